@@ -1,0 +1,226 @@
+"""The vibro-impact oscillator (paper eq. (1)) and the options of its solution.
+
+    x'' - mu (1 - x'^2) x' + a x + c x^3 = f cos(omega t) + F(t),   x < delta
+    x'(t+) = -eta x'(t-)                                            at x = delta
+    F(t) = sum_j delta_Dirac(t - j T1) F0 (1 + a1 sin(omega1 t / n)),   T1 = 2 pi / omega1
+
+Everything here is validated once, in ``__post_init__``, with messages that name the
+parameter and the value; the compiled kernels never see unchecked input.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n", "x0", "v0")
+UNCERTAIN_PARAMETERS = ("mu", "a", "c")
+IMPULSE_MODELS = ("dirac", "pulse")
+TRUNCATIONS = ("galerkin", "paper")
+IMPACT_LAWS = ("mean", "ensemble")
+
+PARAMETER_DOCS = {
+    "mu": "van der Pol damping coefficient (mean value mu_bar when uncertain)",
+    "a": "linear stiffness",
+    "c": "cubic stiffness",
+    "f": "amplitude of the harmonic forcing f cos(omega t)",
+    "omega": "frequency of the harmonic forcing",
+    "eta": "coefficient of restitution, 0 < eta <= 1",
+    "delta": "position of the rigid wall (x < delta)",
+    "F0": "impulse amplitude F0 (1 + a1 sin(omega1 t / n))",
+    "a1": "modulation depth of the impulse amplitude",
+    "omega1": "impulse train frequency (impulses every 2 pi / omega1)",
+    "n": "modulation divisor n of the impulse amplitude",
+    "x0": "initial displacement",
+    "v0": "initial velocity",
+}
+
+
+def _finite(name: str, value) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a real number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}")
+    return value
+
+
+def _choice(name: str, value: str, options: tuple[str, ...]) -> str:
+    if value not in options:
+        allowed = ", ".join(repr(o) for o in options)
+        raise ValueError(f"{name} must be one of {allowed}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class Oscillator:
+    """Parameters of the impact oscillator, eq. (1), with the paper's defaults.
+
+    The defaults are the section 3.2 set at omega = 3.98 (Figs. 5-6) with the impulse
+    train of section 2 (a1 = 1, F0 = 0.1, omega1 = 1, n = 2) and the initial state
+    x0 = -1, v0 = 0 of section 3.1.
+
+    Examples
+    --------
+    >>> Oscillator(c=0.035, omega=2.8, a=1.0, f=2.0).c
+    0.035
+    """
+
+    mu: float = 0.8
+    a: float = 0.5
+    c: float = 0.05
+    f: float = 1.5
+    omega: float = 3.98
+    eta: float = 0.8
+    delta: float = 0.0
+    F0: float = 0.1
+    a1: float = 1.0
+    omega1: float = 1.0
+    n: float = 2.0
+    x0: float = -1.0
+    v0: float = 0.0
+
+    def __post_init__(self):
+        for name in PARAMETER_NAMES:
+            object.__setattr__(self, name, _finite(name, getattr(self, name)))
+        if not 0.0 < self.eta <= 1.0:
+            raise ValueError(f"eta must be in (0, 1], got {self.eta}")
+        if self.omega <= 0.0:
+            raise ValueError(f"omega must be > 0, got {self.omega}")
+        if self.omega1 <= 0.0:
+            raise ValueError(f"omega1 must be > 0, got {self.omega1}")
+        if self.n == 0.0:
+            raise ValueError(f"n must be non-zero, got {self.n}")
+        if self.x0 > self.delta:
+            raise ValueError(
+                f"x0 must not be beyond the wall (x0 <= delta = {self.delta}), got {self.x0}"
+            )
+        if self.x0 == self.delta and self.v0 > 0.0:
+            raise ValueError(f"v0 must be <= 0 when x0 is at the wall, got {self.v0}")
+
+    def replace(self, **changes) -> Oscillator:
+        """A copy with some parameters changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, float]:
+        return {name: getattr(self, name) for name in PARAMETER_NAMES}
+
+    @property
+    def forcing_period(self) -> float:
+        """T = 2 pi / omega, the period used for stroboscopic sections."""
+        return 2.0 * math.pi / self.omega
+
+
+# Presets of the paper's section 3 (the section 3.3 value of c is our choice: the paper
+# says "as 3.1 except a = 3.5, f = 3.5", which leaves c open; c = 0.05).
+PRESETS = {
+    "3.1": dict(f=2.0, omega=2.8, a=1.0, mu=0.8, eta=0.8, delta=0.0, n=2.0, F0=0.1, c=0.05),
+    "3.2": dict(a=0.5, c=0.05, F0=0.1, f=1.5, mu=0.8, eta=0.8, delta=0.0, n=2.0, omega=3.98),
+    "3.3": dict(f=3.5, omega=4.00495, a=3.5, mu=0.8, eta=0.8, delta=0.0, n=2.0, F0=0.1, c=0.05),
+    "3.4": dict(f=2.0, omega=2.8, a=1.0, mu=0.8, eta=0.8, delta=0.0, n=2.0, F0=10.0, c=0.0356),
+}
+
+
+def preset(name: str, **changes) -> Oscillator:
+    """The paper's parameter set of section ``name`` ("3.1" .. "3.4"), with changes."""
+    _choice("preset", name, tuple(PRESETS))
+    return Oscillator(**{**PRESETS[name], **changes})
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Numerical and modelling choices of the integrator (SPEC section 3-4).
+
+    Attributes
+    ----------
+    impulse : "dirac" (velocity jump at t_j = j 2 pi / omega1) or "pulse" (rectangular
+        force of the same height and width ``pulse_width`` starting at t_j).
+    pulse_width : width tau of the rectangular pulses, 0 < tau < 2 pi / omega1.
+    impulse_at_zero : whether the train includes j = 0 (an impulse at t = 0).
+    rtol, atol : tolerances of the Dormand-Prince 5(4) error control.
+    max_steps : hard cap on steps (accepted and rejected) of one trajectory.
+    chatter_velocity : an impact slower than this, with the net force pushing into the
+        wall, ends a chatter sequence: the oscillator is put at rest on the wall at the
+        accumulation point and sticks until the force turns.
+    max_step : upper bound on the step size.
+    """
+
+    impulse: str = "dirac"
+    pulse_width: float = 0.1
+    impulse_at_zero: bool = True
+    rtol: float = 1e-10
+    atol: float = 1e-10
+    max_steps: int = 50_000_000
+    chatter_velocity: float = 1e-6
+    max_step: float = math.inf
+
+    def __post_init__(self):
+        _choice("impulse", self.impulse, IMPULSE_MODELS)
+        for name in ("rtol", "atol"):
+            value = _finite(name, getattr(self, name))
+            if not 1e-15 <= value < 1.0:
+                raise ValueError(f"{name} must be in [1e-15, 1), got {value}")
+        tau = _finite("pulse_width", self.pulse_width)
+        if tau <= 0.0:
+            raise ValueError(f"pulse_width must be > 0, got {tau}")
+        if int(self.max_steps) < 1:
+            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
+        if _finite("chatter_velocity", self.chatter_velocity) < 0.0:
+            raise ValueError(f"chatter_velocity must be >= 0, got {self.chatter_velocity}")
+        if not self.max_step > 0.0:
+            raise ValueError(f"max_step must be > 0, got {self.max_step}")
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """The uncertain parameter ``p = p_bar + sigma * xi``, xi semicircle on [-1, 1].
+
+    ``allow_negative`` permits ``p_bar - sigma < 0`` (e.g. negative damping samples).
+    """
+
+    sigma: float = 0.0
+    parameter: str = "mu"
+    allow_negative: bool = False
+
+    def __post_init__(self):
+        sigma = _finite("sigma", self.sigma)
+        if sigma < 0.0:
+            raise ValueError(f"sigma must be >= 0, got {sigma}")
+        object.__setattr__(self, "sigma", sigma)
+        _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS)
+
+    def check(self, oscillator: Oscillator) -> None:
+        """Refuse ``p_bar - sigma < 0`` unless allowed."""
+        mean = getattr(oscillator, self.parameter)
+        if not self.allow_negative and mean - self.sigma < 0.0 <= mean:
+            raise ValueError(
+                f"sigma = {self.sigma} makes {self.parameter} = {mean} - sigma negative for some "
+                f"samples; pass allow_negative=True (--allow-negative) if that is intended"
+            )
+
+
+def time_grid(omega: float, periods: float, per_period: int):
+    """Output times t_j = j (2 pi / omega) / K, j = 0 .. P K (SPEC section 6)."""
+    import numpy as np
+
+    periods = _finite("periods", periods)
+    if periods <= 0:
+        raise ValueError(f"periods must be > 0, got {periods}")
+    if int(per_period) != per_period or per_period < 1:
+        raise ValueError(f"per_period must be a positive integer, got {per_period}")
+    count = int(round(periods * per_period))
+    if count < 1:
+        raise ValueError(f"periods * per_period must be >= 1, got {periods} * {per_period}")
+    return np.arange(count + 1) * (2.0 * math.pi / omega / per_period)
+
+
+__all__ = [
+    "Oscillator",
+    "SolverOptions",
+    "Uncertainty",
+    "preset",
+    "time_grid",
+    "PARAMETER_NAMES",
+]

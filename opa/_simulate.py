@@ -1,0 +1,290 @@
+"""Single runs of the DMR (eq. (29)) and of the OPA equivalent system (eqs. (24)-(28)).
+
+This layer validates input, packs it into the flat vectors the compiled kernel takes,
+turns the kernel's status codes into exceptions, and builds the ``dmr`` and ``opa``
+datasets of SPEC section 5.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import xarray as xr
+
+from opa import _solver as K
+from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
+from opa._dataset import provenance_attrs, time_coord
+from opa._model import (
+    IMPACT_LAWS,
+    TRUNCATIONS,
+    Oscillator,
+    SolverOptions,
+    Uncertainty,
+    _choice,
+    time_grid,
+)
+
+
+class SimulationError(RuntimeError):
+    """A trajectory could not be completed (divergence, step collapse, step limit)."""
+
+
+def pack_parameters(
+    oscillator: Oscillator,
+    options: SolverOptions,
+    *,
+    sigma: float = 0.0,
+    order: int = 0,
+    uncertain: str = "mu",
+    truncation: str = "galerkin",
+    impact_law: str = "mean",
+) -> tuple[np.ndarray, np.ndarray]:
+    """The kernel's float vector ``p`` and integer vector ``cfg``."""
+    T1 = 2.0 * math.pi / oscillator.omega1
+    if options.impulse == "pulse" and options.pulse_width >= T1:
+        raise ValueError(
+            f"pulse_width must be shorter than the impulse period 2 pi/omega1 = {T1:.6g}, "
+            f"got {options.pulse_width}"
+        )
+    p = np.zeros(K.N_PARAMS)
+    p[K.P_MU] = oscillator.mu
+    p[K.P_A] = oscillator.a
+    p[K.P_C] = oscillator.c
+    p[K.P_F] = oscillator.f
+    p[K.P_OMEGA] = oscillator.omega
+    p[K.P_ETA] = oscillator.eta
+    p[K.P_DELTA] = oscillator.delta
+    p[K.P_F0] = oscillator.F0
+    p[K.P_A1] = oscillator.a1
+    p[K.P_OMEGA1] = oscillator.omega1
+    p[K.P_N] = oscillator.n
+    p[K.P_TAU] = options.pulse_width
+    p[K.P_SIGMA] = sigma
+    p[K.P_CHATTER_V] = options.chatter_velocity
+    p[K.P_HMAX] = options.max_step
+    cfg = np.zeros(K.N_CFG, dtype=np.int64)
+    cfg[K.C_NCOEF] = order + 1
+    cfg[K.C_UNCERTAIN] = ("mu", "a", "c").index(uncertain)
+    cfg[K.C_IMPULSE] = ("dirac", "pulse").index(options.impulse)
+    cfg[K.C_AT_ZERO] = int(bool(options.impulse_at_zero))
+    cfg[K.C_TRUNC] = TRUNCATIONS.index(truncation)
+    cfg[K.C_LAW] = IMPACT_LAWS.index(impact_law)
+    cfg[K.C_MAXSTEPS] = int(options.max_steps)
+    return p, cfg
+
+
+def quadrature(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nodes, weights and basis values U_0..U_{N+1} at the nodes for an order-N system.
+
+    N = 0 uses the one-point rule at xi = 0, which makes EMR_0 the DMR exactly.
+    """
+    if order == 0:
+        # exactly xi = 0 (cos(pi/2) is 6e-17 in floating point), so the kernel takes the
+        # deterministic fast path
+        nodes, weights = np.zeros(1), np.ones(1)
+    else:
+        nodes, weights = gauss_nodes(quadrature_order(order))
+    basis = chebyshev_u(order + 1, nodes)
+    return nodes, weights, np.ascontiguousarray(basis)
+
+
+def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory"):
+    """Integrate and return (states (n_out, dim), event log (n, 3), counters dict)."""
+    nodes, weights, basis = quad
+    capacity = max(64, 4 * len(times))
+    while True:
+        out = np.empty((len(times), len(y0)))
+        log = np.empty((capacity, 3))
+        status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
+            np.asarray(y0, dtype=float), times, p, cfg, nodes, weights, basis, rtol, atol, out, log
+        )
+        if n_events <= capacity:
+            break
+        capacity = int(n_events * 1.2) + 16
+    if status != K.OK:
+        reached = np.isfinite(out[:, 0])
+        t_last = times[reached][-1] if reached.any() else times[0]
+        raise SimulationError(
+            f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
+            f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} impacts). "
+            f"Try smaller tolerances, a smaller --max-step, or check the parameters."
+        )
+    return out, log[:n_events], {"steps": n_steps, "rhs_evaluations": n_rhs, "impacts": n_impacts}
+
+
+def _times(oscillator, periods, per_period, times):
+    if times is None:
+        return time_grid(oscillator.omega, periods, per_period)
+    times = np.asarray(times, dtype=float)
+    if times.ndim != 1 or len(times) < 1 or not np.all(np.isfinite(times)):
+        raise ValueError("times must be a non-empty 1-D array of finite values")
+    if np.any(np.diff(times) <= 0):
+        raise ValueError("times must be strictly increasing")
+    return times
+
+
+def _event_vars(log: np.ndarray) -> dict:
+    kinds = log[:, 2].astype(np.int8) if len(log) else np.zeros(0, np.int8)
+    impact = (kinds == K.EV_IMPACT) | (kinds == K.EV_GRAZE)
+    return {
+        "impact_time": (
+            "impact",
+            log[impact, 0],
+            {"long_name": "time of impact with the wall", "units": "1"},
+        ),
+        "impact_velocity": (
+            "impact",
+            log[impact, 1],
+            {"long_name": "pre-impact velocity of the (mean) coordinate", "units": "1"},
+        ),
+        "impact_graze": (
+            "impact",
+            (kinds[impact] == K.EV_GRAZE).astype(np.int8),
+            {"long_name": f"1 where the impact velocity is below {K.GRAZE_VELOCITY} (graze)",
+             "units": "1"},
+        ),
+        "stick_time": (
+            "stick",
+            log[kinds == K.EV_STICK, 0],
+            {"long_name": "chatter accumulation time, start of sticking", "units": "1"},
+        ),
+        "release_time": (
+            "release",
+            log[kinds == K.EV_RELEASE, 0],
+            {"long_name": "time of release from the wall after sticking", "units": "1"},
+        ),
+    }
+
+
+def simulate_dmr(
+    oscillator: Oscillator | None = None,
+    *,
+    periods: float = 100,
+    per_period: int = 1,
+    options: SolverOptions | None = None,
+    times: np.ndarray | None = None,
+) -> xr.Dataset:
+    """One deterministic trajectory of the impact oscillator (the DMR, eq. (29)).
+
+    Parameters
+    ----------
+    oscillator : model parameters (paper defaults when omitted).
+    periods, per_period : output times t_j = j (2 pi/omega)/K, j = 0..P K; K = 1 gives
+        the stroboscopic samples. ``times`` overrides this grid.
+    options : solver options (impulse model, tolerances, ...).
+
+    Returns
+    -------
+    xarray.Dataset with ``x(time)``, ``v(time)``, ``impact_time(impact)``,
+    ``impact_velocity(impact)`` and the provenance attributes of SPEC section 5.
+    States at an impulse time are recorded just after the impulse (right-continuous).
+
+    Examples
+    --------
+    >>> ds = simulate_dmr(Oscillator(), periods=10)
+    >>> ds.x.sizes["time"]
+    11
+    """
+    oscillator = oscillator or Oscillator()
+    options = options or SolverOptions()
+    times = _times(oscillator, periods, per_period, times)
+    p, cfg = pack_parameters(oscillator, options)
+    out, log, stats = run_kernel(
+        [oscillator.x0, oscillator.v0], times, p, cfg, quadrature(0),
+        rtol=options.rtol, atol=options.atol, label="DMR trajectory",
+    )
+    ds = xr.Dataset(
+        {
+            "x": ("time", out[:, 0], {"long_name": "displacement x", "units": "1"}),
+            "v": ("time", out[:, 1], {"long_name": "velocity dx/dt", "units": "1"}),
+            **_event_vars(log),
+        },
+        coords=time_coord(times, oscillator.omega),
+        attrs=provenance_attrs("dmr", oscillator, options),
+    )
+    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"])
+    return ds
+
+
+def simulate_opa(
+    oscillator: Oscillator | None = None,
+    *,
+    sigma: float = 0.0,
+    order: int = 4,
+    uncertain: str = "mu",
+    truncation: str = "galerkin",
+    impact_law: str = "mean",
+    allow_negative: bool = False,
+    periods: float = 100,
+    per_period: int = 1,
+    options: SolverOptions | None = None,
+    times: np.ndarray | None = None,
+) -> xr.Dataset:
+    """The OPA equivalent system of order N (the EMR, eqs. (24)-(28)).
+
+    ``x(t, xi) ~ sum_i x_i(t) U_i(xi)`` with the uncertain parameter
+    ``p = p_bar + sigma xi``; impacts use the mean constraint ``x_0 = delta``
+    (eq. (21)) and the impact law ``mean`` (eq. (28): only x_0' jumps) or ``ensemble``
+    (every velocity coefficient is multiplied by -eta). ``truncation="paper"`` drops
+    the ``sigma/2 Y_{N+1}`` term of the last equation as eq. (27) does; ``galerkin``
+    keeps the exact projection. Initial coefficients: x_0 = x0, v_0 = v0, others 0.
+
+    Returns
+    -------
+    xarray.Dataset with ``x_coef(order, time)``, ``v_coef(order, time)``,
+    ``x_mean`` (= x_coef[0], the EMR), ``x_var`` (= sum_{i>=1} x_coef^2), ``v_mean``,
+    ``v_var`` and the impacts of the mean coordinate.
+
+    Examples
+    --------
+    >>> ds = simulate_opa(Oscillator(), sigma=0.01, order=4, periods=10)
+    >>> ds.x_coef.shape
+    (5, 11)
+    """
+    oscillator = oscillator or Oscillator()
+    options = options or SolverOptions()
+    if isinstance(order, bool) or int(order) != order or order < 0:
+        raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+    order = int(order)
+    _choice("truncation", truncation, TRUNCATIONS)
+    _choice("impact_law", impact_law, IMPACT_LAWS)
+    unc = Uncertainty(sigma, uncertain, allow_negative)
+    unc.check(oscillator)
+    times = _times(oscillator, periods, per_period, times)
+    p, cfg = pack_parameters(
+        oscillator, options, sigma=unc.sigma, order=order, uncertain=uncertain,
+        truncation=truncation, impact_law=impact_law,
+    )
+    y0 = np.zeros(2 * (order + 1))
+    y0[0] = oscillator.x0
+    y0[order + 1] = oscillator.v0
+    out, log, stats = run_kernel(
+        y0, times, p, cfg, quadrature(order), rtol=options.rtol, atol=options.atol,
+        label=f"OPA (N={order}) trajectory",
+    )
+    xc = out[:, : order + 1].T
+    vc = out[:, order + 1 :].T
+    ds = xr.Dataset(
+        {
+            "x_coef": (("order", "time"), xc,
+                       {"long_name": "OPA coefficient x_i = E[x U_i(xi)]", "units": "1"}),
+            "v_coef": (("order", "time"), vc,
+                       {"long_name": "OPA coefficient v_i = E[x' U_i(xi)]", "units": "1"}),
+            "x_mean": ("time", xc[0], {"long_name": "OPA mean E[x] = x_0 (EMR)", "units": "1"}),
+            "x_var": ("time", (xc[1:] ** 2).sum(axis=0),
+                      {"long_name": "OPA variance sum_{i>=1} x_i^2", "units": "1"}),
+            "v_mean": ("time", vc[0], {"long_name": "OPA mean velocity v_0", "units": "1"}),
+            "v_var": ("time", (vc[1:] ** 2).sum(axis=0),
+                      {"long_name": "OPA velocity variance sum_{i>=1} v_i^2", "units": "1"}),
+            **_event_vars(log),
+        },
+        coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1))},
+        attrs=provenance_attrs(
+            "opa", oscillator, options, sigma=unc.sigma, order=order, uncertain=uncertain,
+            truncation=truncation, impact_law=impact_law,
+        ),
+    )
+    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"],
+                    allow_negative=int(allow_negative))
+    return ds
