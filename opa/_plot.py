@@ -30,7 +30,9 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
     if per_period is None:
         per_period = max(1, int(round(T / (t[1] - t[0])))) if len(t) > 1 else 1
     fig, (ax_t, ax_p) = plt.subplots(1, 2, figsize=(11, 4.2))
-    ax_t.plot(t, x, lw=0.8, label=label)
+    dense = per_period >= 8  # lines between outputs only when they resolve the motion
+    style = dict(lw=0.8) if dense else dict(ls="none", marker=".", ms=3)
+    ax_t.plot(t, x, label=label, **style)
     if "x_var" in ds and label != "DMR":
         sd = np.sqrt(np.maximum(ds.x_var.values, 0.0))
         ax_t.fill_between(t, x - sd, x + sd, alpha=0.25, label="± 1 std")
@@ -40,7 +42,8 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
     ax_t.legend(loc="lower left", fontsize=8)
     ax_t.set_title("time history")
     half = len(t) // 2
-    ax_p.plot(x[half:], v[half:], lw=0.6, label="trajectory (second half)")
+    if dense:
+        ax_p.plot(x[half:], v[half:], lw=0.6, label="trajectory (second half)")
     strobe = slice(half - half % per_period, None, per_period)
     ax_p.plot(x[strobe], v[strobe], "rs", ms=4, label="t = k 2π/ω")
     ax_p.axvline(ds.attrs["delta"], color="k", lw=1, ls="--")

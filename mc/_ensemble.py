@@ -1,0 +1,268 @@
+"""Monte Carlo ensembles of the true sampled impact system, with streamed statistics.
+
+Each sample is the deterministic impact oscillator (eq. (1)) with its own value of the
+uncertain parameter ``p = p_bar + sigma xi``: its own impacts, chatter and sticking,
+integrated by the same compiled kernel as the DMR (``opa._solver.run_samples``).
+
+Samples are processed in fixed chunks. A chunk's paths live only while its statistics
+are formed; chunk statistics (weight, mean, centred sum of squares, Chebyshev moments)
+are merged in chunk order with Chan's pairwise update. Memory is therefore
+O(chunk * T + N * T), independent of the number of samples, and the result depends
+only on the seed and the chunk size, never on the thread count or on where a chunk ran,
+which is what makes the Dask backend return exactly the local result.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+
+import numpy as np
+import xarray as xr
+
+from mc._sampling import SAMPLERS, sample_xi
+from opa import _solver as K
+from opa._basis import chebyshev_u
+from opa._dataset import provenance_attrs, time_coord
+from opa._model import Oscillator, SolverOptions, Uncertainty, _choice
+from opa._simulate import SimulationError, _times, pack_parameters
+
+CHUNK_BYTES = 32 * 2**20
+
+
+@dataclass
+class ChunkStats:
+    """Sufficient statistics of a set of samples at every output time (weights w_m)."""
+
+    weight: float  # sum of weights
+    count: int
+    x_mean: np.ndarray  # (T,)
+    x_m2: np.ndarray  # (T,) sum w (x - mean)^2
+    v_mean: np.ndarray
+    v_m2: np.ndarray
+    x_moment: np.ndarray  # (N+1, T) sum w x U_i(xi)
+
+    @classmethod
+    def of(cls, x: np.ndarray, v: np.ndarray, xi: np.ndarray, w: np.ndarray, order: int):
+        """Statistics of paths x, v of shape (M, T) for sample values xi and weights w."""
+        W = float(w.sum())
+        xm = w @ x / W
+        vm = w @ v / W
+        basis = chebyshev_u(order, xi)  # (N+1, M)
+        return cls(
+            weight=W,
+            count=len(w),
+            x_mean=xm,
+            x_m2=w @ (x - xm) ** 2,
+            v_mean=vm,
+            v_m2=w @ (v - vm) ** 2,
+            x_moment=(basis * w) @ x,
+        )
+
+    def merge(self, other: ChunkStats) -> ChunkStats:
+        """Chan et al.'s pairwise combination (exact, order-dependent only by round-off)."""
+        W = self.weight + other.weight
+        f = other.weight / W
+        g = self.weight * other.weight / W
+        dx = other.x_mean - self.x_mean
+        dv = other.v_mean - self.v_mean
+        return ChunkStats(
+            weight=W,
+            count=self.count + other.count,
+            x_mean=self.x_mean + dx * f,
+            x_m2=self.x_m2 + other.x_m2 + dx**2 * g,
+            v_mean=self.v_mean + dv * f,
+            v_m2=self.v_m2 + other.v_m2 + dv**2 * g,
+            x_moment=self.x_moment + other.x_moment,
+        )
+
+
+def run_chunk(y0, xi, w, times, p, cfg, rtol, atol, order, keep_paths, single_thread=False):
+    """Integrate one chunk of samples and reduce it: (ChunkStats, n_impacts, status, paths)."""
+    if single_thread:
+        import numba
+
+        numba.set_num_threads(1)
+    paths = np.empty((len(xi), len(times), 2))
+    n_impacts = np.zeros(len(xi), dtype=np.int64)
+    status = np.zeros(len(xi), dtype=np.int64)
+    K.run_samples(y0, xi, times, p, cfg, rtol, atol, paths, n_impacts, status)
+    bad = np.flatnonzero(status != K.OK)
+    if len(bad):
+        m = bad[0]
+        return None, n_impacts, status, (m, xi[m], int(status[m]))
+    stats = ChunkStats.of(paths[:, :, 0], paths[:, :, 1], xi, w, order)
+    return stats, n_impacts, status, (paths if keep_paths else None)
+
+
+def _chunk_size(n_times: int, requested: int | None) -> int:
+    if requested is not None:
+        if int(requested) != requested or requested < 1:
+            raise ValueError(f"chunk_size must be a positive integer, got {requested}")
+        return int(requested)
+    return int(min(4096, max(64, CHUNK_BYTES // (16 * n_times))))
+
+
+def simulate_mc(
+    oscillator: Oscillator | None = None,
+    *,
+    sigma: float = 0.01,
+    samples: int = 1024,
+    sampler: str = "sobol",
+    seed: int | None = 0,
+    order: int = 4,
+    uncertain: str = "mu",
+    allow_negative: bool = False,
+    periods: float = 100,
+    per_period: int = 1,
+    options: SolverOptions | None = None,
+    times: np.ndarray | None = None,
+    keep_paths: bool = False,
+    chunk_size: int | None = None,
+    scheduler: str | None = None,
+    progress: bool | None = None,
+) -> xr.Dataset:
+    """Monte Carlo ensemble of the sampled impact system, eq. (1), p = p_bar + sigma xi.
+
+    Parameters
+    ----------
+    sigma, uncertain : intensity and name of the uncertain parameter (mu, a or c).
+    samples, sampler, seed : M samples of xi from ``random``, ``sobol`` (scrambled) or
+        ``gauss`` (M collocation nodes with their weights); the same seed gives the same
+        result whatever the thread count or scheduler.
+    order : N, the highest Chebyshev coefficient estimated, E[x U_i(xi)] for i <= N.
+    keep_paths : also return every sample path (memory O(M T)); otherwise only the
+        streamed statistics are kept (memory O(N T)).
+    chunk_size : samples per task (default: about 32 MiB of paths per chunk).
+    scheduler : address of a Dask distributed scheduler (``tcp://host:port``) or a
+        ``distributed.Client``; chunks then run as tasks there. Default: local threads.
+    progress : show a progress bar (default: when stderr is a terminal).
+
+    Returns
+    -------
+    xarray.Dataset ``mc`` of SPEC section 5: ``x_mean, v_mean, x_var, v_var, x_sem,
+    v_sem (time)``, ``x_coef (order, time)``, ``n_impacts, xi, weight (sample)``.
+    For ``gauss`` the weights are the quadrature weights, variances are weighted and
+    the standard errors are NaN (a quadrature has no sampling error).
+    """
+    oscillator = oscillator or Oscillator()
+    options = options or SolverOptions()
+    _choice("sampler", sampler, SAMPLERS)
+    if isinstance(order, bool) or int(order) != order or order < 0:
+        raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+    unc = Uncertainty(sigma, uncertain, allow_negative)
+    unc.check(oscillator)
+    times = _times(oscillator, periods, per_period, times)
+    xi, w = sample_xi(sampler, samples, seed)
+    p, cfg = pack_parameters(oscillator, options, sigma=unc.sigma, uncertain=uncertain)
+    y0 = np.array([oscillator.x0, oscillator.v0])
+    size = _chunk_size(len(times), chunk_size)
+    bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
+    args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths)
+
+    results = _run_chunks(y0, xi, w, bounds, args, scheduler, progress)
+
+    total = None
+    n_impacts = np.empty(len(xi), dtype=np.int64)
+    paths = np.empty((len(xi), len(times), 2)) if keep_paths else None
+    for (lo, hi), (stats, imp, status, extra) in zip(bounds, results):
+        if stats is None:
+            m, xi_m, code = extra
+            raise SimulationError(
+                f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {uncertain} = "
+                f"{getattr(oscillator, uncertain) + unc.sigma * xi_m:.6g}) stopped: "
+                f"{K.STATUS_MESSAGES[code]}"
+            )
+        n_impacts[lo:hi] = imp
+        if keep_paths:
+            paths[lo:hi] = extra
+        total = stats if total is None else total.merge(stats)
+    return _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler,
+                    seed, order)
+
+
+def _run_chunks(y0, xi, w, bounds, args, scheduler, progress):
+    if progress is None:
+        progress = sys.stderr.isatty()
+    if scheduler is None:
+        from tqdm.auto import tqdm
+
+        out = []
+        with tqdm(total=len(xi), unit="sample", disable=not progress, desc="Monte Carlo") as bar:
+            for lo, hi in bounds:
+                out.append(run_chunk(y0, xi[lo:hi], w[lo:hi], *args))
+                bar.update(hi - lo)
+        return out
+    return _run_chunks_dask(y0, xi, w, bounds, args, scheduler, progress)
+
+
+def _run_chunks_dask(y0, xi, w, bounds, args, scheduler, progress):
+    from distributed import Client, as_completed
+
+    own = not isinstance(scheduler, Client)
+    client = Client(scheduler) if own else scheduler
+    try:
+        futures = [
+            client.submit(run_chunk, y0, xi[lo:hi], w[lo:hi], *args, True, pure=False)
+            for lo, hi in bounds
+        ]
+        if progress is None:
+            progress = sys.stderr.isatty()
+        if progress:
+            from tqdm.auto import tqdm
+
+            for _ in tqdm(as_completed(futures), total=len(futures), unit="chunk",
+                          desc="Monte Carlo (dask)"):
+                pass
+        return client.gather(futures)  # in submission order: the merge order is fixed
+    finally:
+        if own:
+            client.close()
+
+
+def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler, seed,
+             order):
+    M = total.count
+    if sampler == "gauss":
+        x_var = total.x_m2 / total.weight
+        v_var = total.v_m2 / total.weight
+        x_sem = np.full_like(x_var, np.nan)
+        v_sem = np.full_like(v_var, np.nan)
+    else:
+        corr = M / (M - 1) if M > 1 else math.nan
+        x_var = total.x_m2 / total.weight * corr
+        v_var = total.v_m2 / total.weight * corr
+        x_sem = np.sqrt(x_var / M)
+        v_sem = np.sqrt(v_var / M)
+    data = {
+        "x_mean": ("time", total.x_mean, {"long_name": "Monte Carlo mean E[x]", "units": "1"}),
+        "v_mean": ("time", total.v_mean, {"long_name": "Monte Carlo mean E[x']", "units": "1"}),
+        "x_var": ("time", x_var, {"long_name": "Monte Carlo variance Var[x]", "units": "1"}),
+        "v_var": ("time", v_var, {"long_name": "Monte Carlo variance Var[x']", "units": "1"}),
+        "x_sem": ("time", x_sem, {"long_name": "standard error of the mean of x", "units": "1"}),
+        "v_sem": ("time", v_sem, {"long_name": "standard error of the mean of x'", "units": "1"}),
+        "x_coef": (("order", "time"), total.x_moment / total.weight,
+                   {"long_name": "Monte Carlo estimate of E[x U_i(xi)]", "units": "1"}),
+        "n_impacts": ("sample", n_impacts, {"long_name": "impacts of each sample", "units": "1"}),
+        "xi": ("sample", xi, {"long_name": "uncertain variable xi (semicircle on [-1, 1])",
+                              "units": "1"}),
+        "weight": ("sample", w, {"long_name": "sample weight", "units": "1"}),
+    }
+    if paths is not None:
+        data["x"] = (("sample", "time"), paths[:, :, 0], {"long_name": "sample path x",
+                                                          "units": "1"})
+        data["v"] = (("sample", "time"), paths[:, :, 1], {"long_name": "sample path x'",
+                                                          "units": "1"})
+    ds = xr.Dataset(
+        data,
+        coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1)),
+                "sample": ("sample", np.arange(M))},
+        attrs=provenance_attrs(
+            "mc", oscillator, options, sigma=unc.sigma, order=order, uncertain=unc.parameter,
+            seed=-1 if seed is None else int(seed), sampler=sampler,
+        ),
+    )
+    ds.attrs["samples"] = int(M)
+    ds.attrs["allow_negative"] = int(unc.allow_negative)
+    return ds
