@@ -220,6 +220,7 @@ def simulate_opa(
     per_period: int = 1,
     options: SolverOptions | None = None,
     times: np.ndarray | None = None,
+    initial: np.ndarray | None = None,
 ) -> xr.Dataset:
     """The OPA equivalent system of order N (the EMR, eqs. (24)-(28)).
 
@@ -228,7 +229,9 @@ def simulate_opa(
     (eq. (21)) and the impact law ``mean`` (eq. (28): only x_0' jumps) or ``ensemble``
     (every velocity coefficient is multiplied by -eta). ``truncation="paper"`` drops
     the ``sigma/2 Y_{N+1}`` term of the last equation as eq. (27) does; ``galerkin``
-    keeps the exact projection. Initial coefficients: x_0 = x0, v_0 = v0, others 0.
+    keeps the exact projection. Initial coefficients: x_0 = x0, v_0 = v0, others 0,
+    unless ``initial`` (shape (2, N+1): rows x_coef, v_coef) is given, e.g. to continue
+    from the end of an earlier run.
 
     Returns
     -------
@@ -257,8 +260,19 @@ def simulate_opa(
         truncation=truncation, impact_law=impact_law,
     )
     y0 = np.zeros(2 * (order + 1))
-    y0[0] = oscillator.x0
-    y0[order + 1] = oscillator.v0
+    if initial is None:
+        y0[0] = oscillator.x0
+        y0[order + 1] = oscillator.v0
+    else:
+        initial = np.asarray(initial, dtype=float)
+        if initial.shape != (2, order + 1) or not np.all(np.isfinite(initial)):
+            raise ValueError(
+                f"initial must be a finite array of shape (2, {order + 1}), got shape "
+                f"{initial.shape}"
+            )
+        if initial[0, 0] > oscillator.delta:
+            raise ValueError(f"initial x_0 must not be beyond the wall, got {initial[0, 0]}")
+        y0[:] = initial.ravel()
     out, log, stats = run_kernel(
         y0, times, p, cfg, quadrature(order), rtol=options.rtol, atol=options.atol,
         label=f"OPA (N={order}) trajectory",
