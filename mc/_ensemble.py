@@ -42,6 +42,7 @@ class ChunkStats:
     v_mean: np.ndarray
     v_m2: np.ndarray
     x_moment: np.ndarray  # (N+1, T) sum w x U_i(xi)
+    rhs_evaluations: int = 0
 
     @classmethod
     def of(cls, x: np.ndarray, v: np.ndarray, xi: np.ndarray, w: np.ndarray, order: int):
@@ -75,6 +76,7 @@ class ChunkStats:
             v_mean=self.v_mean + dv * f,
             v_m2=self.v_m2 + other.v_m2 + dv**2 * g,
             x_moment=self.x_moment + other.x_moment,
+            rhs_evaluations=self.rhs_evaluations + other.rhs_evaluations,
         )
 
 
@@ -86,13 +88,15 @@ def run_chunk(y0, xi, w, times, p, cfg, rtol, atol, order, keep_paths, single_th
         numba.set_num_threads(1)
     paths = np.empty((len(xi), len(times), 2))
     n_impacts = np.zeros(len(xi), dtype=np.int64)
+    n_rhs = np.zeros(len(xi), dtype=np.int64)
     status = np.zeros(len(xi), dtype=np.int64)
-    K.run_samples(y0, xi, times, p, cfg, rtol, atol, paths, n_impacts, status)
+    K.run_samples(y0, xi, times, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status)
     bad = np.flatnonzero(status != K.OK)
     if len(bad):
         m = bad[0]
         return None, n_impacts, status, (m, xi[m], int(status[m]))
     stats = ChunkStats.of(paths[:, :, 0], paths[:, :, 1], xi, w, order)
+    stats.rhs_evaluations = int(n_rhs.sum())
     return stats, n_impacts, status, (paths if keep_paths else None)
 
 
@@ -264,5 +268,6 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
         ),
     )
     ds.attrs["samples"] = int(M)
+    ds.attrs["rhs_evaluations"] = int(total.rhs_evaluations)
     ds.attrs["allow_negative"] = int(unc.allow_negative)
     return ds

@@ -73,21 +73,36 @@ def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
         g.add_argument("--seed", type=int, default=0, metavar="K", help="random seed (default 0)")
         g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="Dask distributed scheduler address (default: local threads)")
+    _solver_flags(parser)
+
+
+def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,
+                  defaults: bool = True) -> None:
+    """Solver flags; with ``defaults=False`` unset flags stay None (a config file decides)."""
+
+    def d(value):
+        return value if defaults else None
+
     s = parser.add_argument_group("solver")
-    s.add_argument("--impulse", choices=IMPULSE_MODELS, default="dirac",
+    s.add_argument("--impulse", choices=IMPULSE_MODELS, default=d("dirac"),
                    help="dirac: velocity jumps at t_j = j 2 pi/omega1; pulse: rectangular "
                         "force of width --pulse-width (default dirac)")
-    s.add_argument("--pulse-width", type=float, default=0.1, metavar="TAU",
+    s.add_argument("--pulse-width", type=float, default=d(0.1), metavar="TAU",
                    help="width of the rectangular pulses (default 0.1)")
-    s.add_argument("--impulse-at-zero", action=argparse.BooleanOptionalAction, default=True,
+    s.add_argument("--impulse-at-zero", action=argparse.BooleanOptionalAction, default=d(True),
                    help="include the impulse at t = 0 (j = 0) (default yes)")
-    s.add_argument("--rtol", type=float, default=1e-10, help="relative tolerance (default 1e-10)")
-    s.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance (default 1e-10)")
-    s.add_argument("--max-step", type=float, default=math.inf, metavar="H",
+    s.add_argument("--rtol", type=float, default=d(tolerance),
+                   help=f"relative tolerance (default {tolerance:g})")
+    s.add_argument("--atol", type=float, default=d(tolerance),
+                   help=f"absolute tolerance (default {tolerance:g})")
+    s.add_argument("--max-step", type=float, default=d(math.inf), metavar="H",
                    help="largest step size (default unlimited)")
-    s.add_argument("--chatter-velocity", type=float, default=1e-6, metavar="V",
+    s.add_argument("--chatter-velocity", type=float, default=d(1e-6), metavar="V",
                    help="impacts slower than V with the force into the wall end a chatter "
                         "sequence: rest on the wall at the accumulation point (default 1e-6)")
+
+
+def _output_flags(parser: argparse.ArgumentParser) -> None:
     o = parser.add_argument_group("output")
     o.add_argument("--out", default=None, metavar="FILE.nc", help="write the dataset here")
     o.add_argument("--plot", default=None, metavar="FILE.png", help="write a figure here")
@@ -195,7 +210,12 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("model", choices=("dmr", "opa", "mc"))
     _model_flags(sim)
     _common_flags(sim)
+    _output_flags(sim)
     sim.set_defaults(func=cmd_simulate)
+
+    from compare._cli import register_validate
+
+    register_validate(sub, _model_flags, _solver_flags)
 
     return parser
 

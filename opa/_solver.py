@@ -628,12 +628,12 @@ def _locate_impact(t, y, h, theta, K, K2, y_new, ytmp, p, cfg, nodes, weights, U
 # ---------------------------------------------------------------------------
 # Monte Carlo: many sampled deterministic systems, parallel over samples
 @njit(cache=True, parallel=True)
-def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, status):
+def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status):
     """Integrate the true impact system for each sample value ``xi[m]``.
 
     The uncertain parameter of sample m is ``p[uncertain] + p[P_SIGMA] * xi[m]``; each
     sample is the deterministic system (N = 0), so its results do not depend on the
-    thread that ran it. paths: (M, n_out, 2); n_impacts, status: (M,).
+    thread that ran it. paths: (M, n_out, 2); n_impacts, n_rhs, status: (M,).
     """
     M = xi.shape[0]
     nodes = np.zeros(1)
@@ -658,3 +658,4 @@ def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, status):
         res = integrate(y0, t_out, pm, cm, nodes, weights, U, rtol, atol, paths[m], log)
         status[m] = res[0]
         n_impacts[m] = res[2]
+        n_rhs[m] = res[4]

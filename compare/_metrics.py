@@ -1,0 +1,84 @@
+"""Errors of an OPA run against a Monte Carlo ensemble on the same time grid.
+
+The MC statistics carry their own standard errors, so every error is read against the
+MC noise: an OPA mean is "within MC noise" at time t when
+``|x_0(t) - E_MC[x](t)| <= z * SE(t) + floor`` (``floor`` absorbs the integrator's
+tolerance where the ensemble has not spread yet, e.g. at t = 0).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+
+
+def _check_same_grid(a: xr.Dataset, b: xr.Dataset) -> None:
+    ta, tb = a.time.values, b.time.values
+    if ta.shape != tb.shape or not np.allclose(ta, tb, rtol=1e-12, atol=1e-12):
+        raise ValueError(
+            f"the datasets must share their time grid, got {ta.size} and {tb.size} times "
+            f"(ends {ta[-1]:.6g} and {tb[-1]:.6g})"
+        )
+
+
+def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
+                 floor: float = 1e-7) -> xr.Dataset:
+    """Pointwise comparison of an ``opa`` dataset with an ``mc`` dataset.
+
+    Returns
+    -------
+    xarray.Dataset with
+    ``err_mean(time)`` = x_0 - E_MC[x], ``mc_sem(time)``, ``err_var(time)`` = OPA
+    variance - MC variance, ``err_coef(order, time)`` for the orders both carry, and
+    ``within_noise(time)`` (1 where ``|err_mean| <= z SE + floor``).
+    """
+    _check_same_grid(opa_ds, mc_ds)
+    n = min(opa_ds.sizes["order"], mc_ds.sizes["order"])
+    err = opa_ds.x_mean.values - mc_ds.x_mean.values
+    sem = mc_ds.x_sem.values
+    noise = np.where(np.isfinite(sem), z * sem, 0.0) + floor
+    ds = xr.Dataset(
+        {
+            "err_mean": ("time", err, {"long_name": "x_0 - E_MC[x]", "units": "1"}),
+            "mc_sem": ("time", sem, {"long_name": "MC standard error of E[x]", "units": "1"}),
+            "err_var": ("time", opa_ds.x_var.values - mc_ds.x_var.values,
+                        {"long_name": "OPA variance - MC variance", "units": "1"}),
+            "err_coef": (("order", "time"),
+                         opa_ds.x_coef.values[:n] - mc_ds.x_coef.values[:n],
+                         {"long_name": "x_i - E_MC[x U_i]", "units": "1"}),
+            "within_noise": ("time", (np.abs(err) <= noise).astype(np.int8),
+                             {"long_name": f"1 where |err_mean| <= {z} SE + {floor}",
+                              "units": "1"}),
+        },
+        coords={"time": opa_ds.time, "order": np.arange(n)},
+        attrs={"z": float(z), "floor": float(floor), "omega": float(opa_ds.attrs["omega"])},
+    )
+    return ds
+
+
+def error_metrics(cmp: xr.Dataset, *, window_periods: float | None = None) -> dict[str, float]:
+    """Scalar summaries of a :func:`compare_runs` result.
+
+    ``rms_error``/``max_error`` of the mean over the window (the first
+    ``window_periods`` forcing periods, or all), ``strobe_rms_error`` at the
+    stroboscopic points t = k 2 pi/omega in the window, ``sem_rms`` (the MC noise
+    floor), ``var_rms_error``, and ``agree_periods``: the time, in forcing periods, of
+    the first output where the error leaves the MC noise band (inf if never).
+    """
+    T = 2 * np.pi / cmp.attrs["omega"]
+    t = cmp.time.values
+    in_window = np.ones(t.size, bool) if window_periods is None else t <= window_periods * T + 1e-9
+    err = cmp.err_mean.values[in_window]
+    tw = t[in_window]
+    phase = tw / T
+    strobe = np.abs(phase - np.round(phase)) < 1e-9
+    sem = cmp.mc_sem.values[in_window]
+    outside = np.flatnonzero(cmp.within_noise.values == 0)
+    return {
+        "rms_error": float(np.sqrt(np.mean(err**2))),
+        "max_error": float(np.max(np.abs(err))),
+        "strobe_rms_error": float(np.sqrt(np.mean(err[strobe] ** 2))) if strobe.any() else np.nan,
+        "sem_rms": float(np.sqrt(np.nanmean(sem**2))) if np.isfinite(sem).any() else np.nan,
+        "var_rms_error": float(np.sqrt(np.mean(cmp.err_var.values[in_window] ** 2))),
+        "agree_periods": float(t[outside[0]] / T) if len(outside) else np.inf,
+    }
