@@ -42,12 +42,22 @@ class ChunkStats:
     v_mean: np.ndarray
     v_m2: np.ndarray
     x_moment: np.ndarray  # (N+1, T) sum w x U_i(xi)
+    x_rep: np.ndarray  # (R, T) sum w x over each randomised-QMC replicate
+    v_rep: np.ndarray
     rhs_evaluations: int = 0
 
     @classmethod
-    def of(cls, x: np.ndarray, v: np.ndarray, xi: np.ndarray, w: np.ndarray, order: int):
-        """Statistics of paths x, v of shape (M, T) for sample values xi and weights w."""
+    def of(cls, x: np.ndarray, v: np.ndarray, xi: np.ndarray, w: np.ndarray, order: int,
+           rep: np.ndarray, replicates: int):
+        """Statistics of paths x, v of shape (M, T) for sample values xi, weights w and
+        replicate indices ``rep`` (all 0 without replicates)."""
         W = float(w.sum())
+        x_rep = np.zeros((replicates, x.shape[1]))
+        v_rep = np.zeros((replicates, x.shape[1]))
+        for r in np.unique(rep):
+            sel = rep == r
+            x_rep[r] = w[sel] @ x[sel]
+            v_rep[r] = w[sel] @ v[sel]
         xm = w @ x / W
         vm = w @ v / W
         basis = chebyshev_u(order, xi)  # (N+1, M)
@@ -59,6 +69,8 @@ class ChunkStats:
             v_mean=vm,
             v_m2=w @ (v - vm) ** 2,
             x_moment=(basis * w) @ x,
+            x_rep=x_rep,
+            v_rep=v_rep,
         )
 
     def merge(self, other: ChunkStats) -> ChunkStats:
@@ -76,11 +88,14 @@ class ChunkStats:
             v_mean=self.v_mean + dv * f,
             v_m2=self.v_m2 + other.v_m2 + dv**2 * g,
             x_moment=self.x_moment + other.x_moment,
+            x_rep=self.x_rep + other.x_rep,
+            v_rep=self.v_rep + other.v_rep,
             rhs_evaluations=self.rhs_evaluations + other.rhs_evaluations,
         )
 
 
-def run_chunk(y0, xi, w, times, p, cfg, rtol, atol, order, keep_paths, single_thread=False):
+def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep_paths,
+              single_thread=False):
     """Integrate one chunk of samples and reduce it: (ChunkStats, n_impacts, status, paths)."""
     if single_thread:
         import numba
@@ -95,7 +110,7 @@ def run_chunk(y0, xi, w, times, p, cfg, rtol, atol, order, keep_paths, single_th
     if len(bad):
         m = bad[0]
         return None, n_impacts, status, (m, xi[m], int(status[m]))
-    stats = ChunkStats.of(paths[:, :, 0], paths[:, :, 1], xi, w, order)
+    stats = ChunkStats.of(paths[:, :, 0], paths[:, :, 1], xi, w, order, rep, replicates)
     stats.rhs_evaluations = int(n_rhs.sum())
     return stats, n_impacts, status, (paths if keep_paths else None)
 
@@ -115,6 +130,7 @@ def simulate_mc(
     samples: int = 1024,
     sampler: str = "sobol",
     seed: int | None = 0,
+    replicates: int | None = None,
     order: int = 4,
     uncertain: str = "mu",
     allow_negative: bool = False,
@@ -135,6 +151,10 @@ def simulate_mc(
     samples, sampler, seed : M samples of xi from ``random``, ``sobol`` (scrambled) or
         ``gauss`` (M collocation nodes with their weights); the same seed gives the same
         result whatever the thread count or scheduler.
+    replicates : for ``sobol``, the number R of independent scramblings whose spread gives
+        the standard error (randomised QMC); default 16 when M is a multiple of 16 and
+        M >= 64, else 1 (then the standard error is the naive sqrt(Var/M), which
+        overstates a QMC error). Ignored by the other samplers.
     order : N, the highest Chebyshev coefficient estimated, E[x U_i(xi)] for i <= N.
     keep_paths : also return every sample path (memory O(M T)); otherwise only the
         streamed statistics are kept (memory O(N T)).
@@ -158,14 +178,19 @@ def simulate_mc(
     unc = Uncertainty(sigma, uncertain, allow_negative)
     unc.check(oscillator)
     times = _times(oscillator, periods, per_period, times)
-    xi, w = sample_xi(sampler, samples, seed)
+    if sampler != "sobol":
+        replicates = 1
+    elif replicates is None:
+        replicates = 16 if samples % 16 == 0 and samples >= 64 else 1
+    xi, w = sample_xi(sampler, samples, seed, replicates)
+    rep = np.arange(len(xi)) // (len(xi) // replicates)
     p, cfg = pack_parameters(oscillator, options, sigma=unc.sigma, uncertain=uncertain)
     y0 = np.array([oscillator.x0, oscillator.v0])
     size = _chunk_size(len(times), chunk_size)
     bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
     args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths)
 
-    results = _run_chunks(y0, xi, w, bounds, args, scheduler, progress)
+    results = _run_chunks(y0, xi, w, rep, replicates, bounds, args, scheduler, progress)
 
     total = None
     n_impacts = np.empty(len(xi), dtype=np.int64)
@@ -183,10 +208,10 @@ def simulate_mc(
             paths[lo:hi] = extra
         total = stats if total is None else total.merge(stats)
     return _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler,
-                    seed, order)
+                    seed, order, replicates)
 
 
-def _run_chunks(y0, xi, w, bounds, args, scheduler, progress):
+def _run_chunks(y0, xi, w, rep, replicates, bounds, args, scheduler, progress):
     if progress is None:
         progress = sys.stderr.isatty()
     if scheduler is None:
@@ -195,20 +220,21 @@ def _run_chunks(y0, xi, w, bounds, args, scheduler, progress):
         out = []
         with tqdm(total=len(xi), unit="sample", disable=not progress, desc="Monte Carlo") as bar:
             for lo, hi in bounds:
-                out.append(run_chunk(y0, xi[lo:hi], w[lo:hi], *args))
+                out.append(run_chunk(y0, xi[lo:hi], w[lo:hi], rep[lo:hi], replicates, *args))
                 bar.update(hi - lo)
         return out
-    return _run_chunks_dask(y0, xi, w, bounds, args, scheduler, progress)
+    return _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler, progress)
 
 
-def _run_chunks_dask(y0, xi, w, bounds, args, scheduler, progress):
+def _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler, progress):
     from distributed import Client, as_completed
 
     own = not isinstance(scheduler, Client)
     client = Client(scheduler) if own else scheduler
     try:
         futures = [
-            client.submit(run_chunk, y0, xi[lo:hi], w[lo:hi], *args, True, pure=False)
+            client.submit(run_chunk, y0, xi[lo:hi], w[lo:hi], rep[lo:hi], replicates, *args,
+                          True, pure=False)
             for lo, hi in bounds
         ]
         if progress is None:
@@ -226,7 +252,7 @@ def _run_chunks_dask(y0, xi, w, bounds, args, scheduler, progress):
 
 
 def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler, seed,
-             order):
+             order, replicates):
     M = total.count
     if sampler == "gauss":
         x_var = total.x_m2 / total.weight
@@ -237,8 +263,14 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
         corr = M / (M - 1) if M > 1 else math.nan
         x_var = total.x_m2 / total.weight * corr
         v_var = total.v_m2 / total.weight * corr
-        x_sem = np.sqrt(x_var / M)
-        v_sem = np.sqrt(v_var / M)
+        if replicates > 1:
+            # randomised QMC: the spread of the replicate means (each of weight W/R)
+            share = total.weight / replicates
+            x_sem = np.std(total.x_rep / share, axis=0, ddof=1) / np.sqrt(replicates)
+            v_sem = np.std(total.v_rep / share, axis=0, ddof=1) / np.sqrt(replicates)
+        else:
+            x_sem = np.sqrt(x_var / M)
+            v_sem = np.sqrt(v_var / M)
     data = {
         "x_mean": ("time", total.x_mean, {"long_name": "Monte Carlo mean E[x]", "units": "1"}),
         "v_mean": ("time", total.v_mean, {"long_name": "Monte Carlo mean E[x']", "units": "1"}),
@@ -268,6 +300,12 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
         ),
     )
     ds.attrs["samples"] = int(M)
+    ds.attrs["replicates"] = int(replicates)
+    ds.attrs["sem_method"] = (
+        "none (quadrature)" if sampler == "gauss"
+        else "spread of randomised-QMC replicates" if replicates > 1
+        else "sqrt(Var/M)"
+    )
     ds.attrs["rhs_evaluations"] = int(total.rhs_evaluations)
     ds.attrs["allow_negative"] = int(unc.allow_negative)
     return ds

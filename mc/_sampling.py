@@ -131,7 +131,7 @@ def _check_sampler(sampler: str, samples: int, seed: int | None) -> None:
 
 
 def sample_xi(
-    sampler: str, samples: int, seed: int | None = None
+    sampler: str, samples: int, seed: int | None = None, replicates: int = 1
 ) -> tuple[np.ndarray, np.ndarray]:
     """Points and weights for expectations over the semicircle law.
 
@@ -148,6 +148,12 @@ def sample_xi(
         as ``Sobol.random(M)``, without its warning).
     seed : int or None
         Non-negative seed; the same seed gives identical output. Ignored by ``gauss``.
+    replicates : int
+        ``sobol`` only: R independent scramblings of ``M / R`` points each, concatenated
+        (replicate r holds points ``r M/R .. (r+1) M/R - 1``). The spread of the R
+        replicate means is the honest error estimate of randomised QMC; the naive
+        ``sqrt(Var/M)`` overstates a Sobol' estimate's error by orders of magnitude.
+        ``M`` must be a multiple of ``R``.
 
     Returns
     -------
@@ -179,7 +185,22 @@ def sample_xi(
         rng = np.random.default_rng(seed)
         xi = 2.0 * rng.beta(_BETA_SHAPE, _BETA_SHAPE, size=samples) - 1.0
         return xi, weights
+    if isinstance(replicates, bool) or int(replicates) != replicates or replicates < 1:
+        raise ValueError(f"replicates must be a positive integer, got {replicates!r}")
+    replicates = int(replicates)
+    if replicates == 1:
+        return semicircle_ppf(_sobol_uniform(samples, seed)), weights
+    if samples % replicates:
+        raise ValueError(
+            f"samples must be a multiple of replicates = {replicates}, got {samples}"
+        )
+    children = np.random.SeedSequence(seed).spawn(replicates)
+    per = samples // replicates
+    u = np.concatenate([_sobol_uniform(per, np.random.default_rng(c)) for c in children])
+    return semicircle_ppf(u), weights
+
+
+def _sobol_uniform(samples: int, seed) -> np.ndarray:
     engine = qmc.Sobol(d=1, scramble=True, seed=seed)
     power = int(np.ceil(np.log2(samples)))
-    u = engine.random_base2(power)[:samples, 0]
-    return semicircle_ppf(u), weights
+    return engine.random_base2(power)[:samples, 0]
