@@ -1,0 +1,615 @@
+"""Parameter sweeps: bifurcation diagrams in both Poincaré sections (paper Figs. 3, 9, 10).
+
+``sweep`` runs one trajectory per parameter value (DMR, OPA equivalent system or a
+Monte Carlo ensemble), drops a transient, records the phase-plane and constraint-plane
+sections and identifies the motion (``opa._poincare.identify_motion``): period, impacts
+per period, label ``z = n/p``, grazing; period doubling is read off neighbours.
+
+Parallel over parameter values with local processes (default, 2 workers, each with one
+numba thread) or on a Dask distributed cluster (``scheduler``). Continuation sweeps
+(``forward``: increasing values, ``backward``: decreasing) start each value from the
+final state of the previous one and are sequential by nature.
+
+Crash safety and resumption: with ``out`` set, every finished point is written at once
+to ``<out>.parts/point-NNNNN.npz`` (temporary file, fsync, atomic rename) next to a
+``sweep.json`` manifest of the sweep's settings. A rerun with the same settings reads the
+finished points back and computes only the others (a continuation resumes from the last
+finished point's final state); when all are done the dataset is written atomically to
+``out`` and the parts are removed. Each point starts at t = 0: continuation carries the
+state over, not the clock (the forcing phase is the same at the handover, since runs end
+at a multiple of 2 pi/omega, but the impulse train restarts).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import sys
+import tempfile
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from opa._dataset import provenance_attrs, write_netcdf
+from opa._model import (
+    PARAMETER_NAMES,
+    Oscillator,
+    SolverOptions,
+    Uncertainty,
+    _choice,
+)
+from opa._poincare import (
+    GRAZE_GAP,
+    GRAZE_VELOCITY,
+    PERIOD_TOL,
+    constraint_section,
+    grazing_points,
+    identify_motion,
+    period_doubling,
+    phase_section,
+)
+
+MODELS = ("dmr", "opa", "mc")
+CONTINUATIONS = ("fixed", "forward", "backward")
+SWEEPABLE = PARAMETER_NAMES + ("sigma",)
+DEFAULT_WORKERS = 2
+_MANIFEST = "sweep.json"
+
+
+# --------------------------------------------------------------------------- one point
+
+
+def sweep_times(oscillator: Oscillator, options: SolverOptions, transient: int, record: int,
+                per_period: int) -> np.ndarray:
+    """Output times of one sweep point: stroboscopic through the transient, then
+    ``per_period`` outputs per forcing period through the record.
+
+    Output times within 1e-9 periods of an impulse are moved onto it exactly, so that a
+    stroboscopic time that coincides with an impulse (e.g. omega = 2.8 = 14/5: every 14
+    forcing periods) is always sampled just after it (outputs are right-continuous).
+    Left to round-off, such a sample falls on either side of the velocity jump.
+    """
+    T = oscillator.forcing_period
+    strobe = np.arange(transient + 1) * T
+    dense = transient * T + np.arange(1, record * per_period + 1) * (T / per_period)
+    times = np.concatenate([strobe, dense])
+    if oscillator.F0 != 0.0:
+        T1 = 2.0 * math.pi / oscillator.omega1
+        j = np.round(times / T1)
+        near = (np.abs(times - j * T1) <= 1e-9 * T) & (j >= (0 if options.impulse_at_zero else 1))
+        times = np.where(near, j * T1, times)
+    return times
+
+
+@dataclass(frozen=True)
+class PointTask:
+    """Everything one worker needs for one parameter value (picklable)."""
+
+    index: int
+    value: float
+    model: str
+    oscillator: Oscillator
+    options: SolverOptions
+    sigma: float
+    order: int
+    uncertain: str
+    truncation: str
+    impact_law: str
+    allow_negative: bool
+    samples: int
+    sampler: str
+    seed: int
+    transient: int
+    record: int
+    per_period: int
+    period_tol: float
+    graze_velocity: float
+    graze_gap: float
+    initial: np.ndarray | None = field(default=None, compare=False)
+    single_thread: bool = False
+
+
+def _run(task: PointTask) -> xr.Dataset:
+    from opa._simulate import simulate_dmr, simulate_opa
+
+    times = sweep_times(task.oscillator, task.options, task.transient, task.record,
+                        task.per_period)
+    if task.model == "dmr":
+        osc = task.oscillator
+        if task.initial is not None:
+            osc = osc.replace(x0=min(float(task.initial[0, 0]), osc.delta),
+                              v0=float(task.initial[1, 0]))
+        return simulate_dmr(osc, times=times, options=task.options)
+    if task.model == "opa":
+        initial = None
+        if task.initial is not None:
+            initial = np.array(task.initial, dtype=float)
+            initial[0, 0] = min(initial[0, 0], task.oscillator.delta)
+        return simulate_opa(task.oscillator, sigma=task.sigma, order=task.order,
+                            uncertain=task.uncertain, truncation=task.truncation,
+                            impact_law=task.impact_law, allow_negative=task.allow_negative,
+                            times=times, options=task.options, initial=initial)
+    from mc import simulate_mc
+
+    return simulate_mc(task.oscillator, sigma=task.sigma, samples=task.samples,
+                       sampler=task.sampler, seed=task.seed, order=0, uncertain=task.uncertain,
+                       allow_negative=task.allow_negative, times=times, options=task.options,
+                       progress=False)
+
+
+def compute_point(task: PointTask) -> dict:
+    """Run one parameter value and reduce it to its sections and motion (a dict of arrays).
+
+    A trajectory that cannot be completed (``SimulationError``) gives a failed point
+    (NaN sections, ``failed = 1`` and the message) instead of stopping the sweep.
+    """
+    from opa._simulate import SimulationError
+
+    if task.single_thread:
+        import numba
+
+        numba.set_num_threads(1)
+    ncoef = task.order + 1 if task.model == "opa" else 1
+    try:
+        ds = _run(task)
+    except SimulationError as err:
+        nan = math.nan
+        return {
+            "index": task.index, "value": task.value, "failed": 1, "message": str(err),
+            "section_x": np.zeros(0), "section_v": np.zeros(0),
+            "impact_phase": np.zeros(0), "impact_v": np.zeros(0),
+            "period": 0, "impacts": -1, "label": "failed", "residual": nan,
+            "nearest_period": 0, "impact_rate": nan, "min_impact_velocity": nan,
+            "min_gap": nan, "x_max": nan, "grazing": 0, "final": np.full((2, ncoef), nan),
+        }
+    T = task.oscillator.forcing_period
+    start = task.transient * T
+    strobe = phase_section(ds, start=start)  # t = start itself is not a return of the record
+    hits = constraint_section(ds, start=start)
+    motion = identify_motion(ds, start=start, period_tol=task.period_tol, graze_velocity=task.graze_velocity,
+                             graze_gap=task.graze_gap)
+    if task.model == "opa":
+        final = np.stack([ds.x_coef.values[:, -1], ds.v_coef.values[:, -1]])
+    elif task.model == "dmr":
+        final = np.array([[ds.x.values[-1]], [ds.v.values[-1]]])
+    else:
+        final = np.array([[ds.x_mean.values[-1]], [ds.v_mean.values[-1]]])
+    return {
+        "index": task.index, "value": task.value, "failed": 0, "message": "",
+        "section_x": strobe.section_x.values, "section_v": strobe.section_v.values,
+        "impact_phase": hits.impact_phase.values, "impact_v": hits.impact_v.values,
+        **motion.as_dict(), "final": final,
+    }
+
+
+def _init_worker() -> None:
+    import numba
+
+    numba.set_num_threads(1)
+
+
+# --------------------------------------------------------------------------- parts on disk
+
+
+def _parts_dir(out: str) -> str:
+    return os.fspath(out) + ".parts"
+
+
+def _part_path(parts: str, index: int) -> str:
+    return os.path.join(parts, f"point-{index:05d}.npz")
+
+
+def _atomic_write(path: str, write) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.splitext(path)[1],
+                               dir=os.path.dirname(path))
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def _write_part(parts: str, result: dict) -> None:
+    arrays = {k: np.asarray(v) for k, v in result.items()}
+    _atomic_write(_part_path(parts, result["index"]), lambda fh: np.savez(fh, **arrays))
+
+
+def _read_part(path: str) -> dict:
+    with np.load(path, allow_pickle=False) as z:
+        out = {k: z[k] for k in z.files}
+    for k, v in out.items():
+        if v.ndim == 0:
+            out[k] = v.item()
+    return out
+
+
+def _open_parts(out: str | None, manifest: dict) -> tuple[str | None, dict]:
+    """Create or check ``<out>.parts`` and return it with the finished points it holds."""
+    if out is None:
+        return None, {}
+    parts = _parts_dir(out)
+    path = os.path.join(parts, _MANIFEST)
+    if os.path.exists(path):
+        with open(path) as fh:
+            old = json.load(fh)
+        if old != manifest:
+            keys = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
+            raise ValueError(
+                f"{parts} holds an unfinished sweep with different settings ({', '.join(keys)}); "
+                f"rerun it with its own settings to finish it, or remove {parts}"
+            )
+    else:
+        os.makedirs(parts, exist_ok=True)
+        text = json.dumps(manifest, indent=1, sort_keys=True)
+        _atomic_write(path, lambda fh: fh.write(text.encode()))
+    done = {}
+    for name in sorted(os.listdir(parts)):
+        if name.startswith("point-") and name.endswith(".npz"):
+            result = _read_part(os.path.join(parts, name))
+            done[int(result["index"])] = result
+    return parts, done
+
+
+# --------------------------------------------------------------------------- the sweep
+
+
+def _settings(model, param, values, oscillator, options, kw) -> dict:
+    """The sweep's settings as plain JSON values: the resume manifest."""
+    return {
+        "model": model,
+        "param": param,
+        "values": [float(v) for v in values],
+        "oscillator": oscillator.as_dict(),
+        "options": {k: (float(v) if isinstance(v, float) else v)
+                    for k, v in asdict(options).items()},
+        **kw,
+    }
+
+
+def sweep(
+    model: str,
+    param: str,
+    values,
+    oscillator: Oscillator | None = None,
+    *,
+    transient: int = 500,
+    record: int = 100,
+    per_period: int = 16,
+    continuation: str = "fixed",
+    sigma: float = 0.0,
+    order: int = 4,
+    uncertain: str = "mu",
+    truncation: str = "galerkin",
+    impact_law: str = "mean",
+    allow_negative: bool = False,
+    samples: int = 256,
+    sampler: str = "sobol",
+    seed: int = 0,
+    options: SolverOptions | None = None,
+    period_tol: float = PERIOD_TOL,
+    graze_velocity: float = GRAZE_VELOCITY,
+    graze_gap: float = GRAZE_GAP,
+    out: str | os.PathLike | None = None,
+    keep_parts: bool = False,
+    scheduler=None,
+    workers: int = DEFAULT_WORKERS,
+    executor=None,
+    progress: bool | None = None,
+) -> xr.Dataset:
+    """Bifurcation diagram: sections and motion labels over values of one parameter.
+
+    Parameters
+    ----------
+    model : "dmr" (eq. (29)), "opa" (the EMR; ``sigma = 0`` gives EMR_0) or "mc" (the
+        Monte Carlo mean of ``samples`` sampled systems).
+    param : the swept parameter, any of ``mu a c f omega eta delta F0 a1 omega1 n x0 v0``
+        or ``sigma`` (opa, mc).
+    values : (P,) distinct parameter values (stored in increasing order).
+    oscillator : the other parameters (paper defaults when omitted).
+    transient, record : forcing periods 2 pi/omega dropped, then recorded.
+    per_period : outputs per forcing period in the record (>= 8 resolves free-flight
+        maxima for grazing; the transient is sampled once per period).
+    continuation : "fixed" (every value starts from ``x0, v0``), "forward" (increasing
+        values, each from the final state of the previous) or "backward" (decreasing).
+    sigma, order, uncertain, truncation, impact_law, allow_negative : the OPA / MC
+        settings (see ``simulate_opa``, ``simulate_mc``).
+    samples, sampler, seed : Monte Carlo settings (model "mc").
+    options : solver options.
+    period_tol, graze_velocity, graze_gap : see ``identify_motion``.
+    out : netCDF path. Finished points go to ``<out>.parts/`` as they come and a rerun
+        with the same settings resumes; the dataset is written atomically at the end.
+    keep_parts : keep ``<out>.parts`` after the final write.
+    scheduler : Dask distributed scheduler address or ``Client``: points run there.
+    workers : local processes (default 2; 1 runs in this process). Ignored with
+        ``scheduler`` or ``executor``, and for continuation sweeps (sequential).
+    executor : a ``concurrent.futures`` executor to reuse (e.g. a warm process pool).
+    progress : progress bar (default: when stderr is a terminal).
+
+    Returns
+    -------
+    xarray.Dataset with, over the dimension named ``param``: ``section_x, section_v
+    (param, point)`` (stroboscopic points of the record, NaN padded), ``impact_phase,
+    impact_v (param, point)`` (constraint plane), ``period`` (0: none), ``impacts`` (per
+    period, -1: none), ``label`` ("n/p"), ``residual``, ``impact_rate``,
+    ``min_impact_velocity``, ``min_gap``, ``x_max``, ``grazing``, ``period_doubling``,
+    ``failed``; ``grazing_parameter(graze)``: grazing locations estimated between
+    neighbours; the attributes of SPEC section 5 (the swept parameter's is NaN).
+
+    Performance: one trajectory of ``transient + record`` periods per value; about
+    50 ms per value for the DMR at the default tolerances (600 periods, section 3.1),
+    three times that for OPA N = 4.
+
+    Examples
+    --------
+    >>> from opa import preset
+    >>> ds = sweep("dmr", "c", [0.035, 0.05], preset("3.1", F0=0.0), transient=200,
+    ...            record=40, workers=1)
+    >>> ds.label.values.tolist()
+    ['4/4', '2/2']
+    """
+    _choice("model", model, MODELS)
+    _choice("continuation", continuation, CONTINUATIONS)
+    _choice("parameter", param, SWEEPABLE)
+    oscillator = oscillator or Oscillator()
+    options = options or SolverOptions()
+    if param == "sigma" and model == "dmr":
+        raise ValueError("the DMR has no uncertainty: sweep sigma with model 'opa' or 'mc'")
+    if continuation != "fixed" and model == "mc":
+        raise ValueError("continuation is not defined for 'mc' (every sample has its own "
+                         "state); use continuation='fixed'")
+    for name, value, low in (("transient", transient, 0), ("record", record, 2),
+                             ("per_period", per_period, 1), ("workers", workers, 1)):
+        if isinstance(value, bool) or int(value) != value or value < low:
+            raise ValueError(f"{name} must be an integer >= {low}, got {value}")
+    if isinstance(order, bool) or int(order) != order or order < 0:
+        raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+    values = np.asarray(values, dtype=float).ravel()
+    if len(values) < 1 or not np.all(np.isfinite(values)):
+        raise ValueError(f"sweep values of {param} must be finite, got {values.tolist()}")
+    values = np.sort(values)
+    if np.any(np.diff(values) == 0):
+        raise ValueError(f"sweep values of {param} must be distinct, got {values.tolist()}")
+    for name, value in (("period_tol", period_tol), ("graze_velocity", graze_velocity),
+                        ("graze_gap", graze_gap)):
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be > 0, got {value}")
+
+    kw = dict(sigma=float(sigma), order=int(order) if model == "opa" else 0,
+              uncertain=uncertain, truncation=truncation, impact_law=impact_law,
+              allow_negative=bool(allow_negative), samples=int(samples), sampler=sampler,
+              seed=int(seed), transient=int(transient), record=int(record),
+              per_period=int(per_period), period_tol=float(period_tol),
+              graze_velocity=float(graze_velocity), graze_gap=float(graze_gap))
+    tasks = []
+    for i, value in enumerate(values):
+        osc, task_kw = oscillator, dict(kw)
+        if param == "sigma":
+            task_kw["sigma"] = float(value)
+        else:
+            osc = oscillator.replace(**{param: float(value)})  # validates, names the value
+        if model != "dmr":
+            Uncertainty(task_kw["sigma"], uncertain, allow_negative).check(osc)
+        tasks.append(PointTask(index=i, value=float(value), model=model, oscillator=osc,
+                               options=options, **task_kw))
+    manifest = _settings(model, param, values, oscillator, options,
+                         {**kw, "continuation": continuation})
+    out = None if out is None else os.fspath(out)
+    parts, done = _open_parts(out, manifest)
+
+    if progress is None:
+        progress = sys.stderr.isatty()
+    from tqdm.auto import tqdm
+
+    results = dict(done)
+    with tqdm(total=len(tasks), initial=len(done), unit="point", disable=not progress,
+              desc=f"{model} sweep over {param}") as bar:
+
+        def finish(result):
+            if parts is not None:
+                _write_part(parts, result)
+            results[int(result["index"])] = result
+            bar.update(1)
+
+        if continuation == "fixed":
+            todo = [t for t in tasks if t.index not in done]
+            _run_parallel(todo, finish, scheduler, executor, workers)
+        else:
+            order_ = tasks if continuation == "forward" else tasks[::-1]
+            _run_continuation(order_, done, finish, scheduler)
+    computed = len(tasks) - len(done)
+    ds = assemble(model, param, values, [results[i] for i in range(len(tasks))], oscillator,
+                  options, kw, continuation)
+    ds.attrs.update(points_resumed=len(done), points_computed=computed)
+    if out is not None:
+        write_netcdf(ds, out)
+        if not keep_parts:
+            shutil.rmtree(parts, ignore_errors=True)
+    return ds
+
+
+def _run_parallel(tasks, finish, scheduler, executor, workers) -> None:
+    if not tasks:
+        return
+    if scheduler is not None:
+        _run_dask(tasks, finish, scheduler)
+        return
+    if executor is None and (workers <= 1 or len(tasks) == 1):
+        for task in tasks:
+            finish(compute_point(task))
+        return
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    own = executor is None
+    if own:
+        executor = local_executor(min(workers, len(tasks)))
+    pending = set()
+    try:
+        pending = {executor.submit(compute_point, t) for t in tasks}
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                finish(fut.result())
+    except BaseException:
+        for fut in pending:
+            fut.cancel()
+        raise
+    finally:
+        if own:
+            executor.shutdown(wait=True, cancel_futures=True)
+
+
+def local_executor(workers: int = DEFAULT_WORKERS):
+    """A process pool for sweeps: ``workers`` processes with one numba thread each.
+
+    Processes come from a fork server (not a plain fork, which is unsafe once numba's
+    thread pool has started in this process). Reuse it across sweeps with
+    ``sweep(..., executor=pool)`` to pay the start-up (imports and loading the compiled
+    kernel, about 2-3 s) once.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["opa._bifurcation"])
+    return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx,
+                               initializer=_init_worker)
+
+
+def _run_dask(tasks, finish, scheduler) -> None:
+    from distributed import Client, as_completed
+
+    own = not isinstance(scheduler, Client)
+    client = Client(scheduler) if own else scheduler
+    try:
+        single = [PointTask(**{**_task_fields(t), "single_thread": True}) for t in tasks]
+        futures = [client.submit(compute_point, t, pure=False) for t in single]
+        for fut in as_completed(futures):
+            finish(fut.result())
+    finally:
+        if own:
+            client.close()
+
+
+def _task_fields(task: PointTask) -> dict:
+    return {f: getattr(task, f) for f in PointTask.__dataclass_fields__}
+
+
+def _run_continuation(ordered, done, finish, scheduler) -> None:
+    """Sequential sweep, each value from the final state of the previous one."""
+    initial = None
+    client = None
+    try:
+        for task in ordered:
+            if task.index in done:
+                final = np.asarray(done[task.index]["final"], dtype=float)
+                initial = final if np.all(np.isfinite(final)) else None
+                continue
+            task = PointTask(**{**_task_fields(task), "initial": initial})
+            if scheduler is None:
+                result = compute_point(task)
+            else:
+                if client is None:
+                    from distributed import Client
+
+                    client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
+                result = client.submit(compute_point, task, pure=False).result()
+            finish(result)
+            final = np.asarray(result["final"], dtype=float)
+            initial = final if np.all(np.isfinite(final)) else None
+    finally:
+        if client is not None and client is not scheduler:
+            client.close()
+
+
+# --------------------------------------------------------------------------- assembly
+
+
+_SCALARS = {
+    "period": ("int32", "smallest stroboscopic repeat in forcing periods (0: none)"),
+    "impacts": ("int32", "impacts per period (-1: no period or not steady)"),
+    "residual": ("float64", "relative stroboscopic repeat distance at the period "
+                            "(or at nearest_period)"),
+    "nearest_period": ("int32", "repeat with the smallest stroboscopic distance"),
+    "impact_rate": ("float64", "impacts per forcing period in the record"),
+    "min_impact_velocity": ("float64", "slowest impact velocity in the record"),
+    "min_gap": ("float64", "delta minus the highest free-flight maximum of x"),
+    "x_max": ("float64", "largest x in the record, impacts excluded"),
+    "grazing": ("int8", "1 where an impact is slower than graze_velocity or a free "
+                        "flight comes within graze_gap of the wall"),
+    "failed": ("int8", "1 where the trajectory could not be completed"),
+}
+
+
+def _padded(rows, width):
+    out = np.full((len(rows), width), np.nan)
+    for i, r in enumerate(rows):
+        out[i, : len(r)] = r
+    return out
+
+
+def assemble(model, param, values, results, oscillator, options, kw, continuation
+             ) -> xr.Dataset:
+    """The sweep dataset (SPEC section 5) from per-point results in value order."""
+    width = max([kw["record"]] + [len(r["impact_v"]) for r in results])
+    dim = param
+    data = {
+        "section_x": ((dim, "point"), _padded([r["section_x"] for r in results], width),
+                      {"long_name": "phase-plane section: x at t = k 2 pi/omega",
+                       "units": "1"}),
+        "section_v": ((dim, "point"), _padded([r["section_v"] for r in results], width),
+                      {"long_name": "phase-plane section: dx/dt at t = k 2 pi/omega",
+                       "units": "1"}),
+        "impact_phase": ((dim, "point"), _padded([r["impact_phase"] for r in results], width),
+                         {"long_name": "constraint-plane section: forcing phase "
+                                       "omega t mod 2 pi at impact", "units": "rad"}),
+        "impact_v": ((dim, "point"), _padded([r["impact_v"] for r in results], width),
+                     {"long_name": "constraint-plane section: pre-impact velocity",
+                      "units": "1"}),
+        "label": (dim, np.array([str(r["label"]) for r in results], dtype=str),
+                  {"long_name": "period label z = n/p (n forcing periods, p impacts)"}),
+    }
+    for name, (dtype, long_name) in _SCALARS.items():
+        data[name] = (dim, np.array([r[name] for r in results], dtype=dtype),
+                      {"long_name": long_name, "units": "1"})
+    periods = data["period"][1]
+    data["period_doubling"] = (dim, period_doubling(periods),
+                               {"long_name": "1 where the period is twice a neighbour's",
+                                "units": "1"})
+    rate = data["impact_rate"][1]
+    graze_at = grazing_points(values, data["min_impact_velocity"][1], data["min_gap"][1],
+                              rate)
+    data["grazing_parameter"] = ("graze", graze_at,
+                                 {"long_name": f"estimated {param} of grazing bifurcations",
+                                  "units": "1"})
+    attrs = provenance_attrs(model, oscillator, options, sigma=kw["sigma"], order=kw["order"],
+                             uncertain=kw["uncertain"], truncation=kw["truncation"],
+                             impact_law=kw["impact_law"],
+                             seed=kw["seed"] if model == "mc" else -1,
+                             sampler=kw["sampler"] if model == "mc" else "none")
+    attrs[param] = math.nan  # swept: see the coordinate
+    attrs.update(
+        sweep_parameter=param, continuation=continuation, transient=kw["transient"],
+        record=kw["record"], per_period=kw["per_period"], period_tol=kw["period_tol"],
+        graze_velocity=kw["graze_velocity"], graze_gap=kw["graze_gap"],
+        samples=kw["samples"] if model == "mc" else 0,
+        failures="; ".join(f"{param}={r['value']:.6g}: {r['message']}" for r in results
+                           if r["failed"]) or "none",
+    )
+    coords = {
+        dim: (dim, np.asarray(values, dtype=float), {"long_name": f"swept parameter {param}",
+                                                     "units": "1"}),
+        "point": ("point", np.arange(width)),
+    }
+    return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+__all__ = ["sweep", "sweep_times", "compute_point", "local_executor", "PointTask", "assemble",
+           "MODELS", "CONTINUATIONS", "SWEEPABLE"]
