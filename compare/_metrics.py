@@ -56,7 +56,8 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     return ds
 
 
-def error_metrics(cmp: xr.Dataset, *, window_periods: float | None = None) -> dict[str, float]:
+def error_metrics(cmp: xr.Dataset, *, window_periods: float | None = None,
+                  until: float | None = None) -> dict[str, float]:
     """Scalar summaries of a :func:`compare_runs` result.
 
     ``rms_error``/``max_error`` of the mean over the window (the first
@@ -64,10 +65,18 @@ def error_metrics(cmp: xr.Dataset, *, window_periods: float | None = None) -> di
     stroboscopic points t = k 2 pi/omega in the window, ``sem_rms`` (the MC noise
     floor), ``var_rms_error``, and ``agree_periods``: the time, in forcing periods, of
     the first output where the error leaves the MC noise band (inf if never).
+    ``until`` (a time) further restricts the window to ``t < until``, e.g. to the time
+    before the first impact.
     """
     T = 2 * np.pi / cmp.attrs["omega"]
     t = cmp.time.values
     in_window = np.ones(t.size, bool) if window_periods is None else t <= window_periods * T + 1e-9
+    if until is not None:
+        in_window &= t < until
+    if not in_window.any():
+        nan = float("nan")
+        return dict.fromkeys(("rms_error", "max_error", "strobe_rms_error", "sem_rms",
+                              "var_rms_error"), nan) | {"agree_periods": nan}
     err = cmp.err_mean.values[in_window]
     tw = t[in_window]
     phase = tw / T

@@ -157,7 +157,9 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print) -> 
     variants = [f"{law}/{trunc}" for law, trunc in VARIANTS]
     S, V, N = len(cfg.sigmas), len(variants), len(orders)
     shape = (S, V, N)
-    metric = {f"{m}_{w}": np.full(shape, np.nan) for m in METRICS for w in ("window", "full")}
+    metric = {f"{m}_{w}": np.full(shape, np.nan) for m in METRICS
+              for w in ("window", "full", "pre")}
+    first_impact = np.full(shape, np.nan)
     opa_seconds = np.full(shape, np.nan)
     opa_rhs = np.zeros(shape, dtype=np.int64)
     mc_seconds = np.zeros(S)
@@ -180,12 +182,20 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print) -> 
                 opa_seconds[s, v, k] = time.perf_counter() - start
                 opa_rhs[s, v, k] = opa_ds.attrs["rhs_evaluations"]
                 cmp = compare_runs(opa_ds, mc_ds, floor=10 * opts.atol + 10 * opts.rtol)
-                for w, window in (("window", cfg.window), ("full", None)):
-                    for m, value in error_metrics(cmp, window_periods=window).items():
+                first = (float(opa_ds.impact_time[0]) if opa_ds.sizes["impact"]
+                         else float(opa_ds.time[-1]) + 1.0)
+                for w, window, until in (("window", cfg.window, None), ("full", None, None),
+                                         ("pre", None, first)):
+                    for m, value in error_metrics(cmp, window_periods=window,
+                                                  until=until).items():
                         if m in METRICS:
                             metric[f"{m}_{w}"][s, v, k] = value
+                first_impact[s, v, k] = first
                 curves[(variants[v], s, order)] = opa_ds
     ds = _assemble(cfg, curves, metric, opa_seconds, opa_rhs, mc_seconds, mc_rhs, variants)
+    ds["first_impact_time"] = (("sigma", "variant", "N"), first_impact,
+                               {"long_name": "time of the OPA system's first impact",
+                                "units": "1"})
     ds = xr.merge([ds, cost_studies(cfg, curves, progress=progress, log=log)],
                   combine_attrs="drop_conflicts")
     ds.attrs.update(_attrs(cfg))

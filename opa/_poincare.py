@@ -208,51 +208,174 @@ def period_doubling(periods: np.ndarray) -> np.ndarray:
     return flag
 
 
-def grazing_points(values: np.ndarray, min_impact_velocity: np.ndarray, min_gap: np.ndarray,
-                   impact_rate: np.ndarray) -> np.ndarray:
-    """Parameter values where a grazing bifurcation is crossed between sweep neighbours.
+def grazing_points(values: np.ndarray, period: np.ndarray, impacts: np.ndarray,
+                   min_impact_velocity: np.ndarray, min_gap: np.ndarray) -> np.ndarray:
+    """Parameter values where a branch of periodic motions crosses a grazing.
 
-    A grazing is crossed between neighbours when the number of impacts per forcing period
-    changes and, on the impacting side, the slowest impact is slow compared to the
-    sweep's typical impact velocity, or on the other side a free flight nearly reaches the
-    wall. The location is interpolated from the square law near a graze,
-    ``v_min^2 ~ (p - p_g)`` on the impacting side and ``gap ~ (p_g - p)`` on the free side
-    (both vanish at ``p_g``); when only one side is informative it is used alone.
+    Along a branch of periodic motions the number of impacts per forcing period changes
+    only where an impact appears or disappears, i.e. at a grazing (a free-flight maximum
+    reaching the wall with zero velocity). Such a change between two periodic
+    neighbours is reported, located by the square law near a graze: on the impacting
+    side the new impact has ``v^2 ~ |p - p_g|``, on the other side the nearest free
+    flight has ``gap ~ |p - p_g|``; with ``g = gap`` on one side and ``g = -v^2/2`` on
+    the other, the linear root of ``g`` is taken (the midpoint when either is missing).
+    Grazings inside non-periodic ranges are not located (see the per-value ``grazing``
+    flag and ``min_impact_velocity`` there).
 
     Parameters
     ----------
-    values : (P,) increasing parameter values; the others are per value, NaN where
-        undefined (no impacts, no free-flight maximum).
+    values : (P,) increasing parameter values; ``period``, ``impacts`` (per period),
+        ``min_impact_velocity``, ``min_gap`` per value (NaN where undefined).
 
     Returns
     -------
     Estimated grazing parameter values, increasing.
+
+    >>> grazing_points(np.array([1.0, 2.0]), np.array([2, 2]), np.array([2, 3]),
+    ...                np.array([0.5, 0.1]), np.array([0.01, np.nan])).round(3).tolist()
+    [1.667]
     """
     values = np.asarray(values, dtype=float)
+    period = np.asarray(period)
+    impacts = np.asarray(impacts)
     vmin = np.asarray(min_impact_velocity, dtype=float)
     gap = np.asarray(min_gap, dtype=float)
-    rate = np.asarray(impact_rate, dtype=float)
-    typical = np.nanmedian(vmin) if np.any(np.isfinite(vmin)) else math.nan
     found = []
-    for i in range(len(values) - 1):
-        a, b = i, i + 1
-        if not (np.isfinite(rate[a]) and np.isfinite(rate[b])) or abs(rate[a] - rate[b]) < 1e-9:
+    for a in range(len(values) - 1):
+        b = a + 1
+        if min(period[a], period[b]) < 1 or min(impacts[a], impacts[b]) < 0:
             continue
-        imp, free = (a, b) if rate[a] > rate[b] else (b, a)
-        slow = np.isfinite(vmin[imp]) and vmin[imp] < 0.25 * typical
-        close = np.isfinite(gap[free]) and gap[free] < 0.05 * max(vmin[imp], 1e-12) ** 2
-        if not (slow or close):
+        rate_a, rate_b = impacts[a] / period[a], impacts[b] / period[b]
+        if rate_a == rate_b:
             continue
-        # square-law interpolation: g(p) = +gap on the free side, -v^2/2 on the impacting
-        # side (a crude common scale; the root lies between the two values either way)
-        g_free = gap[free] if np.isfinite(gap[free]) else math.nan
-        g_imp = -0.5 * vmin[imp] ** 2 if np.isfinite(vmin[imp]) else math.nan
-        if np.isfinite(g_free) and np.isfinite(g_imp) and g_free > g_imp:
+        imp, free = (a, b) if rate_a > rate_b else (b, a)
+        g_free, g_imp = gap[free], -0.5 * vmin[imp] ** 2
+        if np.isfinite(g_free) and np.isfinite(g_imp) and g_free > 0 > g_imp:
             w = g_free / (g_free - g_imp)
             found.append(values[free] + w * (values[imp] - values[free]))
         else:
             found.append(0.5 * (values[a] + values[b]))
     return np.array(found)
+
+
+def stroboscopic_mask(t: np.ndarray, forcing_period: float, start: float | None = None,
+                      end: float | None = None) -> np.ndarray:
+    """True at outputs on stroboscopic times ``k 2 pi/omega`` within ``(start, end]``."""
+    t = np.asarray(t, dtype=float)
+    k = t / forcing_period
+    mask = np.abs(k - np.round(k)) <= _STROBE_TOL * np.maximum(1.0, np.abs(k))
+    if start is not None:
+        mask &= t > start + 1e-9 * forcing_period
+    if end is not None:
+        mask &= t <= end + 1e-9 * forcing_period
+    return mask
+
+
+def impulse_times(t_end: float, omega1: float, *, impulse_at_zero: bool = True) -> np.ndarray:
+    """Impulse times ``j 2 pi/omega1`` up to ``t_end`` (as the solver computes them)."""
+    T1 = 2.0 * math.pi / omega1
+    j = np.arange(0 if impulse_at_zero else 1, int(t_end // T1) + 2)
+    tj = j * T1
+    return tj[tj <= t_end]
+
+
+def sticking_mask(t: np.ndarray, stick_time: np.ndarray, release_time: np.ndarray
+                  ) -> np.ndarray:
+    """True at output times inside a sticking phase [stick, next release]."""
+    t = np.asarray(t, dtype=float)
+    mask = np.zeros(len(t), dtype=bool)
+    releases = np.sort(np.asarray(release_time, dtype=float))
+    for ts in np.asarray(stick_time, dtype=float):
+        later = releases[releases >= ts]
+        mask |= (t >= ts) & (t <= (later[0] if len(later) else np.inf))
+    return mask
+
+
+@dataclass(frozen=True)
+class Motion:
+    """What a run's sections say about its motion after the transient.
+
+    Attributes
+    ----------
+    period : smallest stroboscopic repeat p (forcing periods), 0 if none within tol.
+    impacts : impacts per repeat, -1 when there is no period, no impact record (MC mean)
+        or the count differs between repeats.
+    label : the paper's z = n/p, e.g. "4/4"; "none" without a period.
+    residual : relative repeat distance at ``period`` (or at ``nearest_period``).
+    nearest_period : the p with the smallest repeat distance (== period when periodic).
+    impact_rate : impacts per forcing period over the record (NaN for MC means).
+    min_impact_velocity : slowest impact in the record (NaN if none).
+    min_gap : ``delta`` minus the highest free-flight maximum of x (NaN if none or if the
+        outputs are too sparse to resolve maxima, fewer than 8 per period).
+    grazing : 1 if an impact is slower than ``graze_velocity`` or a free flight comes
+        within ``graze_gap`` of the wall, else 0.
+    """
+
+    period: int
+    impacts: int
+    label: str
+    residual: float
+    nearest_period: int
+    impact_rate: float
+    min_impact_velocity: float
+    min_gap: float
+    grazing: int
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def identify(
+    t: np.ndarray,
+    x: np.ndarray,
+    v: np.ndarray,
+    *,
+    forcing_period: float,
+    delta: float,
+    start: float | None = None,
+    impact_time: np.ndarray | None = None,
+    impact_velocity: np.ndarray | None = None,
+    breaks: np.ndarray = (),
+    sticking: np.ndarray | None = None,
+    period_tol: float = PERIOD_TOL,
+    max_period: int | None = None,
+    graze_velocity: float = GRAZE_VELOCITY,
+    graze_gap: float = GRAZE_GAP,
+) -> Motion:
+    """Array form of ``identify_motion``: outputs ``t, x, v`` (n,), impacts (m,) or None
+    when the run has no impact record (MC mean), ``breaks`` the times where the velocity
+    or force jumps, ``sticking`` (n,) True while resting on the wall."""
+    t = np.asarray(t, dtype=float)
+    T = float(forcing_period)
+    lo = float(t[0]) if start is None else float(start)
+    hi = float(t[-1])
+    strobe = stroboscopic_mask(t, T, start)
+    period, residual, nearest = detect_period(x[strobe], v[strobe], tol=period_tol,
+                                              max_period=max_period)
+    span = max((hi - lo) / T, 1e-300)
+    if impact_time is not None:
+        ti = np.asarray(impact_time, dtype=float)
+        window = (ti <= hi) & ((ti > lo) if start is not None else True)
+        rec, vi = ti[window], np.asarray(impact_velocity, dtype=float)[window]
+        repeats = int(round(span)) // period if period else 0
+        impacts = impacts_per_period(rec, hi, T, period, repeats)
+        rate = len(rec) / span
+        vmin = float(np.min(np.abs(vi))) if len(vi) else math.nan
+    else:
+        impacts, rate, vmin = -1, math.nan, math.nan
+    in_rec = (t >= lo) & (t <= hi)
+    gap = math.nan
+    if (np.count_nonzero(in_rec) - 1) / span >= 8:
+        free = in_rec if sticking is None else in_rec & ~np.asarray(sticking, dtype=bool)
+        _, xm = free_flight_maxima(t[free], x[free], v[free], breaks)
+        if len(xm):
+            gap = float(delta - xm.max())
+    graze = int((np.isfinite(vmin) and vmin < graze_velocity)
+                or (np.isfinite(gap) and gap < graze_gap))
+    return Motion(period=int(period), impacts=int(impacts),
+                  label=period_label(period, impacts), residual=float(residual),
+                  nearest_period=int(nearest), impact_rate=float(rate),
+                  min_impact_velocity=vmin, min_gap=gap, grazing=graze)
 
 
 # --------------------------------------------------------------------------- labelled layer
@@ -276,18 +399,12 @@ def _forcing_period(ds: xr.Dataset) -> float:
     return 2.0 * math.pi / float(ds.attrs["omega"])
 
 
-def _window(ds: xr.Dataset, start, end) -> tuple[float, float]:
-    t = ds.time.values
-    return (float(t[0]) if start is None else float(start),
-            float(t[-1]) if end is None else float(end))
-
-
 def phase_section(ds: xr.Dataset, *, start: float | None = None, end: float | None = None
                   ) -> xr.Dataset:
     """Stroboscopic (phase-plane) section: the state at ``t_k = k 2 pi/omega``.
 
     Only outputs that fall on stroboscopic times and lie in ``(start, end]`` are taken
-    (``start``: after the transient; default: all of the run).
+    (``start``: the end of the transient; default: all of the run).
 
     Returns
     -------
@@ -295,12 +412,7 @@ def phase_section(ds: xr.Dataset, *, start: float | None = None, end: float | No
     """
     x, v, name = mean_state(ds)
     t = ds.time.values
-    T = _forcing_period(ds)
-    lo, hi = _window(ds, start, end)
-    k = t / T
-    strobe = np.abs(k - np.round(k)) <= _STROBE_TOL * np.maximum(1.0, np.abs(k))
-    keep = strobe & (t <= hi + 1e-9 * T)
-    keep &= (t > lo + 1e-9 * T) if start is not None else True
+    keep = stroboscopic_mask(t, _forcing_period(ds), start, end)
     return xr.Dataset(
         {
             "section_x": ("point", x[keep], {"long_name": f"{name} x at t = k 2 pi/omega",
@@ -323,11 +435,14 @@ def constraint_section(ds: xr.Dataset, *, start: float | None = None,
     ``impact_v(point)`` = pre-impact velocity x'(t-) > 0 (the rebound is ``-eta`` times
     it), for the impacts in ``(start, end]``; empty for Monte Carlo means.
     """
-    lo, hi = _window(ds, start, end)
     if "impact_time" in ds:
         ti = ds.impact_time.values
         vi = ds.impact_velocity.values
-        keep = (ti <= hi) & ((ti > lo) if start is not None else True)
+        keep = np.ones(len(ti), dtype=bool)
+        if start is not None:
+            keep &= ti > start
+        if end is not None:
+            keep &= ti <= end
         ti, vi = ti[keep], vi[keep]
     else:
         ti = vi = np.zeros(0)
@@ -344,69 +459,19 @@ def constraint_section(ds: xr.Dataset, *, start: float | None = None,
     )
 
 
-def _breaks(ds: xr.Dataset) -> np.ndarray:
-    """Times where the velocity or the force jumps: impacts, impulses, stick, release."""
+def run_breaks(ds: xr.Dataset) -> np.ndarray:
+    """Times where the velocity or the force of a run jumps: impacts, impulses, pulse
+    ends, sticking and release."""
     parts = [ds[name].values for name in ("impact_time", "stick_time", "release_time")
              if name in ds]
     a = ds.attrs
-    if float(a.get("F0", 0.0)) != 0.0 and "omega1" in a:
-        T1 = 2 * math.pi / float(a["omega1"])
-        t = ds.time.values
-        j = np.arange(0 if int(a.get("impulse_at_zero", 1)) else 1, int(t[-1] // T1) + 2)
-        tj = j * T1
+    if float(a.get("F0", 0.0)) != 0.0:
+        tj = impulse_times(float(ds.time.values[-1]), float(a["omega1"]),
+                           impulse_at_zero=bool(int(a.get("impulse_at_zero", 1))))
         parts.append(tj)
         if a.get("impulse") == "pulse":
             parts.append(tj + float(a.get("pulse_width", 0.0)))
     return np.concatenate(parts) if parts else np.zeros(0)
-
-
-def _sticking_mask(ds: xr.Dataset, t: np.ndarray) -> np.ndarray:
-    """True at output times inside a sticking phase [stick, release]."""
-    mask = np.zeros(len(t), dtype=bool)
-    if "stick_time" not in ds:
-        return mask
-    releases = np.sort(ds.release_time.values) if "release_time" in ds else np.zeros(0)
-    for ts in ds.stick_time.values:
-        later = releases[releases >= ts]
-        tr = later[0] if len(later) else np.inf
-        mask |= (t >= ts) & (t <= tr)
-    return mask
-
-
-@dataclass(frozen=True)
-class Motion:
-    """What a run's sections say about its motion after the transient.
-
-    Attributes
-    ----------
-    period : smallest stroboscopic repeat p (forcing periods), 0 if none within tol.
-    impacts : impacts per repeat, -1 when there is no period, no impact record (MC mean)
-        or the count differs between repeats.
-    label : the paper's z = n/p, e.g. "4/4"; "none" without a period.
-    residual : relative repeat distance at ``period`` (or at ``nearest_period``).
-    nearest_period : the p with the smallest repeat distance (== period when periodic).
-    impact_rate : impacts per forcing period over the record (NaN for MC means).
-    min_impact_velocity : slowest impact in the record (NaN if none).
-    min_gap : ``delta`` minus the highest free-flight maximum of x (NaN if none or if the
-        outputs are too sparse to resolve maxima, fewer than 8 per period).
-    x_max : largest x in the record (outputs and interpolated maxima).
-    grazing : 1 if an impact is slower than ``graze_velocity`` or a free flight comes
-        within ``graze_gap`` of the wall, else 0.
-    """
-
-    period: int
-    impacts: int
-    label: str
-    residual: float
-    nearest_period: int
-    impact_rate: float
-    min_impact_velocity: float
-    min_gap: float
-    x_max: float
-    grazing: int
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
 
 def identify_motion(
@@ -424,10 +489,16 @@ def identify_motion(
     ----------
     ds : a ``dmr``, ``opa`` or ``mc`` dataset (``simulate_dmr`` etc.). The stroboscopic
         samples are the outputs at ``t = k 2 pi/omega``; outputs in between (e.g.
-        ``per_period=16``) are used to resolve free-flight maxima for grazing.
+        ``per_period=16``) resolve free-flight maxima for grazing.
     start : end of the transient (a time); default: the whole run.
     period_tol, max_period : see ``detect_period``.
     graze_velocity, graze_gap : grazing thresholds (see ``Motion.grazing``).
+
+    Notes
+    -----
+    When a stroboscopic time coincides with an impulse (omega/omega1 rational), the
+    sample lies just after the velocity jump only if the output time equals the impulse
+    time to the last bit; ``opa._bifurcation.sweep_times`` builds such grids.
 
     Examples
     --------
@@ -437,46 +508,28 @@ def identify_motion(
     >>> identify_motion(ds, start=200 * osc.forcing_period).label
     '2/2'
     """
-    T = _forcing_period(ds)
-    lo, hi = _window(ds, start, None)
-    sec = phase_section(ds, start=start)
-    period, residual, nearest = detect_period(sec.section_x.values, sec.section_v.values,
-                                              tol=period_tol, max_period=max_period)
-    has_impacts = "impact_time" in ds
-    delta = float(ds.attrs["delta"])
-    if has_impacts:
-        ti = ds.impact_time.values
-        in_window = (ti <= hi) & ((ti > lo) if start is not None else True)
-        rec, vi = ti[in_window], ds.impact_velocity.values[in_window]
-        repeats = int(round((hi - lo) / T)) // period if period else 0
-        impacts = impacts_per_period(rec, hi, T, period, repeats)
-        rate = len(rec) / max((hi - lo) / T, 1e-300)
-        vmin = float(np.min(np.abs(vi))) if len(vi) else math.nan
-    else:
-        impacts, rate, vmin = -1, math.nan, math.nan
-
     x, v, _ = mean_state(ds)
     t = ds.time.values
-    in_rec = (t >= lo) & (t <= hi)
-    x_max = float(np.max(x[in_rec])) if in_rec.any() else math.nan
-    gap = math.nan
-    per_period = (np.count_nonzero(in_rec) - 1) / max((hi - lo) / T, 1e-300)
-    if per_period >= 8:
-        free = in_rec & ~_sticking_mask(ds, t)
-        _, xm = free_flight_maxima(t[free], x[free], v[free], _breaks(ds))
-        if len(xm):
-            x_max = max(x_max, float(xm.max()))
-            gap = float(delta - xm.max())
-    graze = int((np.isfinite(vmin) and vmin < graze_velocity)
-                or (np.isfinite(gap) and gap < graze_gap))
-    return Motion(period=int(period), impacts=int(impacts),
-                  label=period_label(period, impacts), residual=float(residual),
-                  nearest_period=int(nearest), impact_rate=float(rate),
-                  min_impact_velocity=vmin, min_gap=gap, x_max=x_max, grazing=graze)
+    has_impacts = "impact_time" in ds
+    sticking = None
+    if "stick_time" in ds:
+        sticking = sticking_mask(t, ds.stick_time.values, ds.release_time.values)
+    return identify(
+        t, x, v, forcing_period=_forcing_period(ds), delta=float(ds.attrs["delta"]),
+        start=start, impact_time=ds.impact_time.values if has_impacts else None,
+        impact_velocity=ds.impact_velocity.values if has_impacts else None,
+        breaks=run_breaks(ds), sticking=sticking, period_tol=period_tol,
+        max_period=max_period, graze_velocity=graze_velocity, graze_gap=graze_gap,
+    )
 
 
 __all__ = [
     "Motion",
+    "identify",
+    "stroboscopic_mask",
+    "impulse_times",
+    "sticking_mask",
+    "run_breaks",
     "detect_period",
     "repeat_distance",
     "impacts_per_period",

@@ -1,0 +1,256 @@
+"""``opa-mc bifurcation`` and ``opa-mc reproduce``: sweeps and the paper's figures.
+
+Wired into ``opa._cli.build_parser`` by ``register(sub, _model_flags, _common_flags)``.
+User mistakes raise ``ValueError`` (reported by ``opa._cli.main`` as one line, exit 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+
+import numpy as np
+
+from opa._bifurcation import CONTINUATIONS, DEFAULT_WORKERS, MODELS, SWEEPABLE
+from opa._model import IMPULSE_MODELS
+from opa._poincare import GRAZE_GAP, GRAZE_VELOCITY, PERIOD_TOL
+
+SECTIONS = ("phase", "constraint", "both")
+
+
+def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
+    """``NAME=START:STOP:COUNT`` (COUNT values, ends included) or ``NAME=V1,V2,...``.
+
+    >>> name, values = parse_sweep("c=0.01:0.1:10")
+    >>> name, len(values), float(values[-1])
+    ('c', 10, 0.1)
+    """
+    usage = "expected NAME=START:STOP:COUNT (e.g. c=0.01:0.1:200) or NAME=V1,V2,..."
+    name, sep, rhs = spec.partition("=")
+    name = name.strip().lstrip("-")
+    if not sep or not name or not rhs:
+        raise ValueError(f"--sweep {spec!r}: {usage}")
+    if name not in SWEEPABLE:
+        raise ValueError(f"--sweep {spec!r}: unknown parameter {name!r} "
+                         f"(choose from {', '.join(SWEEPABLE)})")
+
+    def number(text, what):
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"--sweep {spec!r}: {what} {text!r} is not a number") from None
+        if not math.isfinite(value):
+            raise ValueError(f"--sweep {spec!r}: {what} must be finite, got {text!r}")
+        return value
+
+    if ":" in rhs:
+        fields = rhs.split(":")
+        if len(fields) != 3:
+            raise ValueError(f"--sweep {spec!r}: {usage}")
+        start, stop = number(fields[0], "START"), number(fields[1], "STOP")
+        try:
+            count = int(fields[2])
+        except ValueError:
+            raise ValueError(f"--sweep {spec!r}: COUNT must be an integer >= 1, "
+                             f"got {fields[2]!r}") from None
+        if count < 1:
+            raise ValueError(f"--sweep {spec!r}: COUNT must be an integer >= 1, got {count}")
+        if count == 1 and start != stop:
+            raise ValueError(f"--sweep {spec!r}: COUNT = 1 needs START == STOP")
+        if count > 1 and start == stop:
+            raise ValueError(f"--sweep {spec!r}: START and STOP are equal, got {start:g}")
+        values = np.linspace(start, stop, count)
+    else:
+        values = np.array([number(v, "value") for v in rhs.split(",")])
+        if len(np.unique(values)) != len(values):
+            raise ValueError(f"--sweep {spec!r}: values must be distinct")
+    return name, values
+
+
+def _summary(ds) -> list[str]:
+    """Runs of equal labels along the sweep, then grazing and period-doubling points."""
+    param = ds.attrs["sweep_parameter"]
+    values = ds[param].values
+    labels = ds.label.values
+    lines = []
+    start = 0
+    for i in range(1, len(values) + 1):
+        if i == len(values) or labels[i] != labels[start]:
+            lo, hi = values[start], values[i - 1]
+            where = f"{param} = {lo:.6g}" if i - 1 == start else f"{param} in [{lo:.6g}, {hi:.6g}]"
+            lab = str(labels[start])
+            if lab == "none":
+                near = ds.nearest_period.values[start:i]
+                res = ds.residual.values[start:i]
+                lab = (f"no period within tol (nearest repeat {int(near[np.argmin(res)])}, "
+                       f"residual >= {np.nanmin(res):.2g})")
+            else:
+                lab = f"{lab}  (period {ds.period.values[start]}, impacts "
+                lab += f"{ds.impacts.values[start]})"
+            lines.append(f"  {where}: {lab}")
+            start = i
+    graze = ds.grazing_parameter.values
+    if len(graze):
+        lines.append(f"  grazing between periodic branches near {param} = "
+                     + ", ".join(f"{g:.6g}" for g in graze))
+    flagged = values[ds.grazing.values == 1]
+    if len(flagged):
+        lines.append(f"  grazing flagged (slow impact or near-touching free flight) at "
+                     f"{len(flagged)} values, first {param} = {flagged[0]:.6g}")
+    doubling = values[ds.period_doubling.values == 1]
+    if len(doubling):
+        lines.append(f"  period doubling at {param} = " + ", ".join(f"{v:.6g}" for v in doubling))
+    if ds.failed.values.any():
+        lines.append(f"  {int(ds.failed.sum())} values failed: {ds.attrs['failures']}")
+    return lines
+
+
+def cmd_bifurcation(args) -> int:
+    from opa._bifurcation import sweep
+    from opa._cli import options_from, oscillator_from
+
+    if args.periods is not None:
+        raise ValueError("--periods does not apply to bifurcation sweeps; use --transient P "
+                         "and --record P")
+    param, values = parse_sweep(args.sweep)
+    osc = oscillator_from(args)
+    opts = options_from(args)
+    start = time.perf_counter()
+    ds = sweep(
+        args.model, param, values, osc, transient=args.transient, record=args.record,
+        per_period=args.per_period, continuation=args.continuation, sigma=args.sigma,
+        order=args.order, uncertain=args.uncertain, truncation=args.truncation,
+        impact_law=args.impact_law, allow_negative=args.allow_negative,
+        samples=getattr(args, "samples", 256), sampler=getattr(args, "sampler", "sobol"),
+        seed=getattr(args, "seed", 0), options=opts, period_tol=args.period_tol,
+        graze_velocity=args.graze_velocity, graze_gap=args.graze_gap, out=args.out,
+        keep_parts=args.keep_parts, scheduler=getattr(args, "scheduler", None),
+        workers=args.workers, progress=not args.quiet,
+    )
+    elapsed = time.perf_counter() - start
+    if args.plot:
+        from opa._figures import plot_bifurcation
+
+        plot_bifurcation(ds, args.plot, section=args.section)
+    if not args.quiet:
+        resumed = ds.attrs["points_resumed"]
+        print(f"opa-mc bifurcation {args.model}: {len(values)} values of {param} in "
+              f"[{values[0]:.6g}, {values[-1]:.6g}], {args.transient} + {args.record} periods"
+              f" each, in {elapsed:.2f} s" + (f" ({resumed} resumed from disk)" if resumed
+                                                else ""))
+        print("\n".join(_summary(ds)))
+        if args.out:
+            print(f"  wrote {args.out}")
+        if args.plot:
+            print(f"  wrote {args.plot}")
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from opa._figures import FIGURES, reproduce
+
+    names = list(FIGURES) if args.figure == "all" else [args.figure]
+    start = time.perf_counter()
+    paths = reproduce(args.figure, args.outdir, full=args.full, impulse=args.impulse,
+                      pulse_width=args.pulse_width, order=args.order, workers=args.workers,
+                      scheduler=args.scheduler, progress=not args.quiet,
+                      log=None if args.quiet else print)
+    if not args.quiet:
+        print(f"opa-mc reproduce {args.figure}: {len(names)} figure(s), {len(paths)} files "
+              f"in {time.perf_counter() - start:.1f} s")
+    return 0
+
+
+def _set_help(parser: argparse.ArgumentParser, dest: str, text: str, default) -> None:
+    """Change one shared flag's default and help for this subcommand."""
+    parser.set_defaults(**{dest: default})
+    for action in parser._actions:  # argparse has no public accessor for this
+        if action.dest == dest:
+            action.help = text
+
+
+def register(subparsers, model_flags, common_flags) -> None:
+    """Add ``bifurcation`` and ``reproduce`` to the ``opa-mc`` subcommands.
+
+    ``model_flags(parser)`` and ``common_flags(parser)`` are ``opa._cli``'s
+    ``_model_flags`` and ``_common_flags``.
+    """
+    from opa._figures import FIGURES
+
+    b = subparsers.add_parser(
+        "bifurcation",
+        help="parameter sweep: both Poincaré sections, period labels, grazing",
+        description="Sweep one parameter; for each value drop a transient, record the "
+        "phase-plane (stroboscopic, t = k 2 pi/omega) and constraint-plane (at impacts: "
+        "forcing phase and velocity) sections and identify the motion: period p "
+        "(smallest stroboscopic repeat), impacts per period, label z = n/p, grazing, "
+        "period doubling. Parallel over values (local processes or --scheduler); with "
+        "--out, finished values are kept in OUT.parts/ and a rerun resumes.",
+    )
+    b.add_argument("model", choices=MODELS,
+                   help="dmr: deterministic system; opa: EMR of the OPA system (--sigma 0: "
+                        "EMR_0); mc: Monte Carlo mean")
+    model_flags(b)
+    common_flags(b)
+    g = b.add_argument_group("sweep")
+    g.add_argument("--sweep", required=True, metavar="NAME=START:STOP:COUNT",
+                   help="the swept parameter and its values, e.g. c=0.01:0.1:200 or "
+                        "omega=3.98,4.2; NAME is a model parameter or sigma")
+    g.add_argument("--section", choices=SECTIONS, default="both",
+                   help="Poincaré section(s) in the --plot figure (the dataset holds both; "
+                        "default both)")
+    g.add_argument("--transient", type=int, default=500, metavar="P",
+                   help="forcing periods dropped before recording (default 500)")
+    g.add_argument("--record", type=int, default=100, metavar="P",
+                   help="forcing periods recorded (default 100)")
+    g.add_argument("--continuation", choices=CONTINUATIONS, default="fixed",
+                   help="fixed: every value starts from --x0/--v0; forward/backward: each "
+                        "value starts from the final state of the previous one, sweeping "
+                        "up/down (sequential) (default fixed)")
+    g.add_argument("--workers", type=int, default=DEFAULT_WORKERS, metavar="W",
+                   help=f"local worker processes (default {DEFAULT_WORKERS}; 1: in process)")
+    g.add_argument("--period-tol", type=float, default=PERIOD_TOL, metavar="TOL",
+                   help=f"relative tolerance of the stroboscopic repeat (default {PERIOD_TOL:g})")
+    g.add_argument("--graze-velocity", type=float, default=GRAZE_VELOCITY, metavar="V",
+                   help=f"impacts slower than V count as grazing (default {GRAZE_VELOCITY:g})")
+    g.add_argument("--graze-gap", type=float, default=GRAZE_GAP, metavar="D",
+                   help="free-flight maxima within D of the wall count as grazing "
+                        f"(default {GRAZE_GAP:g})")
+    g.add_argument("--keep-parts", action="store_true",
+                   help="keep OUT.parts/ (one file per finished value) after writing OUT")
+    _set_help(b, "per_period",
+              "outputs per forcing period in the record; >= 8 resolves free-flight maxima "
+              "for grazing (default 16)", 16)
+    _set_help(b, "periods", "not used by sweeps: see --transient and --record", None)
+    b.set_defaults(func=cmd_bifurcation)
+
+    r = subparsers.add_parser(
+        "reproduce",
+        help="the paper's figures 2-11 (impulse trains, bifurcation diagrams, portraits)",
+        description="Regenerate the paper's figures: fig2 impulse trains; fig3, fig9, "
+        "fig10 bifurcation diagrams in both sections; fig4-fig8, fig11 phase portraits "
+        "with section points and time histories; DMR, EMR_0 and EMR side by side. Each "
+        "figure's data is written next to it as netCDF. Default sizes run in a few "
+        "minutes on 2 cores; --full uses the paper's resolution.",
+    )
+    r.add_argument("figure", choices=list(FIGURES) + ["all"])
+    r.add_argument("--outdir", default="figures", metavar="DIR",
+                   help="where to write the PNG and netCDF files (default ./figures)")
+    r.add_argument("--full", action="store_true",
+                   help="paper resolution: 200 sweep values, 500 + 100 periods (slow)")
+    r.add_argument("--impulse", choices=IMPULSE_MODELS, default="dirac",
+                   help="impulse model for every figure (default dirac)")
+    r.add_argument("--pulse-width", type=float, default=0.1, metavar="TAU",
+                   help="width of the rectangular pulses with --impulse pulse (default 0.1)")
+    r.add_argument("--order", type=int, default=4, metavar="N",
+                   help="OPA order N of EMR_0 and EMR (default 4)")
+    r.add_argument("--workers", type=int, default=DEFAULT_WORKERS, metavar="W",
+                   help=f"local worker processes for sweeps (default {DEFAULT_WORKERS})")
+    r.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask distributed scheduler address for the sweeps")
+    r.add_argument("--quiet", action="store_true", help="no progress bars or summaries")
+    r.set_defaults(func=cmd_reproduce)
+
+
+__all__ = ["register", "parse_sweep", "cmd_bifurcation", "cmd_reproduce"]
