@@ -17,8 +17,13 @@ SMOKE_PERIODS = 50
 
 def pytest_collect_file(file_path, parent):
     # The project's python_files are the default test_*.py; benchmark modules are named
-    # bench_*.py so that the quick suite never picks them up by accident.
-    if file_path.suffix == ".py" and file_path.name.startswith("bench_"):
+    # bench_*.py so that the quick suite never picks them up by accident. A file named on
+    # the command line is collected by pytest itself whatever its name: not twice.
+    if (
+        file_path.suffix == ".py"
+        and file_path.name.startswith("bench_")
+        and not parent.session.isinitpath(file_path)
+    ):
         return pytest.Module.from_parent(parent, path=file_path)
     return None
 
