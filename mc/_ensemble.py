@@ -190,12 +190,13 @@ def simulate_mc(
     bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
     args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths)
 
-    results = _run_chunks(y0, xi, w, rep, replicates, bounds, args, scheduler, progress)
-
     total = None
     n_impacts = np.empty(len(xi), dtype=np.int64)
     paths = np.empty((len(xi), len(times), 2)) if keep_paths else None
-    for (lo, hi), (stats, imp, status, extra) in zip(bounds, results):
+    # chunks arrive in order and are merged at once: memory does not grow with M
+    for (lo, hi), (stats, imp, status, extra) in _run_chunks(
+        y0, xi, w, rep, replicates, bounds, args, scheduler, progress
+    ):
         if stats is None:
             m, xi_m, code = extra
             raise SimulationError(
@@ -212,22 +213,26 @@ def simulate_mc(
 
 
 def _run_chunks(y0, xi, w, rep, replicates, bounds, args, scheduler, progress):
+    """Yield ``((lo, hi), chunk result)`` in chunk order."""
     if progress is None:
         progress = sys.stderr.isatty()
-    if scheduler is None:
-        from tqdm.auto import tqdm
+    if scheduler is not None:
+        yield from _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler,
+                                    progress)
+        return
+    from tqdm.auto import tqdm
 
-        out = []
-        with tqdm(total=len(xi), unit="sample", disable=not progress, desc="Monte Carlo") as bar:
-            for lo, hi in bounds:
-                out.append(run_chunk(y0, xi[lo:hi], w[lo:hi], rep[lo:hi], replicates, *args))
-                bar.update(hi - lo)
-        return out
-    return _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler, progress)
+    with tqdm(total=len(xi), unit="sample", disable=not progress, desc="Monte Carlo") as bar:
+        for lo, hi in bounds:
+            yield (lo, hi), run_chunk(y0, xi[lo:hi], w[lo:hi], rep[lo:hi], replicates, *args)
+            bar.update(hi - lo)
 
 
 def _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler, progress):
-    from distributed import Client, as_completed
+    """Chunks as Dask tasks; results are yielded (and released) in submission order, so
+    the merge order, hence the result, is the local one."""
+    from distributed import Client
+    from tqdm.auto import tqdm
 
     own = not isinstance(scheduler, Client)
     client = Client(scheduler) if own else scheduler
@@ -237,15 +242,13 @@ def _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler, progre
                           True, pure=False)
             for lo, hi in bounds
         ]
-        if progress is None:
-            progress = sys.stderr.isatty()
-        if progress:
-            from tqdm.auto import tqdm
-
-            for _ in tqdm(as_completed(futures), total=len(futures), unit="chunk",
-                          desc="Monte Carlo (dask)"):
-                pass
-        return client.gather(futures)  # in submission order: the merge order is fixed
+        with tqdm(total=len(futures), unit="chunk", disable=not progress,
+                  desc="Monte Carlo (dask)") as bar:
+            for i, bound in enumerate(bounds):
+                result = futures[i].result()
+                futures[i] = None  # let the cluster forget it
+                bar.update(1)
+                yield bound, result
     finally:
         if own:
             client.close()

@@ -630,7 +630,8 @@ def assemble(model, param, values, results, oscillator, options, kw, continuatio
     coords = {
         dim: (dim, np.asarray(values, dtype=float), {"long_name": f"swept parameter {param}",
                                                      "units": "1"}),
-        "point": ("point", np.arange(width)),
+        "point": ("point", np.arange(width), {"long_name": "index of the section point in "
+                                             "the record (time order)", "units": "1"}),
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)
 

@@ -193,6 +193,14 @@ def register(subparsers, model_flags, common_flags) -> None:
                         "EMR_0); mc: Monte Carlo mean")
     model_flags(b)
     common_flags(b)
+    if "--out" not in b._option_string_actions:  # shared output flags, unless common has them
+        o = b.add_argument_group("output")
+        o.add_argument("--out", default=None, metavar="FILE.nc",
+                       help="write the sweep dataset here; finished values are kept in "
+                            "FILE.nc.parts/ meanwhile and a rerun resumes")
+        o.add_argument("--plot", default=None, metavar="FILE.png",
+                       help="write the bifurcation diagram here")
+        o.add_argument("--quiet", action="store_true", help="no progress bars or summaries")
     g = b.add_argument_group("sweep")
     g.add_argument("--sweep", required=True, metavar="NAME=START:STOP:COUNT",
                    help="the swept parameter and its values, e.g. c=0.01:0.1:200 or "

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass
 
 PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n", "x0", "v0")
@@ -158,19 +159,35 @@ class SolverOptions:
 
     def __post_init__(self):
         _choice("impulse", self.impulse, IMPULSE_MODELS)
+        if self.impulse_at_zero not in (True, False, 0, 1):
+            raise ValueError(f"impulse_at_zero must be True or False, got {self.impulse_at_zero!r}")
         for name in ("rtol", "atol"):
             value = _finite(name, getattr(self, name))
             if not 1e-15 <= value < 1.0:
                 raise ValueError(f"{name} must be in [1e-15, 1), got {value}")
+            object.__setattr__(self, name, value)
         tau = _finite("pulse_width", self.pulse_width)
         if tau <= 0.0:
             raise ValueError(f"pulse_width must be > 0, got {tau}")
-        if int(self.max_steps) < 1:
-            raise ValueError(f"max_steps must be >= 1, got {self.max_steps}")
-        if _finite("chatter_velocity", self.chatter_velocity) < 0.0:
-            raise ValueError(f"chatter_velocity must be >= 0, got {self.chatter_velocity}")
-        if not self.max_step > 0.0:
-            raise ValueError(f"max_step must be > 0, got {self.max_step}")
+        object.__setattr__(self, "pulse_width", tau)
+        steps = self.max_steps
+        whole = isinstance(steps, numbers.Integral) or (
+            isinstance(steps, float) and steps.is_integer()
+        )
+        if isinstance(steps, bool) or not whole or steps < 1:
+            raise ValueError(f"max_steps must be an integer >= 1, got {steps!r}")
+        object.__setattr__(self, "max_steps", int(steps))
+        chatter = _finite("chatter_velocity", self.chatter_velocity)
+        if not chatter > 0.0:
+            raise ValueError(f"chatter_velocity must be > 0, got {chatter}")
+        object.__setattr__(self, "chatter_velocity", chatter)
+        try:
+            max_step = float(self.max_step)
+        except (TypeError, ValueError):
+            raise ValueError(f"max_step must be a number > 0, got {self.max_step!r}") from None
+        if not max_step > 0.0:
+            raise ValueError(f"max_step must be > 0, got {max_step}")
+        object.__setattr__(self, "max_step", max_step)
 
 
 @dataclass(frozen=True)

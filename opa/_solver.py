@@ -459,6 +459,17 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
             n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
             rhs(t, y, p, cfg, nodes, weights, U, pulse, sticking, K[0], xk, vk)
             n_rhs += 1
+        elif not sticking and y[0] >= delta and y[ncoef] == 0.0 and release > 0.0:
+            # at rest on the wall with the net force into it (e.g. x0 = delta, v0 = 0):
+            # no impact will be detected from here, so start sticking now
+            y[0] = delta
+            if law == LAW_ENSEMBLE:
+                for i in range(ncoef):
+                    y[ncoef + i] = 0.0
+            sticking = True
+            n_events = _log_event(log, n_events, t, 0.0, EV_STICK)
+            rhs(t, y, p, cfg, nodes, weights, U, pulse, sticking, K[0], xk, vk)
+            n_rhs += 1
         if h == 0.0:
             # Initial step: a fraction of the forcing period, then let the controller adapt.
             h = min(1e-3, 0.01 * (t_break - t) + 1e-12)
@@ -504,7 +515,15 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                 factor = min(MAX_FACTOR, SAFETY * err**ERROR_EXPONENT)
             h_next = max(h_try * factor, h if last else 0.0)
 
+            # Cheap exclusion before the full scan: the quartic cannot rise more than
+            # |h| max|stage slope| above the higher endpoint (x2 for interpolant overshoot).
+            near_wall = False
             if not sticking:
+                vmax = 0.0
+                for s in range(7):
+                    vmax = max(vmax, abs(K[s, 0]))
+                near_wall = max(y[0], y_new[0]) + 2.0 * h_try * vmax >= delta
+            if near_wall:
                 theta = find_wall_crossing(y, y_new[0], h_try, K, delta)
                 if theta > 0.0:
                     t_hit, v_minus = _locate_impact(t, y, h_try, theta, K, K2, y_new, ytmp, p, cfg, nodes, weights, U, pulse, xk, vk)
@@ -539,7 +558,7 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                         t = t_break
                         break
                     continue
-            else:
+            elif sticking:
                 # sticking: release when the unconstrained acceleration turns away from the wall
                 rel_end = rhs(t + h_try, y_new, p, cfg, nodes, weights, U, pulse, False, ytmp, xk, vk)
                 n_rhs += 1

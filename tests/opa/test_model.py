@@ -163,16 +163,12 @@ def test_bad_solver_numbers_are_refused_by_name(name, value):
         SolverOptions(**{name: value})
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: SolverOptions checks max_steps with int(), "
-                   "so nan/'abc' give messages without the name and 1.5 is accepted")
 @pytest.mark.parametrize("value", [math.nan, "abc", 1.5])
 def test_max_steps_must_be_a_whole_number_named_in_the_message(value):
     with pytest.raises(ValueError, match=names_parameter_and_value("max_steps", value)):
         SolverOptions(max_steps=value)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: SolverOptions validates rtol/atol/max_step "
-                   "as floats but stores the raw value (a str reaches the numba kernel)")
 @pytest.mark.parametrize("name", ["rtol", "atol", "max_step", "pulse_width"])
 def test_solver_numbers_are_stored_as_floats(name):
     opts = SolverOptions(**{name: "0.01"})

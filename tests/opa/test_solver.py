@@ -326,8 +326,6 @@ def test_kick_while_stuck_releases_and_chatter_resumes(kick):
     assert ds.x.max() <= 0.0
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: starting at rest on the wall with the force "
-                   "into it, find_wall_crossing sees no crossing and the mass goes through")
 def test_start_at_rest_on_the_wall_with_force_into_it_sticks():
     osc = Oscillator(mu=0.0, a=0.0, c=0.0, f=1.0, omega=1.0, eta=0.5, delta=0.0, F0=0.0,
                      x0=0.0, v0=0.0)
@@ -412,11 +410,12 @@ def test_brief_excursions_inside_one_step_are_not_missed(eta):
 # --------------------------------------------------------------------------- scipy reference
 
 # Horizons (forcing periods). The sensitivity of the stroboscopic state to the initial
-# state (finite differences, measured below in each case) stays below ~10 over 50 periods
-# for the periodic orbits of section 3.1 and of section 3.2 without impulses or at
-# omega = 4.2. At omega = 3.98 the impulse train (period 2 pi, incommensurate with the
-# forcing) makes the motion quasi-periodic and sensitive: the amplification is ~1e2 at
-# 30 periods, 7e3 at 40 and 1e6 at 100, so those cases stop at 30 periods.
+# state (finite differences, checked in each case below) stays at 1-20 over 50 periods
+# for the orbits without impulses and at omega = 4.2, and at 40-110 for section 3.1 with
+# Dirac kicks (transients; it stops growing after ~30 periods). At omega = 3.98 the
+# impulse train (period 2 pi, incommensurate with the forcing) makes the motion
+# quasi-periodic and sensitive: the amplification is ~1e2 at 30 periods, 7e3 at 40 and
+# 1e6 at 100, so those cases stop at 30 periods. Measured agreement: 7e-12 .. 1.5e-10.
 PAPER_CASES = [
     pytest.param("3.1", dict(c=0.035, F0=0.0), "dirac", True, 50, id="3.1-c0.035-F0=0"),
     pytest.param("3.1", dict(c=0.035), "dirac", True, 50, id="3.1-c0.035-dirac"),
@@ -489,12 +488,12 @@ def test_chatter_in_the_section_32_set_finishes_and_sticks():
     assert t_stick == pytest.approx(t_k[-1] + flight * osc.eta / (1 - osc.eta), abs=1e-3 * flight)
 
 
-@pytest.mark.xfail(strict=True, raises=opa.SimulationError,
-                   reason="BUG: with chatter_velocity = 0 (accepted by SolverOptions) the "
-                   "impact velocities stall at round-off (1e-15) and the solver impacts "
-                   "once per step until max_steps (50 million by default: minutes)")
-def test_chatter_without_velocity_threshold_still_reaches_the_accumulation_point():
-    opts = SolverOptions(chatter_velocity=0.0, max_steps=100_000)
+def test_zero_chatter_velocity_is_refused_or_still_reaches_the_accumulation_point():
+    try:
+        opts = SolverOptions(chatter_velocity=0.0, max_steps=100_000)
+    except ValueError as error:  # one acceptable fix: chatter_velocity must be > 0
+        assert "chatter_velocity" in str(error)
+        return
     ds = simulate_dmr(FREE_FALL, times=np.linspace(0.0, 6.0, 7), options=opts)
     assert ds.stick_time.item() == pytest.approx(3.0, rel=1e-5)
 

@@ -1,0 +1,319 @@
+"""Tests for ``opa._bifurcation`` (sweeps) and ``opa._bifurcation_cli``.
+
+The dataset contract of SPEC section 5, labels and period doubling on sweeps whose
+motions are known (section 3.1 without impulses: 4/4 at c = 0.035, 2/2 at c = 0.05;
+section 3.3 without impulses: 1/1 -> 2/2 between omega = 4.9 and 5.0), parallel ==
+serial, and crash safety: a sweep interrupted after k points and rerun computes only
+the missing points and returns exactly the uninterrupted result.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import opa._bifurcation as B
+from opa import preset
+from opa._bifurcation import sweep
+from opa._bifurcation_cli import parse_sweep, register
+from opa._model import PARAMETER_NAMES
+
+QUICK = dict(transient=20, record=10, per_period=8, workers=1)
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def assert_same(a: xr.Dataset, b: xr.Dataset) -> None:
+    drop = ["history", "points_resumed", "points_computed"]
+    xr.testing.assert_identical(a.drop_attrs(), b.drop_attrs())  # values and coordinates
+    assert {k: v for k, v in a.attrs.items() if k not in drop} == pytest.approx(
+        {k: v for k, v in b.attrs.items() if k not in drop}, nan_ok=True)
+
+
+# --------------------------------------------------------------------------- contract
+
+
+def test_dataset_contract(tmp_path):
+    osc = preset("3.1")
+    values = [0.02, 0.05, 0.08]
+    ds = sweep("dmr", "c", values, osc, out=tmp_path / "s.nc", **QUICK)
+    assert ds.sizes["c"] == 3
+    assert ds.sizes["point"] >= 10
+    for name in ("section_x", "section_v", "impact_phase", "impact_v"):
+        assert ds[name].dims == ("c", "point")
+    for name in ("period", "impacts", "label", "residual", "impact_rate",
+                 "min_impact_velocity", "min_gap", "grazing", "period_doubling", "failed"):
+        assert ds[name].dims == ("c",)
+    assert ds.period.dtype.kind == "i" and ds.impacts.dtype.kind == "i"
+    np.testing.assert_array_equal(ds.c.values, values)
+    # the record's stroboscopic points, NaN padded beyond them
+    assert np.all(np.isfinite(ds.section_x.values[:, :10]))
+    assert np.all(np.isnan(ds.section_x.values[:, ds.sizes["point"] - 1 :])) or \
+        ds.sizes["point"] == 10
+    # every variable labelled, every parameter in the attributes, no bools
+    for name, var in ds.variables.items():
+        assert "long_name" in var.attrs, name
+        if name != "label":
+            assert "units" in var.attrs, name
+    for name in PARAMETER_NAMES + ("sigma", "N", "impulse", "truncation", "impact_law", "rtol",
+                                   "atol", "seed", "sampler", "Conventions", "history",
+                                   "opa_mc_version", "sweep_parameter", "transient", "record",
+                                   "continuation"):
+        assert name in ds.attrs, name
+    assert np.isnan(ds.attrs["c"])  # swept: the coordinate holds it
+    assert not any(isinstance(v, (bool, dict, type(None))) for v in ds.attrs.values())
+    # written atomically, parts removed, and what is on disk is what was returned
+    assert not os.path.exists(str(tmp_path / "s.nc") + ".parts")
+    with xr.open_dataset(tmp_path / "s.nc") as disk:
+        assert_same(disk.load(), ds)
+
+
+def test_labels_and_period_doubling_on_known_sweeps():
+    ds = sweep("dmr", "c", [0.035, 0.05], preset("3.1", F0=0.0), transient=200, record=40,
+               workers=1)
+    assert ds.label.values.tolist() == ["4/4", "2/2"]
+    assert ds.period.values.tolist() == [4, 2] and ds.impacts.values.tolist() == [4, 2]
+    assert ds.period_doubling.values.tolist() == [1, 0]  # 2 -> 4 going down in c
+    ds = sweep("dmr", "omega", [4.9, 5.0], preset("3.3", F0=0.0), transient=200, record=40,
+               workers=1)
+    assert ds.label.values.tolist() == ["1/1", "2/2"]
+    assert ds.period_doubling.values.tolist() == [0, 1]
+
+
+def test_opa_sigma_sweep_and_emr0_equals_dmr():
+    osc = preset("3.1", c=0.05, F0=0.0)
+    emr = sweep("opa", "sigma", [0.0, 0.05], osc, order=2, transient=100, record=20,
+                workers=1)
+    dmr = sweep("dmr", "x0", [osc.x0], osc, transient=100, record=20, workers=1)
+    assert emr.label.values.tolist() == ["2/2", "2/2"]
+    np.testing.assert_allclose(emr.section_x.values[0, :20], dmr.section_x.values[0, :20],
+                               atol=1e-8)  # EMR_0 reduces to the DMR
+
+
+def test_mc_sweep_has_phase_section_only():
+    ds = sweep("mc", "c", [0.05], preset("3.1", F0=0.0), sigma=0.01, samples=8, **QUICK)
+    assert np.all(np.isfinite(ds.section_x.values[0, :10]))
+    assert np.all(np.isnan(ds.impact_v.values)) and ds.impacts.values.tolist() == [-1]
+    assert ds.attrs["samples"] == 8 and ds.attrs["sampler"] == "sobol"
+
+
+def test_parallel_equals_serial():
+    osc = preset("3.1")
+    values = np.linspace(0.03, 0.06, 4)
+    serial = sweep("dmr", "c", values, osc, transient=30, record=10, workers=1)
+    parallel = sweep("dmr", "c", values, osc, transient=30, record=10, workers=2)
+    assert_same(serial, parallel)
+
+
+# --------------------------------------------------------------------------- resumption
+
+
+class Interrupt(Exception):
+    pass
+
+
+def interrupt_after(monkeypatch, k):
+    """Make the k+1-th write of a finished point raise, as a crash at that moment would."""
+    real = B._write_part
+    written = []
+
+    def write(parts, result):
+        if len(written) == k:
+            raise Interrupt
+        written.append(result["index"])
+        real(parts, result)
+
+    monkeypatch.setattr(B, "_write_part", write)
+    return written
+
+
+def count_computed(monkeypatch):
+    real = B.compute_point
+    computed = []
+
+    def compute(task):
+        computed.append(task.index)
+        return real(task)
+
+    monkeypatch.setattr(B, "compute_point", compute)
+    return computed
+
+
+@pytest.mark.parametrize("continuation", ["fixed", "forward", "backward"])
+def test_interrupted_sweep_resumes_without_loss_or_rework(tmp_path, monkeypatch,
+                                                          continuation):
+    osc = preset("3.1")
+    values = np.linspace(0.02, 0.08, 6)
+    kw = dict(transient=30, record=10, per_period=8, workers=1, continuation=continuation)
+    reference = sweep("dmr", "c", values, osc, **kw)
+    out = tmp_path / "sweep.nc"
+
+    with monkeypatch.context() as m:
+        written = interrupt_after(m, 3)
+        with pytest.raises(Interrupt):
+            sweep("dmr", "c", values, osc, out=out, **kw)
+    parts = str(out) + ".parts"
+    assert len(written) == 3 and not out.exists()
+    assert sorted(f for f in os.listdir(parts) if f.startswith("point-")) == \
+        [f"point-{i:05d}.npz" for i in sorted(written)]
+    before = {f: os.stat(os.path.join(parts, f)).st_mtime_ns for f in os.listdir(parts)}
+
+    with monkeypatch.context() as m:
+        computed = count_computed(m)
+        resumed = sweep("dmr", "c", values, osc, out=out, keep_parts=True, **kw)
+    assert sorted(computed) == sorted(set(range(6)) - set(written))  # nothing redone
+    assert resumed.attrs["points_resumed"] == 3 and resumed.attrs["points_computed"] == 3
+    for f, mtime in before.items():  # finished points untouched
+        assert os.stat(os.path.join(parts, f)).st_mtime_ns == mtime
+    assert_same(resumed, reference)  # nothing lost
+    if continuation == "forward":
+        assert written == [0, 1, 2]
+    elif continuation == "backward":
+        assert written == [5, 4, 3]
+
+
+def test_resume_refuses_different_settings(tmp_path, monkeypatch):
+    osc = preset("3.1")
+    out = tmp_path / "sweep.nc"
+    with monkeypatch.context() as m:
+        interrupt_after(m, 1)
+        with pytest.raises(Interrupt):
+            sweep("dmr", "c", [0.02, 0.05], osc, out=out, **QUICK)
+    with pytest.raises(ValueError, match="different settings.*record"):
+        sweep("dmr", "c", [0.02, 0.05], osc, out=out, **{**QUICK, "record": 12})
+
+
+def test_killed_sweep_process_resumes(tmp_path, monkeypatch):
+    """SIGKILL a sweep in another process half way, then finish it here.
+
+    The other process pauses 0.2 s after each finished point, so that the kill lands
+    while points are still missing whatever the speed of the machine."""
+    out = tmp_path / "killed.nc"
+    parts = str(out) + ".parts"
+    script = (
+        "import time\n"
+        "import numpy as np\n"
+        "import opa._bifurcation as B\n"
+        "from opa import preset\n"
+        "from opa._bifurcation import sweep\n"
+        "write = B._write_part\n"
+        "B._write_part = lambda *a: (write(*a), time.sleep(0.2))\n"
+        f"sweep('dmr', 'c', np.linspace(0.02, 0.08, 12), preset('3.1'), transient=100, "
+        f"record=10, workers=1, out={str(out)!r})\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=REPO)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            done = [f for f in os.listdir(parts)] if os.path.isdir(parts) else []
+            if sum(f.startswith("point-") for f in done) >= 4:
+                break
+            assert proc.poll() is None, "the sweep finished before it could be killed"
+            time.sleep(0.01)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    finished = sorted(f for f in os.listdir(parts) if f.startswith("point-"))
+    assert 4 <= len(finished) < 12 and not out.exists()
+    computed = count_computed(monkeypatch)
+    ds = sweep("dmr", "c", np.linspace(0.02, 0.08, 12), preset("3.1"), transient=100,
+               record=10, workers=1, out=out)
+    assert len(computed) == 12 - len(finished)
+    reference = sweep("dmr", "c", np.linspace(0.02, 0.08, 12), preset("3.1"), transient=100,
+                      record=10, workers=1)
+    assert_same(ds, reference)
+
+
+# --------------------------------------------------------------------------- validation
+
+
+@pytest.mark.parametrize(
+    "args, kwargs, match",
+    [
+        (("dmr", "cc", [0.1]), {}, "parameter must be one of"),
+        (("dmr", "c", [0.1, 0.1]), {}, "distinct"),
+        (("dmr", "c", [0.1, np.nan]), {}, "finite"),
+        (("dmr", "sigma", [0.1]), {}, "no uncertainty"),
+        (("mc", "c", [0.1]), {"continuation": "forward"}, "continuation"),
+        (("dmr", "eta", [0.5, 1.5]), {}, r"eta must be in \(0, 1\], got 1.5"),
+        (("opa", "sigma", [0.1, 0.9]), {}, "sigma = 0.9"),
+        (("dmr", "c", [0.1]), {"record": 1}, "record must be an integer >= 2"),
+        (("dmr", "c", [0.1]), {"continuation": "sideways"}, "continuation must be one of"),
+    ],
+)
+def test_bad_input_is_refused_with_the_value(args, kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        sweep(*args, preset("3.1"), **{**QUICK, **kwargs})
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def cli(argv):
+    from opa._cli import CliError, _common_flags, _model_flags
+
+    parser = argparse.ArgumentParser(prog="opa-mc")
+    register(parser.add_subparsers(dest="command", required=True), _model_flags,
+             _common_flags)
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except (ValueError, CliError) as err:
+        return str(err)
+
+
+@pytest.mark.parametrize(
+    "spec, match",
+    [
+        ("c=0.01:0.1", "expected NAME=START:STOP:COUNT"),
+        ("c0.01:0.1:3", "expected NAME=START:STOP:COUNT"),
+        ("cc=0.01:0.1:3", "unknown parameter 'cc'"),
+        ("c=x:0.1:3", "START 'x' is not a number"),
+        ("c=0.01:0.1:2.5", "COUNT must be an integer >= 1, got '2.5'"),
+        ("c=0.01:0.1:0", "COUNT must be an integer >= 1, got 0"),
+        ("c=0.1:0.1:5", "START and STOP are equal"),
+        ("c=0.1,0.1", "distinct"),
+        ("c=0.01:inf:3", "STOP must be finite"),
+    ],
+)
+def test_bad_sweep_spec_names_the_value(spec, match):
+    with pytest.raises(ValueError, match=match) as err:
+        parse_sweep(spec)
+    assert repr(spec) in str(err.value)
+
+
+def test_parse_sweep():
+    name, values = parse_sweep("omega=3.98:4.2:12")
+    assert name == "omega" and len(values) == 12 and values[0] == 3.98 and values[-1] == 4.2
+    assert parse_sweep("F0=0,0.1")[1].tolist() == [0.0, 0.1]
+    assert parse_sweep("c=0.05:0.05:1")[1].tolist() == [0.05]
+
+
+def test_cli_bifurcation_writes_dataset_and_plot(tmp_path, capsys):
+    out, png = tmp_path / "b.nc", tmp_path / "b.png"
+    code = cli(["bifurcation", "dmr", "--preset", "3.1", "--F0", "0", "--sweep",
+                "c=0.035,0.05", "--transient", "200", "--record", "40", "--workers", "1",
+                "--out", str(out), "--plot", str(png)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "c = 0.035: 4/4" in text and "c = 0.05: 2/2" in text
+    with xr.open_dataset(out) as ds:
+        assert ds.label.values.tolist() == ["4/4", "2/2"]
+    assert png.stat().st_size > 10_000
+    assert "use --transient" in cli(["bifurcation", "dmr", "--sweep", "c=0.1:0.2:2",
+                                     "--periods", "5"])
+    assert "unknown parameter" in cli(["bifurcation", "dmr", "--sweep", "q=1:2:2"])
+
+
+def test_cli_reproduce_fig2(tmp_path):
+    assert cli(["reproduce", "fig2", "--outdir", str(tmp_path), "--quiet"]) == 0
+    assert (tmp_path / "fig2.png").stat().st_size > 10_000
