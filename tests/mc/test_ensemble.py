@@ -103,6 +103,8 @@ def test_mean_matches_scipy_reference_on_the_same_samples(reference_ensemble):
     """
     ds, ref_paths, ref_impacts = reference_ensemble
     assert len(np.unique(ref_impacts)) > 1  # the horizon covers a change of impact count
+    print(f"\nsame xi: max |path difference| {np.abs(ds.x.values - ref_paths).max():.1e}, "
+          f"|mean difference| {np.abs(ds.x_mean.values - ref_paths.mean(axis=0)).max():.1e}")
     np.testing.assert_array_equal(ds.n_impacts.values, ref_impacts)
     np.testing.assert_allclose(ds.x.values, ref_paths, rtol=0, atol=1e-8)
     np.testing.assert_allclose(ds.x_mean.values, ref_paths.mean(axis=0), rtol=0, atol=1e-9)
@@ -395,10 +397,10 @@ def test_peak_memory_does_not_grow_with_the_number_of_samples():
 # --------------------------------------------------------------------------- Dask
 
 
-@pytest.mark.filterwarnings("ignore:Port 8787 is already in use:UserWarning")
 def test_dask_local_cluster_gives_exactly_the_local_result():
     """Two worker processes, chunks as tasks, merged in submission order: bit-identical to
-    the local engine for the same seed and chunk size (by Client and by address)."""
+    the local engine for the same seed and chunk size (by Client and by address). The
+    dashboard gets a free port (":0"): a busy 8787 would raise a warning, an error here."""
     distributed = pytest.importorskip("distributed")
     kwargs = dict(sigma=SIGMA, samples=96, sampler="sobol", seed=3, periods=5, chunk_size=16,
                   order=3, options=FAST)  # fmt: skip
@@ -413,9 +415,8 @@ def test_dask_local_cluster_gives_exactly_the_local_result():
     for remote in (by_client, by_address):
         for name in STAT_NAMES:
             np.testing.assert_array_equal(remote[name].values, local[name].values, err_msg=name)
-        assert remote.attrs == local.attrs or {
-            k for k in local.attrs if remote.attrs.get(k) != local.attrs[k]
-        } <= {"history"}
+        differing = {k for k in local.attrs if remote.attrs.get(k) != local.attrs[k]}
+        assert differing <= {"history"}  # history holds a time stamp
 
 
 # --------------------------------------------------------------------------- bad input
