@@ -104,7 +104,7 @@ def impulse_strength(t, p):
     return p[P_F0] * (1.0 + p[P_A1] * np.sin(p[P_OMEGA1] * t / p[P_N]))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rhs(t, y, p, cfg, nodes, weights, U, pulse, sticking, out, xk, vk):
     """Right-hand side of the equivalent system (eqs. (24)-(27)); writes into ``out``.
 
@@ -112,21 +112,35 @@ def rhs(t, y, p, cfg, nodes, weights, U, pulse, sticking, out, xk, vk):
     pulses). With ``sticking`` the mean coordinate is held at rest at the wall.
     Returns the unconstrained acceleration of the mean coordinate (the release function).
     """
+    if cfg[C_NCOEF] == 1 and nodes.shape[0] == 1 and nodes[0] == 0.0:
+        return rhs_deterministic(t, y, p, pulse, sticking, out)
+    return rhs_galerkin(t, y, p, cfg, nodes, weights, U, pulse, sticking, out, xk, vk)
+
+
+@njit(cache=True, inline="always")
+def _f2(t, x, v, p, pulse, sticking):
+    """Deterministic right-hand side on scalars: (x', v'), eq. (29)."""
+    if sticking:
+        return 0.0, 0.0
+    return v, (p[P_MU] * (1.0 - v * v) * v - p[P_A] * x - p[P_C] * x * x * x
+               + p[P_F] * np.cos(p[P_OMEGA] * t) + pulse)
+
+
+@njit(cache=True, inline="always")
+def rhs_deterministic(t, y, p, pulse, sticking, out):
+    """The DMR (and one Monte Carlo sample): no quadrature needed."""
+    dx, dv = _f2(t, y[0], y[1], p, pulse, False)
+    out[0] = 0.0 if sticking else dx
+    out[1] = 0.0 if sticking else dv
+    return dv
+
+
+@njit(cache=True)
+def rhs_galerkin(t, y, p, cfg, nodes, weights, U, pulse, sticking, out, xk, vk):
+    """Galerkin right-hand side for any N: evaluate x, v at the Q Gauss nodes, apply the
+    sampled system's force there, project back on U_0..U_N (exact for Q >= 2N + 1)."""
     ncoef = cfg[C_NCOEF]
     q = nodes.shape[0]
-    if ncoef == 1 and q == 1 and nodes[0] == 0.0:
-        # The deterministic system (DMR, or one Monte Carlo sample): no quadrature needed.
-        x = y[0]
-        v = y[1]
-        out[0] = v
-        acc = (
-            p[P_MU] * (1.0 - v * v) * v - p[P_A] * x - p[P_C] * x * x * x
-        ) * weights[0] * U[0, 0] * U[0, 0] + p[P_F] * np.cos(p[P_OMEGA] * t) + pulse
-        out[1] = acc
-        if sticking:
-            out[0] = 0.0
-            out[1] = 0.0
-        return acc
     sigma = p[P_SIGMA]
     unc = cfg[C_UNCERTAIN]
     for k in range(q):
@@ -178,12 +192,62 @@ def rhs(t, y, p, cfg, nodes, weights, U, pulse, sticking, out, xk, vk):
 # ---------------------------------------------------------------------------
 # Runge-Kutta step and dense output
 @njit(cache=True)
+def _rk_step_2d(t, y, h, K, y_new, p, pulse, sticking):
+    """rk_step for the two-dimensional deterministic system, stages kept in registers."""
+    x = y[0]
+    v = y[1]
+    k1x = K[0, 0]
+    k1v = K[0, 1]
+    k2x, k2v = _f2(t + h / 5, x + h * (k1x / 5), v + h * (k1v / 5), p, pulse, sticking)
+    k3x, k3v = _f2(t + 3 * h / 10, x + h * (3 / 40 * k1x + 9 / 40 * k2x),
+                   v + h * (3 / 40 * k1v + 9 / 40 * k2v), p, pulse, sticking)
+    k4x, k4v = _f2(t + 4 * h / 5, x + h * (44 / 45 * k1x - 56 / 15 * k2x + 32 / 9 * k3x),
+                   v + h * (44 / 45 * k1v - 56 / 15 * k2v + 32 / 9 * k3v), p, pulse, sticking)
+    k5x, k5v = _f2(
+        t + 8 * h / 9,
+        x + h * (19372 / 6561 * k1x - 25360 / 2187 * k2x + 64448 / 6561 * k3x - 212 / 729 * k4x),
+        v + h * (19372 / 6561 * k1v - 25360 / 2187 * k2v + 64448 / 6561 * k3v - 212 / 729 * k4v),
+        p, pulse, sticking,
+    )
+    k6x, k6v = _f2(
+        t + h,
+        x + h * (9017 / 3168 * k1x - 355 / 33 * k2x + 46732 / 5247 * k3x + 49 / 176 * k4x
+                 - 5103 / 18656 * k5x),
+        v + h * (9017 / 3168 * k1v - 355 / 33 * k2v + 46732 / 5247 * k3v + 49 / 176 * k4v
+                 - 5103 / 18656 * k5v),
+        p, pulse, sticking,
+    )
+    xn = x + h * (35 / 384 * k1x + 500 / 1113 * k3x + 125 / 192 * k4x - 2187 / 6784 * k5x
+                  + 11 / 84 * k6x)
+    vn = v + h * (35 / 384 * k1v + 500 / 1113 * k3v + 125 / 192 * k4v - 2187 / 6784 * k5v
+                  + 11 / 84 * k6v)
+    k7x, k7v = _f2(t + h, xn, vn, p, pulse, sticking)
+    y_new[0] = xn
+    y_new[1] = vn
+    K[1, 0] = k2x
+    K[1, 1] = k2v
+    K[2, 0] = k3x
+    K[2, 1] = k3v
+    K[3, 0] = k4x
+    K[3, 1] = k4v
+    K[4, 0] = k5x
+    K[4, 1] = k5v
+    K[5, 0] = k6x
+    K[5, 1] = k6v
+    K[6, 0] = k7x
+    K[6, 1] = k7v
+
+
+@njit(cache=True)
 def rk_step(t, y, h, K, y_new, ytmp, p, cfg, nodes, weights, U, pulse, sticking, xk, vk):
     """One Dormand-Prince step from (t, y) of size h; K[0] must hold f(t, y).
 
     Fills K[1..6] (K[6] = f(t + h, y_new), first-same-as-last) and ``y_new``.
     """
     dim = y.shape[0]
+    if dim == 2 and nodes.shape[0] == 1 and nodes[0] == 0.0:
+        _rk_step_2d(t, y, h, K, y_new, p, pulse, sticking)
+        return
     for s in range(1, 6):
         for j in range(dim):
             acc = 0.0
