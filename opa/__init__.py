@@ -6,7 +6,18 @@ Public names are re-exported here; every other module is private.
 from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, triple_product
 from opa._dataset import write_netcdf
 from opa._model import Oscillator, SolverOptions, Uncertainty, preset, time_grid
+from opa._bifurcation import sweep
+from opa._poincare import Motion, constraint_section, detect_period, identify_motion, phase_section
 from opa._simulate import SimulationError, simulate_dmr, simulate_opa
+
+
+def reproduce(figure: str, outdir: str = "figures", **kwargs):
+    """Regenerate a figure of the paper (``fig2`` .. ``fig11`` or ``all``); see
+    :func:`opa._figures.reproduce`. Imported lazily: it pulls in matplotlib."""
+    from opa._figures import reproduce as _reproduce
+
+    return _reproduce(figure, outdir, **kwargs)
+
 
 __all__ = [
     "Oscillator",
@@ -18,6 +29,13 @@ __all__ = [
     "simulate_dmr",
     "simulate_opa",
     "write_netcdf",
+    "sweep",
+    "reproduce",
+    "Motion",
+    "identify_motion",
+    "phase_section",
+    "constraint_section",
+    "detect_period",
     "chebyshev_u",
     "cubic_projection",
     "gauss_nodes",

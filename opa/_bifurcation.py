@@ -345,6 +345,7 @@ def sweep(
         maxima for grazing; the transient is sampled once per period).
     continuation : "fixed" (every value starts from ``x0, v0``), "forward" (increasing
         values, each from the final state of the previous) or "backward" (decreasing).
+        A failed value hands ``x0, v0`` on to the next.
     sigma, order, uncertain, truncation, impact_law, allow_negative : the OPA / MC
         settings (see ``simulate_opa``, ``simulate_mc``).
     samples, sampler, seed : Monte Carlo settings (model "mc").
@@ -408,12 +409,14 @@ def sweep(
         if not (math.isfinite(value) and value > 0):
             raise ValueError(f"{name} must be > 0, got {value}")
 
-    kw = dict(sigma=float(sigma), order=int(order) if model == "opa" else 0,
-              uncertain=uncertain, truncation=truncation, impact_law=impact_law,
-              allow_negative=bool(allow_negative), samples=int(samples), sampler=sampler,
-              seed=int(seed), transient=int(transient), record=int(record),
-              per_period=int(per_period), period_tol=float(period_tol),
-              graze_velocity=float(graze_velocity), graze_gap=float(graze_gap))
+    kw = {
+        "sigma": float(sigma), "order": int(order) if model == "opa" else 0,
+        "uncertain": uncertain, "truncation": truncation, "impact_law": impact_law,
+        "allow_negative": bool(allow_negative), "samples": int(samples), "sampler": sampler,
+        "seed": int(seed), "transient": int(transient), "record": int(record),
+        "per_period": int(per_period), "period_tol": float(period_tol),
+        "graze_velocity": float(graze_velocity), "graze_gap": float(graze_gap),
+    }
     tasks = []
     for i, value in enumerate(values):
         osc, task_kw = oscillator, dict(kw)
@@ -561,14 +564,14 @@ def _run_continuation(ordered, done, finish, scheduler) -> None:
 _SCALARS = {
     "period": ("int32", "smallest stroboscopic repeat in forcing periods (0: none)"),
     "impacts": ("int32", "impacts per period (-1: no period or not steady)"),
-    "residual": ("float64", "relative stroboscopic repeat distance at the period "
-                            "(or at nearest_period)"),
+    "residual": ("float64", ("relative stroboscopic repeat distance at the period "
+                            "(or at nearest_period)")),
     "nearest_period": ("int32", "repeat with the smallest stroboscopic distance"),
     "impact_rate": ("float64", "impacts per forcing period in the record"),
     "min_impact_velocity": ("float64", "slowest impact velocity in the record"),
     "min_gap": ("float64", "delta minus the highest free-flight maximum of x"),
-    "grazing": ("int8", "1 where an impact is slower than graze_velocity or a free "
-                        "flight comes within graze_gap of the wall"),
+    "grazing": ("int8", ("1 where an impact is slower than graze_velocity or a free "
+                        "flight comes within graze_gap of the wall")),
     "failed": ("int8", "1 where the trajectory could not be completed"),
 }
 
@@ -636,5 +639,14 @@ def assemble(model, param, values, results, oscillator, options, kw, continuatio
     return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
-__all__ = ["sweep", "sweep_times", "compute_point", "local_executor", "PointTask", "assemble",
-           "MODELS", "CONTINUATIONS", "SWEEPABLE"]
+__all__ = [
+    "CONTINUATIONS",
+    "MODELS",
+    "SWEEPABLE",
+    "PointTask",
+    "assemble",
+    "compute_point",
+    "local_executor",
+    "sweep",
+    "sweep_times",
+]

@@ -90,6 +90,23 @@ def _summary(ds) -> list[str]:
                 lab += f"{ds.impacts.values[start]})"
             lines.append(f"  {where}: {lab}")
             start = i
+    rate = ds.impact_rate.values
+    if np.isfinite(rate).any():
+        first = np.flatnonzero(np.abs(rate - rate[0]) > 0.01)
+        if len(first):
+            i = first[0]
+            lines.append(f"  impacts per forcing period {rate[0]:.3g} from {param} = "
+                         f"{values[0]:.6g}, first different at {param} = {values[i]:.6g} "
+                         f"({rate[i]:.3g})")
+        vmin = ds.min_impact_velocity.values
+        if np.isfinite(vmin).any():
+            j = int(np.nanargmin(vmin))
+            lines.append(f"  slowest impact velocity {vmin[j]:.3g} at {param} = {values[j]:.6g}")
+    gap = ds.min_gap.values
+    if np.isfinite(gap).any():
+        j = int(np.nanargmin(gap))
+        lines.append(f"  closest free flight to the wall: gap {gap[j]:.3g} at {param} = "
+                     f"{values[j]:.6g}")
     graze = ds.grazing_parameter.values
     if len(graze):
         lines.append(f"  grazing between periodic branches near {param} = "
@@ -136,7 +153,7 @@ def cmd_bifurcation(args) -> int:
     if not args.quiet:
         resumed = ds.attrs["points_resumed"]
         print(f"opa-mc bifurcation {args.model}: {len(values)} values of {param} in "
-              f"[{values[0]:.6g}, {values[-1]:.6g}], {args.transient} + {args.record} periods"
+              f"[{values.min():.6g}, {values.max():.6g}], {args.transient} + {args.record} periods"
               f" each, in {elapsed:.2f} s" + (f" ({resumed} resumed from disk)" if resumed
                                                 else ""))
         print("\n".join(_summary(ds)))
@@ -261,4 +278,4 @@ def register(subparsers, model_flags, common_flags) -> None:
     r.set_defaults(func=cmd_reproduce)
 
 
-__all__ = ["register", "parse_sweep", "cmd_bifurcation", "cmd_reproduce"]
+__all__ = ["cmd_bifurcation", "cmd_reproduce", "parse_sweep", "register"]

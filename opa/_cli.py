@@ -214,8 +214,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.set_defaults(func=cmd_simulate)
 
     from compare._cli import register_validate
+    from opa._bifurcation_cli import register as register_bifurcation
 
     register_validate(sub, _model_flags, _solver_flags)
+    register_bifurcation(sub, _model_flags, _common_flags)
 
     return parser
 

@@ -32,12 +32,12 @@ import textwrap
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import xarray as xr
 
-from opa._model import SolverOptions, preset  # noqa: E402
-from opa._poincare import identify_motion, mean_state, phase_section  # noqa: E402
+from opa._model import SolverOptions, preset
+from opa._poincare import identify_motion, mean_state, phase_section
 
 FIGURES = ("fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fig11")
 
@@ -60,14 +60,12 @@ def plot_bifurcation(ds: xr.Dataset, path: str, *, section: str = "both",
     Phase plane: stroboscopic x against the parameter; constraint plane: pre-impact
     velocity against the parameter. Grazing estimates and period doublings are marked.
     """
-    fig, axes = plt.subplots(1, 2 if section == "both" else 1, figsize=(
-        11 if section == "both" else 6, 4.2), squeeze=False)
-    panels = {"phase": "phase", "constraint": "constraint"}
-    which = ["phase", "constraint"] if section == "both" else [panels[section]]
+    which = ["phase", "constraint"] if section == "both" else [section]
+    fig, axes = plt.subplots(1, len(which), figsize=(5.5 * len(which) + 0.5, 4.2),
+                             squeeze=False, layout="constrained")
     for ax, kind in zip(axes[0], which):
         _diagram(ax, ds, kind)
     fig.suptitle(title or _sweep_title(ds), fontsize=10)
-    fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
@@ -93,7 +91,8 @@ def _diagram(ax, ds: xr.Dataset, kind: str, color: str = "black") -> None:
         title = "constraint plane"
     xs = np.broadcast_to(values[:, None], y.shape)
     ok = np.isfinite(y)
-    ax.plot(xs[ok], y[ok], ".", color=color, ms=2.2, alpha=0.7, mec="none")
+    ms = 4.0 if len(values) <= 40 else 2.2
+    ax.plot(xs[ok], y[ok], ".", color=color, ms=ms, alpha=0.7, mec="none")
     for g in ds.grazing_parameter.values:
         ax.axvline(g, color="tab:orange", lw=0.8, ls=":")
     for v in values[ds.period_doubling.values == 1]:
@@ -163,7 +162,6 @@ def _suptitle(fig, text: str, width: int) -> None:
 
 def _save(fig, outdir, name, log) -> str:
     path = os.path.join(outdir, f"{name}.png")
-    fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     if log:
@@ -216,7 +214,7 @@ class _Context:
 
 
 def fig2(ctx):
-    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5.5), sharex=True, layout="constrained")
     t_end = 64.0
     for ax, n, tag in zip(axes, (2, 4), "ab"):
         osc = preset("3.1", n=float(n))
@@ -246,7 +244,8 @@ def fig2(ctx):
 
 def _bifurcation_grid(ctx, name, rows, param, values, *, title, marks=()):
     """Rows of (row label, model, oscillator, sweep kwargs): both sections side by side."""
-    fig, axes = plt.subplots(len(rows), 2, figsize=(11, 3.1 * len(rows)), squeeze=False)
+    fig, axes = plt.subplots(len(rows), 2, figsize=(11, 3.1 * len(rows)), squeeze=False,
+                             layout="constrained")
     paths = []
     for (row_label, tag, model, osc, kw), ax_row in zip(rows, axes):
         ds = ctx.sweep(f"{name}_{tag}", model, param, values, osc, **kw)
@@ -285,7 +284,7 @@ def _portrait_grid(ctx, name, cases, *, title, marker="*", history=True):
     has_emr = any(sigma > 0 for _, _, sigma in cases)
     ncol = 1 + has_emr + history
     fig, axes = plt.subplots(len(cases), ncol, figsize=(4.3 * ncol, 3.5 * len(cases)),
-                             squeeze=False)
+                             squeeze=False, layout="constrained")
     for (row, osc, sigma), ax_row in zip(cases, axes):
         T = osc.forcing_period
         dmr = ctx.run("dmr", osc)
@@ -343,13 +342,13 @@ def fig6(ctx):
 
 
 def fig7(ctx):
-    cases = [(f"ω = 4.00495", preset("3.3", omega=4.00495), s) for s in (0.1, 0.2)]
+    cases = [("ω = 4.00495", preset("3.3", omega=4.00495), s) for s in (0.1, 0.2)]
     return _portrait_grid(ctx, "fig7", cases, marker="s",
                           title="Fig. 7: EMR of set 3.3 (c = 0.05) at ω = 4.00495")
 
 
 def fig8(ctx):
-    cases = [(f"ω = 3.98", preset("3.3", omega=3.98), s) for s in (0.1, 0.18)]
+    cases = [("ω = 3.98", preset("3.3", omega=3.98), s) for s in (0.1, 0.18)]
     return _portrait_grid(ctx, "fig8", cases, marker="s",
                           title="Fig. 8: EMR of set 3.3 (c = 0.05) at ω = 3.98")
 
@@ -379,13 +378,13 @@ def fig10(ctx):
 def fig11(ctx):
     cases = [(f"F0 = {F0:g}, n = {n}", preset("3.4", F0=F0, n=float(n)), 0.0)
              for F0 in (0.1, 10.0) for n in (2, 4)]
-    fig, axes = plt.subplots(2, 2, figsize=(10, 8))
+    fig, axes = plt.subplots(2, 2, figsize=(10, 8), layout="constrained")
     for (row, osc, _), ax, tag in zip(cases, axes.ravel(), "abcd"):
         T = osc.forcing_period
         emr0 = ctx.run("opa", osc, sigma=0.0)
         dmr = ctx.run("dmr", osc)
-        _portrait(ax, dmr, color="lightgray", strobe=False, label="DMR", last=60)
         _portrait(ax, emr0, color=COLORS["EMR_0"], marker="s", last=60)
+        _portrait(ax, dmr, color="black", ls=":", strobe=False, label="DMR (dotted)", last=60)
         m = identify_motion(emr0, start=500 * T)
         ax.set_title(f"({tag}) c = 0.0356, {row}\nEMR_0: {_label_text(m)}", fontsize=9)
         ax.legend(fontsize=7, loc="best", framealpha=0.85)
@@ -439,4 +438,4 @@ def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool 
     return paths
 
 
-__all__ = ["reproduce", "plot_bifurcation", "FIGURES"]
+__all__ = ["FIGURES", "plot_bifurcation", "reproduce"]

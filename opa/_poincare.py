@@ -357,7 +357,7 @@ def identify(
         ti = np.asarray(impact_time, dtype=float)
         window = (ti <= hi) & ((ti > lo) if start is not None else True)
         rec, vi = ti[window], np.asarray(impact_velocity, dtype=float)[window]
-        repeats = int(round(span)) // period if period else 0
+        repeats = round(span) // period if period else 0
         impacts = impacts_per_period(rec, hi, T, period, repeats)
         rate = len(rec) / span
         vmin = float(np.min(np.abs(vi))) if len(vi) else math.nan
@@ -525,20 +525,20 @@ def identify_motion(
 
 __all__ = [
     "Motion",
-    "identify",
-    "stroboscopic_mask",
-    "impulse_times",
-    "sticking_mask",
-    "run_breaks",
-    "detect_period",
-    "repeat_distance",
-    "impacts_per_period",
-    "period_label",
-    "free_flight_maxima",
-    "period_doubling",
-    "grazing_points",
-    "mean_state",
-    "phase_section",
     "constraint_section",
+    "detect_period",
+    "free_flight_maxima",
+    "grazing_points",
+    "identify",
     "identify_motion",
+    "impacts_per_period",
+    "impulse_times",
+    "mean_state",
+    "period_doubling",
+    "period_label",
+    "phase_section",
+    "repeat_distance",
+    "run_breaks",
+    "sticking_mask",
+    "stroboscopic_mask",
 ]

@@ -247,8 +247,8 @@ def dense_value(theta, z_old, h, K, j):
     for s in range(7):
         ks = K[s, j]
         if ks != 0.0:
-            acc += ks * theta * (DP_P[s, 0] + theta * (DP_P[s, 1] + theta * (DP_P[s, 2]
-                                                                              + theta * DP_P[s, 3])))
+            acc += ks * theta * (DP_P[s, 0] + theta * (
+                DP_P[s, 1] + theta * (DP_P[s, 2] + theta * DP_P[s, 3])))
     return z_old[j] + h * acc
 
 

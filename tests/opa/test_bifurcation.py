@@ -26,7 +26,7 @@ from opa._bifurcation import sweep
 from opa._bifurcation_cli import parse_sweep, register
 from opa._model import PARAMETER_NAMES
 
-QUICK = dict(transient=20, record=10, per_period=8, workers=1)
+QUICK = {"transient": 20, "record": 10, "per_period": 8, "workers": 1}
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -112,6 +112,31 @@ def test_parallel_equals_serial():
     assert_same(serial, parallel)
 
 
+@pytest.mark.slow  # a local cluster's workers each import opa and load the kernel
+def test_dask_scheduler_gives_the_local_result(tmp_path):
+    """Points as Dask tasks on two worker processes, by Client and by address, fixed and
+    continued: the same dataset as the local run (the dashboard takes a free port)."""
+    distributed = pytest.importorskip("distributed")
+    osc = preset("3.1")
+    values = [0.03, 0.05, 0.07]
+    kw = {"transient": 30, "record": 10, "per_period": 8}
+    local = sweep("dmr", "c", values, osc, workers=1, **kw)
+    local_cont = sweep("dmr", "c", values, osc, workers=1, continuation="forward", **kw)
+    with (
+        distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                 dashboard_address=":0") as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        by_client = sweep("dmr", "c", values, osc, scheduler=client, out=tmp_path / "d.nc",
+                          **kw)
+        by_address = sweep("dmr", "c", values, osc, scheduler=cluster.scheduler_address, **kw)
+        continued = sweep("dmr", "c", values, osc, scheduler=client, continuation="forward",
+                          **kw)
+    assert_same(by_client, local)
+    assert_same(by_address, local)
+    assert_same(continued, local_cont)
+
+
 # --------------------------------------------------------------------------- resumption
 
 
@@ -151,7 +176,8 @@ def test_interrupted_sweep_resumes_without_loss_or_rework(tmp_path, monkeypatch,
                                                           continuation):
     osc = preset("3.1")
     values = np.linspace(0.02, 0.08, 6)
-    kw = dict(transient=30, record=10, per_period=8, workers=1, continuation=continuation)
+    kw = {"transient": 30, "record": 10, "per_period": 8, "workers": 1,
+          "continuation": continuation}
     reference = sweep("dmr", "c", values, osc, **kw)
     out = tmp_path / "sweep.nc"
 

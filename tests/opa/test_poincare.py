@@ -108,7 +108,7 @@ def free_flight(gap, *, delta=0.0, omega=2.0, per_period=16, periods=20, phase=0
 def test_hermite_maxima_of_a_free_flight_converge_at_fourth_order():
     errors = []
     for per_period in (8, 16, 32, 64):
-        t, x, v, T = free_flight(0.01, per_period=per_period)
+        t, x, v, _T = free_flight(0.01, per_period=per_period)
         tm, xm = free_flight_maxima(t, x, v)
         assert len(xm) == 20
         errors.append(np.abs(xm + 0.01).max())
@@ -168,7 +168,7 @@ def test_grazing_located_between_periodic_branches_by_the_square_law():
 
 @pytest.mark.parametrize(
     "name, changes, label",
-    [("3.1", dict(c=0.035), "4/4"), ("3.1", dict(c=0.05), "2/2"), ("3.2", dict(omega=3.98),
+    [("3.1", {"c": 0.035}, "4/4"), ("3.1", {"c": 0.05}, "2/2"), ("3.2", {"omega": 3.98},
                                                                    "6/2")],
 )
 def test_periodic_orbits_of_the_dmr_without_impulses(name, changes, label):

@@ -541,3 +541,33 @@ def test_divergence_raises_a_clear_error_quickly(changes):
 def test_step_limit_raises_a_clear_error():
     with pytest.raises(opa.SimulationError, match=r"maximum number of steps.*100 steps"):
         simulate_dmr(preset("3.2"), periods=100, options=SolverOptions(max_steps=100))
+
+
+def test_emr0_higher_modes_stay_exactly_zero_over_long_runs():
+    """sigma = 0: the Galerkin projection of a constant is exactly U_0 (the force at the
+    mean state is split off), so the higher modes never leave zero, even where the van der
+    Pol term would amplify round-off (section 3.2 at omega = 4.2 with impulses)."""
+    osc = preset("3.2", omega=4.2)
+    emr = opa.simulate_opa(osc, sigma=0.0, order=4, periods=300)
+    assert np.all(emr.x_coef.values[1:] == 0.0) and np.all(emr.v_coef.values[1:] == 0.0)
+    dmr = simulate_dmr(osc, periods=300)
+    assert emr.sizes["impact"] == dmr.sizes["impact"]
+    np.testing.assert_allclose(emr.x_mean.values, dmr.x.values, rtol=0, atol=1e-8)
+
+
+def test_impulses_before_a_late_start_are_not_applied():
+    """A run starting at t0 > 0 sees only the impulses at t_j >= t0 (linear oscillator,
+    no wall: superposition of the free response and the kicks after t0)."""
+    a, F0, T1 = 1.3, 0.2, 2 * np.pi
+    osc = Oscillator(mu=0.0, a=a, c=0.0, f=0.0, omega=1.0, eta=1.0, delta=1e6, F0=F0,
+                     a1=0.5, omega1=1.0, n=2.0, x0=0.3, v0=0.0)
+    t0 = 10 * T1 + 0.5
+    t = t0 + np.linspace(0.0, 3 * T1, 31)
+    ds = simulate_dmr(osc, times=t, options=TIGHT)
+    w = np.sqrt(a)
+    x = 0.3 * np.cos(w * (t - t0))
+    for j in (11, 12, 13):
+        tj = j * T1
+        kick = F0 * (1 + 0.5 * np.sin(tj / 2))
+        x += np.where(t >= tj, kick / w * np.sin(w * (t - tj)), 0.0)
+    np.testing.assert_allclose(ds.x.values, x, rtol=0, atol=1e-9)
