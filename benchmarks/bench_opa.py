@@ -112,7 +112,7 @@ class ScipyOPA:
         self.o = oscillator
         self.n = order + 1
         nodes, weights, basis = quadrature(order)
-        self.basis = basis[: self.n]  # (N+1, Q)
+        self.basis = basis.T[: self.n]  # (N+1, Q)
         self.weights = weights
         self.mu_k = oscillator.mu + sigma * nodes
 

@@ -77,6 +77,8 @@ def pack_parameters(
 def quadrature(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nodes, weights and basis values U_0..U_{N+1} at the nodes for an order-N system.
 
+    The basis comes node-major, shape (Q, N+2): ``basis[k, i] = U_i(xi_k)``.
+
     N = 0 uses the one-point rule at xi = 0, which makes EMR_0 the DMR exactly.
     """
     if order == 0:
@@ -85,8 +87,8 @@ def quadrature(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         nodes, weights = np.zeros(1), np.ones(1)
     else:
         nodes, weights = gauss_nodes(quadrature_order(order))
-    basis = chebyshev_u(order + 1, nodes)
-    return nodes, weights, np.ascontiguousarray(basis)
+    basis = chebyshev_u(order + 1, nodes)  # (N+2, Q)
+    return nodes, weights, np.ascontiguousarray(basis.T)  # node-major (Q, N+2)
 
 
 def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory"):

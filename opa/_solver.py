@@ -147,8 +147,8 @@ def rhs_galerkin(t, y, p, cfg, nodes, weights, U, pulse, sticking, out, xk, vk):
         xs = 0.0
         vs = 0.0
         for i in range(ncoef):
-            xs += y[i] * U[i, k]
-            vs += y[ncoef + i] * U[i, k]
+            xs += y[i] * U[k, i]
+            vs += y[ncoef + i] * U[k, i]
         xk[k] = xs
         vk[k] = vs
     mu = p[P_MU]
@@ -182,15 +182,15 @@ def rhs_galerkin(t, y, p, cfg, nodes, weights, U, pulse, sticking, out, xk, vk):
         if g == 0.0:
             continue
         for i in range(ncoef):
-            out[ncoef + i] += g * U[i, k]
+            out[ncoef + i] += g * U[k, i]
     if cfg[C_TRUNC] == TRUNC_PAPER and sigma != 0.0:
         # eq. (27) drops the xi * cubic term's projection on U_{N+1} from the last equation.
         extra = 0.0
         for k in range(q):
             if unc == UNCERTAIN_MU:
-                extra += weights[k] * U[ncoef, k] * vk[k] ** 3
+                extra += weights[k] * U[k, ncoef] * vk[k] ** 3
             elif unc == UNCERTAIN_C:
-                extra += weights[k] * U[ncoef, k] * xk[k] ** 3
+                extra += weights[k] * U[k, ncoef] * xk[k] ** 3
         out[2 * ncoef - 1] += 0.5 * sigma * extra
     out[ncoef] += p[P_F] * np.cos(p[P_OMEGA] * t) + pulse
     release = out[ncoef]
@@ -445,7 +445,8 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
     y0 : (dim,) initial state ``[x_0..x_N, v_0..v_N]`` at ``t_out[0]``.
     t_out : (n_out,) increasing output times, hit exactly as breakpoints.
     p, cfg : parameter and configuration vectors (see the ``P_*`` and ``C_*`` indices).
-    nodes, weights : (Q,) semicircle Gauss rule; U : (N+2, Q) basis values at nodes.
+    nodes, weights : (Q,) semicircle Gauss rule; U : (Q, N+2) basis values at the nodes,
+        ``U[k, i] = U_i(xi_k)`` (node-major, so the loops over i run over contiguous memory).
     out_y : (n_out, dim) output buffer.
     log : (cap, 3) event log rows ``(time, velocity, kind)``; kind is EV_*.
         Impacts record the pre-impact velocity of x_0.
@@ -733,7 +734,7 @@ def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, stat
     M = xi.shape[0]
     nodes = np.zeros(1)
     weights = np.ones(1)
-    U = np.zeros((2, 1))
+    U = np.zeros((1, 2))
     U[0, 0] = 1.0
     unc = cfg[C_UNCERTAIN]
     idx = P_MU
