@@ -28,7 +28,7 @@ from scipy.integrate import solve_ivp
 
 import opa
 from opa import _solver
-from opa._simulate import pack_parameters, quadrature, run_kernel
+from opa._simulate import kernel_quadrature, pack_parameters, quadrature, run_kernel
 
 RHS_ORDERS = [2, 4, 8, 16, 32, 64]
 RHS_EVALUATIONS = 10_000
@@ -50,7 +50,7 @@ def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, xk, vk):
 def _rhs_inputs(order):
     oscillator = opa.preset("3.2")
     p, cfg = pack_parameters(oscillator, opa.SolverOptions(), sigma=0.01, order=order)
-    nodes, weights, basis = quadrature(order)
+    nodes, weights, basis = kernel_quadrature(quadrature(order))
     y = np.random.default_rng(order).normal(scale=0.3, size=2 * (order + 1))
     out = np.empty_like(y)
     return (y, p, cfg, nodes, weights, basis, out, np.empty(len(nodes)), np.empty(len(nodes)))
@@ -112,7 +112,7 @@ class ScipyOPA:
         self.o = oscillator
         self.n = order + 1
         nodes, weights, basis = quadrature(order)
-        self.basis = basis.T[: self.n]  # (N+1, Q)
+        self.basis = basis[: self.n]  # (N+1, Q)
         self.weights = weights
         self.mu_k = oscillator.mu + sigma * nodes
 

@@ -77,7 +77,8 @@ def pack_parameters(
 def quadrature(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Nodes, weights and basis values U_0..U_{N+1} at the nodes for an order-N system.
 
-    The basis comes node-major, shape (Q, N+2): ``basis[k, i] = U_i(xi_k)``.
+    The basis is degree-major, shape (N+2, Q): ``basis[i, k] = U_i(xi_k)``; the kernel
+    takes it node-major (:func:`kernel_quadrature`).
 
     N = 0 uses the one-point rule at xi = 0, which makes EMR_0 the DMR exactly.
     """
@@ -88,12 +89,21 @@ def quadrature(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     else:
         nodes, weights = gauss_nodes(quadrature_order(order))
     basis = chebyshev_u(order + 1, nodes)  # (N+2, Q)
-    return nodes, weights, np.ascontiguousarray(basis.T)  # node-major (Q, N+2)
+    return nodes, weights, np.ascontiguousarray(basis)
+
+
+def kernel_quadrature(quad):
+    """The kernel's layout of :func:`quadrature`'s rule: basis node-major (Q, N+2), so
+    the kernel's inner loops over the degree run over contiguous memory."""
+    nodes, weights, basis = quad
+    return nodes, weights, np.ascontiguousarray(basis.T)
 
 
 def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory"):
-    """Integrate and return (states (n_out, dim), event log (n, 3), counters dict)."""
-    nodes, weights, basis = quad
+    """Integrate and return (states (n_out, dim), event log (n, 3), counters dict).
+
+    ``quad`` is :func:`quadrature`'s (nodes, weights, basis (N+2, Q))."""
+    nodes, weights, basis = kernel_quadrature(quad)
     capacity = max(64, 4 * len(times))
     while True:
         out = np.empty((len(times), len(y0)))

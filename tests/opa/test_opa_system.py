@@ -23,7 +23,7 @@ from scipy.special import eval_chebyu, roots_jacobi
 
 import opa
 from opa import _solver
-from opa._simulate import pack_parameters, quadrature
+from opa._simulate import kernel_quadrature, pack_parameters, quadrature
 from tests.reference import reference_trajectory
 
 RNG_SEED = 20240612
@@ -99,7 +99,7 @@ def kernel_rhs(t, y, oscillator, sigma, order, uncertain, truncation, pulse=0.0)
         oscillator, opa.SolverOptions(), sigma=sigma, order=order, uncertain=uncertain,
         truncation=truncation,
     )  # fmt: skip
-    nodes, weights, basis = quadrature(order)
+    nodes, weights, basis = kernel_quadrature(quadrature(order))
     out = np.empty_like(y)
     xk, vk = np.empty(len(nodes)), np.empty(len(nodes))
     release = _solver.rhs(t, y, p, cfg, nodes, weights, basis, pulse, False, out, xk, vk)

@@ -27,7 +27,7 @@ import pytest
 import opa
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
 from opa import _solver as K
-from opa._simulate import pack_parameters, quadrature
+from opa._simulate import kernel_quadrature, pack_parameters, quadrature
 from tests.reference import reference_trajectory
 
 TIGHT = SolverOptions(rtol=1e-12, atol=1e-12)
@@ -89,7 +89,7 @@ def test_dormand_prince_tableau_satisfies_its_order_conditions():
 def kernel_step(osc: Oscillator, t0: float, y0, h: float):
     """One compiled Dormand-Prince step of the DMR: returns (K stages, y_new)."""
     p, cfg = pack_parameters(osc, SolverOptions())
-    nodes, weights, U = quadrature(0)
+    nodes, weights, U = kernel_quadrature(quadrature(0))
     y0 = np.asarray(y0, dtype=float)
     stages, y_new, ytmp = np.zeros((7, 2)), np.empty(2), np.empty(2)
     xk, vk = np.empty(1), np.empty(1)
@@ -153,7 +153,8 @@ def test_kernel_reports_status_codes_and_fills_unreached_outputs_with_nan():
     times = np.linspace(0.0, 20.0, 5)
     out, log = np.empty((5, 2)), np.empty((16, 3))
     status, _, _, n_steps, _ = K.integrate(
-        np.array([osc.x0, osc.v0]), times, p, cfg, *quadrature(0), 1e-10, 1e-10, out, log)
+        np.array([osc.x0, osc.v0]), times, p, cfg, *kernel_quadrature(quadrature(0)), 1e-10,
+        1e-10, out, log)
     assert status == K.MAX_STEPS and n_steps == 50
     assert np.isfinite(out[0]).all() and np.isnan(out[-1]).all()
 
