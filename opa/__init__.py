@@ -7,8 +7,19 @@ from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, trip
 from opa._dataset import write_netcdf
 from opa._model import Oscillator, SolverOptions, Uncertainty, preset, time_grid
 from opa._bifurcation import sweep
+from opa._continuation import continue_orbits, plot_branches
 from opa._poincare import Motion, constraint_section, detect_period, identify_motion, phase_section
 from opa._simulate import SimulationError, simulate_dmr, simulate_opa
+from opa._stability import (
+    ImpactSystem,
+    PeriodicOrbit,
+    impulse_cycle,
+    lyapunov_benettin,
+    lyapunov_exponent,
+    periodic_orbit,
+    poincare_map,
+    transverse_lyapunov_exponent,
+)
 
 
 def reproduce(figure: str, outdir: str = "figures", **kwargs):
@@ -36,6 +47,16 @@ __all__ = [
     "phase_section",
     "constraint_section",
     "detect_period",
+    "ImpactSystem",
+    "PeriodicOrbit",
+    "periodic_orbit",
+    "poincare_map",
+    "lyapunov_exponent",
+    "lyapunov_benettin",
+    "transverse_lyapunov_exponent",
+    "impulse_cycle",
+    "continue_orbits",
+    "plot_branches",
     "chebyshev_u",
     "cubic_projection",
     "gauss_nodes",

@@ -216,8 +216,11 @@ def build_parser() -> argparse.ArgumentParser:
     from compare._cli import register_validate
     from opa._bifurcation_cli import register as register_bifurcation
 
+    from opa._stability_cli import register_stability
+
     register_validate(sub, _model_flags, _solver_flags)
     register_bifurcation(sub, _model_flags, _common_flags)
+    register_stability(sub, _model_flags, _solver_flags)
 
     return parser
 

@@ -141,9 +141,18 @@ def vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, out, work)
             vs += z[n + i] * U[i, k]
         xk[k] = xs
         vk[k] = vs
+    # The force at the mean state, g_0, goes to U_0 alone and only g_k - g_0 is projected:
+    # the same projection (sum_k w_k U_i(xi_k) = [i = 0]), but with sigma = 0 and zero
+    # higher coefficients every g_k - g_0 is exactly 0, so the higher modes stay exactly
+    # 0 and EMR_0 is the DMR bit for bit; otherwise the ~1e-17 round-off of that sum is
+    # amplified by the transverse instability (``transverse_lyapunov_exponent``).
+    x0 = z[0]
+    v0 = z[n]
+    g0 = p[V_MU] * (1.0 - v0 * v0) * v0 - p[V_A] * x0 - p[V_C] * x0 * x0 * x0
     for i in range(n):
         out[i] = z[n + i]
         out[n + i] = 0.0
+    out[n] = g0
     for k in range(q):
         mu_k = p[V_MU]
         a_k = p[V_A]
@@ -157,11 +166,12 @@ def vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, out, work)
         x = xk[k]
         v = vk[k]
         w = weights[k]
-        g = w * (mu_k * (1.0 - v * v) * v - a_k * x - c_k * x * x * x)
+        g = w * (mu_k * (1.0 - v * v) * v - a_k * x - c_k * x * x * x - g0)
         gx[k] = w * (-a_k - 3.0 * c_k * x * x)
         gv[k] = w * mu_k * (1.0 - 3.0 * v * v)
-        for i in range(n):
-            out[n + i] += g * U[i, k]
+        if g != 0.0:
+            for i in range(n):
+                out[n + i] += g * U[i, k]
     paper = cfg[G_TRUNC] == TRUNC_PAPER and sigma != 0.0 and unc != UNCERTAIN_A
     if paper:
         # eq. (27) drops the projection of the xi * cubic term on U_{N+1}: add it back
@@ -694,19 +704,24 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
 
 
 @njit(cache=True)
-def flow_points(z, m, times, include_start, p, cfg, nodes, weights, U, rtol, atol, out, stats,
-                log):
+def flow_points(z, m, times, include_start, renormalise, p, cfg, nodes, weights, U, rtol, atol,
+                out, stats, log_growth, log):
     """Advance ``z`` through ``times`` (increasing), storing the state at each time.
 
     ``out`` (len(times), D) receives the state (W is not stored); ``stats`` (len(times)
     - 1, N_STATS) the statistics of each interval; the impacts of all intervals go to
-    ``log``. ``z`` ends as the augmented state at times[-1].
+    ``log``. With ``renormalise`` the tangent matrix W is scaled to unit Frobenius norm
+    at every time and ``log_growth[i]`` (len(times) - 1) receives the log of its growth
+    over interval i (``-inf`` when sticking collapsed it; W then restarts from equal
+    entries). This is the Lyapunov loop (Benettin's renormalisation with the exact
+    tangent map). ``z`` ends as the augmented state at times[-1].
 
     Returns
     -------
     status, number of impacts logged (or counted beyond the log's capacity)
     """
     dim = 2 * cfg[G_NCOEF]
+    size = z.shape[0]
     for j in range(dim):
         out[0, j] = z[j]
     n_log = 0
@@ -719,69 +734,17 @@ def flow_points(z, m, times, include_start, p, cfg, nodes, weights, U, rtol, ato
             return status, n_log
         for j in range(dim):
             out[i + 1, j] = z[j]
+        if renormalise and m > 0:
+            norm = 0.0
+            for j in range(dim, size):
+                norm += z[j] * z[j]
+            norm = np.sqrt(norm)
+            if norm > 0.0 and np.isfinite(norm):
+                log_growth[i] = np.log(norm)
+                for j in range(dim, size):
+                    z[j] /= norm
+            else:
+                log_growth[i] = -np.inf
+                for j in range(dim, size):
+                    z[j] = 1.0 / np.sqrt(size - dim)
     return OK, n_log
-
-
-@njit(cache=True)
-def lyapunov_growth(y0, t0, period, n_transient, include_start, p, cfg, nodes, weights, U, rtol,
-                    atol, growth, stats):
-    """Largest Lyapunov exponent: one tangent vector, renormalised every ``period``.
-
-    After ``n_transient`` periods of the plain flow, a tangent vector (saltation at each
-    impact) is carried over ``growth.shape[0]`` periods; ``growth[k]`` is the log of its
-    growth over period k (``-inf`` when sticking collapses it; it is then restarted).
-    ``stats`` (N_STATS) accumulates impacts (sum), the smallest impact velocity,
-    sticking episodes and steps over the recorded periods.
-
-    Returns
-    -------
-    status, number of periods recorded
-    """
-    dim = y0.shape[0]
-    log = np.empty((0, 2))
-    one = np.empty(N_STATS)
-    z = np.zeros(2 * dim)
-    for j in range(dim):
-        z[j] = y0[j]
-    start = include_start
-    t_rec = t0
-    if n_transient > 0:
-        t_rec = t0 + n_transient * period
-        status, _ = advance(z[:dim], 0, t0, t_rec, start, p, cfg, nodes, weights, U, rtol, atol,
-                            one, log)
-        if status != OK:
-            return status, 0
-        start = False
-    for j in range(dim):
-        z[dim + j] = 1.0 / np.sqrt(dim)
-    stats[S_IMPACTS] = 0.0
-    stats[S_MIN_VELOCITY] = np.inf
-    stats[S_STICKS] = 0.0
-    stats[S_STEPS] = 0.0
-    stats[S_STICKING] = 0.0
-    stats[S_GAP] = np.inf
-    for k in range(growth.shape[0]):
-        ta = t_rec + k * period
-        tb = t_rec + (k + 1) * period
-        status, _ = advance(z, 1, ta, tb, start and k == 0, p, cfg, nodes, weights, U, rtol, atol,
-                            one, log)
-        if status != OK:
-            return status, k
-        stats[S_IMPACTS] += one[S_IMPACTS]
-        stats[S_MIN_VELOCITY] = min(stats[S_MIN_VELOCITY], one[S_MIN_VELOCITY])
-        stats[S_STICKS] += one[S_STICKS]
-        stats[S_STEPS] += one[S_STEPS]
-        stats[S_GAP] = min(stats[S_GAP], one[S_GAP])
-        norm = 0.0
-        for j in range(dim):
-            norm += z[dim + j] ** 2
-        norm = np.sqrt(norm)
-        if norm > 0.0 and np.isfinite(norm):
-            growth[k] = np.log(norm)
-            for j in range(dim):
-                z[dim + j] /= norm
-        else:
-            growth[k] = -np.inf
-            for j in range(dim):
-                z[dim + j] = 1.0 / np.sqrt(dim)
-    return OK, growth.shape[0]

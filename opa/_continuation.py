@@ -1,0 +1,802 @@
+"""Branches of periodic orbits along a parameter: pseudo-arclength continuation of the
+fixed points of the stroboscopic map, bifurcation detection and location, branch
+switching at period doubling, the branch dataset and its figure.
+
+Along a branch ``G(y, lambda) = P^k(y; lambda) - y = 0`` is followed by pseudo-arclength
+continuation (secant/tangent predictor, Newton corrector on ``G = 0`` plus the arclength
+condition) in the scaled parameter ``lambda / L`` (``L = |stop - start|``), so folds are
+passed and unstable orbits are followed as readily as stable ones. The Jacobian
+``DP^k`` is exact (``opa._stability``); ``dP/dlambda`` is a central difference.
+
+Test functions between consecutive points:
+
+- period doubling: ``det(DP^k + I)`` changes sign (a real multiplier crosses -1);
+  located by Brent's method in the parameter to ``xtol`` (default 1e-10), with a Newton
+  solve at each trial value, then the doubled branch ``P^{2k}`` is started from the
+  bifurcation point along the eigenvector of -1 (the pitchfork of ``P^{2k}``);
+- fold: the parameter component of the tangent changes sign (a multiplier must be
+  near +1, else the turn is a non-smooth point of the map and the branch ends); located
+  by Brent's method on ``det(DP^k - I)`` along the chord between the two points;
+- Neimark-Sacker: the number of complex multipliers outside the unit circle changes
+  (approximate, linear interpolation of their modulus);
+- grazing: the number of impacts per period changes, or a free-flight maximum reaches
+  the wall (approximate: the squared impact velocity and the gap are extrapolated
+  linearly to zero, as they vanish linearly in the parameter near a grazing).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+from scipy.optimize import brentq
+
+from opa._simulate import SimulationError
+from opa._stability import (
+    SWEEPABLE,
+    ConvergenceError,
+    ImpactSystem,
+    PeriodicOrbit,
+    _orbit,
+    _residual,
+    default_tolerance,
+    flow,
+    periodic_orbit,
+    poincare_map,
+    shoot,
+)
+
+BIFURCATION_KINDS = ("period-doubling", "fold", "neimark-sacker", "grazing", "impulse-impact")
+PD, FOLD, NS, GRAZING, IMPULSE_IMPACT = range(5)
+FOLD_MULTIPLIER = 0.25  # a turn of the branch is a fold only with a multiplier this close to 1
+NEAR = 1e-2  # a branch end is put down to grazing / an impulse when these are this small
+
+
+@dataclass(eq=False)
+class Bifurcation:
+    """A bifurcation point on a branch.
+
+    ``value``: parameter value; ``located``: True when found to ``xtol`` by root
+    finding (period doubling), False for interpolated estimates; ``orbit``: the orbit
+    at the point when located; ``child``: index of the branch switched onto, or -1.
+    """
+
+    kind: str
+    value: float
+    branch: int
+    located: bool
+    orbit: PeriodicOrbit | None = None
+    x: float = math.nan
+    v: float = math.nan
+    child: int = -1
+
+
+@dataclass(eq=False)
+class Branch:
+    """The orbits along one branch, in continuation order."""
+
+    parameter: str
+    periods: int
+    values: list = field(default_factory=list)
+    orbits: list = field(default_factory=list)
+    parent: int = -1
+    end: str = ""
+
+
+# --------------------------------------------------------------------------- one branch
+class _Continuation:
+    """Pseudo-arclength continuation of the fixed points of ``P^k`` in one parameter."""
+
+    def __init__(self, system, parameter, lo, hi, periods, t0, *, tol, scale):
+        if parameter not in SWEEPABLE:
+            raise ValueError(f"parameter must be one of {', '.join(SWEEPABLE)}, got "
+                             f"{parameter!r}")
+        self.system = system
+        self.name = parameter
+        self.lo, self.hi = lo, hi
+        self.k = periods
+        self.t0 = t0
+        self.tol = tol
+        self.L = scale
+        self.dlam = 1e-4 * scale
+
+    def at(self, lam):
+        return self.system.with_parameter(self.name, lam)
+
+    def residual_map(self, y, lam, jacobian=True):
+        sys_ = self.at(lam)
+        return poincare_map(sys_, y, periods=self.k, t0=self.t0, jacobian=jacobian)
+
+    def g_lambda(self, y, lam):
+        """dG/d(theta) = L dP/dlambda, central difference."""
+        h = self.dlam
+        yp, _ = self.residual_map(y, lam + h, jacobian=False)
+        ym, _ = self.residual_map(y, lam - h, jacobian=False)
+        return self.L * (yp - ym) / (2.0 * h)
+
+    def tangent(self, y, lam, J, t_prev=None, direction=1.0):
+        D = len(y)
+        A = np.hstack([J - np.eye(D), self.g_lambda(y, lam)[:, None]])
+        if t_prev is None:
+            _, _, vt = np.linalg.svd(A)
+            t = vt[-1]
+            if t[-1] * direction < 0:
+                t = -t
+        else:
+            M = np.vstack([A, t_prev[None, :]])
+            rhs = np.zeros(D + 1)
+            rhs[-1] = 1.0
+            t = np.linalg.solve(M, rhs)
+        return t / np.linalg.norm(t)
+
+    def correct(self, u_pred, t, max_iter=8):
+        """Newton on [G(u); t . (u - u_pred)] = 0; returns (y, lam, J, iterations)."""
+        D = len(u_pred) - 1
+        delta = self.system.oscillator.delta
+        u = u_pred.copy()
+        g_lam = None
+        res = math.inf
+        for it in range(max_iter):
+            y, lam = u[:D], u[D] * self.L
+            if y[0] > delta or not (self.lo - 0.5 * self.L <= lam <= self.hi + 0.5 * self.L):
+                return None
+            y1, J = self.residual_map(y, lam)
+            G = y1 - y
+            if g_lam is None:
+                g_lam = self.g_lambda(y, lam)
+            res_prev, res = res, _residual(y, y1)
+            arc = float(t @ (u - u_pred))
+            floor = res < 100.0 * self.tol and res > 0.5 * res_prev  # integration noise
+            if (res < self.tol or floor) and abs(arc) < 1e-9:
+                return y.copy(), lam, J, it
+            M = np.zeros((D + 1, D + 1))
+            M[:D, :D] = J - np.eye(D)
+            M[:D, D] = g_lam
+            M[D] = t
+            try:
+                du = np.linalg.solve(M, -np.concatenate([G, [arc]]))
+            except np.linalg.LinAlgError:
+                return None
+            u = u + du
+        return None
+
+
+def _stability_count(orbit: PeriodicOrbit) -> tuple[int, int]:
+    """(unstable real multipliers, unstable complex multipliers)."""
+    mu = orbit.multipliers
+    out = np.abs(mu) > 1.0
+    cplx = np.abs(mu.imag) > 1e-12 * np.maximum(1.0, np.abs(mu))
+    return int(np.sum(out & ~cplx)), int(np.sum(out & cplx))
+
+
+def _near_one(orbit: PeriodicOrbit) -> bool:
+    mu = orbit.multipliers
+    return bool(np.any((np.abs(mu.imag) < 1e-9) & (np.abs(mu.real - 1.0) < FOLD_MULTIPLIER)))
+
+
+def _pd_test(orbit: PeriodicOrbit) -> float:
+    return float(np.prod(orbit.multipliers + 1.0).real)
+
+
+def follow(system: ImpactSystem, parameter: str, orbit: PeriodicOrbit, stop: float, *,
+           step: float = 0.02, max_step: float = 0.05, min_step: float = 1e-6,
+           max_points: int = 500, tol: float | None = None, bounds: tuple | None = None,
+           initial_tangent: np.ndarray | None = None, max_multiplier: float = 1e3
+           ) -> tuple[Branch, list]:
+    """Follow the branch of ``orbit`` in ``parameter`` towards ``stop``.
+
+    ``step``, ``max_step``, ``min_step`` are arclength steps in the scaled variables
+    (state, parameter / L with L the length of ``bounds``). ``initial_tangent`` (D + 1)
+    starts the continuation in a given direction (branch switching). The branch is
+    abandoned where its largest multiplier exceeds ``max_multiplier`` in modulus. Returns the branch
+    and the raw list of detected events ``(kind, index_a, index_b)`` between points.
+    """
+    start = system.parameter(parameter)
+    tol = default_tolerance(system) if tol is None else tol
+    lo, hi = bounds if bounds is not None else (min(start, stop), max(start, stop))
+    L = max(hi - lo, 1e-12)
+    k, t0 = orbit.periods, orbit.t0
+    cont = _Continuation(system, parameter, lo, hi, k, t0, tol=tol, scale=L)
+    branch = Branch(parameter=parameter, periods=k)
+    branch.values.append(start)
+    branch.orbits.append(orbit)
+    D = system.dim
+    direction = 1.0 if stop >= start else -1.0
+    y, lam, J = orbit.state.copy(), start, orbit.jacobian
+    if initial_tangent is not None:
+        t = initial_tangent / np.linalg.norm(initial_tangent)
+    else:
+        t = cont.tangent(y, lam, J, direction=direction)
+    ds = step
+    events = []
+    while len(branch.orbits) < max_points:
+        u = np.concatenate([y, [lam / L]])
+        got = None
+        while ds >= min_step:
+            try:
+                got = cont.correct(u + ds * t, t)
+            except (SimulationError, ValueError):
+                got = None
+            if got is not None:
+                y_new, lam_new, J_new, iters = got
+                # a too-large step can jump to another branch: require the new point
+                # to lie ahead of the old one, within a few steps
+                if np.linalg.norm(np.concatenate([y_new, [lam_new / L]]) - u) <= 3.0 * ds:
+                    break
+                got = None
+            ds *= 0.5
+        if got is None:
+            branch.end = "corrector failed (step below min_step)"
+            events.append(("end", len(branch.orbits) - 1, len(branch.orbits) - 1))
+            break
+        y_new, lam_new, J_new, iters = got
+        if lam_new < lo or lam_new > hi:
+            # land exactly on the end of the interval
+            end = hi if lam_new > hi else lo
+            frac = (end - lam) / (lam_new - lam) if lam_new != lam else 1.0
+            guess = y + frac * (y_new - y)
+            try:
+                o = shoot(system.with_parameter(parameter, end), guess, periods=k, t0=t0, tol=tol)
+                _append(branch, end, o, events)
+            except (ConvergenceError, SimulationError):
+                pass
+            branch.end = "reached the end of the interval"
+            break
+        sys_new = system.with_parameter(parameter, lam_new)
+        o = _orbit(sys_new, y_new, k, t0, J_new, _residual(y_new, flow(
+            sys_new, y_new, [t0, t0 + k * sys_new.forcing_period]).states[-1]), iters)
+        prev = branch.orbits[-1]
+        if prev.impacts == o.impacts and prev.impulse_order != o.impulse_order:
+            # an impact crossed an impulse time: the map jumps there, the new orbit lies on
+            # another sheet of it
+            branch.end = ("an impact crossed an impulse time (the map is discontinuous there)"
+                          if system.options.impulse == "dirac" else
+                          "an impact crossed a pulse edge (the map is not smooth there)")
+            events.append(("impulse-impact", len(branch.orbits) - 1, len(branch.orbits) - 1))
+            break
+        t_new = cont.tangent(y_new, lam_new, J_new, t_prev=t)
+        if t_new[-1] * t[-1] < 0:
+            if not (_near_one(branch.orbits[-1]) or _near_one(o)):
+                # the branch turned with no multiplier near +1: the map is not smooth here
+                branch.end = ("the branch turned back with no multiplier near +1: non-smooth "
+                              "point of the map")
+                events.append(("end", len(branch.orbits) - 1, len(branch.orbits) - 1))
+                break
+            events.append(("fold", len(branch.orbits) - 1, len(branch.orbits)))
+        _append(branch, lam_new, o, events)
+        if o.spectral_radius > max_multiplier:
+            branch.end = f"a multiplier exceeds max_multiplier = {max_multiplier:g}"
+            break
+        y, lam, J, t = y_new, lam_new, J_new, t_new
+        ds = min(ds * 1.5, max_step) if iters <= 3 else ds
+    else:
+        branch.end = f"max_points ({max_points}) reached"
+    return branch, events
+
+
+def _append(branch: Branch, value: float, orbit: PeriodicOrbit, events: list) -> None:
+    if branch.orbits:
+        prev = branch.orbits[-1]
+        i = len(branch.orbits) - 1
+        if np.sign(_pd_test(prev)) != np.sign(_pd_test(orbit)):
+            events.append(("period-doubling", i, i + 1))
+        if _stability_count(prev)[1] != _stability_count(orbit)[1]:
+            events.append(("neimark-sacker", i, i + 1))
+        if prev.impacts != orbit.impacts:
+            events.append(("grazing", i, i + 1))
+    branch.values.append(value)
+    branch.orbits.append(orbit)
+
+
+# --------------------------------------------------------------------------- location
+def locate_period_doubling(system: ImpactSystem, parameter: str, a: tuple, b: tuple, *,
+                           xtol: float = 1e-10, tol: float | None = None) -> PeriodicOrbit:
+    """The period-doubling point between two orbits ``a = (value, orbit)``, ``b``.
+
+    Brent's method on ``det(DP^k + I)`` in the parameter, each trial value solved by
+    Newton shooting from the linear interpolation of the two states. Returns the orbit
+    at the bifurcation (its system carries the parameter value).
+    """
+    (la, oa), (lb, ob) = a, b
+    k, t0 = oa.periods, oa.t0
+    cache = {}
+
+    def solve(lam):
+        if lam not in cache:
+            frac = (lam - la) / (lb - la)
+            guess = oa.state + frac * (ob.state - oa.state)
+            cache[lam] = shoot(system.with_parameter(parameter, lam), guess, periods=k, t0=t0,
+                               tol=tol)
+        return cache[lam]
+
+    fa, fb = _pd_test(oa), _pd_test(ob)
+    if np.sign(fa) == np.sign(fb):
+        raise ValueError("the two orbits do not bracket a period doubling")
+    root = brentq(lambda lam: _pd_test(solve(lam)), la, lb, xtol=xtol, rtol=4 * np.finfo(float).eps,
+                  maxiter=200)
+    return solve(root)
+
+
+def locate_fold(system: ImpactSystem, parameter: str, a: tuple, b: tuple, *, scale: float,
+                xtol: float = 1e-12, tol: float | None = None) -> PeriodicOrbit:
+    """The fold (multiplier +1, turning point in the parameter) between two orbits.
+
+    The branch between ``a = (value, orbit)`` and ``b`` is parametrised by the fraction
+    s of the chord from a to b (each point: Newton on ``G = 0`` in the hyperplane normal
+    to the chord, in the variables (y, value / scale)), and Brent's method finds the
+    sign change of ``det(DP^k - I)`` in s. The parameter is quadratic in s at a fold,
+    so it is located far more precisely than s.
+    """
+    (la, oa), (lb, ob) = a, b
+    tol = default_tolerance(system) if tol is None else tol
+    lo, hi = min(la, lb), max(la, lb)
+    cont = _Continuation(system, parameter, lo - scale, hi + scale, oa.periods, oa.t0, tol=tol,
+                         scale=scale)
+    ua = np.concatenate([oa.state, [la / scale]])
+    chord = np.concatenate([ob.state, [lb / scale]]) - ua
+    normal = chord / np.linalg.norm(chord)
+    eye = np.eye(system.dim)
+    cache = {}
+
+    def point(frac):
+        if frac not in cache:
+            got = cont.correct(ua + frac * chord, normal, max_iter=12)
+            if got is None:
+                raise ConvergenceError(f"no orbit on the chord at fraction {frac:.6g}")
+            cache[frac] = got
+        return cache[frac]
+
+    def test(frac):
+        if frac == 0.0:
+            return float(np.linalg.det(oa.jacobian - eye))
+        if frac == 1.0:
+            return float(np.linalg.det(ob.jacobian - eye))
+        return float(np.linalg.det(point(frac)[2] - eye))
+
+    if np.sign(test(0.0)) == np.sign(test(1.0)):
+        raise ValueError("the two orbits do not bracket a fold")
+    root = brentq(test, 0.0, 1.0, xtol=xtol, maxiter=200)
+    y, lam, J, iters = point(root) if 0.0 < root < 1.0 else (
+        (oa.state, la, oa.jacobian, 0) if root == 0.0 else (ob.state, lb, ob.jacobian, 0))
+    sys_ = system.with_parameter(parameter, lam)
+    res = _residual(y, flow(sys_, y, [oa.t0, oa.t0 + oa.periods * sys_.forcing_period]
+                            ).states[-1])
+    return _orbit(sys_, y, oa.periods, oa.t0, J, res, iters)
+
+
+def _interpolate(kind, branch, ia, ib):
+    """Approximate location of a fold, Neimark-Sacker or grazing point."""
+    la, lb = branch.values[ia], branch.values[ib]
+    oa, ob = branch.orbits[ia], branch.orbits[ib]
+    if kind == "fold":
+        i0 = max(ia - 1, 0)
+        i2 = min(ib, len(branch.values) - 1)
+        # parabola lambda(s) through three points, s = cumulative state distance
+        pts = [i0, ia, i2] if i2 - i0 == 2 else [i0, ia, ib]
+        s = [0.0]
+        for i, j in zip(pts[:-1], pts[1:]):
+            s.append(s[-1] + np.linalg.norm(branch.orbits[j].state - branch.orbits[i].state))
+        lam = [branch.values[i] for i in pts]
+        if len(set(s)) == 3:
+            c2, c1, c0 = np.polyfit(s, lam, 2)
+            if c2 != 0:
+                sm = -c1 / (2 * c2)
+                if s[0] <= sm <= s[-1]:
+                    return float(c0 + c1 * sm + c2 * sm * sm)
+        return float(lam[1])
+    if kind == "neimark-sacker":
+        def radius(o):
+            cplx = np.abs(o.multipliers.imag) > 1e-12
+            return np.abs(o.multipliers[cplx]).max() if cplx.any() else np.nan
+        ra, rb = radius(oa), radius(ob)
+        if np.isfinite(ra) and np.isfinite(rb) and ra != rb:
+            return float(la + (1.0 - ra) * (lb - la) / (rb - ra))
+        return 0.5 * (la + lb)
+    if kind == "impulse-impact":
+        i0 = max(ib - 1, 0)
+        sa, sb = branch.orbits[i0].impulse_separation, branch.orbits[ib].impulse_separation
+        l0 = branch.values[i0]
+        if i0 != ib and sa != sb and np.isfinite(sa) and np.isfinite(sb):
+            return float(lb + sb * (lb - l0) / (sa - sb))
+        return lb
+    # grazing: v^2 (side with the extra impact) or the gap (other side) vanish linearly
+    fa = oa.min_gap if np.isfinite(oa.min_gap) else -oa.min_impact_velocity ** 2
+    fb = ob.min_gap if np.isfinite(ob.min_gap) else -ob.min_impact_velocity ** 2
+    if oa.impacts != ob.impacts:
+        fa = oa.min_gap if oa.impacts < ob.impacts else -oa.min_impact_velocity ** 2
+        fb = ob.min_gap if ob.impacts < oa.impacts else -ob.min_impact_velocity ** 2
+    if np.isfinite(fa) and np.isfinite(fb) and fa != fb and np.sign(fa) != np.sign(fb):
+        return float(la + fa * (lb - la) / (fa - fb))
+    return 0.5 * (la + lb)
+
+
+# --------------------------------------------------------------------------- branches
+def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: float, *,
+                    seed: float | None = None, guess=None, periods: int | None = None,
+                    t0: float = 0.0, transient: int = 300, depth: int = 1,
+                    step: float = 0.02, max_step: float = 0.05, max_points: int = 500,
+                    tol: float | None = None, xtol: float = 1e-10,
+                    switch_amplitude: float = 1e-3, max_multiplier: float = 1e3,
+                    progress: bool = False) -> xr.Dataset:
+    """Branches of periodic orbits from ``start`` to ``stop`` with their bifurcations.
+
+    The orbit at ``seed`` (default ``start``; ``periodic_orbit`` with ``guess``,
+    ``periods``, ``transient``) is continued to both ends of the interval by
+    pseudo-arclength continuation, stable and unstable parts alike. Every period
+    doubling is located to ``xtol`` in the parameter and, up to ``depth`` levels (where
+    one side of it is stable), the doubled branch (period 2k) is started from it and
+    followed to the end of the interval. Folds are located along the branch; grazing and
+    Neimark-Sacker points are marked at interpolated positions. A branch ends at the
+    interval's end, at ``max_points``, where a multiplier exceeds ``max_multiplier``,
+    or where the map stops being smooth: an impact meeting an impulse time (marked
+    ``impulse-impact``; if an orbit with the two events swapped exists just beyond, a new
+    branch goes on from it) or a grazing.
+
+    Parameters
+    ----------
+    system : the DMR or OPA system (its value of ``parameter`` is ignored).
+    parameter : a model parameter name or ``sigma``.
+    step, max_step : first and largest arclength step, in units of the interval length
+        (the state counts with its own scale).
+    tol : Newton tolerance (default ``default_tolerance(system)``).
+    switch_amplitude : distance along the -1 eigenvector of the first doubled orbit.
+
+    Returns
+    -------
+    xarray.Dataset (see ``branch_dataset``).
+
+    Examples
+    --------
+    >>> from opa import preset
+    >>> ds = continue_orbits(ImpactSystem(preset("3.1", F0=0.0)), "c", 0.1, 0.08)
+    >>> int(ds.sizes["bifurcation"]) >= 1
+    True
+    """
+    if parameter not in SWEEPABLE:
+        raise ValueError(f"parameter must be one of {', '.join(SWEEPABLE)}, got {parameter!r}")
+    for name, value in (("start", start), ("stop", stop)):
+        if not math.isfinite(value):
+            raise ValueError(f"{name} must be finite, got {value}")
+    if start == stop:
+        raise ValueError(f"start and stop must differ, got {start}")
+    if int(depth) < 0:
+        raise ValueError(f"depth must be >= 0, got {depth}")
+    bounds = (min(start, stop), max(start, stop))
+    tol = default_tolerance(system) if tol is None else tol
+    seed = start if seed is None else float(seed)
+    if not bounds[0] <= seed <= bounds[1]:
+        raise ValueError(f"seed must lie between start and stop, got {seed}")
+    sys0 = system.with_parameter(parameter, seed)
+    orbit = periodic_orbit(sys0, guess, periods=periods, t0=t0, transient=transient, tol=tol)
+    branches: list[Branch] = []
+    bifurcations: list[Bifurcation] = []
+    queue = [(sys0, orbit, end, None, -1, 0) for end in (stop, start) if end != seed]
+    crossings, max_crossings = 0, 20
+    while queue:
+        sys_b, orb, target, tangent, parent, level = queue.pop(0)
+        branch, events = follow(sys_b, parameter, orb, target, step=step, max_step=max_step,
+                                max_points=max_points, tol=tol, bounds=bounds,
+                                initial_tangent=tangent, max_multiplier=max_multiplier)
+        branch.parent = parent
+        b_id = len(branches)
+        branches.append(branch)
+        if progress:
+            print(f"  branch {b_id}: period {branch.periods}, {len(branch.orbits)} points, "
+                  f"{parameter} in [{min(branch.values):.6g}, {max(branch.values):.6g}]; "
+                  f"{branch.end}")
+        for kind, ia, ib in events:
+            if kind == "period-doubling":
+                a = (branch.values[ia], branch.orbits[ia])
+                b = (branch.values[ib], branch.orbits[ib])
+                try:
+                    o_pd = locate_period_doubling(system, parameter, a, b, xtol=xtol, tol=tol)
+                    located = True
+                    value = o_pd.system.parameter(parameter)
+                except (ConvergenceError, SimulationError, ValueError):
+                    o_pd, located, value = None, False, 0.5 * (a[0] + b[0])
+                bif = Bifurcation("period-doubling", value, b_id, located, o_pd)
+                if o_pd is not None:
+                    bif.x, bif.v = float(o_pd.state[0]), float(o_pd.state[o_pd.system.order + 1])
+                    stable_side = branch.orbits[ia].stable or branch.orbits[ib].stable
+                    if level < depth and stable_side:
+                        doubled = _doubled_seed(o_pd, parameter, switch_amplitude, tol)
+                        if doubled is not None:
+                            sys2, o2, ahead = doubled
+                            bif.child = len(branches) + len(queue)
+                            end = bounds[1] if ahead else bounds[0]
+                            queue.append((sys2, o2, end, None, b_id, level + 1))
+                bifurcations.append(bif)
+            else:
+                if kind == "end":
+                    last = branch.orbits[ib]
+                    if last.impulse_separation < NEAR:
+                        kind = "impulse-impact"
+                        branch.end += "; an impact meets an impulse time (map discontinuous)"
+                    elif last.min_impact_velocity < NEAR or last.min_gap < NEAR:
+                        kind = "grazing"
+                        branch.end += "; grazing"
+                    else:
+                        continue
+                located, o = False, branch.orbits[ia]
+                value = _interpolate(kind, branch, ia, ib)
+                if kind == "fold":
+                    try:
+                        o = locate_fold(system, parameter, (branch.values[ia], o),
+                                        (branch.values[ib], branch.orbits[ib]),
+                                        scale=bounds[1] - bounds[0], tol=tol)
+                        located, value = True, o.system.parameter(parameter)
+                    except (ConvergenceError, SimulationError, ValueError):
+                        o = branch.orbits[ia]
+                bif = Bifurcation(kind, value, b_id, located, o if located else None,
+                                  x=float(o.state[0]), v=float(o.state[o.system.order + 1]))
+                if kind == "impulse-impact" and crossings < max_crossings:
+                    # the orbit may go on beyond the discontinuity with the events swapped
+                    across = _cross_impulse(system, parameter, branch, value, bounds, tol)
+                    if across is not None:
+                        crossings += 1
+                        bif.child = len(branches) + len(queue)
+                        queue.append((across[0], across[1], target, None, b_id, level))
+                bifurcations.append(bif)
+    return branch_dataset(system, parameter, branches, bifurcations, t0=t0,
+                          settings=dict(start=start, stop=stop, seed=seed, depth=depth,
+                                        xtol=xtol, tol=tol))
+
+
+def _cross_impulse(system, parameter, branch, border, bounds, tol):
+    """An orbit just beyond an impulse-impact discontinuity, with the events swapped.
+
+    Newton shooting from the last orbit of ``branch`` at parameter values a little past
+    the extrapolated border, in the direction of travel; accepted only with the same
+    number of impacts and a different impact/impulse order. None if there is none (the
+    branch then really ends: a gap in the parameter without this orbit).
+    """
+    last = branch.orbits[-1]
+    lam_last = branch.values[-1]
+    direction = np.sign(lam_last - branch.values[-2]) if len(branch.values) > 1 else 0.0
+    if direction == 0.0:
+        return None
+    scale = bounds[1] - bounds[0]
+    for step in (1e-5, 1e-4, 1e-3):
+        lam = border + direction * step * scale
+        if not bounds[0] <= lam <= bounds[1]:
+            return None
+        sys_ = system.with_parameter(parameter, lam)
+        try:
+            o = shoot(sys_, last.state, periods=last.periods, t0=last.t0, tol=tol)
+        except (ConvergenceError, SimulationError, ValueError):
+            continue
+        if o.impacts == last.impacts and o.impulse_order != last.impulse_order:
+            return sys_, o
+    return None
+
+
+def _doubled_seed(o_pd: PeriodicOrbit, parameter: str, amplitude: float, tol: float):
+    """First point of the doubled branch: Newton on P^{2k} from the PD orbit along v.
+
+    Pseudo-arclength from the bifurcation point with the initial tangent (v, 0): for
+    ``P^{2k}`` the period-doubling is a pitchfork, the doubled branch leaving the old
+    one perpendicular to the parameter axis. Both the step and its sign are tried; a
+    point counts only if it is a genuine 2k-orbit (``P^k(y) != y``).
+    """
+    system = o_pd.system
+    k2 = 2 * o_pd.periods
+    v = o_pd.eigenvector(-1.0)
+    lam0 = system.parameter(parameter)
+    L = max(abs(lam0), 1.0) * 0.05
+    cont = _Continuation(system, parameter, lam0 - L, lam0 + L, k2, o_pd.t0, tol=tol, scale=L)
+    D = system.dim
+    u0 = np.concatenate([o_pd.state, [lam0 / L]])
+    t = np.concatenate([v, [0.0]])
+    for amp in (amplitude, 3 * amplitude, 10 * amplitude, 0.3 * amplitude):
+        for sign in (1.0, -1.0):
+            try:
+                got = cont.correct(u0 + sign * amp * t, sign * t, max_iter=12)
+            except (SimulationError, ValueError):
+                got = None
+            if got is None:
+                continue
+            y, lam, J, iters = got
+            sys_ = system.with_parameter(parameter, lam)
+            half = flow(sys_, y, [o_pd.t0, o_pd.t0 + o_pd.periods * sys_.forcing_period])
+            if np.max(np.abs(half.states[-1] - y)) < 10 * amp * 1e-2:
+                continue  # fell back onto the period-k orbit
+            o2 = _orbit(sys_, y, k2, o_pd.t0, J, _residual(y, flow(
+                sys_, y, [o_pd.t0, o_pd.t0 + k2 * sys_.forcing_period]).states[-1]), iters)
+            return sys_, o2, lam > lam0  # continue away from the bifurcation
+    return None
+
+
+def branch_dataset(system: ImpactSystem, parameter: str, branches: list, bifurcations: list,
+                   *, t0: float = 0.0, settings: dict | None = None) -> xr.Dataset:
+    """Labelled dataset of the branches (one ``point`` per orbit) and bifurcations.
+
+    Variables over ``point``: the parameter (coordinate named after it), ``branch``,
+    ``period`` (k), ``impacts`` (per period of the orbit), ``stable`` (1/0),
+    ``spectral_radius``, ``min_impact_velocity``, ``min_gap``; over ``(point, strobe)``:
+    ``section_x``, ``section_v`` (the mean coordinate at t0 + j T, NaN past the period);
+    over ``(point, component)``: ``state``; over ``(point, multiplier)``:
+    ``multiplier_real``, ``multiplier_imag``. Over ``bifurcation``:
+    ``bifurcation_kind`` (flag values 0..4: period-doubling fold neimark-sacker
+    grazing impulse-impact), ``bifurcation_<parameter>``, ``bifurcation_branch``, ``bifurcation_x``,
+    ``bifurcation_v``, ``bifurcation_located`` (1: located to xtol), ``bifurcation_child``
+    (the branch switched onto, -1 if none). Over ``branch_id``: ``branch_period``,
+    ``branch_parent``.
+    """
+    D = system.dim
+    n = system.order + 1
+    rows = [(b, lam, o) for b, br in enumerate(branches) for lam, o in zip(br.values, br.orbits)]
+    kmax = max([o.periods for _, _, o in rows] + [1])
+    P = len(rows)
+    sx = np.full((P, kmax), np.nan)
+    sv = np.full((P, kmax), np.nan)
+    state = np.empty((P, D))
+    mr = np.empty((P, D))
+    mi = np.empty((P, D))
+    for i, (_, _, o) in enumerate(rows):
+        sx[i, : o.periods] = o.points[:, 0]
+        sv[i, : o.periods] = o.points[:, n]
+        state[i] = o.state
+        mr[i] = o.multipliers.real
+        mi[i] = o.multipliers.imag
+    one = {"units": "1"}
+    kinds = np.array([BIFURCATION_KINDS.index(b.kind) for b in bifurcations], dtype=np.int8)
+    ds = xr.Dataset(
+        {
+            "branch": ("point", np.array([b for b, _, _ in rows], dtype=np.int32),
+                       {"long_name": "branch index", **one}),
+            "period": ("point", np.array([o.periods for *_, o in rows], dtype=np.int32),
+                       {"long_name": "period of the orbit in forcing periods 2 pi/omega", **one}),
+            "impacts": ("point", np.array([o.impacts for *_, o in rows], dtype=np.int32),
+                        {"long_name": "impacts per period of the orbit", **one}),
+            "stable": ("point", np.array([o.stable for *_, o in rows], dtype=np.int8),
+                       {"long_name": "1 if every Floquet multiplier is inside the unit circle",
+                        **one}),
+            "spectral_radius": ("point", np.array([o.spectral_radius for *_, o in rows]),
+                                {"long_name": "largest Floquet multiplier modulus", **one}),
+            "min_impact_velocity": ("point",
+                                    np.array([o.min_impact_velocity for *_, o in rows]),
+                                    {"long_name": "smallest pre-impact velocity on the orbit",
+                                     **one}),
+            "min_gap": ("point", np.array([o.min_gap for *_, o in rows]),
+                        {"long_name": "smallest distance of a free-flight maximum of x_0 "
+                                      "below the wall", **one}),
+            "section_x": (("point", "strobe"), sx,
+                          {"long_name": "x_0 at t0 + j 2 pi/omega (stroboscopic points)", **one}),
+            "section_v": (("point", "strobe"), sv,
+                          {"long_name": "v_0 at t0 + j 2 pi/omega (stroboscopic points)", **one}),
+            "state": (("point", "component"), state,
+                      {"long_name": "orbit state [x_0..x_N, v_0..v_N] at t0", **one}),
+            "multiplier_real": (("point", "multiplier"), mr,
+                                {"long_name": "Floquet multipliers, real part", **one}),
+            "multiplier_imag": (("point", "multiplier"), mi,
+                                {"long_name": "Floquet multipliers, imaginary part", **one}),
+            "bifurcation_kind": ("bifurcation", kinds,
+                                 {"long_name": "kind of bifurcation",
+                                  "flag_values": np.arange(len(BIFURCATION_KINDS), dtype=np.int8),
+                                  "flag_meanings": " ".join(k.replace("-", "_")
+                                                            for k in BIFURCATION_KINDS)}),
+            f"bifurcation_{parameter}": ("bifurcation",
+                                         np.array([b.value for b in bifurcations], dtype=float),
+                                         {"long_name": f"{parameter} at the bifurcation", **one}),
+            "bifurcation_branch": ("bifurcation",
+                                   np.array([b.branch for b in bifurcations], dtype=np.int32),
+                                   {"long_name": "branch the bifurcation lies on", **one}),
+            "bifurcation_x": ("bifurcation", np.array([b.x for b in bifurcations], dtype=float),
+                              {"long_name": "x_0 at t0 of the orbit at the bifurcation", **one}),
+            "bifurcation_v": ("bifurcation", np.array([b.v for b in bifurcations], dtype=float),
+                              {"long_name": "v_0 at t0 of the orbit at the bifurcation", **one}),
+            "bifurcation_located": ("bifurcation",
+                                    np.array([b.located for b in bifurcations], dtype=np.int8),
+                                    {"long_name": "1 if located by root finding to xtol, 0 if "
+                                                  "interpolated", **one}),
+            "bifurcation_child": ("bifurcation",
+                                  np.array([b.child for b in bifurcations], dtype=np.int32),
+                                  {"long_name": "branch started at this bifurcation (-1: none)",
+                                   **one}),
+            "branch_period": ("branch_id", np.array([b.periods for b in branches], dtype=np.int32),
+                              {"long_name": "period of the branch's orbits", **one}),
+            "branch_parent": ("branch_id", np.array([b.parent for b in branches], dtype=np.int32),
+                              {"long_name": "branch this one was switched from (-1: none)", **one}),
+        },
+        coords={
+            parameter: ("point", np.array([lam for _, lam, _ in rows], dtype=float),
+                        {"long_name": f"continuation parameter {parameter}", **one}),
+            "point": np.arange(P),
+            "strobe": np.arange(kmax),
+            "component": np.arange(D),
+            "multiplier": np.arange(D),
+            "bifurcation": np.arange(len(bifurcations)),
+            "branch_id": np.arange(len(branches)),
+        },
+        attrs=system.attrs(),
+    )
+    ds.attrs.update(
+        analysis="periodic-orbit continuation (pseudo-arclength, Newton shooting, saltation "
+                 "matrices)",
+        parameter=parameter,
+        t0=float(t0),
+        branch_end="; ".join(f"{i}: {b.end}" for i, b in enumerate(branches)),
+    )
+    for key, value in (settings or {}).items():
+        ds.attrs[f"continuation_{key}"] = float(value)
+    return ds
+
+
+# --------------------------------------------------------------------------- figure
+MARKERS = {"period-doubling": ("o", "tab:red"), "fold": ("s", "k"),
+           "neimark-sacker": ("D", "tab:purple"), "grazing": ("^", "tab:green"),
+           "impulse-impact": ("x", "tab:brown")}
+
+
+def plot_branches(ds: xr.Dataset, path: str | None = None, *, ax=None, coordinate: str = "x"):
+    """Branch diagram: stable orbits solid, unstable dashed, bifurcations marked.
+
+    ``coordinate``: ``"x"`` (x_0 at the stroboscopic times) or ``"v"``. Draws on ``ax``
+    if given (e.g. over a brute-force bifurcation diagram), writes ``path`` if given.
+    Returns the matplotlib axes.
+    """
+    import matplotlib
+
+    if ax is None:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    parameter = ds.attrs["parameter"]
+    own = ax is None
+    if own:
+        fig, ax = plt.subplots(figsize=(8, 5))
+    sec = ds[f"section_{coordinate}"]
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    periods = sorted(set(int(k) for k in ds.branch_period.values))
+    labelled = set()
+    for b in np.unique(ds.branch.values):
+        sel = ds.branch.values == b
+        lam = ds[parameter].values[sel]
+        stable = ds.stable.values[sel].astype(bool)
+        k = int(ds.period.values[sel][0])
+        colour = colours[periods.index(k) % len(colours)]  # one colour per period
+        for j in range(k):
+            y = sec.values[sel, j]
+            for flag, style in ((True, "-"), (False, "--")):
+                yy = np.where(stable == flag, y, np.nan)
+                # join a run to its neighbour so stable and unstable parts meet
+                edge = np.zeros_like(stable)
+                edge[:-1] |= (stable[:-1] != stable[1:]) & (stable[1:] == flag)
+                yy = np.where(edge, y, yy)
+                label = None
+                if (k, flag) not in labelled:
+                    label = f"period {k}, {'stable' if flag else 'unstable'}"
+                    labelled.add((k, flag))
+                ax.plot(lam, yy, style, color=colour, lw=1.2, label=label)
+    for kind, (marker, colour) in MARKERS.items():
+        sel = ds.bifurcation_kind.values == BIFURCATION_KINDS.index(kind)
+        if sel.any():
+            ax.plot(ds[f"bifurcation_{parameter}"].values[sel],
+                    ds[f"bifurcation_{coordinate}"].values[sel], marker, color=colour,
+                    ms=7, mfc="none", mew=1.5, ls="none", label=kind)
+    ax.set_xlabel(parameter)
+    ax.set_ylabel(f"{coordinate}_0 at t0 + j 2π/ω")
+    ax.set_title(f"{ds.attrs['model'].upper()} (N = {ds.attrs['N']}, σ = {ds.attrs['sigma']:g}): "
+                 "stable solid, unstable dashed")
+    ax.legend(fontsize=8, loc="best")
+    if own:
+        fig.tight_layout()
+        if path:
+            fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return ax
+
+
+__all__ = [
+    "Bifurcation",
+    "Branch",
+    "BIFURCATION_KINDS",
+    "follow",
+    "locate_period_doubling",
+    "locate_fold",
+    "continue_orbits",
+    "branch_dataset",
+    "plot_branches",
+]

@@ -1,0 +1,871 @@
+"""Stability of impacting orbits: the exact Jacobian of the stroboscopic Poincaré map,
+periodic orbits by Newton shooting, Floquet multipliers and Lyapunov exponents.
+
+The map is ``P: y(t0) -> y(t0 + k T)``, ``T = 2 pi / omega``, of the DMR (eq. (29)) or
+of the OPA equivalent system of any order N (eqs. (24)-(28)); states are
+right-continuous (just after an impulse or impact at that instant). Its Jacobian comes
+from the variational equation carried through every impact with the saltation matrix
+of the impact law (``opa._variational``), so it is exact up to the integration
+tolerance; ``tests/opa/test_stability.py`` checks it against finite differences of the
+independent solver ``opa._solver``.
+
+Impulses. With ``F0 = 0`` the system is T-periodic and every ``k >= 1`` gives an
+autonomous map. With Dirac or pulse impulses at ``t_j = j 2 pi/omega1`` of amplitude
+``F0 (1 + a1 sin(2 pi j / n))`` the forcing repeats only over the common period of the
+harmonic forcing and of the impulse train: ``k0`` forcing periods, the smallest ``k``
+with ``k T`` a multiple of the train's period (``impulse_cycle``; 14 for section 3.1,
+where ``T1 = 2.8 T`` and the amplitude is constant for n = 2). Periodic orbits and
+multipliers are then those of ``P^(k0)`` (``periods`` must be a multiple of ``k0``).
+When ``omega1 / omega`` is irrational (or the common period is longer than
+``MAX_CYCLE`` forcing periods) no stroboscopic map is autonomous and only Lyapunov
+exponents are meaningful: ``lyapunov_exponent`` works for any forcing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from opa import _variational as V
+from opa._model import (
+    IMPACT_LAWS,
+    PARAMETER_NAMES,
+    TRUNCATIONS,
+    UNCERTAIN_PARAMETERS,
+    Oscillator,
+    SolverOptions,
+    Uncertainty,
+    _choice,
+)
+from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
+from opa._simulate import SimulationError, quadrature
+
+MODELS = ("dmr", "opa")
+MAX_CYCLE = 1000  # longest common period (in forcing periods) accepted for a map
+GRAZE_VELOCITY = 1e-3  # classification: impacts slower than this are (near) grazing
+GRAZE_GAP = 1e-3  # classification: free-flight maxima closer than this to the wall
+CRITICAL_TOL = 1e-3  # classification: |mu + 1|, |mu - 1|, ||mu| - 1| below this
+
+
+class ConvergenceError(SimulationError):
+    """Newton shooting (or a continuation corrector) did not converge."""
+
+
+# --------------------------------------------------------------------------- the system
+@dataclass(frozen=True)
+class ImpactSystem:
+    """The impact system whose stroboscopic map is studied: DMR or OPA of order N.
+
+    Parameters
+    ----------
+    oscillator : model parameters (paper eq. (1)); x0, v0 only start transients.
+    model : ``"dmr"`` (eq. (29), state (x, v)) or ``"opa"`` (eqs. (24)-(28), state
+        ``[x_0..x_N, v_0..v_N]``).
+    sigma, order, uncertain, truncation, impact_law, allow_negative : as in
+        ``opa.simulate_opa`` (ignored, and must be left at their defaults, for ``dmr``
+        except ``order``, which is forced to 0).
+    options : solver options; ``rtol``/``atol`` control the state and the variational
+        matrix alike.
+
+    Examples
+    --------
+    >>> from opa import preset
+    >>> ImpactSystem(preset("3.1", F0=0.0)).dim
+    2
+    >>> ImpactSystem(preset("3.1"), model="opa", order=4, sigma=0.01).dim
+    10
+    """
+
+    oscillator: Oscillator = field(default_factory=Oscillator)
+    model: str = "dmr"
+    sigma: float = 0.0
+    order: int = 4
+    uncertain: str = "mu"
+    truncation: str = "galerkin"
+    impact_law: str = "mean"
+    allow_negative: bool = False
+    options: SolverOptions = field(default_factory=SolverOptions)
+    _packed: tuple = field(init=False, repr=False, compare=False, default=None)
+
+    def __post_init__(self):
+        _choice("model", self.model, MODELS)
+        _choice("truncation", self.truncation, TRUNCATIONS)
+        _choice("impact_law", self.impact_law, IMPACT_LAWS)
+        _choice("uncertain", self.uncertain, UNCERTAIN_PARAMETERS)
+        if not isinstance(self.oscillator, Oscillator):
+            raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r}")
+        if not isinstance(self.options, SolverOptions):
+            raise ValueError(f"options must be an opa.SolverOptions, got {self.options!r}")
+        order = self.order
+        if isinstance(order, bool) or int(order) != order or order < 0:
+            raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+        if self.model == "dmr":
+            if self.sigma != 0.0:
+                raise ValueError(f"sigma applies to the opa model only, got sigma = {self.sigma} "
+                                 "with model 'dmr'")
+            object.__setattr__(self, "order", 0)
+        else:
+            object.__setattr__(self, "order", int(order))
+        unc = Uncertainty(self.sigma, self.uncertain, self.allow_negative)
+        unc.check(self.oscillator)
+        object.__setattr__(self, "sigma", unc.sigma)
+        object.__setattr__(self, "_packed", _pack(self))
+
+    @property
+    def dim(self) -> int:
+        """Dimension D = 2 (N + 1) of the state."""
+        return 2 * (self.order + 1)
+
+    @property
+    def forcing_period(self) -> float:
+        return self.oscillator.forcing_period
+
+    def with_parameter(self, name: str, value: float) -> ImpactSystem:
+        """A copy with one model parameter (or ``sigma``) changed."""
+        if name == "sigma":
+            return dataclasses.replace(self, sigma=float(value))
+        if name not in PARAMETER_NAMES or name in ("x0", "v0"):
+            raise ValueError(f"parameter must be one of {', '.join(SWEEPABLE)}, got {name!r}")
+        return dataclasses.replace(self, oscillator=self.oscillator.replace(**{name: value}))
+
+    def parameter(self, name: str) -> float:
+        return self.sigma if name == "sigma" else float(getattr(self.oscillator, name))
+
+    def initial_state(self) -> np.ndarray:
+        """The transient's start: x_0 = x0, v_0 = v0, higher coefficients 0."""
+        y = np.zeros(self.dim)
+        y[0] = self.oscillator.x0
+        y[self.order + 1] = self.oscillator.v0
+        return y
+
+    def attrs(self) -> dict:
+        """Dataset attributes (SPEC section 5)."""
+        from opa._dataset import provenance_attrs
+
+        return provenance_attrs(
+            self.model, self.oscillator, self.options, sigma=self.sigma, order=self.order,
+            uncertain=self.uncertain, truncation=self.truncation, impact_law=self.impact_law,
+        )
+
+
+SWEEPABLE = tuple(n for n in PARAMETER_NAMES if n not in ("x0", "v0")) + ("sigma",)
+
+
+def _pack(system: ImpactSystem):
+    osc, opts = system.oscillator, system.options
+    T1 = 2.0 * math.pi / osc.omega1
+    if opts.impulse == "pulse" and opts.pulse_width >= T1:
+        raise ValueError(f"pulse_width must be shorter than 2 pi/omega1 = {T1:.6g}, "
+                         f"got {opts.pulse_width}")
+    p = np.zeros(V.N_PARAMS)
+    p[V.V_MU], p[V.V_A], p[V.V_C], p[V.V_F] = osc.mu, osc.a, osc.c, osc.f
+    p[V.V_OMEGA], p[V.V_ETA], p[V.V_DELTA] = osc.omega, osc.eta, osc.delta
+    p[V.V_F0], p[V.V_A1], p[V.V_OMEGA1], p[V.V_N] = osc.F0, osc.a1, osc.omega1, osc.n
+    p[V.V_TAU], p[V.V_SIGMA] = opts.pulse_width, system.sigma
+    p[V.V_CHATTER_V], p[V.V_HMAX] = opts.chatter_velocity, opts.max_step
+    cfg = np.zeros(V.N_CFG, dtype=np.int64)
+    cfg[V.G_NCOEF] = system.order + 1
+    cfg[V.G_UNCERTAIN] = UNCERTAIN_PARAMETERS.index(system.uncertain)
+    cfg[V.G_IMPULSE] = ("dirac", "pulse").index(opts.impulse)
+    cfg[V.G_AT_ZERO] = int(bool(opts.impulse_at_zero))
+    cfg[V.G_TRUNC] = TRUNCATIONS.index(system.truncation)
+    cfg[V.G_LAW] = IMPACT_LAWS.index(system.impact_law)
+    cfg[V.G_MAXSTEPS] = int(opts.max_steps)
+    nodes, weights, basis = _quadrature(system.order)
+    return p, cfg, nodes, weights, basis
+
+
+def _quadrature(order: int):
+    """Gauss rule of the semicircle density with Q = 2N + 1 nodes and the basis
+    U_0..U_{N+1} at the nodes, degree-major (N+2, Q), as ``opa._variational`` takes it.
+    N = 0: the one-node rule at xi = 0 exactly (the DMR)."""
+    if order == 0:
+        nodes, weights = np.zeros(1), np.ones(1)
+    else:
+        nodes, weights = gauss_nodes(quadrature_order(order))
+    return nodes, weights, np.ascontiguousarray(chebyshev_u(order + 1, nodes))
+
+
+def impulse_cycle(oscillator: Oscillator, *, max_cycle: int = MAX_CYCLE) -> int | None:
+    """Forcing periods over which harmonic forcing and impulse train repeat together.
+
+    1 when ``F0 = 0``. Otherwise the smallest ``k <= max_cycle`` such that ``k T`` is a
+    whole number of periods of the impulse train (``J`` impulse intervals, where the
+    amplitudes ``F0 (1 + a1 sin(2 pi j / n))`` repeat every ``J`` impulses), or None.
+
+    Examples
+    --------
+    >>> from opa import preset
+    >>> impulse_cycle(preset("3.1")), impulse_cycle(preset("3.1", F0=0.0))
+    (14, 1)
+    """
+    if oscillator.F0 == 0.0:
+        return 1
+    amp = lambda j: math.sin(2.0 * math.pi * j / oscillator.n) * oscillator.a1  # noqa: E731
+    J = None
+    for cand in range(1, 65):
+        if all(abs(amp(j + cand) - amp(j)) <= 1e-9 for j in range(2 * cand + 4)):
+            J = cand
+            break
+    if J is None:
+        return None
+    ratio = oscillator.omega * J / oscillator.omega1  # forcing periods per train period
+    for k in range(1, max_cycle + 1):
+        m = k / ratio
+        if abs(m - round(m)) <= 1e-9 * max(1.0, m) and round(m) >= 1:
+            return k
+    return None
+
+
+def _cycle_or_raise(system: ImpactSystem, periods: int) -> int:
+    k0 = impulse_cycle(system.oscillator)
+    if k0 is None:
+        osc = system.oscillator
+        raise ValueError(
+            f"with impulses (F0 = {osc.F0:g}, omega1 = {osc.omega1:g}, n = {osc.n:g}) and "
+            f"omega = {osc.omega:g} the forcing has no common period of at most {MAX_CYCLE} "
+            "forcing periods, so no stroboscopic map is autonomous; use F0 = 0 or the "
+            "Lyapunov exponent"
+        )
+    if periods % k0:
+        raise ValueError(
+            f"with impulses the forcing repeats every {k0} forcing periods; periods must be a "
+            f"multiple of {k0}, got {periods}"
+        )
+    return k0
+
+
+def _as_state(system: ImpactSystem, state) -> np.ndarray:
+    y = np.asarray(state, dtype=float)
+    if y.shape == (2, system.order + 1):
+        y = y.ravel()
+    if y.shape != (system.dim,) or not np.all(np.isfinite(y)):
+        raise ValueError(f"state must be a finite array of shape ({system.dim},) or "
+                         f"(2, {system.order + 1}), got shape {np.shape(state)}")
+    return y.copy()
+
+
+# --------------------------------------------------------------------------- flow
+@dataclass(frozen=True, eq=False)
+class Flow:
+    """Result of ``flow``: states at the requested times and the tangent map.
+
+    ``states`` (len(times), D); ``tangent`` (D, m): W(t_end) for W(t_start) given;
+    ``impact_time``, ``impact_velocity``: impacts of the mean coordinate (pre-impact
+    velocity); ``min_gap``: smallest distance of a free-flight maximum of x_0 below the
+    wall; ``sticks``: sticking episodes.
+    """
+
+    times: np.ndarray
+    states: np.ndarray
+    tangent: np.ndarray | None
+    impact_time: np.ndarray
+    impact_velocity: np.ndarray
+    min_gap: float
+    sticks: int
+    steps: int
+
+
+def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: bool = False
+         ) -> Flow:
+    """Integrate the state (and tangent vectors) through ``times``.
+
+    Parameters
+    ----------
+    state : (D,) or (2, N+1) state at ``times[0]`` (right-continuous).
+    times : increasing times; the state is returned at each.
+    tangent : None, ``"identity"`` (the Jacobian of the flow map) or an array (D, m) of
+        tangent vectors carried with the variational equation and the saltation matrices.
+    include_start : apply an impulse that falls on ``times[0]`` (for a transient started
+        at t = 0 with ``impulse_at_zero``); otherwise it belongs to the previous interval.
+    """
+    p, cfg, nodes, weights, U = system._packed
+    y = _as_state(system, state)
+    times = np.ascontiguousarray(times, dtype=float)
+    if times.ndim != 1 or len(times) < 2 or np.any(np.diff(times) <= 0):
+        raise ValueError("times must be a strictly increasing 1-D array of length >= 2")
+    if y[0] > system.oscillator.delta:
+        raise ValueError(f"state x_0 = {y[0]:.10g} is beyond the wall delta = "
+                         f"{system.oscillator.delta:g}")
+    D = system.dim
+    if tangent is None:
+        W = np.zeros((D, 0))
+    elif isinstance(tangent, str) and tangent == "identity":
+        W = np.eye(D)
+    else:
+        W = np.asarray(tangent, dtype=float)
+        if W.ndim == 1:
+            W = W[:, None]
+        if W.shape[0] != D:
+            raise ValueError(f"tangent must have {D} rows, got shape {W.shape}")
+    m = W.shape[1]
+    capacity = 64
+    while True:
+        z = np.concatenate([y, W.ravel()])
+        out = np.empty((len(times), D))
+        stats = np.empty((len(times) - 1, V.N_STATS))
+        log = np.empty((capacity, 2))
+        status, n_log = V.flow_points(z, m, times, include_start, False, p, cfg, nodes, weights,
+                                      U, system.options.rtol, system.options.atol, out, stats,
+                                      np.empty(0), log)
+        if status != V.OK:
+            raise SimulationError(
+                f"{system.model} variational flow stopped: {V.STATUS_MESSAGES[status]} "
+                f"(t in [{times[0]:.6g}, {times[-1]:.6g}])"
+            )
+        if n_log <= capacity:
+            break
+        capacity = n_log + 16
+    return Flow(
+        times=times,
+        states=out,
+        tangent=z[D:].reshape(D, m).copy() if m else None,
+        impact_time=log[:n_log, 0].copy(),
+        impact_velocity=log[:n_log, 1].copy(),
+        min_gap=float(stats[:, V.S_GAP].min()),
+        sticks=int(stats[:, V.S_STICKS].sum()),
+        steps=int(stats[:, V.S_STEPS].sum()),
+    )
+
+
+def poincare_map(system: ImpactSystem, state, *, periods: int = 1, t0: float = 0.0,
+                 jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """The stroboscopic map ``P^k: y(t0) -> y(t0 + k T)`` and its exact Jacobian.
+
+    ``periods`` (k) must be a multiple of ``impulse_cycle`` when ``F0 != 0``.
+
+    Returns
+    -------
+    state (D,), Jacobian (D, D) or None
+
+    Examples
+    --------
+    >>> from opa import preset
+    >>> system = ImpactSystem(preset("3.1", F0=0.0, c=0.05))
+    >>> y, J = poincare_map(system, [-1.5, 0.6], periods=2)
+    >>> J.shape
+    (2, 2)
+    """
+    periods = _periods(periods)
+    _cycle_or_raise(system, periods)
+    times = t0 + np.array([0.0, periods]) * system.forcing_period
+    res = flow(system, state, times, tangent="identity" if jacobian else None)
+    return res.states[-1].copy(), res.tangent
+
+
+def _periods(periods) -> int:
+    if isinstance(periods, bool) or int(periods) != periods or periods < 1:
+        raise ValueError(f"periods must be an integer >= 1, got {periods}")
+    return int(periods)
+
+
+# --------------------------------------------------------------------------- periodic orbits
+@dataclass(frozen=True, eq=False)
+class PeriodicOrbit:
+    """A periodic orbit of the stroboscopic map and its Floquet multipliers.
+
+    Attributes
+    ----------
+    system : the system it belongs to.
+    state : (D,) the state at t0.
+    periods : k, the orbit's period in forcing periods T = 2 pi/omega.
+    t0 : section time.
+    points : (k, D) the stroboscopic states at t0 + j T, j = 0..k-1.
+    jacobian : (D, D) the Jacobian of P^k at ``state`` (monodromy matrix).
+    multipliers : (D,) complex eigenvalues of ``jacobian``, by decreasing modulus.
+    eigenvectors : (D, D) the matching eigenvectors (columns).
+    impact_time, impact_velocity : impacts over one period of the orbit.
+    min_gap : smallest distance below the wall of a free-flight maximum of x_0.
+    residual : max |P^k(y) - y| / (1 + max |y|) at convergence; iterations: Newton steps.
+    """
+
+    system: ImpactSystem
+    state: np.ndarray
+    periods: int
+    t0: float
+    points: np.ndarray
+    jacobian: np.ndarray
+    multipliers: np.ndarray
+    eigenvectors: np.ndarray
+    impact_time: np.ndarray
+    impact_velocity: np.ndarray
+    min_gap: float
+    sticks: int
+    residual: float
+    iterations: int
+
+    @property
+    def impulse_separation(self) -> float:
+        """Smallest time between an impact and an impulse time (or a pulse edge).
+
+        With Dirac impulses the map is discontinuous where an impact meets an impulse
+        (kick then impact, or impact then kick, differ by (1 + eta) F0 in velocity), so
+        a branch ends where this separation goes to zero. inf when F0 = 0.
+        """
+        osc = self.system.oscillator
+        if osc.F0 == 0.0 or not self.impacts:
+            return math.inf
+        T1 = 2.0 * math.pi / osc.omega1
+        edges = [0.0]
+        if self.system.options.impulse == "pulse":
+            edges.append(self.system.options.pulse_width)
+        sep = math.inf
+        for e in edges:
+            ph = np.mod(self.impact_time - e, T1)
+            sep = min(sep, float(np.min(np.minimum(ph, T1 - ph))))
+        return sep
+
+    @property
+    def impulse_order(self) -> tuple:
+        """For each impact, the number of impulse times (and pulse ends) before it.
+
+        Two orbits of one branch with the same impacts but a different order have had an
+        impact cross an impulse time between them (a discontinuity of the map).
+        """
+        osc = self.system.oscillator
+        if osc.F0 == 0.0:
+            return ()
+        T1 = 2.0 * math.pi / osc.omega1
+        count = np.floor(self.impact_time / T1)
+        if self.system.options.impulse == "pulse":
+            count = count + np.floor((self.impact_time - self.system.options.pulse_width) / T1)
+        return tuple(int(c) for c in count)
+
+    @property
+    def impacts(self) -> int:
+        """Impacts per period of the orbit (the p of the paper's label z = n/p)."""
+        return len(self.impact_time)
+
+    @property
+    def label(self) -> str:
+        """The paper's period label z = n/p (n forcing periods, p impacts)."""
+        return f"{self.periods}/{self.impacts}"
+
+    @property
+    def min_impact_velocity(self) -> float:
+        return float(self.impact_velocity.min()) if self.impacts else math.inf
+
+    @property
+    def spectral_radius(self) -> float:
+        return float(np.abs(self.multipliers).max())
+
+    @property
+    def stable(self) -> bool:
+        """All Floquet multipliers strictly inside the unit circle."""
+        return self.spectral_radius < 1.0
+
+    def classify(self, *, tol: float = CRITICAL_TOL, graze_velocity: float = GRAZE_VELOCITY,
+                 graze_gap: float = GRAZE_GAP) -> list[str]:
+        """Labels of the orbit: ``stable``/``unstable`` and any critical multiplier.
+
+        ``period-doubling``: a real multiplier within ``tol`` of -1; ``fold``: within
+        ``tol`` of +1; ``neimark-sacker``: a complex pair within ``tol`` of the unit
+        circle; ``grazing``: an impact slower than ``graze_velocity`` or a free-flight
+        maximum within ``graze_gap`` of the wall; ``sticking``: the orbit sticks.
+        """
+        labels = ["stable" if self.stable else "unstable"]
+        mu = self.multipliers
+        real = np.abs(mu.imag) <= tol
+        if np.any(real & (np.abs(mu.real + 1.0) < tol)):
+            labels.append("period-doubling")
+        if np.any(real & (np.abs(mu.real - 1.0) < tol)):
+            labels.append("fold")
+        if np.any(~real & (np.abs(np.abs(mu) - 1.0) < tol)):
+            labels.append("neimark-sacker")
+        if self.min_impact_velocity < graze_velocity or self.min_gap < graze_gap:
+            labels.append("grazing")
+        if self.sticks:
+            labels.append("sticking")
+        return labels
+
+    def eigenvector(self, target: float = -1.0) -> np.ndarray:
+        """The real eigenvector of the multiplier closest to ``target``, unit length."""
+        i = int(np.argmin(np.abs(self.multipliers - target)))
+        v = np.real(self.eigenvectors[:, i])
+        return v / np.linalg.norm(v)
+
+
+def _residual(y, y1):
+    return float(np.max(np.abs(y1 - y)) / (1.0 + np.max(np.abs(y))))
+
+
+def default_tolerance(system: ImpactSystem) -> float:
+    """Newton tolerance matched to the integrator: 10 max(rtol, atol), at least 1e-13.
+
+    The residual of the map cannot fall much below the integration error, so a tighter
+    tolerance only stalls.
+    """
+    return max(10.0 * max(system.options.rtol, system.options.atol), 1e-13)
+
+
+def shoot(system: ImpactSystem, guess, *, periods: int = 1, t0: float = 0.0,
+          tol: float | None = None, max_iter: int = 40) -> PeriodicOrbit:
+    """Newton shooting for a fixed point of ``P^k`` from ``guess`` (no transient).
+
+    Solves ``P^k(y) - y = 0`` with the exact Jacobian ``DP^k - I`` and a backtracking line
+    search that keeps x_0 behind the wall. Unstable orbits converge as well as stable
+    ones. ``tol`` bounds max |P^k(y) - y| / (1 + max |y|) (default
+    ``default_tolerance``); a residual that stops decreasing within 100 tol is accepted
+    (the integration-noise floor). Raises ``ConvergenceError`` otherwise.
+    """
+    periods = _periods(periods)
+    _cycle_or_raise(system, periods)
+    tol = default_tolerance(system) if tol is None else float(tol)
+    y = _as_state(system, guess)
+    T = system.forcing_period
+    end = np.array([t0, t0 + periods * T])
+    delta = system.oscillator.delta
+    eye = np.eye(system.dim)
+    res = math.inf
+    for it in range(max_iter + 1):
+        y1, J = poincare_map(system, y, periods=periods, t0=t0)
+        G = y1 - y
+        res_prev, res = res, _residual(y, y1)
+        if res < tol or (res < 100.0 * tol and res > 0.5 * res_prev):
+            return _orbit(system, y, periods, t0, J, res, it)
+        if it == max_iter:
+            break
+        try:
+            dy = np.linalg.solve(J - eye, -G)
+        except np.linalg.LinAlgError:
+            dy = np.linalg.lstsq(J - eye, -G, rcond=None)[0]
+        lam = 1.0
+        while True:
+            y_try = y + lam * dy
+            if y_try[0] <= delta:
+                try:
+                    r_try = _residual(y_try, flow(system, y_try, end).states[-1])
+                except SimulationError:
+                    r_try = math.inf
+                if r_try < res or lam < 1e-3:
+                    break
+            lam *= 0.5
+            if lam < 1e-6:
+                break
+        y = y_try if y_try[0] <= delta else y
+    raise ConvergenceError(
+        f"Newton shooting for a period-{periods} orbit did not converge: residual {res:.3g} "
+        f"after {max_iter} iterations (tolerance {tol:g})"
+    )
+
+
+def _orbit(system, y, periods, t0, J, residual, iterations) -> PeriodicOrbit:
+    T = system.forcing_period
+    times = t0 + np.arange(periods + 1) * T
+    tr = flow(system, y, times)
+    mu, vec = np.linalg.eig(J)
+    order = np.argsort(-np.abs(mu), kind="stable")
+    return PeriodicOrbit(
+        system=system, state=y.copy(), periods=periods, t0=t0, points=tr.states[:-1].copy(),
+        jacobian=J, multipliers=mu[order], eigenvectors=vec[:, order],
+        impact_time=tr.impact_time, impact_velocity=tr.impact_velocity, min_gap=tr.min_gap,
+        sticks=tr.sticks, residual=residual, iterations=iterations,
+    )
+
+
+def _minimal_period(points: np.ndarray, k: int, k0: int, tol: float) -> int:
+    """Smallest divisor d of k (multiple of k0) with points[d] == points[0]."""
+    scale = 1.0 + np.max(np.abs(points))
+    for d in range(k0, k, k0):
+        if k % d == 0 and np.max(np.abs(points[d] - points[0])) <= tol * scale:
+            return d
+    return k
+
+
+def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = None,
+                   t0: float = 0.0, transient: int = 300, max_period: int = 32,
+                   tol: float | None = None, max_iter: int = 40) -> PeriodicOrbit:
+    """A periodic orbit of the stroboscopic map with its Floquet multipliers.
+
+    Parameters
+    ----------
+    system : the DMR or the OPA system.
+    guess : starting state (D,) or (2, N+1). Default: run ``transient`` forcing periods
+        from the oscillator's x0, v0 (higher OPA coefficients 0) and start from there.
+    periods : k, the period in forcing periods; default: the smallest stroboscopic
+        repeat (up to ``max_period``) seen after the transient, else ``impulse_cycle``.
+    t0 : section time (the orbit is sampled at t0 + j T).
+    tol : Newton tolerance on max |P^k(y) - y| / (1 + max |y|) (``shoot``).
+
+    Returns
+    -------
+    PeriodicOrbit (the period is reduced to the minimal one if Newton lands on an orbit
+    of a smaller period).
+
+    Examples
+    --------
+    >>> from opa import preset
+    >>> orbit = periodic_orbit(ImpactSystem(preset("3.1", F0=0.0, c=0.05)))
+    >>> orbit.label, orbit.stable
+    ('2/2', True)
+    """
+    k0 = impulse_cycle(system.oscillator)
+    if k0 is None:
+        _cycle_or_raise(system, 1)
+    T = system.forcing_period
+    hint = ""
+    if guess is None:
+        if int(transient) < 0:
+            raise ValueError(f"transient must be >= 0, got {transient}")
+        n_tr = int(math.ceil(transient / k0)) * k0
+        y0 = system.initial_state()
+        start = 0.0
+        if t0 != 0.0 or n_tr > 0:
+            tr = flow(system, y0, [0.0, t0 + n_tr * T],
+                      include_start=system.options.impulse_at_zero)
+            y0 = tr.states[-1]
+            start = t0 + n_tr * T
+        if periods is None:
+            n_rec = 2 * max_period
+            n_rec = int(math.ceil(n_rec / k0)) * k0
+            rec = flow(system, y0, start + np.arange(n_rec + 1) * T).states
+            scale = 1.0 + np.max(np.abs(rec))
+            dist = {k: np.max(np.abs(rec[-1] - rec[-1 - k])) / scale
+                    for k in range(k0, min(max_period, n_rec) + 1, k0)}
+            close = [k for k, d in dist.items() if d < 1e-4]
+            periods = min(close) if close else k0
+            y0 = rec[-1]
+            if not close:
+                hint = (f"; no stroboscopic repeat up to {max_period} periods after "
+                        f"{n_tr} periods of transient: the motion may not be periodic (give "
+                        "periods, a longer transient, or use the Lyapunov exponent)")
+        guess = y0
+    periods = _periods(periods)
+    try:
+        orbit = shoot(system, guess, periods=periods, t0=t0, tol=tol, max_iter=max_iter)
+    except ConvergenceError as err:
+        raise ConvergenceError(f"{err}{hint}") from None
+    d = _minimal_period(orbit.points, orbit.periods, k0, 1e-7)
+    if d < orbit.periods:
+        orbit = shoot(system, orbit.state, periods=d, t0=t0, tol=tol, max_iter=max_iter)
+    return orbit
+
+
+def floquet_multipliers(system: ImpactSystem, guess=None, **kwargs) -> np.ndarray:
+    """The Floquet multipliers of the periodic orbit found by ``periodic_orbit``."""
+    return periodic_orbit(system, guess, **kwargs).multipliers
+
+
+# --------------------------------------------------------------------------- Lyapunov
+@dataclass(frozen=True, eq=False)
+class LyapunovEstimate:
+    """Largest Lyapunov exponent (per unit time) and its convergence record.
+
+    ``log_growth[k]`` is the log growth of the renormalised perturbation over forcing
+    period k; the exponent is their mean divided by T. ``standard_error`` is a
+    batch-means estimate (20 batches) of the statistical error of the exponent.
+    """
+
+    exponent: float
+    log_growth: np.ndarray
+    forcing_period: float
+    method: str
+    impacts: int
+    min_impact_velocity: float
+    min_gap: float
+    sticks: int
+
+    @property
+    def periods(self) -> int:
+        return len(self.log_growth)
+
+    @property
+    def running(self) -> np.ndarray:
+        """The running estimate after 1, 2, ... periods."""
+        return np.cumsum(self.log_growth) / (np.arange(1, self.periods + 1) * self.forcing_period)
+
+    @property
+    def standard_error(self) -> float:
+        g = self.log_growth
+        if not np.all(np.isfinite(g)) or len(g) < 40:
+            return math.nan
+        batches = np.array_split(g, 20)
+        means = np.array([b.mean() for b in batches]) / self.forcing_period
+        return float(means.std(ddof=1) / math.sqrt(len(means)))
+
+
+def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: int = 500,
+                      t0: float = 0.0, initial=None) -> LyapunovEstimate:
+    """Largest Lyapunov exponent of the non-smooth flow from the variational equation.
+
+    One tangent vector is carried with the flow, through every impact with the saltation
+    matrix of the impact law (and unchanged through impulses), and renormalised every
+    forcing period T; the exponent is the mean log growth per unit time. Works with any
+    forcing, periodic or not. Sticking collapses the tangent vector (growth ``-inf``).
+
+    Parameters
+    ----------
+    periods : forcing periods averaged over; transient : forcing periods dropped first.
+    t0 : start time of the transient; initial : start state (default x0, v0, zeros).
+    """
+    periods, transient = _periods(periods), int(transient)
+    if transient < 0:
+        raise ValueError(f"transient must be >= 0, got {transient}")
+    p, cfg, nodes, weights, U = system._packed
+    T = system.forcing_period
+    D = system.dim
+    y = system.initial_state() if initial is None else _as_state(system, initial)
+    start = bool(system.options.impulse_at_zero) and t0 == 0.0
+    t_rec = t0
+    if transient > 0:
+        t_rec = t0 + transient * T
+        y = flow(system, y, [t0, t_rec], include_start=start).states[-1]
+        start = False
+    z = np.concatenate([y, np.full(D, 1.0 / math.sqrt(D))])
+    times = t_rec + np.arange(periods + 1) * T
+    out = np.full((periods + 1, D), np.nan)
+    stats = np.empty((periods, V.N_STATS))
+    growth = np.empty(periods)
+    status, _ = V.flow_points(z, 1, times, start, True, p, cfg, nodes, weights, U,
+                              system.options.rtol, system.options.atol, out, stats, growth,
+                              np.empty((0, 2)))
+    if status != V.OK:
+        done = int(np.sum(np.isfinite(out[1:, 0])))
+        raise SimulationError(f"Lyapunov run stopped after about {done} periods: "
+                              f"{V.STATUS_MESSAGES[status]}")
+    return LyapunovEstimate(
+        exponent=float(np.mean(growth) / T), log_growth=growth, forcing_period=T,
+        method="variational (saltation)", impacts=int(stats[:, V.S_IMPACTS].sum()),
+        min_impact_velocity=float(stats[:, V.S_MIN_VELOCITY].min()),
+        min_gap=float(stats[:, V.S_GAP].min()), sticks=int(stats[:, V.S_STICKS].sum()),
+    )
+
+
+def transverse_lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000,
+                                 transient: int = 500) -> LyapunovEstimate:
+    """Exponent of perturbations of the higher OPA coefficients along EMR_0 = DMR.
+
+    At sigma = 0 the subspace x_i = v_i = 0 (i >= 1) is invariant and carries the DMR.
+    Its transverse stability decides whether round-off (or a small sigma) in the higher
+    coefficients dies out or grows until the OPA trajectory leaves the DMR. The linearised
+    dynamics of every higher mode is the same (orthonormality), so order 1 suffices: a
+    tangent vector in (x_1, v_1) is carried along the trajectory, whose higher
+    coefficients are reset to exactly 0 every period so that it stays the DMR. With the
+    ``mean`` law the transverse mode crosses impacts unchanged (the saltation matrix is
+    the identity on it); with ``ensemble`` its velocity is multiplied by -eta.
+    """
+    if system.model != "opa" or system.sigma != 0.0 or system.order < 1:
+        raise ValueError("transverse_lyapunov_exponent needs model 'opa', sigma = 0 and "
+                         f"order >= 1, got model {system.model!r}, sigma = {system.sigma}, "
+                         f"order {system.order}")
+    periods, transient = _periods(periods), int(transient)
+    one = dataclasses.replace(system, order=1)
+    T = one.forcing_period
+    y = one.initial_state()
+    if transient > 0:
+        y = flow(one, y, [0.0, transient * T], include_start=one.options.impulse_at_zero
+                 ).states[-1]
+    w = np.array([0.0, 1.0, 0.0, 1.0]) / math.sqrt(2.0)
+    growth = np.empty(periods)
+    impacts, vmin = 0, math.inf
+    for k in range(periods):
+        y[[1, 3]] = 0.0
+        res = flow(one, y, [(transient + k) * T, (transient + k + 1) * T], tangent=w,
+                   include_start=transient == 0 and k == 0 and one.options.impulse_at_zero)
+        y, w = res.states[-1], res.tangent[:, 0]
+        norm = float(np.linalg.norm(w))
+        growth[k] = math.log(norm) if norm > 0 else -math.inf
+        w = w / norm if norm > 0 else np.array([0.0, 1.0, 0.0, 1.0]) / math.sqrt(2.0)
+        impacts += len(res.impact_time)
+        if len(res.impact_velocity):
+            vmin = min(vmin, float(res.impact_velocity.min()))
+    return LyapunovEstimate(
+        exponent=float(np.mean(growth) / T), log_growth=growth, forcing_period=T,
+        method=f"transverse (higher OPA coefficients along the DMR, {system.impact_law} law)",
+        impacts=impacts, min_impact_velocity=vmin, min_gap=math.nan, sticks=0,
+    )
+
+
+def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: int = 500,
+                      initial=None, d0: float = 1e-8, engine: str = "solver") -> LyapunovEstimate:
+    """Largest Lyapunov exponent by two nearby trajectories (Benettin et al. 1980).
+
+    An independent check of ``lyapunov_exponent``: a reference and a perturbed
+    trajectory, with no variational equation and no saltation matrix, the separation
+    renormalised to ``d0`` every forcing period.
+
+    Parameters
+    ----------
+    engine : ``"solver"``: both trajectories by the project's event-driven solver
+        ``opa._solver`` (fully independent code; needs ``F0 = 0``, because
+        ``opa._solver.integrate`` restarts its impulse train at every call and so cannot
+        resume a trajectory mid-way under impulses); ``"plain"``: by this module's own
+        kernel without tangent vectors (shares the event code, not the saltation
+        matrices; works with impulses).
+    """
+    _choice("engine", engine, ("solver", "plain"))
+    periods, transient = _periods(periods), int(transient)
+    if transient < 0:
+        raise ValueError(f"transient must be >= 0, got {transient}")
+    T = system.forcing_period
+    delta = system.oscillator.delta
+    impacts, vmin = 0, math.inf
+    at_zero = bool(system.options.impulse_at_zero)
+    if engine == "solver":
+        from opa._simulate import pack_parameters, run_kernel
+
+        if system.oscillator.F0 != 0.0:
+            raise ValueError(f"lyapunov_benettin(engine='solver') needs F0 = 0, got F0 = "
+                             f"{system.oscillator.F0:g}; use engine='plain' with impulses")
+        p, cfg = pack_parameters(system.oscillator, system.options, sigma=system.sigma,
+                                 order=system.order, uncertain=system.uncertain,
+                                 truncation=system.truncation, impact_law=system.impact_law)
+        quad = quadrature(system.order)
+        opts = system.options
+
+        def run(y, ta, tb, first=False):
+            out, log, _ = run_kernel(y, np.array([ta, tb]), p, cfg, quad, rtol=opts.rtol,
+                                     atol=opts.atol, label="Benettin trajectory")
+            return out[-1], log[:, 1]
+    else:
+        def run(y, ta, tb, first=False):
+            res = flow(system, y, [ta, tb], include_start=first and at_zero)
+            return res.states[-1], res.impact_velocity
+
+    y = system.initial_state() if initial is None else _as_state(system, initial)
+    if transient > 0:
+        y, _ = run(y, 0.0, transient * T, first=True)
+    u = np.ones(system.dim) / math.sqrt(system.dim)
+    growth = np.empty(periods)
+    for k in range(periods):
+        ta, tb = (transient + k) * T, (transient + k + 1) * T
+        if y[0] + d0 * u[0] > delta:
+            u = -u
+        first = transient == 0 and k == 0
+        y_next, v_imp = run(y, ta, tb, first)
+        y_pert, _ = run(y + d0 * u, ta, tb, first)
+        diff = y_pert - y_next
+        dist = float(np.linalg.norm(diff))
+        growth[k] = math.log(dist / d0) if dist > 0 else -math.inf
+        u = diff / dist if dist > 0 else np.ones(system.dim) / math.sqrt(system.dim)
+        y = y_next
+        impacts += len(v_imp)
+        if len(v_imp):
+            vmin = min(vmin, float(np.min(v_imp)))
+    where = "opa._solver" if engine == "solver" else "opa._variational without tangents"
+    return LyapunovEstimate(
+        exponent=float(np.mean(growth) / T), log_growth=growth, forcing_period=T,
+        method=f"Benettin two-trajectory ({where}, d0 = {d0:g})", impacts=impacts,
+        min_impact_velocity=vmin, min_gap=math.nan, sticks=0,
+    )
+
+
+__all__ = [
+    "ImpactSystem",
+    "PeriodicOrbit",
+    "LyapunovEstimate",
+    "ConvergenceError",
+    "impulse_cycle",
+    "flow",
+    "poincare_map",
+    "shoot",
+    "default_tolerance",
+    "periodic_orbit",
+    "floquet_multipliers",
+    "lyapunov_exponent",
+    "transverse_lyapunov_exponent",
+    "lyapunov_benettin",
+]

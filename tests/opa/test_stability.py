@@ -1,0 +1,388 @@
+"""Tests for the stability tools (``opa._stability``, ``opa._continuation``,
+``opa._variational``, ``opa._stability_cli``).
+
+Independent references:
+
+- central finite differences of the stroboscopic map computed with the project's
+  event-driven solver (``opa.simulate_dmr`` / ``opa.simulate_opa``), which shares no
+  code with the variational kernel, for the DMR, the OPA system (both impact laws, both
+  truncations, uncertain mu and c) and with Dirac and pulse impulses;
+- the closed form of the period-1 single-impact orbit of the linear impact oscillator
+  (mu = c = 0): impact phase and velocity from the fixed-point equations of the impact
+  map, and the monodromy matrix composed of the explicit linear flow and the saltation
+  matrix (whose determinant is eta^2);
+- two Lyapunov estimates: tangent vector with saltation matrices vs two trajectories
+  of ``opa._solver`` (Benettin), in a chaotic impacting regime;
+- a period-doubling point located at rtol 1e-9 and 1e-11;
+- the doubled branch against a long brute-force simulation.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+import pytest
+
+from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
+from opa._continuation import (
+    BIFURCATION_KINDS,
+    continue_orbits,
+    locate_period_doubling,
+    plot_branches,
+)
+from opa._stability import (
+    ImpactSystem,
+    impulse_cycle,
+    lyapunov_benettin,
+    lyapunov_exponent,
+    periodic_orbit,
+    poincare_map,
+    shoot,
+    transverse_lyapunov_exponent,
+)
+
+TIGHT = SolverOptions(rtol=1e-12, atol=1e-12)
+H = 1e-6  # finite-difference step
+
+
+def _fd_jacobian(fun, y, h=H):
+    cols = []
+    for j in range(len(y)):
+        e = np.zeros(len(y))
+        e[j] = h
+        cols.append((fun(y + e) - fun(y - e)) / (2 * h))
+    return np.array(cols).T
+
+
+def _solver_map_dmr(osc, options, t0, t1):
+    def fun(y):
+        ds = simulate_dmr(osc.replace(x0=y[0], v0=y[1]), times=np.array([t0, t1]),
+                          options=options)
+        return np.array([ds.x.values[-1], ds.v.values[-1]])
+    return fun
+
+
+# --------------------------------------------------------------------------- Jacobian
+def test_monodromy_matches_finite_differences_dmr():
+    system = ImpactSystem(preset("3.1", F0=0.0, c=0.05), options=TIGHT)
+    orbit = periodic_orbit(system)
+    assert orbit.label == "2/2" and orbit.stable
+    T = system.forcing_period
+    fd = _fd_jacobian(_solver_map_dmr(system.oscillator, TIGHT, 0.0, 2 * T), orbit.state)
+    np.testing.assert_allclose(orbit.jacobian, fd, atol=1e-6 * np.abs(fd).max())
+    np.testing.assert_allclose(np.sort_complex(orbit.multipliers),
+                               np.sort_complex(np.linalg.eigvals(fd)), atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    "law, truncation, uncertain",
+    [("mean", "galerkin", "mu"), ("ensemble", "paper", "mu"), ("mean", "paper", "c"),
+     ("ensemble", "galerkin", "a")],
+)
+def test_map_jacobian_matches_finite_differences_opa(law, truncation, uncertain):
+    osc = preset("3.1", F0=0.0, c=0.05)
+    system = ImpactSystem(osc, model="opa", order=3, sigma=0.05, uncertain=uncertain,
+                          truncation=truncation, impact_law=law, options=TIGHT)
+    y0 = np.array([-1.5, 0.1, -0.02, 0.01, 0.6, 0.02, -0.01, 0.0])
+    T = system.forcing_period
+    y1, J = poincare_map(system, y0, periods=2)
+
+    def fun(y):
+        ds = simulate_opa(osc, sigma=0.05, order=3, uncertain=uncertain, truncation=truncation,
+                          impact_law=law, times=np.array([0.0, 2 * T]), options=TIGHT,
+                          initial=y.reshape(2, 4))
+        return np.concatenate([ds.x_coef.values[:, -1], ds.v_coef.values[:, -1]])
+
+    ds_imp = simulate_opa(osc, sigma=0.05, order=3, uncertain=uncertain, truncation=truncation,
+                          impact_law=law, times=np.array([0.0, 2 * T]), options=TIGHT,
+                          initial=y0.reshape(2, 4))
+    assert ds_imp.sizes["impact"] >= 2  # the map crosses impacts
+    np.testing.assert_allclose(y1, fun(y0), atol=1e-9)
+    fd = _fd_jacobian(fun, y0)
+    np.testing.assert_allclose(J, fd, atol=2e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("impulse", ["dirac", "pulse"])
+def test_flow_jacobian_through_impulses(impulse):
+    from opa._stability import flow
+
+    options = SolverOptions(rtol=1e-12, atol=1e-12, impulse=impulse, impulse_at_zero=False)
+    system = ImpactSystem(preset("3.1", c=0.05, F0=0.3), options=options)
+    T = system.forcing_period
+    t0, t1 = 0.7, 0.7 + 3 * T  # contains the impulse (or pulse) at t = 2 pi
+    y0 = np.array([-1.2, 0.4])
+    res = flow(system, y0, [t0, t1], tangent="identity")
+    assert len(res.impact_time) >= 1
+    fun = _solver_map_dmr(system.oscillator, options, t0, t1)
+    np.testing.assert_allclose(res.states[-1], fun(y0), atol=1e-9)
+    fd = _fd_jacobian(fun, y0)
+    np.testing.assert_allclose(res.tangent, fd, atol=2e-6 * np.abs(fd).max())
+
+
+# --------------------------------------------------------------------------- closed form
+def _linear_impact_orbit(a, f, omega, eta, delta):
+    """Period-1 single-impact orbit of x'' + a x = f cos(omega t), x <= delta.
+
+    With x = X cos(omega t) + h(t), X = f / (a - omega^2), the free flight of one period
+    T from the post-impact state (delta, -eta v) at phase phi = omega t* back to
+    (delta, v) gives, with K = -sqrt(a) tan(sqrt(a) T / 2),
+
+        (1 - eta) v = -2 X omega sin(phi),   (1 + eta) v = 2 (delta - X cos phi) K,
+
+    i.e. X omega (1 + eta) sin(phi) - (1 - eta) K X cos(phi) = -(1 - eta) K delta.
+    The monodromy matrix over [0, T] is Phi(T - t*) S Phi(t*) with the linear flow Phi
+    and the saltation matrix S = [[-eta, 0], [(1 + eta) acc / v, -eta]].
+    Returns (state at t = 0, monodromy matrix, impact phase, impact velocity).
+    """
+    w0 = math.sqrt(a)
+    T = 2 * math.pi / omega
+    X = f / (a - omega**2)
+    K = -w0 * math.tan(w0 * T / 2)
+    alpha, beta = X * omega * (1 + eta), (1 - eta) * K * X
+    R, psi = math.hypot(alpha, beta), math.atan2(beta, alpha)
+    base = math.asin(-(1 - eta) * K * delta / R)
+    for root in (base, math.pi - base):
+        phi = (root + psi) % (2 * math.pi)
+        v = -2 * X * omega * math.sin(phi) / (1 - eta)
+        if v > 0:
+            break
+    t_star = phi / omega
+    h0, dh0 = delta - X * math.cos(phi), -eta * v + X * omega * math.sin(phi)
+    s = T - t_star
+    y0 = np.array([X + h0 * math.cos(w0 * s) + dh0 / w0 * math.sin(w0 * s),
+                   -h0 * w0 * math.sin(w0 * s) + dh0 * math.cos(w0 * s)])
+
+    def phi_mat(s):
+        return np.array([[math.cos(w0 * s), math.sin(w0 * s) / w0],
+                         [-w0 * math.sin(w0 * s), math.cos(w0 * s)]])
+
+    acc = -a * delta + f * math.cos(phi)
+    S = np.array([[-eta, 0.0], [(1 + eta) * acc / v, -eta]])
+    return y0, phi_mat(T - t_star) @ S @ phi_mat(t_star), phi, v
+
+
+@pytest.mark.parametrize(
+    "a, f, omega, eta, delta, stable",
+    [(1.0, 1.0, 1.6, 0.8, 0.1, True), (1.0, 2.0, 2.8, 0.8, 0.1, False)],
+)
+def test_linear_impact_oscillator_closed_form(a, f, omega, eta, delta, stable):
+    y_ref, M_ref, phi, v = _linear_impact_orbit(a, f, omega, eta, delta)
+    osc = Oscillator(mu=0.0, c=0.0, a=a, f=f, omega=omega, eta=eta, delta=delta, F0=0.0,
+                     x0=min(delta, -0.5))
+    system = ImpactSystem(osc, options=TIGHT)
+    orbit = shoot(system, y_ref + np.array([0.02, -0.03]), periods=1)
+    np.testing.assert_allclose(orbit.state, y_ref, atol=1e-9)
+    assert orbit.impacts == 1 and orbit.label == "1/1"
+    T = system.forcing_period
+    assert math.isclose(orbit.impact_time[0] % T, phi / omega, abs_tol=1e-9)
+    assert math.isclose(orbit.impact_velocity[0], v, rel_tol=1e-9)
+    np.testing.assert_allclose(orbit.jacobian, M_ref, atol=1e-8 * np.abs(M_ref).max())
+    np.testing.assert_allclose(np.sort_complex(orbit.multipliers),
+                               np.sort_complex(np.linalg.eigvals(M_ref)), atol=1e-8)
+    assert math.isclose(np.prod(orbit.multipliers).real, eta**2, rel_tol=1e-8)
+    assert orbit.stable is stable
+
+
+def test_grazing_gap_of_free_oscillation():
+    # x'' + x = 0 from (-A, 0): x = -A cos t reaches A at t = pi, 1e-4 below the wall;
+    # every state is 2 pi-periodic (multipliers 1, 1) and the orbit grazes
+    A = 0.5
+    osc = Oscillator(mu=0.0, c=0.0, a=1.0, f=0.0, omega=1.0, eta=0.8, delta=A + 1e-4, F0=0.0)
+    orbit = shoot(ImpactSystem(osc, options=TIGHT), [-A, 0.0], periods=1)
+    assert orbit.impacts == 0
+    assert math.isclose(orbit.min_gap, 1e-4, rel_tol=1e-6)
+    np.testing.assert_allclose(orbit.multipliers, [1.0, 1.0], atol=1e-8)
+    assert {"grazing", "fold"} <= set(orbit.classify())
+
+
+# --------------------------------------------------------------------------- Lyapunov
+def test_lyapunov_two_independent_estimates_agree_in_chaos():
+    # section 3.1, F0 = 0, c = 0.02: beyond the period-doubling cascade, one impact per
+    # forcing period, no sticking
+    system = ImpactSystem(preset("3.1", F0=0.0, c=0.02), options=SolverOptions(rtol=1e-10,
+                                                                                 atol=1e-10))
+    # 15000 periods: each estimate's batch-means standard error is ~1%, so 5% is a
+    # ~4-sigma bound for two estimates along different (chaotic) trajectories
+    var = lyapunov_exponent(system, periods=15000, transient=200)
+    ben = lyapunov_benettin(system, periods=15000, transient=200)
+    assert var.exponent > 0.05 and var.impacts >= 15000 and var.sticks == 0
+    assert abs(var.exponent - ben.exponent) < 0.05 * abs(ben.exponent)
+
+
+def test_lyapunov_of_periodic_orbit_is_log_multiplier():
+    system = ImpactSystem(preset("3.1", F0=0.0, c=0.05))
+    orbit = periodic_orbit(system)
+    expected = math.log(orbit.spectral_radius) / (orbit.periods * system.forcing_period)
+    est = lyapunov_exponent(system, periods=400, transient=300)
+    assert math.isclose(est.exponent, expected, rel_tol=1e-2)
+    # once the tangent vector has aligned with the leading Floquet vector
+    tail = est.log_growth[100:].mean() / system.forcing_period
+    assert math.isclose(tail, expected, rel_tol=1e-5)
+
+
+def test_transverse_exponent_matches_growth_of_a_seed():
+    # EMR_0 = DMR is invariant in the OPA system at sigma = 0; with the ensemble law its
+    # section 3.2 (omega = 4.2, F0 = 0) orbit is transversally unstable: a 1e-14 seed in
+    # x_1, integrated by the independent solver, grows at the transverse exponent
+    options = SolverOptions(rtol=1e-11, atol=1e-11)
+    osc = preset("3.2", omega=4.2, F0=0.0)
+    dmr = simulate_dmr(osc, periods=300, options=options)
+    est = transverse_lyapunov_exponent(
+        ImpactSystem(osc, model="opa", order=1, impact_law="ensemble", options=options),
+        periods=1000, transient=300)
+    ds = simulate_opa(osc, sigma=0.0, order=1, impact_law="ensemble", periods=200,
+                      options=options,
+                      initial=np.array([[float(dmr.x[-1]), 1e-14], [float(dmr.v[-1]), 0.0]]))
+    amp = np.hypot(ds.x_coef.values[1], ds.v_coef.values[1])
+    t = ds.time.values
+    sel = (t > 20 * osc.forcing_period) & (amp < 1e-6)
+    slope = np.polyfit(t[sel], np.log(amp[sel]), 1)[0]
+    assert est.exponent > 0.05
+    assert math.isclose(slope, est.exponent, rel_tol=0.02)
+
+
+@pytest.mark.slow
+def test_lyapunov_two_estimates_agree_opa():
+    system = ImpactSystem(preset("3.1", F0=0.0, c=0.02), model="opa", order=4, sigma=0.02,
+                          options=SolverOptions(rtol=1e-10, atol=1e-10))
+    var = lyapunov_exponent(system, periods=8000, transient=200)
+    ben = lyapunov_benettin(system, periods=8000, transient=200)
+    assert var.exponent > 0.05
+    assert abs(var.exponent - ben.exponent) < 0.05 * abs(ben.exponent)
+
+
+# --------------------------------------------------------------------------- branches
+def test_period_doubling_located_independently_of_tolerance():
+    values = []
+    for tol in (1e-9, 1e-11):
+        system = ImpactSystem(preset("3.1", F0=0.0), options=SolverOptions(rtol=tol, atol=tol))
+        ds = continue_orbits(system, "c", 0.095, 0.085, depth=0)
+        pd = ds.bifurcation_kind.values == BIFURCATION_KINDS.index("period-doubling")
+        assert pd.sum() == 1 and ds.bifurcation_located.values[pd][0] == 1
+        values.append(float(ds.bifurcation_c.values[pd][0]))
+    assert abs(values[0] - values[1]) < 1e-6
+    assert 0.0891 < values[1] < 0.0892
+
+
+def test_period_doubling_point_has_multiplier_minus_one_and_emr0_agrees():
+    system = ImpactSystem(preset("3.1", F0=0.0))
+    a = periodic_orbit(system.with_parameter("c", 0.092))
+    b = shoot(system.with_parameter("c", 0.087), a.state, periods=1)
+    orbit = locate_period_doubling(system, "c", (0.092, a), (0.087, b))
+    assert np.min(np.abs(orbit.multipliers + 1.0)) < 1e-7
+    assert "period-doubling" in orbit.classify()
+    c_pd = orbit.system.oscillator.c
+    emr0 = ImpactSystem(preset("3.1", F0=0.0), model="opa", order=3, sigma=0.0)
+    y = np.zeros(8)
+    y[0], y[4] = a.state
+    ea = shoot(emr0.with_parameter("c", 0.092), y, periods=1)
+    eb = shoot(emr0.with_parameter("c", 0.087), y, periods=1)
+    e_pd = locate_period_doubling(emr0, "c", (0.092, ea), (0.087, eb))
+    assert abs(e_pd.system.oscillator.c - c_pd) < 1e-8
+
+
+def test_branch_switching_matches_brute_force():
+    system = ImpactSystem(preset("3.1", F0=0.0))
+    ds = continue_orbits(system, "c", 0.095, 0.08, depth=1)
+    assert set(ds.branch_period.values) == {1, 2}
+    pd = int(np.flatnonzero(ds.bifurcation_child.values >= 0)[0])
+    c_pd = float(ds.bifurcation_c[pd])
+    child = int(ds.bifurcation_child[pd])
+    doubled = ds.where(ds.branch == child, drop=True)
+    primary = ds.where(ds.branch == 0, drop=True)
+    # supercritical: the doubled orbits lie below c_pd, stable; the period-1 orbit is
+    # stable above c_pd and unstable below
+    assert np.all(doubled.c.values <= c_pd + 1e-9)
+    assert doubled.stable.values[-1] == 1
+    assert np.all(primary.stable.values[primary.c.values > c_pd + 1e-6] == 1)
+    assert np.all(primary.stable.values[primary.c.values < c_pd - 1e-6] == 0)
+    # the doubled orbit at the end of the interval is the attractor of a long simulation
+    end = int(np.argmin(doubled.c.values))
+    osc = system.oscillator.replace(c=float(doubled.c.values[end]))
+    sim = simulate_dmr(osc, periods=800, options=SolverOptions(rtol=1e-10, atol=1e-10))
+    last = np.sort(sim.x.values[-2:])
+    np.testing.assert_allclose(np.sort(doubled.section_x.values[end, :2]), last, atol=1e-6)
+
+
+def test_dataset_netcdf_and_plot(tmp_path):
+    import xarray as xr
+
+    from opa._dataset import write_netcdf
+
+    system = ImpactSystem(preset("3.1", F0=0.0))
+    ds = continue_orbits(system, "c", 0.095, 0.085, depth=1, max_points=30)
+    for name in ("section_x", "section_v", "multiplier_real", "multiplier_imag", "stable",
+                 "bifurcation_kind", "bifurcation_c", "state", "period", "impacts"):
+        assert name in ds
+    assert ds.attrs["parameter"] == "c" and ds.attrs["model"] == "dmr"
+    path = tmp_path / "branches.nc"
+    write_netcdf(ds, path)
+    with xr.open_dataset(path) as back:
+        np.testing.assert_array_equal(back.stable.values, ds.stable.values)
+    png = tmp_path / "branches.png"
+    plot_branches(ds, str(png))
+    assert png.stat().st_size > 1000
+
+
+# --------------------------------------------------------------------------- impulses
+def test_impulse_cycle():
+    assert impulse_cycle(preset("3.1", F0=0.0)) == 1
+    assert impulse_cycle(preset("3.1")) == 14  # T1 = 2.8 T, constant amplitudes (n = 2)
+    assert impulse_cycle(preset("3.1", n=4.0)) == 56  # amplitudes repeat every 4 impulses
+    assert impulse_cycle(preset("3.2")) == 199  # omega = 3.98 = 199/50
+    assert impulse_cycle(preset("3.1", omega=math.sqrt(8.0))) is None
+
+
+def test_map_with_impulses_needs_the_common_period():
+    system = ImpactSystem(preset("3.1"))
+    with pytest.raises(ValueError, match="multiple of 14"):
+        poincare_map(system, [-1.0, 0.0], periods=2)
+    with pytest.raises(ValueError, match="no common period"):
+        poincare_map(ImpactSystem(preset("3.1", omega=math.sqrt(8.0))), [-1.0, 0.0])
+
+
+@pytest.mark.slow
+def test_impulses_turn_the_first_period_doubling_into_a_fold():
+    # with the default impulses the period-1-like orbit (a fixed point of P^14) meets an
+    # impulse with an impact and ends; the period-2-like orbit folds instead of doubling
+    system = ImpactSystem(preset("3.1"), options=SolverOptions(rtol=1e-10, atol=1e-10))
+    ds = continue_orbits(system, "c", 0.1, 0.06, depth=0)
+    kinds = [BIFURCATION_KINDS[k] for k in ds.bifurcation_kind.values]
+    assert "impulse-impact" in kinds and "period-doubling" not in kinds
+    ds2 = continue_orbits(system, "c", 0.06, 0.08, depth=0)
+    folds = ds2.bifurcation_c.values[ds2.bifurcation_kind.values == BIFURCATION_KINDS.index(
+        "fold")]
+    assert len(folds) == 1 and 0.0735 < folds[0] < 0.0737
+
+
+# --------------------------------------------------------------------------- validation, CLI
+def test_bad_input_is_reported():
+    with pytest.raises(ValueError, match="model"):
+        ImpactSystem(model="mc")
+    with pytest.raises(ValueError, match="sigma applies to the opa model"):
+        ImpactSystem(sigma=0.1)
+    with pytest.raises(ValueError, match="periods"):
+        poincare_map(ImpactSystem(preset("3.1", F0=0.0)), [-1.0, 0.0], periods=0)
+    with pytest.raises(ValueError, match="beyond the wall"):
+        poincare_map(ImpactSystem(preset("3.1", F0=0.0)), [0.5, 0.0])
+    with pytest.raises(ValueError, match="parameter"):
+        continue_orbits(ImpactSystem(preset("3.1", F0=0.0)), "x0", 0.0, 1.0)
+
+
+def test_cli_orbit_and_sweep(tmp_path, capsys):
+    from opa._cli import _model_flags, _solver_flags
+    from opa._stability_cli import register_stability
+
+    parser = argparse.ArgumentParser()
+    register_stability(parser.add_subparsers(), _model_flags, _solver_flags)
+    args = parser.parse_args(["stability", "dmr", "--preset", "3.1", "--F0", "0", "--c", "0.05"])
+    assert args.func(args) == 0
+    out = capsys.readouterr().out
+    assert "period-2 orbit" in out and "-0.3996" in out
+    nc = tmp_path / "b.nc"
+    args = parser.parse_args(["stability", "dmr", "--preset", "3.1", "--F0", "0", "--sweep",
+                              "c=0.095:0.085:10", "--depth", "0", "--out", str(nc)])
+    assert args.func(args) == 0
+    assert "period-doubling  c = 0.0891" in capsys.readouterr().out and nc.exists()
