@@ -42,6 +42,25 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+# The tableau and status codes are plain constants shared with the solver (no jitted code
+# is imported across modules, so numba's per-module cache stays consistent).
+from opa._solver import (  # noqa: E402
+    DIVERGED,
+    DP_A,
+    DP_B,
+    DP_C,
+    DP_E,
+    DP_P,
+    ERROR_EXPONENT,
+    MAX_FACTOR,
+    MAX_STEPS,
+    MIN_FACTOR,
+    OK,
+    SAFETY,
+    STATUS_MESSAGES,
+    STEP_COLLAPSE,
+)
+
 # ---------------------------------------------------------------------------
 # Parameter vector ``p`` and integer configuration ``cfg`` of this kernel chain.
 V_MU, V_A, V_C, V_F, V_OMEGA, V_ETA, V_DELTA = 0, 1, 2, 3, 4, 5, 6
@@ -57,14 +76,6 @@ IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
 TRUNC_GALERKIN, TRUNC_PAPER = 0, 1
 LAW_MEAN, LAW_ENSEMBLE = 0, 1
 
-OK, MAX_STEPS, STEP_COLLAPSE, DIVERGED = 0, 1, 2, 3
-STATUS_MESSAGES = {
-    OK: "ok",
-    MAX_STEPS: "the maximum number of steps was reached",
-    STEP_COLLAPSE: "the step size collapsed below round-off",
-    DIVERGED: "the trajectory diverged (|state| > 1e8 or non-finite)",
-}
-
 # Slots of the ``stats`` output of ``advance``.
 S_IMPACTS, S_MIN_VELOCITY, S_STICKS, S_STEPS, S_STICKING, S_GAP = 0, 1, 2, 3, 4, 5
 N_STATS = 6
@@ -73,36 +84,6 @@ DIVERGENCE_LIMIT = 1e8
 # Impulse times within this (relative) distance of the end of an interval belong to it.
 SNAP = 1e-10
 
-# ---------------------------------------------------------------------------
-# Dormand-Prince 5(4) with Shampine's quartic continuous extension.
-DP_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0])
-DP_A = np.array(
-    [
-        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [1 / 5, 0.0, 0.0, 0.0, 0.0, 0.0],
-        [3 / 40, 9 / 40, 0.0, 0.0, 0.0, 0.0],
-        [44 / 45, -56 / 15, 32 / 9, 0.0, 0.0, 0.0],
-        [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0.0, 0.0],
-        [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656, 0.0],
-    ]
-)
-DP_B = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0])
-DP_E = np.array(
-    [71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40]
-)
-DP_P = np.array(
-    [
-        [1.0, -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432],
-        [0.0, 0.0, 0.0, 0.0],
-        [0.0, 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799],
-        [0.0, -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072],
-        [0.0, 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632],
-        [0.0, -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844],
-        [0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423],
-    ]
-)
-ERROR_EXPONENT = -1.0 / 5.0
-SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 N_SCAN = 8
 
 
