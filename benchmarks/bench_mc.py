@@ -41,10 +41,10 @@ import tracemalloc
 import numba
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
 
 import mc
 import opa
+from benchmarks.bench_dmr import scipy_dmr
 
 OSCILLATOR = opa.preset("3.2", omega=3.98)
 SIGMA = 0.01
@@ -114,59 +114,10 @@ def engine_throughput(sizes: dict) -> dict:
 
 def scipy_sample(osc: opa.Oscillator, mu: float, periods: int, method: str, rtol: float,
                  atol: float):  # fmt: skip
-    """Stroboscopic x of eq. (1) for one value of mu with ``solve_ivp``, lean.
-
-    Kicks at ``t_j = j 2 pi / omega1`` (j = 0, 1, ...) add ``F0 (1 + a1 sin(omega1 t_j/n))``
-    to the velocity (right-continuous outputs, like the engine's); an impact at
-    ``x = delta`` ends the ``solve_ivp`` call and restarts it with ``v -> -eta v``.
-    Returns ``(x at t_j = j 2 pi / omega, number of rhs evaluations)``.
-    """
-    a, c, f, omega, delta, eta = osc.a, osc.c, osc.f, osc.omega, osc.delta, osc.eta
-    t_out = np.arange(periods + 1) * (2 * math.pi / omega)
-    t_end = t_out[-1]
-    T1 = 2 * math.pi / osc.omega1
-    kicks = np.arange(math.floor(t_end / T1) + 1) * T1
-    bounds = np.unique(np.concatenate([kicks, [t_end]]))
-    x_out = np.full(len(t_out), np.nan)
-    nfev = 0
-
-    def rhs(t, y):
-        x, v = y
-        return [v, mu * (1.0 - v * v) * v - a * x - c * x * x * x + f * math.cos(omega * t)]
-
-    y = np.array([osc.x0, osc.v0])
-    for k, t0 in enumerate(bounds):
-        if k < len(kicks) and t0 == kicks[k]:
-            y[1] += osc.F0 * (1.0 + osc.a1 * math.sin(osc.omega1 * t0 / osc.n))
-            if y[0] >= delta and y[1] > 0.0:
-                y[1] = -eta * y[1]
-        x_out[t_out == t0] = y[0]
-        if k == len(bounds) - 1:
-            break
-        t1 = bounds[k + 1]
-        while True:
-            inside = np.flatnonzero((t_out > t0) & (t_out < t1))
-            start = t0
-
-            def wall(t, y, start=start):
-                # -1 at the start: a restart from the wall must not find its impact again
-                return y[0] - delta if t > start else -1.0
-
-            wall.terminal, wall.direction = True, 1.0
-            sol = solve_ivp(rhs, (t0, t1), y, method=method, rtol=rtol, atol=atol,
-                            events=wall, t_eval=np.append(t_out[inside], t1))  # fmt: skip
-            if sol.status < 0:
-                raise RuntimeError(f"solve_ivp failed at t = {sol.t[-1]}: {sol.message}")
-            nfev += sol.nfev
-            reached = inside[: len(sol.t)]
-            if reached.size:  # (sol.y is an empty list when an impact comes first)
-                x_out[reached] = sol.y[0, : reached.size]
-            if sol.status == 0:
-                y = sol.y[:, -1].copy()
-                break
-            t0 = sol.t_events[0][0]
-            y = np.array([delta, -eta * sol.y_events[0][0][1]])
-    return x_out, nfev
+    """Stroboscopic x of eq. (1) for one value of mu with ``solve_ivp`` (the lean loop of
+    ``bench_dmr.scipy_dmr``). Returns ``(x at t_j = j 2 pi / omega, rhs evaluations)``."""
+    _, x, _, _, nfev = scipy_dmr(osc.replace(mu=mu), periods, method, rtol, atol)
+    return x, nfev
 
 
 # --------------------------------------------------------------------------- benchmarks
