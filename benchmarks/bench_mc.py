@@ -32,7 +32,6 @@ CI runs the smoke mode, ``pytest benchmarks -m "not slow" --benchmark-disable``.
 
 from __future__ import annotations
 
-import math
 import os
 import resource
 import time
