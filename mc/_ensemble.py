@@ -25,7 +25,7 @@ from mc._sampling import SAMPLERS, sample_xi
 from opa import _solver as K
 from opa._basis import chebyshev_u
 from opa._dataset import provenance_attrs, time_coord
-from opa._model import Oscillator, SolverOptions, Uncertainty, _choice
+from opa._model import Oscillator, SolverOptions, Uncertainty, _choice, check_order
 from opa._simulate import SimulationError, _times, pack_parameters
 
 CHUNK_BYTES = 32 * 2**20
@@ -173,8 +173,7 @@ def simulate_mc(
     oscillator = oscillator or Oscillator()
     options = options or SolverOptions()
     _choice("sampler", sampler, SAMPLERS)
-    if isinstance(order, bool) or int(order) != order or order < 0:
-        raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+    order = check_order(order)
     unc = Uncertainty(sigma, uncertain, allow_negative)
     unc.check(oscillator)
     times = _times(oscillator, periods, per_period, times)

@@ -35,6 +35,7 @@ import xarray as xr
 
 from opa._dataset import provenance_attrs, write_netcdf
 from opa._model import (
+    check_order,
     PARAMETER_NAMES,
     Oscillator,
     SolverOptions,
@@ -396,8 +397,7 @@ def sweep(
                              ("per_period", per_period, 1), ("workers", workers, 1)):
         if isinstance(value, bool) or int(value) != value or value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value}")
-    if isinstance(order, bool) or int(order) != order or order < 0:
-        raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+    order = check_order(order)
     values = np.asarray(values, dtype=float).ravel()
     if len(values) < 1 or not np.all(np.isfinite(values)):
         raise ValueError(f"sweep values of {param} must be finite, got {values.tolist()}")

@@ -36,7 +36,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
 
-from opa._model import SolverOptions, preset
+from opa._model import SolverOptions, check_order, preset
 from opa._poincare import identify_motion, mean_state, phase_section
 
 FIGURES = ("fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fig11")
@@ -422,8 +422,7 @@ def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool 
         if name not in _MAKERS:
             raise ValueError(f"figure must be one of {', '.join(FIGURES)} or 'all', "
                              f"got {figure!r}")
-    if isinstance(order, bool) or int(order) != order or order < 0:
-        raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+    order = check_order(order)
     os.makedirs(outdir, exist_ok=True)
     ctx = _Context(os.fspath(outdir), full, impulse, pulse_width, int(order), int(workers),
                    scheduler, progress, log)

@@ -48,6 +48,17 @@ def _finite(name: str, value) -> float:
     return value
 
 
+def check_order(order) -> int:
+    """The truncation order N as an int, refusing bools, non-integers and N < 0."""
+    try:
+        whole = not isinstance(order, bool) and float(order) == int(order)
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole or int(order) < 0:
+        raise ValueError(f"order (N) must be an integer >= 0, got {order!r}")
+    return int(order)
+
+
 def _choice(name: str, value: str, options: tuple[str, ...]) -> str:
     if value not in options:
         allowed = ", ".join(repr(o) for o in options)

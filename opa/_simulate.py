@@ -16,6 +16,7 @@ from opa import _solver as K
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
 from opa._dataset import provenance_attrs, time_coord
 from opa._model import (
+    check_order,
     IMPACT_LAWS,
     TRUNCATIONS,
     Oscillator,
@@ -259,9 +260,7 @@ def simulate_opa(
     """
     oscillator = oscillator or Oscillator()
     options = options or SolverOptions()
-    if isinstance(order, bool) or int(order) != order or order < 0:
-        raise ValueError(f"order (N) must be an integer >= 0, got {order}")
-    order = int(order)
+    order = check_order(order)
     _choice("truncation", truncation, TRUNCATIONS)
     _choice("impact_law", impact_law, IMPACT_LAWS)
     unc = Uncertainty(sigma, uncertain, allow_negative)

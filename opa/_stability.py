@@ -31,6 +31,7 @@ import numpy as np
 
 from opa import _variational as V
 from opa._model import (
+    check_order,
     IMPACT_LAWS,
     PARAMETER_NAMES,
     TRUNCATIONS,
@@ -99,9 +100,7 @@ class ImpactSystem:
             raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r}")
         if not isinstance(self.options, SolverOptions):
             raise ValueError(f"options must be an opa.SolverOptions, got {self.options!r}")
-        order = self.order
-        if isinstance(order, bool) or int(order) != order or order < 0:
-            raise ValueError(f"order (N) must be an integer >= 0, got {order}")
+        order = check_order(self.order)
         if self.model == "dmr":
             if self.sigma != 0.0:
                 raise ValueError(f"sigma applies to the opa model only, got sigma = {self.sigma} "
