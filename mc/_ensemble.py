@@ -44,6 +44,8 @@ class ChunkStats:
     x_moment: np.ndarray  # (N+1, T) sum w x U_i(xi)
     x_rep: np.ndarray  # (R, T) sum w x over each randomised-QMC replicate
     v_rep: np.ndarray
+    x2_rep: np.ndarray  # (R, T) sum w x^2 over each replicate (for the variance's SE)
+    rep_weight: np.ndarray  # (R,) sum w over each replicate
     rhs_evaluations: int = 0
 
     @classmethod
@@ -54,10 +56,14 @@ class ChunkStats:
         W = float(w.sum())
         x_rep = np.zeros((replicates, x.shape[1]))
         v_rep = np.zeros((replicates, x.shape[1]))
+        x2_rep = np.zeros((replicates, x.shape[1]))
+        rep_weight = np.zeros(replicates)
         for r in np.unique(rep):
             sel = rep == r
             x_rep[r] = w[sel] @ x[sel]
             v_rep[r] = w[sel] @ v[sel]
+            x2_rep[r] = w[sel] @ x[sel] ** 2
+            rep_weight[r] = w[sel].sum()
         xm = w @ x / W
         vm = w @ v / W
         basis = chebyshev_u(order, xi)  # (N+1, M)
@@ -71,6 +77,8 @@ class ChunkStats:
             x_moment=(basis * w) @ x,
             x_rep=x_rep,
             v_rep=v_rep,
+            x2_rep=x2_rep,
+            rep_weight=rep_weight,
         )
 
     def merge(self, other: ChunkStats) -> ChunkStats:
@@ -90,6 +98,8 @@ class ChunkStats:
             x_moment=self.x_moment + other.x_moment,
             x_rep=self.x_rep + other.x_rep,
             v_rep=self.v_rep + other.v_rep,
+            x2_rep=self.x2_rep + other.x2_rep,
+            rep_weight=self.rep_weight + other.rep_weight,
             rhs_evaluations=self.rhs_evaluations + other.rhs_evaluations,
         )
 
@@ -261,6 +271,7 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
         v_var = total.v_m2 / total.weight
         x_sem = np.full_like(x_var, np.nan)
         v_sem = np.full_like(v_var, np.nan)
+        x_var_sem = np.full_like(x_var, np.nan)
     else:
         corr = M / (M - 1) if M > 1 else math.nan
         x_var = total.x_m2 / total.weight * corr
@@ -270,9 +281,16 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
             share = total.weight / replicates
             x_sem = np.std(total.x_rep / share, axis=0, ddof=1) / np.sqrt(replicates)
             v_sem = np.std(total.v_rep / share, axis=0, ddof=1) / np.sqrt(replicates)
+            # each replicate's own variance estimate; their spread is the variance's SE
+            wr = total.rep_weight[:, None]
+            m_r = total.x_rep / wr
+            var_r = np.maximum(total.x2_rep / wr - m_r**2, 0.0)
+            x_var_sem = np.std(var_r, axis=0, ddof=1) / np.sqrt(replicates)
         else:
             x_sem = np.sqrt(x_var / M)
             v_sem = np.sqrt(v_var / M)
+            # normal-theory standard error of a sample variance
+            x_var_sem = x_var * math.sqrt(2.0 / (M - 1)) if M > 1 else np.full_like(x_var, math.nan)
     data = {
         "x_mean": ("time", total.x_mean, {"long_name": "Monte Carlo mean E[x]", "units": "1"}),
         "v_mean": ("time", total.v_mean, {"long_name": "Monte Carlo mean E[x']", "units": "1"}),
@@ -280,6 +298,8 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
         "v_var": ("time", v_var, {"long_name": "Monte Carlo variance Var[x']", "units": "1"}),
         "x_sem": ("time", x_sem, {"long_name": "standard error of the mean of x", "units": "1"}),
         "v_sem": ("time", v_sem, {"long_name": "standard error of the mean of x'", "units": "1"}),
+        "x_var_sem": ("time", x_var_sem, {"long_name": "standard error of the variance of x",
+                                          "units": "1"}),
         "x_coef": (("order", "time"), total.x_moment / total.weight,
                    {"long_name": "Monte Carlo estimate of E[x U_i(xi)]", "units": "1"}),
         "n_impacts": ("sample", n_impacts, {"long_name": "impacts of each sample", "units": "1"}),

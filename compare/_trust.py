@@ -1,0 +1,91 @@
+"""Verdicts: does an OPA curve agree with the Monte Carlo truth, and until when?
+
+Plain numpy on arrays over time; no model, no xarray. The criterion, for the mean
+(``e = x_0 - E_MC[x]``, spread ``s = sqrt(Var_MC[x])``, MC standard error ``se``)::
+
+    R_e(t) <= tol * R_s(t) + z * R_se(t) + floor        for every output t <= H
+
+where ``R_a(t) = sqrt(mean of a^2 over the outputs in [0, t])`` is a running root mean
+square. In words: the OPA mean stays within ``tol`` of the ensemble's own spread, after
+allowing ``z`` MC standard errors for the reference's noise. The running RMS makes the
+verdict robust to the instants where the spread or the error crosses zero, and monotone
+in the horizon: the *first time of disagreement* is the first t where the inequality
+fails, and OPA agrees over H exactly when that time is past H. The variance uses the
+same form with ``e = Var_OPA - Var_MC``, scale ``Var_MC`` and the variance's SE.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+
+def running_rms(a: np.ndarray) -> np.ndarray:
+    """sqrt(cumulative mean of a^2) along the last axis."""
+    a = np.asarray(a, dtype=float)
+    k = np.arange(1, a.shape[-1] + 1)
+    return np.sqrt(np.cumsum(a * a, axis=-1) / k)
+
+
+def excess(err: np.ndarray, scale: np.ndarray, sem: np.ndarray, *, tol: float,
+           z: float = 0.0, floor: float = 0.0) -> np.ndarray:
+    """``R_e - tol R_scale - z R_se - floor`` at every output (> 0: disagreement)."""
+    sem = np.where(np.isfinite(sem), sem, 0.0)
+    return running_rms(err) - tol * running_rms(scale) - z * running_rms(sem) - floor
+
+
+def first_disagreement(t: np.ndarray, err: np.ndarray, scale: np.ndarray, sem: np.ndarray,
+                       *, tol: float, z: float, floor: float) -> float:
+    """The first output time at which the criterion fails (inf if it never does)."""
+    bad = np.flatnonzero(excess(err, scale, sem, tol=tol, z=z, floor=floor) > 0)
+    return float(t[bad[0]]) if len(bad) else float("inf")
+
+
+def marginal(err, scale, sem, *, tol: float, z: float, floor: float, upto: int) -> bool:
+    """Whether the verdict over the first ``upto`` outputs hangs on the MC noise: it
+    differs between no allowance for the noise and twice the allowance."""
+    strict = excess(err[:upto], scale[:upto], sem[:upto], tol=tol, z=0.0, floor=floor)
+    loose = excess(err[:upto], scale[:upto], sem[:upto], tol=tol, z=2 * z, floor=floor)
+    return bool((strict <= 0).all()) != bool((loose <= 0).all())
+
+
+def window_errors(err: np.ndarray, scale: np.ndarray, sem: np.ndarray,
+                  upto: int) -> tuple[float, float, float]:
+    """RMS error over the first ``upto`` outputs: absolute, in MC standard errors, and
+    relative to the RMS of ``scale`` (the response's spread, or the variance)."""
+    rms = float(np.sqrt(np.mean(err[:upto] ** 2)))
+    se = sem[:upto]
+    se_rms = float(np.sqrt(np.mean(se**2))) if np.isfinite(se).all() else float("nan")
+    sc = float(np.sqrt(np.mean(scale[:upto] ** 2)))
+    in_se = rms / se_rms if se_rms > 0 else float("inf")
+    rel = rms / sc if sc > 0 else (0.0 if rms == 0 else float("inf"))
+    return rms, in_se, rel
+
+
+def bisect_boundary(agrees: Callable[[float], bool], lo: float, hi: float,
+                    resolution: float, *, max_steps: int = 60) -> tuple[float, float, int]:
+    """Locate the change from "agrees" (at ``lo``) to "does not" (at ``hi``) by bisection.
+
+    ``agrees(lo)`` is taken as True and ``agrees(hi)`` as False (the caller knows them).
+    Returns the final bracket ``(lo, hi)``, ``hi - lo <= resolution``, and the number of
+    evaluations. When the verdict is not monotone inside the bracket, this finds *a*
+    boundary inside it, not necessarily the smallest.
+    """
+    if not lo < hi:
+        raise ValueError(f"need lo < hi, got [{lo}, {hi}]")
+    if not resolution > 0:
+        raise ValueError(f"resolution must be > 0, got {resolution}")
+    steps = 0
+    while hi - lo > resolution and steps < max_steps:
+        mid = 0.5 * (lo + hi)
+        if agrees(mid):
+            lo = mid
+        else:
+            hi = mid
+        steps += 1
+    return lo, hi, steps
+
+
+__all__ = ["bisect_boundary", "excess", "first_disagreement", "marginal", "running_rms",
+           "window_errors"]

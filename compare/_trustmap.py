@@ -1,0 +1,706 @@
+"""The trust map: where does OPA agree with Monte Carlo, where does it stop, and why?
+
+Over a grid of the intensity sigma and one model parameter q (default: omega over the
+section 3.2 range), each point runs
+
+* a Monte Carlo ensemble of the true sampled impact system (scrambled Sobol, randomised-QMC
+  standard errors of the mean and the variance), with more samples only where the verdict
+  hangs on the MC noise (:func:`compare._trust.marginal`);
+* the OPA equivalent system for every N and every variant (impact law x truncation),
+  all compared with that one ensemble;
+
+and gives, per horizon, the RMS error of x_0 and of the variance (absolute, in MC standard
+errors, relative to the spread) with the verdict of :mod:`compare._trust`. For each q,
+``sigma*`` -- the largest sigma at which OPA at the highest N still agrees -- is located by
+bisection in sigma between the last agreeing and the first failing grid value. The sampled
+systems' impact sequences are scanned along the uncertain parameter
+(:func:`opa._splits.find_splits`): their splits, what happens there, and the distribution
+of impact counts at every grid point say *why* the boundary is where it is.
+
+Monte Carlo runs are written to ``OUTDIR/parts/`` as they finish and reused by a rerun with
+the same settings, so an interrupted map resumes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+import os
+import time
+import tomllib
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
+from mc._ensemble import simulate_mc
+from mc._sampling import semicircle_cdf
+from opa._dataset import provenance_attrs, write_netcdf
+from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions, preset, time_grid
+from opa._simulate import simulate_dmr, simulate_opa
+from opa._splits import SPLIT_KINDS, find_splits
+
+VARIANTS = (("mean", "galerkin"), ("ensemble", "galerkin"), ("mean", "paper"),
+            ("ensemble", "paper"))
+CRITERIA = ("mean", "variance")
+PAPER_SIGMAS = (0.01, 0.014, 0.02, 0.03)
+
+# The swept parameter's default range for each of the paper's sets (sections 3.1-3.3).
+SWEEPS = {
+    "3.1": ("c", tuple(np.round(np.linspace(0.01, 0.1, 7), 6))),
+    "3.2": ("omega", (3.98, 4.035, 4.09, 4.145, 4.2)),
+    "3.3": ("omega", tuple(np.round(np.linspace(3.9, 5.9, 6), 6))),
+}
+DEFAULT_SIGMAS = (0.005, 0.01, 0.014, 0.02, 0.025, 0.03, 0.04, 0.05)
+SIGMAS_33 = (0.01, 0.02, 0.05, 0.1, 0.14, 0.16, 0.18, 0.2)
+
+
+@dataclass(frozen=True)
+class ValidateConfig:
+    """What ``opa-mc validate`` runs; the defaults are the embedded default job.
+
+    The section 3.2 set, omega in {3.98, 4.035, 4.09, 4.145, 4.2}, sigma from 0.005 to
+    0.05 (the paper's 0.01, 0.014, 0.02, 0.03 included), N = 0..8, all four variants,
+    horizons of 10 and 50 forcing periods, 8 outputs per period, Sobol ensembles of 1024
+    samples doubled up to 8192 where the verdict hangs on the MC noise, tolerance 0.1 of
+    the spread for the mean and 0.25 of the variance for the variance, 3 standard errors
+    of allowance, sigma* to 1e-3, splits located to 1e-6 in xi at the smallest sigma.
+    """
+
+    preset: str = "3.2"
+    oscillator: Oscillator = field(default_factory=lambda: preset("3.2"))
+    options: SolverOptions = field(default_factory=lambda: SolverOptions(rtol=1e-9, atol=1e-9))
+    parameter: str = "omega"
+    values: tuple[float, ...] = SWEEPS["3.2"][1]
+    sigmas: tuple[float, ...] = DEFAULT_SIGMAS
+    orders: tuple[int, ...] = tuple(range(9))
+    uncertain: str = "mu"
+    horizons: tuple[float, ...] = (10.0, 50.0)
+    per_period: int = 8
+    samples: int = 1024
+    max_samples: int = 8192
+    seed: int = 0
+    tolerance: float = 0.1
+    var_tolerance: float = 0.25
+    z: float = 3.0
+    resolution: float = 1e-3
+    split_resolution: float = 1e-6
+    outdir: str = "results"
+    plots: bool = True
+    scheduler: str | None = None
+
+    def __post_init__(self):
+        if self.parameter not in PARAMETER_NAMES or self.parameter in ("x0", "v0"):
+            raise ValueError(f"parameter must be a model parameter, got {self.parameter!r}")
+        if self.parameter == self.uncertain:
+            raise ValueError(f"the swept parameter must differ from the uncertain one, got "
+                             f"{self.parameter!r} for both")
+        if self.uncertain not in ("mu", "a", "c"):
+            raise ValueError(f"uncertain must be one of mu, a, c, got {self.uncertain!r}")
+        for name in ("values", "sigmas", "horizons"):
+            seq = getattr(self, name)
+            if not isinstance(seq, tuple) or not seq or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                    for v in seq):
+                raise ValueError(f"{name} must be a non-empty list of finite numbers, got {seq!r}")
+            if len(set(seq)) != len(seq) or list(seq) != sorted(seq):
+                raise ValueError(f"{name} must be strictly increasing, got {seq}")
+        if self.sigmas[0] <= 0:
+            raise ValueError(f"sigmas must be > 0, got {self.sigmas}")
+        if self.horizons[0] <= 0:
+            raise ValueError(f"horizons must be > 0 forcing periods, got {self.horizons}")
+        if not self.orders or any(int(n) != n or n < 0 for n in self.orders):
+            raise ValueError(f"orders must be non-negative integers, got {self.orders}")
+        if int(self.per_period) != self.per_period or self.per_period < 1:
+            raise ValueError(f"per_period must be a positive integer, got {self.per_period}")
+        for h in self.horizons:
+            if abs(h * self.per_period - round(h * self.per_period)) > 1e-9:
+                raise ValueError(f"horizon {h} is not a whole number of outputs at "
+                                 f"per_period = {self.per_period}")
+        if int(self.samples) != self.samples or self.samples < 64 or self.samples % 16:
+            raise ValueError(f"samples must be a multiple of 16 and >= 64, got {self.samples}")
+        if self.max_samples < self.samples:
+            raise ValueError(f"max_samples must be >= samples, got {self.max_samples}")
+        for name in ("tolerance", "var_tolerance", "resolution", "split_resolution"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if not (math.isfinite(self.z) and self.z >= 0):
+            raise ValueError(f"z must be >= 0, got {self.z}")
+        if not isinstance(self.plots, bool):
+            raise ValueError(f"plots must be true or false, got {self.plots!r}")
+
+    @property
+    def nmax(self) -> int:
+        return max(self.orders)
+
+    @property
+    def variants(self) -> list[str]:
+        return [f"{law}/{trunc}" for law, trunc in VARIANTS]
+
+    def oscillator_at(self, value: float) -> Oscillator:
+        return self.oscillator.replace(**{self.parameter: float(value)})
+
+    def key(self, value: float, sigma: float, samples: int) -> str:
+        """A hash of everything one Monte Carlo run of the map depends on."""
+        blob = json.dumps(
+            [self.oscillator_at(value).as_dict(), dataclasses.asdict(self.options), sigma,
+             self.uncertain, samples, self.seed, max(self.horizons), self.per_period,
+             self.nmax],
+            sort_keys=True, default=str,
+        )
+        return hashlib.sha256(blob.encode()).hexdigest()[:12]
+
+
+def load_config(path: str | None, **overrides) -> ValidateConfig:
+    """A configuration from a TOML file (all keys optional) and keyword overrides.
+
+    TOML layout::
+
+        preset = "3.2"            # 3.1 sweeps c, 3.2 and 3.3 sweep omega
+        parameter = "omega"
+        values = [3.98, 4.09, 4.2]
+        sigmas = [0.005, 0.01, 0.02]
+        horizons = [10, 50]
+        [model]                   # any Oscillator parameter
+        F0 = 0.1
+        [solver]                  # any SolverOptions field
+        rtol = 1e-9
+    """
+    data: dict = {}
+    if path is not None:
+        try:
+            with open(path, "rb") as fh:
+                data = tomllib.load(fh)
+        except (FileNotFoundError, IsADirectoryError, PermissionError) as err:
+            raise ValueError(f"config file {path}: {err.strerror}") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+            raise ValueError(f"config file {path} is not valid TOML: {err}") from None
+    model = data.pop("model", {})
+    solver = data.pop("solver", {})
+    for name, table in (("model", model), ("solver", solver)):
+        if not isinstance(table, dict):
+            raise ValueError(f"config [{name}] must be a table, got {table!r}")
+    model = {**model, **(overrides.pop("model", None) or {})}
+    solver = {**solver, **(overrides.pop("solver", None) or {})}
+    known = {f.name for f in dataclasses.fields(ValidateConfig)} - {"oscillator", "options"}
+    unknown = set(data) - known
+    if unknown:
+        raise ValueError(f"unknown config key(s) {sorted(unknown)}; known: {sorted(known)}")
+    data.update({k: v for k, v in overrides.items() if v is not None})
+    name = data.setdefault("preset", model.pop("preset", "3.2"))
+    if name not in SWEEPS:
+        raise ValueError(f"preset must be one of {', '.join(SWEEPS)}, got {name!r}")
+    parameter, values = SWEEPS[name]
+    data.setdefault("parameter", parameter)
+    if "values" not in data:
+        if data["parameter"] != parameter:
+            raise ValueError(f"values are needed when sweeping {data['parameter']!r}")
+        data["values"] = values
+    if name == "3.3":
+        data.setdefault("sigmas", SIGMAS_33)
+    for key in ("values", "sigmas", "orders", "horizons"):
+        if key in data:
+            if not isinstance(data[key], (list, tuple)):
+                raise ValueError(f"{key} must be a list, got {data[key]!r}")
+            data[key] = tuple(data[key])
+    try:
+        options = dataclasses.replace(SolverOptions(rtol=1e-9, atol=1e-9), **solver)
+        osc = preset(name, **model)
+    except TypeError as err:
+        raise ValueError(f"unknown model or solver key: {err}") from None
+    return ValidateConfig(oscillator=osc, options=options, **data)
+
+
+@dataclass
+class Point:
+    """One (q, sigma) of the map: the MC reference, the OPA curves and their verdicts."""
+
+    sigma: float
+    samples: int
+    mc: dict  # x_mean, x_var, x_sem, x_var_sem (over outputs), impacts (min, max), seconds
+    opa_mean: np.ndarray  # (variant, N, output)
+    opa_var: np.ndarray
+    first_impact: np.ndarray  # (variant, N) in forcing periods
+    errors: np.ndarray  # (variant, N, horizon, criterion, 3): abs, in SE, relative
+    pre_impact: np.ndarray  # (variant, N) RMS error of the mean before OPA's first impact
+    disagree: np.ndarray  # (variant, N, criterion) first time of disagreement [periods]
+    agrees: np.ndarray  # (variant, N, horizon, criterion) bool
+    seconds: float = 0.0
+
+
+class _Map:
+    """The computation for one configuration (one object so that caches are shared)."""
+
+    def __init__(self, cfg: ValidateConfig, *, progress: bool, log):
+        self.cfg = cfg
+        self.log = log
+        self.progress = progress
+        self.parts = os.path.join(cfg.outdir, "parts")
+        self.floor = 10 * (cfg.options.rtol + cfg.options.atol)
+        self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
+        self.mc_runs = 0
+        self.bar = None
+
+    # -- one point ---------------------------------------------------------------------
+    def _mc(self, osc, value, sigma, samples, times):
+        path = os.path.join(self.parts, f"mc_{self.cfg.parameter}{value:g}_sigma{sigma:.6g}_"
+                            f"M{samples}_{self.cfg.key(value, sigma, samples)}.nc")
+        if os.path.exists(path):
+            with xr.open_dataset(path) as ds:
+                return ds.load()
+        start = time.perf_counter()
+        ds = simulate_mc(osc, sigma=sigma, samples=samples, sampler="sobol", seed=self.cfg.seed,
+                         order=0, uncertain=self.cfg.uncertain, times=times,
+                         options=self.cfg.options, scheduler=self.cfg.scheduler,
+                         progress=False, allow_negative=True)
+        ds = ds.drop_vars(["xi", "weight", "sample", "n_impacts"]).assign_attrs(
+            impacts_min=int(ds.n_impacts.min()), impacts_max=int(ds.n_impacts.max()),
+            wall_seconds=time.perf_counter() - start)
+        write_netcdf(ds, path)
+        self.mc_runs += 1
+        return ds
+
+    def evaluate(self, value: float, sigma: float) -> Point:
+        cfg = self.cfg
+        start = time.perf_counter()
+        osc = cfg.oscillator_at(value)
+        times = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
+        V, N = len(VARIANTS), len(cfg.orders)
+        opa_mean = np.empty((V, N, len(times)))
+        opa_var = np.empty((V, N, len(times)))
+        first = np.empty((V, N))
+        T = osc.forcing_period
+        for v, (law, trunc) in enumerate(VARIANTS):
+            for k, order in enumerate(cfg.orders):
+                ds = simulate_opa(osc, sigma=sigma, order=order, uncertain=cfg.uncertain,
+                                  truncation=trunc, impact_law=law, times=times,
+                                  options=cfg.options, allow_negative=True)
+                opa_mean[v, k] = ds.x_mean.values
+                opa_var[v, k] = ds.x_var.values
+                first[v, k] = (float(ds.impact_time[0]) / T if ds.sizes["impact"]
+                               else np.inf)
+        samples = cfg.samples
+        while True:
+            mc = self._mc(osc, value, sigma, samples, times)
+            point = self._judge(sigma, samples, mc, opa_mean, opa_var, first, times / T)
+            if samples * 2 > cfg.max_samples or not self._hangs_on_noise(point):
+                break
+            samples *= 2
+        point.seconds = time.perf_counter() - start
+        return point
+
+    def _hangs_on_noise(self, point: Point) -> bool:
+        cfg, k = self.cfg, len(self.cfg.orders) - 1
+        mc = point.mc
+        sd = np.sqrt(np.maximum(mc["x_var"], 0.0))
+        for v in range(len(VARIANTS)):
+            e_mean = point.opa_mean[v, k] - mc["x_mean"]
+            e_var = point.opa_var[v, k] - mc["x_var"]
+            for n in self.n_h:
+                if marginal(e_mean, sd, mc["x_sem"], tol=cfg.tolerance, z=cfg.z,
+                            floor=self.floor, upto=n):
+                    return True
+                if marginal(e_var, mc["x_var"], mc["x_var_sem"], tol=cfg.var_tolerance,
+                            z=cfg.z, floor=self.floor**2, upto=n):
+                    return True
+        return False
+
+    def _judge(self, sigma, samples, mc_ds, opa_mean, opa_var, first, periods) -> Point:
+        cfg = self.cfg
+        mc = {name: mc_ds[name].values for name in ("x_mean", "x_var", "x_sem", "x_var_sem")}
+        mc["impacts"] = (int(mc_ds.attrs["impacts_min"]), int(mc_ds.attrs["impacts_max"]))
+        mc["seconds"] = float(mc_ds.attrs["wall_seconds"])
+        mc["rhs"] = int(mc_ds.attrs["rhs_evaluations"])
+        sd = np.sqrt(np.maximum(mc["x_var"], 0.0))
+        V, N = opa_mean.shape[:2]
+        H = len(cfg.horizons)
+        errors = np.empty((V, N, H, 2, 3))
+        disagree = np.empty((V, N, 2))
+        pre = np.empty((V, N))
+        for v in range(V):
+            for k in range(N):
+                checks = (
+                    (opa_mean[v, k] - mc["x_mean"], sd, mc["x_sem"], cfg.tolerance, self.floor),
+                    (opa_var[v, k] - mc["x_var"], mc["x_var"], mc["x_var_sem"],
+                     cfg.var_tolerance, self.floor**2),
+                )
+                for c, (err, scale, sem, tol, floor) in enumerate(checks):
+                    disagree[v, k, c] = first_disagreement(periods, err, scale, sem, tol=tol,
+                                                           z=cfg.z, floor=floor)
+                    for h, n in enumerate(self.n_h):
+                        errors[v, k, h, c] = window_errors(err, scale, sem, n)
+                before = periods < first[v, k]
+                e0 = opa_mean[v, k][before] - mc["x_mean"][before]
+                pre[v, k] = float(np.sqrt(np.mean(e0**2))) if before.any() else np.nan
+        horizons = np.array(cfg.horizons)
+        agrees = disagree[:, :, None, :] > horizons[None, None, :, None]
+        return Point(sigma, samples, mc, opa_mean, opa_var, first, errors, pre, disagree,
+                     agrees)
+
+    # -- one value of the swept parameter ------------------------------------------------
+    def splits(self, value: float):
+        """Splits of the sampled systems' event sequences over the largest ensemble, per
+        horizon, and the per-horizon count segments."""
+        cfg = self.cfg
+        osc = cfg.oscillator_at(value)
+        centre = getattr(osc, cfg.uncertain)
+        smax = max(cfg.sigmas)
+        T = osc.forcing_period
+        cache: dict = {"t_end": max(cfg.horizons) * T}
+        found = []
+        for h in sorted(cfg.horizons, reverse=True):
+            splits, truncated = find_splits(
+                osc, cfg.options, cfg.uncertain, centre - smax, centre + smax, h * T,
+                tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache)
+            found.append((h, splits, truncated))
+        seq_centre = cache.get(centre) or _sequence(osc, cfg, cache, centre)
+        found.sort(key=lambda item: cfg.horizons.index(item[0]))
+        return centre, found, seq_centre, T
+
+    def boundary(self, value, grid: dict[float, Point]):
+        """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection."""
+        cfg = self.cfg
+        k = len(cfg.orders) - 1
+        probes: dict[float, Point] = dict(grid)
+        V, H, C = len(VARIANTS), len(cfg.horizons), 2
+        star = np.full((V, H, C, 2), np.nan)
+        steps = np.zeros((V, H, C), dtype=np.int64)
+        for v in range(V):
+            for h in range(H):
+                for c in range(C):
+                    def agrees(s, v=v, h=h, c=c):
+                        s = float(np.round(s, 12))
+                        if s not in probes:
+                            probes[s] = self.evaluate(value, s)
+                            self._tick()
+                        return bool(probes[s].agrees[v, k, h, c])
+
+                    known = sorted(probes)
+                    failing = [s for s in known if not probes[s].agrees[v, k, h, c]]
+                    if not failing:
+                        star[v, h, c] = (known[-1], np.nan)  # agrees at every sigma tried
+                        continue
+                    hi = failing[0]
+                    lo = max([s for s in known if s < hi], default=0.0)
+                    lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
+                    star[v, h, c] = (lo, hi)
+                    steps[v, h, c] = n
+        return star, steps, probes
+
+    def _tick(self):
+        if self.bar is not None:
+            self.bar.total += 1
+            self.bar.update(1)
+
+    def run(self) -> xr.Dataset:
+        from tqdm.auto import tqdm
+
+        cfg = self.cfg
+        os.makedirs(self.parts, exist_ok=True)
+        total = len(cfg.values) * len(cfg.sigmas)
+        results = []
+        start = time.perf_counter()
+        with tqdm(total=total, unit="point", desc="trust map", disable=not self.progress) as bar:
+            self.bar = bar
+            for value in cfg.values:
+                self.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
+                         f"{len(cfg.sigmas)} sigmas x {len(VARIANTS) * len(cfg.orders)} OPA "
+                         f"runs against Monte Carlo ...")
+                split_info = self.splits(value)
+                grid = {}
+                for sigma in cfg.sigmas:
+                    grid[float(sigma)] = self.evaluate(value, float(sigma))
+                    bar.update(1)
+                star, steps, probes = self.boundary(value, grid)
+                results.append((value, split_info, grid, star, steps, probes))
+        self.bar = None
+        ds = _assemble(cfg, results)
+        ds = xr.merge([ds, _details(cfg, results)], combine_attrs="drop_conflicts")
+        ds.attrs.update(_attrs(cfg))
+        ds.attrs["wall_seconds"] = time.perf_counter() - start
+        ds.attrs["mc_runs_computed"] = self.mc_runs
+        return ds
+
+
+def _sequence(osc, cfg, cache, value):
+    from opa._splits import event_sequence
+
+    seq = event_sequence(osc.replace(**{cfg.uncertain: value}), cfg.options, cache["t_end"])
+    cache[value] = seq
+    return seq
+
+
+def count_distribution(centre, sigma, splits, count_at_centre) -> dict[int, float]:
+    """P(impacts up to the horizon = k) for the ensemble ``centre + sigma xi``, exact
+    between the located changes of the count (``splits`` sorted by value, each with the
+    counts on its two sides)."""
+    inside = [s for s in splits if abs(s.value - centre) < sigma]
+    if not inside:
+        return {count_at_centre: 1.0}
+    edges = [-1.0] + [(s.value - centre) / sigma for s in inside] + [1.0]
+    counts = [inside[0].left] + [s.right for s in inside]
+    prob: dict[int, float] = {}
+    for lo, hi, n in zip(edges[:-1], edges[1:], counts):
+        prob[n] = prob.get(n, 0.0) + float(semicircle_cdf(hi) - semicircle_cdf(lo))
+    return prob
+
+
+def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
+    Q, S, V, N, H = (len(cfg.values), len(cfg.sigmas), len(VARIANTS), len(cfg.orders),
+                     len(cfg.horizons))
+    n_out = int(round(max(cfg.horizons) * cfg.per_period)) + 1
+    f = lambda *shape: np.full(shape, np.nan)  # noqa: E731
+    errors, agrees, disagree = f(Q, S, V, N, H, 2, 3), np.zeros((Q, S, V, N, H, 2), np.int8), \
+        f(Q, S, V, N, 2)
+    pre, first = f(Q, S, V, N), f(Q, S, V, N)
+    opa_mean, opa_var = f(Q, S, V, N, n_out), f(Q, S, V, N, n_out)
+    mc = {k: f(Q, S, n_out) for k in ("x_mean", "x_var", "x_sem", "x_var_sem")}
+    samples, imin, imax = (np.zeros((Q, S), np.int64) for _ in range(3))
+    mc_seconds, mc_rhs, seconds = f(Q, S), np.zeros((Q, S), np.int64), f(Q, S)
+    star = f(Q, V, H, 2, 2)
+    steps = np.zeros((Q, V, H, 2), np.int64)
+    max_split = max(1, max(len(sp) for r in results for (_, sp, _) in r[1][1]))
+    sv, skind, stime, sspeed = f(Q, H, max_split), np.full((Q, H, max_split), -1, np.int8), \
+        f(Q, H, max_split), f(Q, H, max_split)
+    sleft, sright = (np.full((Q, H, max_split), -1, np.int64) for _ in range(2))
+    struncated = np.zeros((Q, H), np.int8)
+    sigma_split = f(Q, H)
+    split_kind_nearest = np.full((Q, H), -1, np.int8)
+    max_probes = max(len(r[5]) for r in results)
+    probe_sigma = f(Q, max_probes)
+    probe_agrees = np.full((Q, max_probes, V, H, 2), -1, np.int8)
+    counts: dict = {}
+    for q, (value, (centre, found, seq_centre, T), grid, st, stp, probes) in enumerate(results):
+        for s, sigma in enumerate(cfg.sigmas):
+            p = grid[float(sigma)]
+            errors[q, s], agrees[q, s], disagree[q, s] = p.errors, p.agrees, p.disagree
+            pre[q, s], first[q, s] = p.pre_impact, p.first_impact
+            opa_mean[q, s], opa_var[q, s] = p.opa_mean, p.opa_var
+            for k in mc:
+                mc[k][q, s] = p.mc[k]
+            samples[q, s] = p.samples
+            imin[q, s], imax[q, s] = p.mc["impacts"]
+            mc_seconds[q, s], mc_rhs[q, s], seconds[q, s] = p.mc["seconds"], p.mc["rhs"], \
+                p.seconds
+        star[q], steps[q] = st, stp
+        for j, (sig, point) in enumerate(sorted(probes.items())):
+            probe_sigma[q, j] = sig
+            probe_agrees[q, j] = point.agrees[:, -1]
+        for h, (horizon, splits, truncated) in enumerate(found):
+            struncated[q, h] = truncated
+            real = [sp for sp in splits if sp.kind != "horizon"]
+            if real:
+                near = min(real, key=lambda sp: abs(sp.value - centre))
+                sigma_split[q, h] = abs(near.value - centre)
+                split_kind_nearest[q, h] = SPLIT_KINDS.index(near.kind)
+            for j, sp in enumerate(splits):
+                sv[q, h, j], stime[q, h, j], sspeed[q, h, j] = sp.value, sp.time / T, sp.speed
+                skind[q, h, j] = SPLIT_KINDS.index(sp.kind)
+                sleft[q, h, j], sright[q, h, j] = sp.left, sp.right
+            for s, sigma in enumerate(cfg.sigmas):
+                counts[(q, s, h)] = count_distribution(centre, sigma, splits,
+                                                       seq_centre.count(horizon * T))
+    kmax = max(max(d) for d in counts.values())
+    count_prob = np.zeros((Q, S, H, kmax + 1))
+    for (q, s, h), dist in counts.items():
+        for n, prob in dist.items():
+            count_prob[q, s, h, n] = prob
+    dims = ("value", "sigma", "variant", "N")
+    one = {"units": "1"}
+    kinds = {"flag_values": np.arange(len(SPLIT_KINDS), dtype=np.int8),
+             "flag_meanings": " ".join(k.replace(" ", "_") for k in SPLIT_KINDS),
+             "units": "1"}
+    data = {
+        "err_mean": (dims + ("horizon",), errors[..., 0, 0],
+                     {"long_name": "RMS error of x_0 against the MC mean", **one}),
+        "err_mean_se": (dims + ("horizon",), errors[..., 0, 1],
+                        {"long_name": "RMS error of x_0 in RMS MC standard errors", **one}),
+        "err_mean_rel": (dims + ("horizon",), errors[..., 0, 2],
+                         {"long_name": "RMS error of x_0 relative to the RMS MC spread", **one}),
+        "err_var": (dims + ("horizon",), errors[..., 1, 0],
+                    {"long_name": "RMS error of the OPA variance against the MC variance",
+                     **one}),
+        "err_var_se": (dims + ("horizon",), errors[..., 1, 1],
+                       {"long_name": "RMS variance error in RMS MC standard errors", **one}),
+        "err_var_rel": (dims + ("horizon",), errors[..., 1, 2],
+                        {"long_name": "RMS variance error relative to the RMS MC variance",
+                         **one}),
+        "agrees": (dims + ("horizon", "criterion"), agrees,
+                   {"long_name": "1 where OPA agrees with MC over the horizon", **one}),
+        "disagree_time": (dims + ("criterion",), disagree,
+                          {"long_name": "first time of disagreement (inf: never within the "
+                           "longest horizon)", "units": "forcing periods"}),
+        "pre_impact_err": (dims, pre, {"long_name": "RMS error of x_0 before OPA's first "
+                                       "impact", **one}),
+        "first_impact": (dims, first, {"long_name": "time of OPA's first impact",
+                                       "units": "forcing periods"}),
+        "opa_x_mean": (dims + ("periods",), opa_mean, {"long_name": "OPA mean x_0", **one}),
+        "opa_x_var": (dims + ("periods",), opa_var, {"long_name": "OPA variance", **one}),
+        "mc_x_mean": (("value", "sigma", "periods"), mc["x_mean"],
+                      {"long_name": "MC mean E[x]", **one}),
+        "mc_x_var": (("value", "sigma", "periods"), mc["x_var"],
+                     {"long_name": "MC variance Var[x]", **one}),
+        "mc_x_sem": (("value", "sigma", "periods"), mc["x_sem"],
+                     {"long_name": "MC standard error of E[x]", **one}),
+        "mc_x_var_sem": (("value", "sigma", "periods"), mc["x_var_sem"],
+                         {"long_name": "MC standard error of Var[x]", **one}),
+        "mc_samples": (("value", "sigma"), samples, {"long_name": "MC samples used", **one}),
+        "mc_impacts_min": (("value", "sigma"), imin,
+                           {"long_name": "fewest impacts of an MC sample (longest horizon)",
+                            **one}),
+        "mc_impacts_max": (("value", "sigma"), imax,
+                           {"long_name": "most impacts of an MC sample (longest horizon)",
+                            **one}),
+        "mc_seconds": (("value", "sigma"), mc_seconds, {"long_name": "MC wall time",
+                                                        "units": "s"}),
+        "mc_rhs_evaluations": (("value", "sigma"), mc_rhs,
+                               {"long_name": "MC right-hand sides", **one}),
+        "point_seconds": (("value", "sigma"), seconds,
+                          {"long_name": "wall time of the point (OPA + MC)", "units": "s"}),
+        "sigma_star": (("value", "variant", "horizon", "criterion"), star[..., 0],
+                       {"long_name": "largest sigma at which OPA (N = Nmax) agrees: lower end "
+                        "of the bisection bracket", **one}),
+        "sigma_star_upper": (("value", "variant", "horizon", "criterion"), star[..., 1],
+                             {"long_name": "upper end of the bisection bracket (NaN: agrees at "
+                              "every sigma tried)", **one}),
+        "bisection_steps": (("value", "variant", "horizon", "criterion"), steps,
+                            {"long_name": "bisection evaluations", **one}),
+        "probe_sigma": (("value", "probe"), probe_sigma,
+                        {"long_name": "every sigma evaluated (grid and bisection)", **one}),
+        "probe_agrees": (("value", "probe", "variant", "horizon", "criterion"), probe_agrees,
+                         {"long_name": "verdict at N = Nmax at each evaluated sigma (-1: none)",
+                          **one}),
+        "split_value": (("value", "horizon", "split"), sv,
+                        {"long_name": f"value of {cfg.uncertain} where the sampled systems' "
+                         "event sequence changes", **one}),
+        "split_kind": (("value", "horizon", "split"), skind,
+                       {"long_name": "what happens at the split (-1: none)", **kinds}),
+        "split_time": (("value", "horizon", "split"), stime,
+                       {"long_name": "time of the first differing event",
+                        "units": "forcing periods"}),
+        "split_speed": (("value", "horizon", "split"), sspeed,
+                        {"long_name": "speed of the first differing event", **one}),
+        "split_left": (("value", "horizon", "split"), sleft,
+                       {"long_name": "impacts up to the horizon just below the split", **one}),
+        "split_right": (("value", "horizon", "split"), sright,
+                        {"long_name": "impacts up to the horizon just above the split", **one}),
+        "split_truncated": (("value", "horizon"), struncated,
+                            {"long_name": "1 where more splits exist than were located "
+                             "(the nearest to the nominal value were kept)", **one}),
+        "sigma_split": (("value", "horizon"), sigma_split,
+                        {"long_name": "smallest sigma whose ensemble contains a split "
+                         "(NaN: none within the largest sigma)", **one}),
+        "sigma_split_kind": (("value", "horizon"), split_kind_nearest,
+                             {"long_name": "kind of that nearest split", **kinds}),
+        "count_prob": (("value", "sigma", "horizon", "count"), count_prob,
+                       {"long_name": "probability of k impacts up to the horizon", **one}),
+    }
+    return xr.Dataset(
+        data,
+        coords={
+            "value": ("value", np.array(cfg.values, float), {"long_name": cfg.parameter}),
+            "sigma": ("sigma", np.array(cfg.sigmas, float)),
+            "variant": ("variant", np.array(cfg.variants, dtype=object)),
+            "N": ("N", np.array(cfg.orders)),
+            "horizon": ("horizon", np.array(cfg.horizons, float), {"units": "forcing periods"}),
+            "criterion": ("criterion", np.array(CRITERIA, dtype=object)),
+            "periods": ("periods", np.arange(n_out) / cfg.per_period,
+                        {"long_name": "time in forcing periods t omega / (2 pi)",
+                         "units": "forcing periods"}),
+            "count": ("count", np.arange(kmax + 1)),
+        },
+    )
+
+
+DENSE_PER_PERIOD = 64
+
+
+def _details(cfg: ValidateConfig, results) -> xr.Dataset:
+    """Dense-output phase portraits at the first swept value, and how far EMR_0 (sigma = 0,
+    N = Nmax) stays from the DMR, at each horizon."""
+    value = cfg.values[0]
+    osc = cfg.oscillator_at(value)
+    grid = results[0][2]
+    # the first grid sigma where mean/galerkin fails over the first horizon, else the last
+    sig = next((s for s in cfg.sigmas if not grid[float(s)].agrees[0, -1, 0, 0]), cfg.sigmas[-1])
+    times = time_grid(osc.omega, cfg.horizons[0], DENSE_PER_PERIOD)
+    curves = {}
+    for law in ("mean", "ensemble"):
+        ds = simulate_opa(osc, sigma=sig, order=cfg.nmax, uncertain=cfg.uncertain,
+                          impact_law=law, times=times, options=cfg.options, allow_negative=True)
+        curves[law] = (ds.x_mean.values, ds.v_mean.values)
+    ens = simulate_mc(osc, sigma=sig, samples=256, sampler="sobol", seed=cfg.seed, order=0,
+                      uncertain=cfg.uncertain, times=times, options=cfg.options,
+                      progress=False, allow_negative=True, keep_paths=True)
+    pick = np.argsort(ens.xi.values)[np.linspace(0, 255, 7).astype(int)]
+    long = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
+    dmr = simulate_dmr(osc, times=long, options=cfg.options).x.values
+    emr0 = simulate_opa(osc, sigma=0.0, order=cfg.nmax, times=long, options=cfg.options,
+                        uncertain=cfg.uncertain).x_mean.values
+    diff = [float(np.max(np.abs(emr0[: int(round(h * cfg.per_period)) + 1]
+                                - dmr[: int(round(h * cfg.per_period)) + 1])))
+            for h in cfg.horizons]
+    emr1 = simulate_opa(osc, sigma=0.0, order=0, times=long, options=cfg.options,
+                        uncertain=cfg.uncertain).x_mean.values
+    one = {"units": "1"}
+    return xr.Dataset(
+        {
+            "phase_opa_x": (("law", "phase_time"), np.stack([curves[k][0] for k in curves]),
+                            {"long_name": "OPA x_0 at N = Nmax", **one}),
+            "phase_opa_v": (("law", "phase_time"), np.stack([curves[k][1] for k in curves]),
+                            {"long_name": "OPA v_0 at N = Nmax", **one}),
+            "phase_mc_x": ("phase_time", ens.x_mean.values, {"long_name": "MC mean E[x]",
+                                                             **one}),
+            "phase_mc_v": ("phase_time", ens.v_mean.values, {"long_name": "MC mean E[x']",
+                                                             **one}),
+            "phase_sample_x": (("phase_sample", "phase_time"), ens.x.values[pick],
+                               {"long_name": "sample paths x", **one}),
+            "phase_sample_v": (("phase_sample", "phase_time"), ens.v.values[pick],
+                               {"long_name": "sample paths x'", **one}),
+            "phase_sample_xi": ("phase_sample", ens.xi.values[pick], {"long_name": "xi", **one}),
+            "emr0_dmr_difference": ("horizon", np.array(diff),
+                                    {"long_name": "max |x_0 - x_DMR| with sigma = 0, N = Nmax",
+                                     **one}),
+            "emr0_n0_dmr_difference": ((), float(np.max(np.abs(emr1 - dmr))),
+                                       {"long_name": "max |x_0 - x_DMR| with sigma = 0, N = 0, "
+                                        "longest horizon", **one}),
+        },
+        coords={"law": ("law", np.array(["mean", "ensemble"], dtype=object)),
+                "phase_time": ("phase_time", times / osc.forcing_period,
+                               {"units": "forcing periods"})},
+        attrs={"phase_value": float(value), "phase_sigma": float(sig)},
+    )
+
+
+def _attrs(cfg: ValidateConfig) -> dict:
+    attrs = provenance_attrs(
+        "validate", cfg.oscillator, cfg.options, sigma=max(cfg.sigmas), order=cfg.nmax,
+        uncertain=cfg.uncertain, truncation="galerkin,paper", impact_law="mean,ensemble",
+        seed=cfg.seed, sampler="sobol",
+    )
+    attrs.update(
+        preset=cfg.preset, parameter=cfg.parameter, samples=int(cfg.samples),
+        max_samples=int(cfg.max_samples), per_period=int(cfg.per_period),
+        tolerance=float(cfg.tolerance), var_tolerance=float(cfg.var_tolerance), z=float(cfg.z),
+        resolution=float(cfg.resolution), split_resolution=float(cfg.split_resolution),
+        criterion_text=(
+            "agrees over H when, at every output t <= H, the running RMS error <= tol x the "
+            "running RMS of the MC spread (variance: of the MC variance) + z x the running "
+            "RMS MC standard error + floor"),
+    )
+    return attrs
+
+
+def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print) -> xr.Dataset:
+    """Run the trust map and return its dataset (also written to OUTDIR/validate.nc)."""
+    ds = _Map(cfg, progress=progress, log=log).run()
+    write_netcdf(ds, os.path.join(cfg.outdir, "validate.nc"))
+    return ds
+
+
+__all__ = ["CRITERIA", "SWEEPS", "VARIANTS", "ValidateConfig", "count_distribution",
+           "load_config", "run_validation"]

@@ -1,0 +1,243 @@
+"""Where the sampled systems' impact sequences split: the discontinuities of x(t, xi) in xi.
+
+Every Monte Carlo sample is the deterministic impact oscillator with its own value of the
+uncertain parameter ``p``. Its *event sequence* up to a horizon H is the list of its
+impacts, stick and release events, each tagged with the impulse interval it falls in. Where
+that sequence changes as ``p`` varies, x(t, xi) stops being smooth in xi for t past the
+change, and a polynomial expansion in xi (OPA) cannot follow it.
+
+:func:`find_splits` scans ``p`` over an interval with single deterministic runs, bisects
+every change of the sequence to a given tolerance, and says what happens there:
+
+``grazing``
+    a new impact appears with a vanishing velocity (the trajectory touches the wall);
+``extra impact``
+    one side has an extra impact at a finite velocity (e.g. an impulse drives it into the
+    wall);
+``chatter``
+    the sequences differ inside a chatter burst (at least ``CHATTER_BURST`` impacts within
+    a tenth of a forcing period around the change) or in a sequence that ends in sticking;
+``impulse order``
+    an impact moves across an impulse time, so impact and kick change order;
+``horizon``
+    an event slides across the end of the horizon: the count within H changes but x(t, xi)
+    stays continuous for t < H (not a discontinuity; kept to delimit impact counts).
+
+Because the samples at intensity sigma are the parameter values ``p_bar + sigma xi``, the
+splits in ``p`` serve every sigma at once: at sigma the ensemble contains the split at
+``p_s`` when ``|p_s - p_bar| < sigma``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from opa import _solver as K
+from opa._model import Oscillator, SolverOptions
+from opa._simulate import pack_parameters, quadrature, run_kernel
+
+SPLIT_KINDS = ("grazing", "extra impact", "chatter", "impulse order", "horizon")
+# A new impact slower than this at the located split is a grazing (its velocity vanishes
+# like sqrt(|p - p_s|); at the default tolerance it is ~1e-5). Named apart from the
+# solver's graze flag, which marks single impacts.
+SPLIT_GRAZE_SPEED = 1e-3
+# Impacts within a tenth of a forcing period around a change that make it a chatter burst.
+CHATTER_BURST = 4
+# An extra event this close to the horizon's end slides across it (time units).
+HORIZON_SLACK = 1e-4
+
+_IMPACT, _STICK, _RELEASE = "I", "S", "R"
+
+
+@dataclass(frozen=True)
+class EventSequence:
+    """The events of one deterministic run, in order: time, velocity, kind, interval."""
+
+    time: np.ndarray
+    velocity: np.ndarray
+    kind: tuple[str, ...]  # "I" impact (graze included), "S" stick, "R" release
+    interval: np.ndarray  # index j of the impulse interval [j T1, (j+1) T1) of the event
+
+    def signature(self, horizon: float) -> tuple:
+        """What must not change for x(t, xi) to stay smooth on [0, horizon]."""
+        n = int(np.searchsorted(self.time, horizon, side="right"))
+        return tuple(zip(self.kind[:n], self.interval[:n].tolist()))
+
+    def count(self, horizon: float) -> int:
+        """Impacts (grazes included) up to ``horizon``."""
+        n = int(np.searchsorted(self.time, horizon, side="right"))
+        return sum(k == _IMPACT for k in self.kind[:n])
+
+
+def event_sequence(oscillator: Oscillator, options: SolverOptions, t_end: float) -> EventSequence:
+    """Run the deterministic system to ``t_end`` and return its events."""
+    p, cfg = pack_parameters(oscillator, options)
+    _, log, _ = run_kernel([oscillator.x0, oscillator.v0], np.array([0.0, t_end]), p, cfg,
+                           quadrature(0), rtol=options.rtol, atol=options.atol,
+                           label="sampled system")
+    codes = log[:, 2].astype(int)
+    names = {K.EV_IMPACT: _IMPACT, K.EV_GRAZE: _IMPACT, K.EV_STICK: _STICK,
+             K.EV_RELEASE: _RELEASE}
+    if oscillator.F0 != 0.0:
+        interval = np.floor(log[:, 0] / (2 * math.pi / oscillator.omega1)).astype(int)
+    else:
+        interval = np.zeros(len(log), dtype=int)
+    return EventSequence(log[:, 0].copy(), log[:, 1].copy(),
+                         tuple(names[c] for c in codes), interval)
+
+
+@dataclass(frozen=True)
+class Split:
+    """A change of the event sequence at parameter value ``value`` (located within ``tol``).
+
+    ``time``/``speed``: time and pre-impact speed of the first event that differs, taken
+    on the side that has it; ``left``/``right``: impacts up to the horizon on each side.
+    """
+
+    value: float
+    tol: float
+    kind: str
+    time: float
+    speed: float
+    left: int
+    right: int
+
+
+def _burst(a: EventSequence, b: EventSequence, t: float, period: float) -> bool:
+    near = [np.sum(np.abs(x.time - t) <= 0.05 * period) for x in (a, b)]
+    return max(near) >= CHATTER_BURST
+
+
+def _classify(a: EventSequence, b: EventSequence, horizon: float,
+              period: float) -> tuple[str, float, float]:
+    """Kind of the change between two neighbouring sequences, with the time and speed of
+    the first differing event."""
+    kind, t, v = _classify_events(a, b, horizon, period)
+    if kind in ("grazing", "extra impact") and _burst(a, b, t, period):
+        kind = "chatter"
+    return kind, t, v
+
+
+def _same(x: EventSequence, i: int, y: EventSequence, j: int, slack: float) -> bool:
+    return (x.kind[i] == y.kind[j] and x.interval[i] == y.interval[j]
+            and abs(x.time[i] - y.time[j]) <= slack)
+
+
+def _classify_events(a: EventSequence, b: EventSequence, horizon: float, period: float):
+    # events on the two sides of a located split correspond one to one, at nearly equal
+    # times, up to the first one that differs; "nearly" is a hundredth of a period
+    slack = 0.01 * period
+    na = int(np.searchsorted(a.time, horizon, side="right"))
+    nb = int(np.searchsorted(b.time, horizon, side="right"))
+    i = 0
+    while i < min(na, nb) and _same(a, i, b, i, slack):
+        i += 1
+    if i >= min(na, nb):  # one is a prefix of the other: extra events at the end
+        longer = a if na > nb else b
+        t, v = float(longer.time[i]), float(longer.velocity[i])
+        if horizon - t < HORIZON_SLACK:
+            return "horizon", t, v
+        if _STICK in a.kind[i:na] + b.kind[i:nb] or longer.kind[i] != _IMPACT:
+            return "chatter", t, v
+        return ("grazing" if abs(v) < SPLIT_GRAZE_SPEED else "extra impact"), t, v
+    if _STICK in a.kind[i:na] + b.kind[i:nb]:
+        return "chatter", float(min(a.time[i], b.time[i])), 0.0
+    # an extra impact at i on one side, after which the other side's next event lines up
+    for x, nx, y in ((a, na, b), (b, nb, a)):
+        if x.kind[i] == _IMPACT and i + 1 < nx and _same(x, i + 1, y, i, slack):
+            t, v = float(x.time[i]), float(x.velocity[i])
+            return ("grazing" if abs(v) < SPLIT_GRAZE_SPEED else "extra impact"), t, v
+    first = a if a.time[i] <= b.time[i] else b
+    t, v = float(first.time[i]), float(first.velocity[i])
+    if a.kind[i] == b.kind[i] == _IMPACT and a.interval[i] != b.interval[i]:
+        return "impulse order", t, v
+    return ("grazing" if abs(v) < SPLIT_GRAZE_SPEED else "extra impact"), t, v
+
+
+def find_splits(
+    oscillator: Oscillator,
+    options: SolverOptions,
+    parameter: str,
+    lo: float,
+    hi: float,
+    horizon: float,
+    *,
+    scan: int = 129,
+    tol: float = 1e-8,
+    max_splits: int = 64,
+    center: float | None = None,
+    cache: dict | None = None,
+) -> tuple[list[Split], bool]:
+    """Every change of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi].
+
+    The interval is scanned at ``scan`` equally spaced values; each pair of neighbours whose
+    sequences differ is bisected (single deterministic runs) until the bracket is shorter
+    than ``tol``; a third sequence met inside a bracket is followed as a split of its own.
+    Changes between two scan points with equal sequences (an even number of them) are not
+    seen. Brackets are bisected nearest to ``center`` (default: the middle) first, so
+    when ``max_splits`` cuts the list, the splits kept are those an ensemble centred
+    there meets first. ``cache`` (value -> EventSequence) lets calls for several horizons share runs;
+    the runs go to the largest horizon asked of the cache's first call.
+
+    Returns the splits in increasing ``value`` and whether ``max_splits`` cut the list.
+    """
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise ValueError(f"need finite lo < hi, got [{lo}, {hi}]")
+    if scan < 2:
+        raise ValueError(f"scan must be >= 2, got {scan}")
+    if not tol > 0:
+        raise ValueError(f"tol must be > 0, got {tol}")
+    cache = {} if cache is None else cache
+    t_end = cache.setdefault("t_end", horizon)
+    if horizon > t_end:
+        raise ValueError(f"horizon {horizon} is past the cached runs' end {t_end}")
+
+    def seq(value: float) -> EventSequence:
+        if value not in cache:
+            cache[value] = event_sequence(oscillator.replace(**{parameter: value}), options,
+                                          t_end)
+        return cache[value]
+
+    values = np.linspace(lo, hi, scan)
+    brackets = [(float(x), float(y)) for x, y in zip(values[:-1], values[1:])
+                if seq(float(x)).signature(horizon) != seq(float(y)).signature(horizon)]
+    center = 0.5 * (lo + hi) if center is None else center
+
+    def distance(bracket):
+        x, y = bracket
+        return 0.0 if x <= center <= y else min(abs(x - center), abs(y - center))
+
+    splits: list[Split] = []
+    truncated = False
+    while brackets:
+        if len(splits) >= max_splits:
+            truncated = True
+            break
+        brackets.sort(key=distance)
+        a, b = brackets.pop(0)
+        sig_a, sig_b = seq(a).signature(horizon), seq(b).signature(horizon)
+        while b - a > tol:
+            m = 0.5 * (a + b)
+            sig_m = seq(m).signature(horizon)
+            if sig_m == sig_a:
+                a = m
+            elif sig_m == sig_b:
+                b = m
+            else:  # a third sequence: follow the half nearer the centre, queue the other
+                if distance((a, m)) <= distance((m, b)):
+                    brackets.append((m, b))
+                    b, sig_b = m, sig_m
+                else:
+                    brackets.append((a, m))
+                    a, sig_a = m, sig_m
+        kind, t, v = _classify(seq(a), seq(b), horizon, oscillator.forcing_period)
+        splits.append(Split(0.5 * (a + b), b - a, kind, t, v, seq(a).count(horizon),
+                            seq(b).count(horizon)))
+    splits.sort(key=lambda s: s.value)
+    return splits, truncated
+
+
+__all__ = ["EventSequence", "SPLIT_KINDS", "Split", "event_sequence", "find_splits"]
