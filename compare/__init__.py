@@ -1,15 +1,18 @@
-"""compare: OPA against Monte Carlo — errors, convergence studies, reports, validate."""
+"""compare: OPA against Monte Carlo — error metrics, the trust map, reports."""
 
 from compare._metrics import compare_runs, error_metrics
-from compare._report import error_table, write_report
-from compare._validate import ValidateConfig, load_config, run_validation
+from compare._report import boundary_table, findings, verdict_grid, write_report
+from compare._trustmap import ValidateConfig, count_distribution, load_config, run_validation
 
 __all__ = [
-    "compare_runs",
-    "error_metrics",
-    "error_table",
-    "write_report",
     "ValidateConfig",
+    "boundary_table",
+    "compare_runs",
+    "count_distribution",
+    "error_metrics",
+    "findings",
     "load_config",
     "run_validation",
+    "verdict_grid",
+    "write_report",
 ]

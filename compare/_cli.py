@@ -1,11 +1,14 @@
-"""``opa-mc validate``: the main job (the argparse part; the work is in _validate)."""
+"""``opa-mc validate``: the main job, the trust map (argparse here; the work in _trustmap)."""
 
 from __future__ import annotations
 
 import argparse
 import os
+import shlex
 import sys
 import time
+
+import numpy as np
 
 from opa._model import PARAMETER_NAMES
 
@@ -28,48 +31,94 @@ def _order_list(text: str) -> tuple[int, ...]:
         raise argparse.ArgumentTypeError(f"expected A:B or comma-separated integers, got {text!r}")
 
 
+def _sweep(text: str) -> tuple[str, tuple[float, ...]]:
+    """NAME=START:STOP:COUNT (COUNT equally spaced values, ends included)."""
+    try:
+        name, spec = text.split("=", 1)
+        start, stop, count = spec.split(":")
+        count = int(count)
+        if count < 1:
+            raise ValueError
+        values = np.linspace(float(start), float(stop), count)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NAME=START:STOP:COUNT, got {text!r}")
+    return name.strip(), tuple(float(np.round(v, 12)) for v in values)
+
+
 def register_validate(sub, model_flags, solver_flags) -> None:
     p = sub.add_parser(
         "validate",
-        help="the main job: OPA against Monte Carlo, error tables, figures, netCDF",
-        description="Run OPA for N = 0..Nmax beside a Monte Carlo ensemble of the true "
-        "sampled impact system and report where they agree. With no arguments: the "
-        "embedded default (section 3.2 parameters, omega = 3.98, sigma in {0.005, 0.01, "
-        "0.02}, N = 0..8, 2^14 Sobol samples, 100 forcing periods).",
+        help="the main job: the trust map of OPA against Monte Carlo, its boundary and why",
+        description="Run OPA (N = 0..8, both impact laws, both truncations) beside Monte "
+        "Carlo ensembles of the true sampled impact systems over a grid of sigma and one "
+        "model parameter; locate the trust boundary sigma* by bisection and the splits of "
+        "the sampled systems' impact sequences. With no arguments: the embedded default "
+        "(section 3.2 set, omega in {3.98, 4.035, 4.09, 4.145, 4.2}, sigma from 0.005 to "
+        "0.05, horizons of 10 and 50 forcing periods). Writes OUTDIR/validate.nc, "
+        "summary.md and figures; finished Monte Carlo runs are kept in OUTDIR/parts and "
+        "reused, so an interrupted run resumes.",
     )
     model_flags(p)
-    g = p.add_argument_group("validation")
+    g = p.add_argument_group("trust map")
     g.add_argument("--config", default=None, metavar="FILE.toml",
                    help="TOML file with any of the settings below and [model]/[solver] tables")
+    g.add_argument("--sweep", type=_sweep, default=None, metavar="NAME=START:STOP:COUNT",
+                   help="the swept model parameter and its values (default: the preset's "
+                        "range; 3.1: c, 3.2 and 3.3: omega)")
+    g.add_argument("--values", type=_float_list, default=None, metavar="V1,V2,...",
+                   help="values of the swept parameter (instead of --sweep's range)")
     g.add_argument("--sigmas", type=_float_list, default=None, metavar="S1,S2,...",
-                   help="intensities of the uncertain parameter (default 0.005,0.01,0.02)")
+                   help="grid of intensities (default 0.005,0.01,0.014,0.02,0.025,0.03,0.04,"
+                        "0.05; preset 3.3: up to 0.2)")
     g.add_argument("--orders", type=_order_list, default=None, metavar="A:B",
                    help="OPA orders, 'A:B' inclusive or a comma list (default 0:8)")
     g.add_argument("--uncertain", choices=("mu", "a", "c"), default=None,
                    help="the uncertain parameter (default mu)")
+    g.add_argument("--horizons", type=_float_list, default=None, metavar="H1,H2",
+                   help="horizons in forcing periods (default 10,50)")
+    g.add_argument("--tolerance", type=float, default=None, metavar="TOL",
+                   help="the mean agrees while its running RMS error <= TOL x the running RMS "
+                        "MC spread + z MC standard errors (default 0.1)")
+    g.add_argument("--var-tolerance", type=float, default=None, metavar="TOL",
+                   help="the same for the variance, relative to the MC variance (default 0.25)")
+    g.add_argument("--z", type=float, default=None, metavar="Z",
+                   help="MC standard errors allowed for the reference's noise (default 3)")
+    g.add_argument("--resolution", type=float, default=None, metavar="DS",
+                   help="bisection resolution of sigma* (default 1e-3)")
     g.add_argument("--samples", type=int, default=None, metavar="M",
-                   help="Monte Carlo samples of the reference (default 16384)")
-    g.add_argument("--sampler", choices=("random", "sobol", "gauss"), default=None,
-                   help="sampler of the reference (default sobol)")
+                   help="Sobol samples per ensemble (default 1024)")
+    g.add_argument("--max-samples", type=int, default=None, metavar="M",
+                   help="samples are doubled up to M where the verdict hangs on the MC "
+                        "noise (default 8192)")
     g.add_argument("--seed", type=int, default=None, metavar="K", help="random seed (default 0)")
-    g.add_argument("--periods", type=float, default=None, metavar="P",
-                   help="length in forcing periods (default 100)")
     g.add_argument("--per-period", type=int, default=None, metavar="K",
-                   help="outputs per forcing period (default 4)")
-    g.add_argument("--window", type=float, default=None, metavar="W",
-                   help="error tables summarise the first W periods (default 10)")
+                   help="outputs per forcing period (default 8)")
     g.add_argument("--outdir", default=None, metavar="DIR", help="output folder (default results)")
     g.add_argument("--no-plots", action="store_true", help="skip the figures")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask distributed scheduler for the Monte Carlo chunks")
-    g.add_argument("--quiet", action="store_true", help="no progress bars")
+    g.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
     solver_flags(p, tolerance=1e-9, defaults=False)
     p.set_defaults(func=cmd_validate)
 
 
+def _check_outdir(path: str) -> None:
+    """Fail before computing when the output folder cannot be written."""
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise ValueError(f"--outdir {path} exists and is not a folder")
+    try:
+        os.makedirs(os.path.join(path, "parts"), exist_ok=True)
+        probe = os.path.join(path, ".write-test")
+        with open(probe, "w"):
+            pass
+        os.remove(probe)
+    except OSError as err:
+        raise ValueError(f"--outdir {path} cannot be written: {err.strerror}") from None
+
+
 def cmd_validate(args) -> int:
-    from compare._report import error_table, findings, write_report
-    from compare._validate import load_config, run_validation
+    from compare._report import boundary_table, cause, findings, verdict_grid, write_report
+    from compare._trustmap import load_config, run_validation
 
     model = {name: getattr(args, name) for name in PARAMETER_NAMES
              if getattr(args, name, None) is not None}
@@ -78,17 +127,31 @@ def cmd_validate(args) -> int:
     solver = {k: getattr(args, k) for k in ("rtol", "atol", "impulse", "pulse_width",
                                             "impulse_at_zero", "max_step", "chatter_velocity")
               if getattr(args, k, None) is not None}
+    parameter, values = (args.sweep if args.sweep else (None, None))
+    if args.values is not None:
+        values = args.values
     cfg = load_config(
-        args.config, model=model, solver=solver, sigmas=args.sigmas, orders=args.orders,
-        uncertain=args.uncertain, samples=args.samples, sampler=args.sampler, seed=args.seed,
-        periods=args.periods, per_period=args.per_period, window=args.window,
+        args.config, model=model, solver=solver, parameter=parameter, values=values,
+        sigmas=args.sigmas, orders=args.orders, uncertain=args.uncertain,
+        horizons=args.horizons, tolerance=args.tolerance, var_tolerance=args.var_tolerance,
+        z=args.z, resolution=args.resolution, samples=args.samples,
+        max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,
     )
+    _check_outdir(cfg.outdir)
     start = time.perf_counter()
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     ds = run_validation(cfg, progress=not args.quiet, log=log)
-    written = write_report(ds, cfg.outdir, plots=cfg.plots)
-    print(error_table(ds))
+    command = "opa-mc " + shlex.join(getattr(args, "argv", ["validate"]))
+    written = write_report(ds, cfg.outdir, plots=cfg.plots, command=command)
+    print(boundary_table(ds))
+    print()
+    for h in range(ds.sizes["horizon"]):
+        print(verdict_grid(ds, h))
+        print()
+    for q in range(ds.sizes["value"]):
+        for h in range(ds.sizes["horizon"]):
+            print(f"* {cause(ds, q, h)}")
     print()
     for line in findings(ds):
         print(f"* {line}")

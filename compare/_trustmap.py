@@ -196,6 +196,8 @@ def load_config(path: str | None, **overrides) -> ValidateConfig:
         raise ValueError(f"preset must be one of {', '.join(SWEEPS)}, got {name!r}")
     parameter, values = SWEEPS[name]
     data.setdefault("parameter", parameter)
+    if "values" not in data and data["parameter"] in model:
+        data["values"] = (model[data["parameter"]],)  # e.g. --omega 4.0: a one-column map
     if "values" not in data:
         if data["parameter"] != parameter:
             raise ValueError(f"values are needed when sweeping {data['parameter']!r}")
@@ -213,6 +215,11 @@ def load_config(path: str | None, **overrides) -> ValidateConfig:
     except TypeError as err:
         raise ValueError(f"unknown model or solver key: {err}") from None
     return ValidateConfig(oscillator=osc, options=options, **data)
+
+
+def noise_floor(options: SolverOptions) -> float:
+    """Absolute error of x below which a difference is the solvers' own: 10 (rtol + atol)."""
+    return 10.0 * (options.rtol + options.atol)
 
 
 @dataclass
@@ -240,7 +247,7 @@ class _Map:
         self.log = log
         self.progress = progress
         self.parts = os.path.join(cfg.outdir, "parts")
-        self.floor = 10 * (cfg.options.rtol + cfg.options.atol)
+        self.floor = noise_floor(cfg.options)
         self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
         self.mc_runs = 0
         self.bar = None
@@ -468,6 +475,7 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         f(Q, H, max_split), f(Q, H, max_split)
     sleft, sright = (np.full((Q, H, max_split), -1, np.int64) for _ in range(2))
     struncated = np.zeros((Q, H), np.int8)
+    slow_speed, slow_time = f(Q, H), f(Q, H)
     sigma_split = f(Q, H)
     split_kind_nearest = np.full((Q, H), -1, np.int8)
     max_probes = max(len(r[5]) for r in results)
@@ -492,6 +500,8 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
             probe_agrees[q, j] = point.agrees[:, -1]
         for h, (horizon, splits, truncated) in enumerate(found):
             struncated[q, h] = truncated
+            slow_speed[q, h], slow_time[q, h] = seq_centre.slowest_impact(horizon * T)
+            slow_time[q, h] /= T
             real = [sp for sp in splits if sp.kind != "horizon"]
             if real:
                 near = min(real, key=lambda sp: abs(sp.value - centre))
@@ -591,6 +601,12 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         "split_truncated": (("value", "horizon"), struncated,
                             {"long_name": "1 where more splits exist than were located "
                              "(the nearest to the nominal value were kept)", **one}),
+        "nominal_slowest_speed": (("value", "horizon"), slow_speed,
+                                  {"long_name": "slowest impact of the nominal system within "
+                                   "the horizon: its speed (NaN: no impact)", **one}),
+        "nominal_slowest_time": (("value", "horizon"), slow_time,
+                                 {"long_name": "time of that impact",
+                                  "units": "forcing periods"}),
         "sigma_split": (("value", "horizon"), sigma_split,
                         {"long_name": "smallest sigma whose ensemble contains a split "
                          "(NaN: none within the largest sigma)", **one}),
@@ -687,10 +703,11 @@ def _attrs(cfg: ValidateConfig) -> dict:
         max_samples=int(cfg.max_samples), per_period=int(cfg.per_period),
         tolerance=float(cfg.tolerance), var_tolerance=float(cfg.var_tolerance), z=float(cfg.z),
         resolution=float(cfg.resolution), split_resolution=float(cfg.split_resolution),
+        floor=noise_floor(cfg.options),
         criterion_text=(
             "agrees over H when, at every output t <= H, the running RMS error <= tol x the "
             "running RMS of the MC spread (variance: of the MC variance) + z x the running "
-            "RMS MC standard error + floor"),
+            "RMS MC standard error + floor (variance: floor squared)"),
     )
     return attrs
 

@@ -48,6 +48,9 @@ SPLIT_GRAZE_SPEED = 1e-3
 CHATTER_BURST = 4
 # An extra event this close to the horizon's end slides across it (time units).
 HORIZON_SLACK = 1e-4
+# Two runs whose corresponding events are further apart in time than this share of a
+# forcing period are on two sides of a split (also where the count is the same).
+TIME_SLACK = 0.01
 
 _IMPACT, _STICK, _RELEASE = "I", "S", "R"
 
@@ -65,6 +68,25 @@ class EventSequence:
         """What must not change for x(t, xi) to stay smooth on [0, horizon]."""
         n = int(np.searchsorted(self.time, horizon, side="right"))
         return tuple(zip(self.kind[:n], self.interval[:n].tolist()))
+
+    def same_as(self, other: "EventSequence", horizon: float, slack: float) -> bool:
+        """Whether x(t, p) can be continuous between the two runs on [0, horizon]: the same
+        events in the same impulse intervals, each at nearly the same time (within
+        ``slack``). A jump of an event time means that the events in between changed, e.g.
+        a new grazing impact that moves every later impact, with the count unchanged."""
+        if self.signature(horizon) != other.signature(horizon):
+            return False
+        n = int(np.searchsorted(self.time, horizon, side="right"))
+        return bool(np.all(np.abs(self.time[:n] - other.time[:n]) <= slack))
+
+    def slowest_impact(self, horizon: float) -> tuple[float, float]:
+        """Speed and time of the slowest impact up to ``horizon`` (NaN, NaN if none)."""
+        n = int(np.searchsorted(self.time, horizon, side="right"))
+        idx = [i for i in range(n) if self.kind[i] == _IMPACT]
+        if not idx:
+            return math.nan, math.nan
+        i = min(idx, key=lambda j: abs(self.velocity[j]))
+        return float(abs(self.velocity[i])), float(self.time[i])
 
     def count(self, horizon: float) -> int:
         """Impacts (grazes included) up to ``horizon``."""
@@ -129,7 +151,7 @@ def _same(x: EventSequence, i: int, y: EventSequence, j: int, slack: float) -> b
 def _classify_events(a: EventSequence, b: EventSequence, horizon: float, period: float):
     # events on the two sides of a located split correspond one to one, at nearly equal
     # times, up to the first one that differs; "nearly" is a hundredth of a period
-    slack = 0.01 * period
+    slack = TIME_SLACK * period
     na = int(np.searchsorted(a.time, horizon, side="right"))
     nb = int(np.searchsorted(b.time, horizon, side="right"))
     i = 0
@@ -174,10 +196,12 @@ def find_splits(
     """Every change of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi].
 
     The interval is scanned at ``scan`` equally spaced values; each pair of neighbours whose
-    sequences differ is bisected (single deterministic runs) until the bracket is shorter
+    sequences differ (:meth:`EventSequence.same_as`: other events, or an event time that
+    jumps by more than ``TIME_SLACK`` forcing periods) is bisected (single deterministic runs) until the bracket is shorter
     than ``tol``; a third sequence met inside a bracket is followed as a split of its own.
     Changes between two scan points with equal sequences (an even number of them) are not
-    seen. Brackets are bisected nearest to ``center`` (default: the middle) first, so
+    seen; a bracket whose ends end up matching (fast but continuous event times) is
+    dropped. Brackets are bisected nearest to ``center`` (default: the middle) first, so
     when ``max_splits`` cuts the list, the splits kept are those an ensemble centred
     there meets first. ``cache`` (value -> EventSequence) lets calls for several horizons share runs;
     the runs go to the largest horizon asked of the cache's first call.
@@ -201,9 +225,14 @@ def find_splits(
                                           t_end)
         return cache[value]
 
+    slack = TIME_SLACK * oscillator.forcing_period
+
+    def differ(x: float, y: float) -> bool:
+        return not seq(x).same_as(seq(y), horizon, slack)
+
     values = np.linspace(lo, hi, scan)
     brackets = [(float(x), float(y)) for x, y in zip(values[:-1], values[1:])
-                if seq(float(x)).signature(horizon) != seq(float(y)).signature(horizon)]
+                if differ(float(x), float(y))]
     center = 0.5 * (lo + hi) if center is None else center
 
     def distance(bracket):
@@ -218,21 +247,21 @@ def find_splits(
             break
         brackets.sort(key=distance)
         a, b = brackets.pop(0)
-        sig_a, sig_b = seq(a).signature(horizon), seq(b).signature(horizon)
         while b - a > tol:
             m = 0.5 * (a + b)
-            sig_m = seq(m).signature(horizon)
-            if sig_m == sig_a:
+            if not differ(m, a):
                 a = m
-            elif sig_m == sig_b:
+            elif not differ(m, b):
                 b = m
             else:  # a third sequence: follow the half nearer the centre, queue the other
                 if distance((a, m)) <= distance((m, b)):
                     brackets.append((m, b))
-                    b, sig_b = m, sig_m
+                    b = m
                 else:
                     brackets.append((a, m))
-                    a, sig_a = m, sig_m
+                    a = m
+        if not differ(a, b):  # event times that moved fast, continuously: no split
+            continue
         kind, t, v = _classify(seq(a), seq(b), horizon, oscillator.forcing_period)
         splits.append(Split(0.5 * (a + b), b - a, kind, t, v, seq(a).count(horizon),
                             seq(b).count(horizon)))

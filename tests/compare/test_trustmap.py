@@ -1,0 +1,209 @@
+"""End to end on a tiny map: verdicts against direct comparisons computed here, the
+netCDF round trip, resume from parts/, the report, the configuration and the CLI."""
+
+import math
+import os
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from compare import load_config, run_validation, write_report
+from compare._trustmap import VARIANTS
+from mc import simulate_mc
+from opa import simulate_opa
+from opa._cli import main
+from opa._model import time_grid
+
+TINY = dict(values=(3.98, 4.035), sigmas=(0.01, 0.03), orders=(0, 1, 3), horizons=(4, 8),
+            samples=64, max_samples=128, per_period=4)
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    out = tmp_path_factory.mktemp("validate")
+    cfg = load_config(None, outdir=str(out), **TINY)
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+    return cfg, ds, out
+
+
+def _running_rms(a):
+    out, acc = [], 0.0
+    for k, x in enumerate(a, start=1):
+        acc += x * x
+        out.append(math.sqrt(acc / k))
+    return np.array(out)
+
+
+def _agrees(err, scale, sem, n, tol, z, floor):
+    """The documented criterion, written out: running RMS error within tol running RMS
+    spread + z running RMS SE + floor at every output of the first n."""
+    lhs = _running_rms(err[:n])
+    rhs = tol * _running_rms(scale[:n]) + z * _running_rms(sem[:n]) + floor
+    return bool(np.all(lhs <= rhs))
+
+
+@pytest.mark.parametrize("q", [0, 1])
+@pytest.mark.parametrize("s", [0, 1])
+def test_verdicts_match_direct_comparisons(tiny, q, s):
+    cfg, ds, _ = tiny
+    value, sigma = cfg.values[q], cfg.sigmas[s]
+    osc = cfg.oscillator.replace(omega=value)
+    times = time_grid(value, max(cfg.horizons), cfg.per_period)
+    samples = int(ds.mc_samples[q, s])
+    ens = simulate_mc(osc, sigma=sigma, samples=samples, sampler="sobol", seed=cfg.seed,
+                      order=0, uncertain="mu", times=times, options=cfg.options,
+                      progress=False, keep_paths=True)
+    mean = ens.x.values.mean(axis=0)
+    np.testing.assert_allclose(mean, ens.x_mean.values, atol=1e-13)
+    np.testing.assert_allclose(ds.mc_x_mean.values[q, s], mean, atol=1e-13)
+    var, sem, var_sem = ens.x_var.values, ens.x_sem.values, ens.x_var_sem.values
+    floor = 10 * (cfg.options.rtol + cfg.options.atol)
+    for v, (law, trunc) in enumerate(VARIANTS):
+        for k, order in enumerate(cfg.orders):
+            emr = simulate_opa(osc, sigma=sigma, order=order, uncertain="mu", truncation=trunc,
+                               impact_law=law, times=times, options=cfg.options)
+            err = emr.x_mean.values - mean
+            verr = emr.x_var.values - var
+            for h, H in enumerate(cfg.horizons):
+                n = int(round(H * cfg.per_period)) + 1
+                assert ds.agrees.values[q, s, v, k, h, 0] == _agrees(
+                    err, np.sqrt(var), sem, n, cfg.tolerance, cfg.z, floor)
+                assert ds.agrees.values[q, s, v, k, h, 1] == _agrees(
+                    verr, var, var_sem, n, cfg.var_tolerance, cfg.z, floor**2)
+                np.testing.assert_allclose(ds.err_mean.values[q, s, v, k, h],
+                                           np.sqrt(np.mean(err[:n] ** 2)), rtol=1e-9)
+                np.testing.assert_allclose(
+                    ds.err_mean_rel.values[q, s, v, k, h],
+                    np.sqrt(np.mean(err[:n] ** 2)) / np.sqrt(np.mean(var[:n])), rtol=1e-9)
+
+
+def test_the_tiny_map_has_both_verdicts(tiny):
+    """So that the comparison above can fail both ways."""
+    _, ds, _ = tiny
+    for c in range(2):
+        a = ds.agrees.values[..., c]
+        assert a.any() or c == 1
+        assert not a.all()
+    assert ds.agrees.values[..., 0].any()
+
+
+def test_sigma_star_brackets_the_verdicts_it_probed(tiny):
+    cfg, ds, _ = tiny
+    for q in range(len(cfg.values)):
+        sig = ds.probe_sigma.values[q]
+        ok = np.isfinite(sig)
+        for v in range(len(VARIANTS)):
+            for h in range(len(cfg.horizons)):
+                lo = ds.sigma_star.values[q, v, h, 0]
+                hi = ds.sigma_star_upper.values[q, v, h, 0]
+                verdict = ds.probe_agrees.values[q, ok, v, h, 0]
+                probed = sig[ok]
+                if np.isfinite(hi):
+                    assert hi - lo <= cfg.resolution + 1e-15
+                    assert not verdict[probed == hi].any()
+                    assert lo == 0 or verdict[probed == lo].all()
+                else:  # agrees at every sigma tried
+                    assert verdict.all() and lo == probed.max()
+
+
+def test_netcdf_round_trip(tiny):
+    _, ds, out = tiny
+    with xr.open_dataset(out / "validate.nc") as back:
+        back = back.load()
+    assert set(back.data_vars) == set(ds.data_vars)
+    for name in ds.data_vars:
+        a, b = ds[name].values, back[name].values
+        assert a.shape == b.shape, name
+        if a.dtype.kind in "fc":
+            np.testing.assert_array_equal(a, b, err_msg=name)
+        else:
+            assert (a == b).all(), name
+    for name in ("parameter", "uncertain", "tolerance", "z", "resolution", "floor", "omega",
+                 "rtol", "seed", "criterion_text"):
+        assert back.attrs[name] == ds.attrs[name], name
+    assert list(back.variant.values) == [f"{a}/{b}" for a, b in VARIANTS]
+
+
+def test_rerun_resumes_from_parts(tiny):
+    cfg, ds, out = tiny
+    again = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert again.attrs["mc_runs_computed"] == 0
+    assert ds.attrs["mc_runs_computed"] == len(os.listdir(out / "parts"))
+    np.testing.assert_array_equal(again.agrees.values, ds.agrees.values)
+    np.testing.assert_array_equal(again.err_mean.values, ds.err_mean.values)
+
+
+def test_count_distribution_sums_to_one_and_matches_the_ensemble_range(tiny):
+    _, ds, _ = tiny
+    p = ds.count_prob.values
+    np.testing.assert_allclose(p.sum(axis=-1), 1.0, atol=1e-12)
+    # the fewest and the most impacts a Monte Carlo sample made up to the longest horizon
+    # are counts the located splits give a positive probability (the samples need not
+    # reach every count: a few have probabilities below 1 / samples)
+    for q in range(ds.sizes["value"]):
+        for s in range(ds.sizes["sigma"]):
+            assert p[q, s, -1, ds.mc_impacts_min.values[q, s]] > 0
+            assert p[q, s, -1, ds.mc_impacts_max.values[q, s]] > 0
+    assert (p[..., -1, :] > 0).sum(axis=-1).max() > 1  # some ensemble is split
+
+
+def test_report_files_and_tables(tiny):
+    _, ds, out = tiny
+    written = write_report(ds, str(out), plots=True, command="opa-mc validate (test)")
+    for name in ("summary.md", "trust_map.png", "error_vs_N.png", "mean_vs_mc.png",
+                 "variance.png", "phase.png"):
+        assert str(out / name) in written
+        assert os.path.getsize(out / name) > 0
+    text = (out / "summary.md").read_text()
+    assert "Trust boundary" in text and "opa-mc validate (test)" in text
+
+
+def test_config_errors_name_the_key(tmp_path):
+    with pytest.raises(ValueError, match="sigmas must be strictly increasing"):
+        load_config(None, sigmas=(0.02, 0.01))
+    with pytest.raises(ValueError, match="samples must be a multiple of 16"):
+        load_config(None, samples=100)
+    with pytest.raises(ValueError, match="preset must be one of"):
+        load_config(None, preset="3.4")
+    with pytest.raises(ValueError, match="values are needed"):
+        load_config(None, parameter="f")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("sigmas = [0.01,\n")
+    with pytest.raises(ValueError, match="not valid TOML"):
+        load_config(str(bad))
+    good = tmp_path / "good.toml"
+    good.write_text('preset = "3.1"\nsigmas = [0.01, 0.02]\n[model]\nF0 = 0\n')
+    cfg = load_config(str(good))
+    assert cfg.parameter == "c" and cfg.oscillator.F0 == 0 and len(cfg.values) == 7
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--sigmas", "0.02,0.01"], "sigmas"),
+    (["--horizons", "0"], "horizons"),
+    (["--sweep", "omega=4:3.9:0"], None),  # argparse: exits 2 on its own
+    (["--tolerance", "-1"], "tolerance"),
+])
+def test_cli_bad_input_exits_2_with_one_line(argv, needle, tmp_path, capsys):
+    with pytest.raises(SystemExit) if needle is None else _nothing():
+        code = main(["validate", "--outdir", str(tmp_path / "r"), *argv])
+        assert code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    if needle:
+        assert needle in err and err.count("\n") == 1
+
+
+def test_cli_refuses_an_unwritable_outdir_before_computing(tmp_path, capsys):
+    target = tmp_path / "file"
+    target.write_text("x")
+    assert main(["validate", "--outdir", str(target)]) == 2
+    assert "--outdir" in capsys.readouterr().err
+
+
+class _nothing:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
