@@ -176,7 +176,7 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
 def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 0,
                  markdown: bool = False) -> str:
     """Rows: swept values; columns: sigma; cell: the smallest N from which OPA agrees
-    (at every larger N of the map too), '✗' where no N agrees."""
+    at every larger N of the map, or '✗' where N = Nmax does not."""
     par = _par(ds)
     agrees = ds.agrees.values[:, :, v, :, h, criterion]  # value, sigma, N
     orders = [int(n) for n in ds.N.values]
@@ -188,11 +188,18 @@ def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 
             a = agrees[q, s].astype(bool)
             tail = np.flatnonzero(~a)
             first = 0 if not len(tail) else tail[-1] + 1
-            row.append(f"N ≥ {orders[first]}" if first < len(orders) else "✗")
+            if first < len(orders):
+                row.append(f"N ≥ {orders[first]}")
+            elif a.any():
+                row.append("✗ (N = " + ", ".join(str(orders[k]) for k in np.flatnonzero(a))
+                           + " agree)")
+            else:
+                row.append("✗")
         rows.append(row)
     title = (f"Verdict over {float(ds.horizon[h]):g} periods ({ds.variant.values[v]}, "
-             f"{ds.criterion.values[criterion]}): the smallest N from which OPA agrees "
-             f"with Monte Carlo; ✗: no N ≤ {orders[-1]} agrees")
+             f"{ds.criterion.values[criterion]}): N ≥ k: OPA agrees with Monte Carlo for "
+             f"every N of the map from k to {orders[-1]}; ✗: N = {orders[-1]} does not "
+             f"(the lower N that do are listed)")
     return _table(title, head, rows, markdown)
 
 
@@ -206,8 +213,13 @@ def count_table(ds: xr.Dataset, h: int, *, markdown: bool = True) -> str:
             p = ds.count_prob.values[q, s, h]
             nz = np.flatnonzero(p > 0)
             if len(nz) > 1:
-                rows.append([_g(float(value)), _g(float(sigma)),
-                             ", ".join(f"{k}: {p[k]:.3f}" for k in nz)])
+                big = [k for k in nz if p[k] >= 1e-3]
+                rest = [k for k in nz if p[k] < 1e-3]
+                cell = ", ".join(f"{k}: {p[k]:.3f}" for k in big)
+                if rest:
+                    cell += (f", {len(rest)} other counts ({rest[0]}–{rest[-1]}) "
+                             f"together: {p[rest].sum():.1e}")
+                rows.append([_g(float(value)), _g(float(sigma)), cell])
     title = (f"Impact counts up to {float(ds.horizon[h]):g} periods (exact between the "
              f"located splits; points where every sample makes the same count are left out)")
     if not rows:
@@ -275,6 +287,16 @@ def findings(ds: xr.Dataset) -> list[str]:
             f"Across σ* it jumps from {_e(err[s0])} (σ = {_g(float(sig[s0]))}) to "
             f"{_e(err[s1])} (σ = {_g(float(sig[s1]))}), a factor {err[s1] / err[s0]:.0f}; "
             f"no σ^p law fitted below σ* holds past it.")
+    # does N matter for the verdict?
+    for h, H in enumerate(ds.horizon.values):
+        a = ds.agrees.values[:, :, HEADLINE, :, h, 0].astype(bool)  # value, sigma, N
+        some = a.any(axis=-1)
+        if some.any():
+            n0 = a[..., 0][some].sum()
+            out.append(f"Over {float(H):g} periods ({variants[HEADLINE]}), N = {orders[0]} "
+                       f"already agrees at {n0} of the {some.sum()} grid points where some "
+                       f"N ≤ {nmax} agrees: after impacts the error of the mean does not "
+                       f"fall with N.")
     # before the first impact
     pre = ds.pre_impact_err.values[q, :, HEADLINE, :]  # sigma, N
     first = ds.first_impact.values[q, 0, HEADLINE, -1]
@@ -482,6 +504,9 @@ def plot_variance(ds, path, q=0):
             ax.semilogy(t, np.maximum(ds.opa_x_var.values[q, s, v, -1, :n], 1e-16),
                         ("-", "--")[v], lw=1, label=f"OPA {ds.variant.values[v]}, N = "
                         f"{int(ds.N.max())}")
+        positive = var[1:][var[1:] > 0]
+        if len(positive):
+            ax.set_ylim(bottom=0.1 * float(positive.min()))
         ax.set_title(f"σ = {float(ds.sigma[s]):g}")
         ax.set_xlabel("t [forcing periods]")
     axes[0, 0].legend(fontsize=7)

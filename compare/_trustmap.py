@@ -114,6 +114,8 @@ class ValidateConfig:
             raise ValueError(f"horizons must be > 0 forcing periods, got {self.horizons}")
         if not self.orders or any(int(n) != n or n < 0 for n in self.orders):
             raise ValueError(f"orders must be non-negative integers, got {self.orders}")
+        if list(self.orders) != sorted(set(self.orders)):
+            raise ValueError(f"orders must be strictly increasing, got {self.orders}")
         if int(self.per_period) != self.per_period or self.per_period < 1:
             raise ValueError(f"per_period must be a positive integer, got {self.per_period}")
         for h in self.horizons:
@@ -271,18 +273,20 @@ class _Map:
         self.mc_runs += 1
         return ds
 
-    def evaluate(self, value: float, sigma: float) -> Point:
+    def evaluate(self, value: float, sigma: float, orders=None) -> Point:
+        """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts."""
         cfg = self.cfg
         start = time.perf_counter()
         osc = cfg.oscillator_at(value)
         times = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
-        V, N = len(VARIANTS), len(cfg.orders)
+        orders = cfg.orders if orders is None else orders
+        V, N = len(VARIANTS), len(orders)
         opa_mean = np.empty((V, N, len(times)))
         opa_var = np.empty((V, N, len(times)))
         first = np.empty((V, N))
         T = osc.forcing_period
         for v, (law, trunc) in enumerate(VARIANTS):
-            for k, order in enumerate(cfg.orders):
+            for k, order in enumerate(orders):
                 ds = simulate_opa(osc, sigma=sigma, order=order, uncertain=cfg.uncertain,
                                   truncation=trunc, impact_law=law, times=times,
                                   options=cfg.options, allow_negative=True)
@@ -301,7 +305,7 @@ class _Map:
         return point
 
     def _hangs_on_noise(self, point: Point) -> bool:
-        cfg, k = self.cfg, len(self.cfg.orders) - 1
+        cfg, k = self.cfg, -1  # the verdict that sigma* hangs on: N = Nmax
         mc = point.mc
         sd = np.sqrt(np.maximum(mc["x_var"], 0.0))
         for v in range(len(VARIANTS)):
@@ -371,7 +375,7 @@ class _Map:
     def boundary(self, value, grid: dict[float, Point]):
         """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection."""
         cfg = self.cfg
-        k = len(cfg.orders) - 1
+        k = -1  # N = Nmax; the probes run that order only
         probes: dict[float, Point] = dict(grid)
         V, H, C = len(VARIANTS), len(cfg.horizons), 2
         star = np.full((V, H, C, 2), np.nan)
@@ -382,7 +386,7 @@ class _Map:
                     def agrees(s, v=v, h=h, c=c):
                         s = float(np.round(s, 12))
                         if s not in probes:
-                            probes[s] = self.evaluate(value, s)
+                            probes[s] = self.evaluate(value, s, orders=(cfg.nmax,))
                             self._tick()
                         return bool(probes[s].agrees[v, k, h, c])
 
