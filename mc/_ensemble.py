@@ -23,7 +23,7 @@ import xarray as xr
 
 from mc._sampling import SAMPLERS, sample_xi
 from opa import _solver as K
-from opa._basis import chebyshev_u
+from opa._basis import chebyshev_u, orthonormal
 from opa._dataset import provenance_attrs, time_coord
 from opa._model import Oscillator, SolverOptions, Uncertainty, _choice, check_order
 from opa._simulate import SimulationError, _times, pack_parameters
@@ -50,7 +50,7 @@ class ChunkStats:
 
     @classmethod
     def of(cls, x: np.ndarray, v: np.ndarray, xi: np.ndarray, w: np.ndarray, order: int,
-           rep: np.ndarray, replicates: int):
+           rep: np.ndarray, replicates: int, recurrence=None):
         """Statistics of paths x, v of shape (M, T) for sample values xi, weights w and
         replicate indices ``rep`` (all 0 without replicates)."""
         W = float(w.sum())
@@ -66,7 +66,9 @@ class ChunkStats:
             rep_weight[r] = w[sel].sum()
         xm = w @ x / W
         vm = w @ v / W
-        basis = chebyshev_u(order, xi)  # (N+1, M)
+        # (N+1, M): Chebyshev U for the semicircle, else the law's orthonormal polynomials
+        basis = chebyshev_u(order, xi) if recurrence is None else orthonormal(order, xi,
+                                                                               *recurrence)
         return cls(
             weight=W,
             count=len(w),
@@ -105,7 +107,7 @@ class ChunkStats:
 
 
 def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep_paths,
-              single_thread=False):
+              recurrence=None, single_thread=False):
     """Integrate one chunk of samples and reduce it: (ChunkStats, n_impacts, status, paths)."""
     if single_thread:
         import numba
@@ -120,7 +122,8 @@ def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep
     if len(bad):
         m = bad[0]
         return None, n_impacts, status, (m, xi[m], int(status[m]))
-    stats = ChunkStats.of(paths[:, :, 0], paths[:, :, 1], xi, w, order, rep, replicates)
+    stats = ChunkStats.of(paths[:, :, 0], paths[:, :, 1], xi, w, order, rep, replicates,
+                          recurrence)
     stats.rhs_evaluations = int(n_rhs.sum())
     return stats, n_impacts, status, (paths if keep_paths else None)
 
@@ -152,6 +155,7 @@ def simulate_mc(
     chunk_size: int | None = None,
     scheduler: str | None = None,
     progress: bool | None = None,
+    distribution=None,
 ) -> xr.Dataset:
     """Monte Carlo ensemble of the sampled impact system, eq. (1), p = p_bar + sigma xi.
 
@@ -191,13 +195,23 @@ def simulate_mc(
         replicates = 1
     elif replicates is None:
         replicates = 16 if samples % 16 == 0 and samples >= 64 else 1
-    xi, w = sample_xi(sampler, samples, seed, replicates)
+    measure = None
+    if distribution is not None:
+        from opa._measure import parse
+        from opa._simulate import check_support
+
+        measure = parse(distribution)
+        check_support(oscillator, unc, measure)
+        if measure.name == "semicircle" and measure.is_whole:
+            measure = None
+    xi, w = sample_xi(sampler, samples, seed, replicates, distribution=measure)
+    recurrence = None if measure is None else measure.recurrence(order + 1)
     rep = np.arange(len(xi)) // (len(xi) // replicates)
     p, cfg = pack_parameters(oscillator, options, sigma=unc.sigma, uncertain=uncertain)
     y0 = np.array([oscillator.x0, oscillator.v0])
     size = _chunk_size(len(times), chunk_size)
     bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
-    args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths)
+    args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths, recurrence)
 
     total = None
     n_impacts = np.empty(len(xi), dtype=np.int64)
@@ -218,7 +232,7 @@ def simulate_mc(
             paths[lo:hi] = extra
         total = stats if total is None else total.merge(stats)
     return _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler,
-                    seed, order, replicates)
+                    seed, order, replicates, "semicircle" if measure is None else measure.name)
 
 
 def _run_chunks(y0, xi, w, rep, replicates, bounds, args, scheduler, progress):
@@ -264,7 +278,7 @@ def _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler, progre
 
 
 def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler, seed,
-             order, replicates):
+             order, replicates, distribution="semicircle"):
     M = total.count
     if sampler == "gauss":
         x_var = total.x_m2 / total.weight
@@ -330,4 +344,5 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
     )
     ds.attrs["rhs_evaluations"] = int(total.rhs_evaluations)
     ds.attrs["allow_negative"] = int(unc.allow_negative)
+    ds.attrs["distribution"] = distribution
     return ds

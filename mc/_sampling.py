@@ -131,9 +131,10 @@ def _check_sampler(sampler: str, samples: int, seed: int | None) -> None:
 
 
 def sample_xi(
-    sampler: str, samples: int, seed: int | None = None, replicates: int = 1
+    sampler: str, samples: int, seed: int | None = None, replicates: int = 1,
+    distribution=None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Points and weights for expectations over the semicircle law.
+    """Points and weights for expectations over the semicircle law (or ``distribution``).
 
     Parameters
     ----------
@@ -154,6 +155,10 @@ def sample_xi(
         replicate means is the honest error estimate of randomised QMC; the naive
         ``sqrt(Var/M)`` overstates a Sobol' estimate's error by orders of magnitude.
         ``M`` must be a multiple of ``R``.
+    distribution : None, name, chaospy distribution or opa._measure.Measure
+        Another law of xi (:func:`opa._measure.parse`): the same uniforms go through its
+        quantile function, and ``gauss`` uses its Gauss rule. None: the semicircle, by
+        the closed forms above.
 
     Returns
     -------
@@ -178,6 +183,12 @@ def sample_xi(
     """
     _check_sampler(sampler, samples, seed)
     samples = int(samples)
+    if distribution is not None:
+        from opa._measure import parse
+
+        measure = parse(distribution)
+        if measure.name != "semicircle" or not measure.is_whole:
+            return _sample_measure(measure, sampler, samples, seed, replicates)
     if sampler == "gauss":
         return gauss_nodes(samples)
     weights = np.full(samples, 1.0 / samples)
@@ -198,6 +209,23 @@ def sample_xi(
     per = samples // replicates
     u = np.concatenate([_sobol_uniform(per, np.random.default_rng(c)) for c in children])
     return semicircle_ppf(u), weights
+
+
+def _sample_measure(measure, sampler, samples, seed, replicates):
+    """The samplers for another law: uniforms through its quantile function."""
+    if sampler == "gauss":
+        return measure.gauss(samples)
+    weights = np.full(samples, 1.0 / samples)
+    if sampler == "random":
+        return measure.ppf(np.random.default_rng(seed).random(samples)), weights
+    if int(replicates) == 1:
+        return measure.ppf(_sobol_uniform(samples, seed)), weights
+    if samples % replicates:
+        raise ValueError(f"samples must be a multiple of replicates = {replicates}, got {samples}")
+    children = np.random.SeedSequence(seed).spawn(int(replicates))
+    per = samples // int(replicates)
+    u = np.concatenate([_sobol_uniform(per, np.random.default_rng(c)) for c in children])
+    return measure.ppf(u), weights
 
 
 def _sobol_uniform(samples: int, seed) -> np.ndarray:

@@ -108,6 +108,20 @@ def chebyshev_u(n_max: int, xi: ArrayLike) -> np.ndarray:
     return out
 
 
+def orthonormal(n_max: int, xi: ArrayLike, alpha: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Orthonormal polynomials p_0..p_{n_max} at ``xi`` from the recurrence
+    ``b_{k+1} p_{k+1} = (xi - alpha_k) p_k - b_k p_{k-1}``, ``p_0 = 1`` (any law of xi;
+    :mod:`opa._measure` computes ``alpha``, ``b``). Shape ``(n_max + 1, *xi.shape)``."""
+    xi = np.asarray(xi, dtype=float)
+    out = np.empty((n_max + 1, *xi.shape))
+    out[0] = 1.0
+    if n_max >= 1:
+        out[1] = (xi - alpha[0]) / b[1]
+    for k in range(1, n_max):
+        out[k + 1] = ((xi - alpha[k]) * out[k] - b[k] * out[k - 1]) / b[k + 1]
+    return out
+
+
 def gauss_nodes(q: int) -> tuple[np.ndarray, np.ndarray]:
     r"""Gauss rule of the semicircle density (Gauss-Chebyshev of the second kind).
 

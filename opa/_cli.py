@@ -64,7 +64,8 @@ def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
                         "(default galerkin)")
     g.add_argument("--impact-law", choices=IMPACT_LAWS, default="mean",
                    help="mean: only x_0' jumps (eq. 28); ensemble: every velocity coefficient "
-                        "is multiplied by -eta (default mean)")
+                        "is multiplied by -eta; saltation: the impact's saltation matrix "
+                        "maps the deviation coefficients (default mean)")
     if mc:
         g.add_argument("--samples", type=int, default=1024, metavar="M",
                        help="Monte Carlo samples (default 1024)")
@@ -74,6 +75,33 @@ def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
         g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="Dask distributed scheduler address (default: local threads)")
     _solver_flags(parser)
+
+
+def _elements_arg(text: str):
+    if text == "adaptive":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer or 'adaptive', got "
+                                         f"{text!r}") from None
+
+
+def _element_flags(parser: argparse.ArgumentParser) -> None:
+    """The law of xi and multi-element OPA (simulate only)."""
+    g = parser.add_argument_group("law of xi and multi-element OPA")
+    g.add_argument("--distribution", default=None, metavar="LAW",
+                   help="law of xi: semicircle (the paper's), uniform, beta:A,B or "
+                        "normal-trunc:K, all on [-1, 1] (default semicircle)")
+    g.add_argument("--elements", type=_elements_arg, default=None, metavar="K|adaptive",
+                   help="multi-element OPA: K equal-probability elements, or 'adaptive' "
+                        "(edges at the impact-sequence splits, then refinement) "
+                        "(default: one element, the paper's OPA)")
+    g.add_argument("--tolerance", type=float, default=1e-6, metavar="TOL",
+                   help="adaptive elements: refine while an element's variance share "
+                        "P_k max_t Var_k exceeds TOL (default 1e-6)")
+    g.add_argument("--max-elements", type=int, default=64, metavar="K",
+                   help="adaptive elements: the element budget (default 64)")
 
 
 def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,
@@ -150,6 +178,10 @@ def cmd_simulate(args) -> int:
 
     osc = oscillator_from(args)
     opts = options_from(args)
+    if args.model != "opa" and args.elements is not None:
+        raise CliError(f"--elements applies to simulate opa, not simulate {args.model}")
+    if args.model == "dmr" and args.distribution is not None:
+        raise CliError("--distribution applies to simulate opa and mc, not simulate dmr")
     start = time.perf_counter()
     if args.model == "dmr":
         from opa._simulate import simulate_dmr
@@ -162,9 +194,13 @@ def cmd_simulate(args) -> int:
         ds = simulate_opa(osc, sigma=args.sigma, order=args.order, uncertain=args.uncertain,
                           truncation=args.truncation, impact_law=args.impact_law,
                           allow_negative=args.allow_negative, periods=args.periods,
-                          per_period=args.per_period, options=opts)
-        final = (f"E[x] = x_0 = {float(ds.x_mean[-1]):.10g}, Var[x] = "
+                          per_period=args.per_period, options=opts,
+                          distribution=args.distribution, elements=args.elements,
+                          tolerance=args.tolerance, max_elements=args.max_elements)
+        final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = "
                  f"{float(ds.x_var[-1]):.4g}")
+        if "element" in ds.dims:
+            final += f" ({ds.sizes['element']} elements)"
     else:
         from mc import simulate_mc
 
@@ -172,7 +208,7 @@ def cmd_simulate(args) -> int:
                          seed=args.seed, order=args.order, uncertain=args.uncertain,
                          allow_negative=args.allow_negative, periods=args.periods,
                          per_period=args.per_period, options=opts, scheduler=args.scheduler,
-                         progress=not args.quiet)
+                         progress=not args.quiet, distribution=args.distribution)
         sem = float(ds.x_sem[-1])
         final = (f"E[x] = {float(ds.x_mean[-1]):.8g} ± {sem:.2g} (SE), Var[x] = "
                  f"{float(ds.x_var[-1]):.4g}; impacts per sample "
@@ -210,6 +246,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("model", choices=("dmr", "opa", "mc"))
     _model_flags(sim)
     _common_flags(sim)
+    _element_flags(sim)
     _output_flags(sim)
     sim.set_defaults(func=cmd_simulate)
 

@@ -19,7 +19,7 @@ PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "om
 UNCERTAIN_PARAMETERS = ("mu", "a", "c")
 IMPULSE_MODELS = ("dirac", "pulse")
 TRUNCATIONS = ("galerkin", "paper")
-IMPACT_LAWS = ("mean", "ensemble")
+IMPACT_LAWS = ("mean", "ensemble", "saltation")
 
 PARAMETER_DOCS = {
     "mu": "van der Pol damping coefficient (mean value mu_bar when uncertain)",

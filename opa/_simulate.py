@@ -220,6 +220,17 @@ def simulate_dmr(
     return ds
 
 
+def check_support(oscillator: Oscillator, unc: Uncertainty, measure) -> None:
+    """Refuse samples p_bar + sigma xi < 0 over xi's support unless allowed."""
+    mean = getattr(oscillator, unc.parameter)
+    lowest = mean + unc.sigma * measure.lo
+    if not unc.allow_negative and lowest < 0.0 <= mean:
+        raise ValueError(
+            f"sigma = {unc.sigma} with xi down to {measure.lo:g} makes {unc.parameter} = "
+            f"{lowest:.6g} negative for some samples; pass allow_negative=True "
+            f"(--allow-negative) if that is intended")
+
+
 def simulate_opa(
     oscillator: Oscillator | None = None,
     *,
@@ -234,6 +245,10 @@ def simulate_opa(
     options: SolverOptions | None = None,
     times: np.ndarray | None = None,
     initial: np.ndarray | None = None,
+    distribution=None,
+    elements=None,
+    tolerance: float = 1e-6,
+    max_elements: int = 64,
 ) -> xr.Dataset:
     """The OPA equivalent system of order N (the EMR, eqs. (24)-(28)).
 
@@ -245,6 +260,16 @@ def simulate_opa(
     keeps the exact projection. Initial coefficients: x_0 = x0, v_0 = v0, others 0,
     unless ``initial`` (shape (2, N+1): rows x_coef, v_coef) is given, e.g. to continue
     from the end of an earlier run.
+
+    Multi-element OPA (:mod:`opa._elements`): ``distribution`` is the law of xi (a name
+    of :data:`opa._measure.DISTRIBUTIONS`, a chaospy distribution with bounded support,
+    or a :class:`opa._measure.Measure`; default the semicircle) and ``elements`` cuts
+    its support: ``K`` equal-probability elements, an increasing array of edges, or
+    ``"adaptive"`` (edges at the splits of the sampled systems' impact sequences, then
+    halving of the element with the largest variance share until it is below
+    ``tolerance`` or ``max_elements`` is reached). Each element runs its own OPA system
+    of order N; the result holds the assembled ``x_mean, x_var, v_mean, v_var`` and the
+    per-element coefficients, edges and probabilities.
 
     Returns
     -------
@@ -264,6 +289,20 @@ def simulate_opa(
     _choice("truncation", truncation, TRUNCATIONS)
     _choice("impact_law", impact_law, IMPACT_LAWS)
     unc = Uncertainty(sigma, uncertain, allow_negative)
+    if distribution is not None or elements is not None:
+        from opa._elements import simulate_elements
+        from opa._measure import parse
+
+        if initial is not None:
+            raise ValueError("initial is not supported with elements or a distribution")
+        measure = parse(distribution)
+        check_support(oscillator, unc, measure)
+        return simulate_elements(
+            oscillator, sigma=unc.sigma, order=order, uncertain=uncertain,
+            impact_law=impact_law, truncation=truncation, options=options,
+            times=_times(oscillator, periods, per_period, times), unc=unc, measure=measure,
+            elements=1 if elements is None else elements, tolerance=tolerance,
+            max_elements=max_elements, allow_negative=allow_negative)
     unc.check(oscillator)
     times = _times(oscillator, periods, per_period, times)
     p, cfg = pack_parameters(

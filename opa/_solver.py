@@ -45,7 +45,7 @@ N_CFG = 7
 UNCERTAIN_MU, UNCERTAIN_A, UNCERTAIN_C = 0, 1, 2
 IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
 TRUNC_GALERKIN, TRUNC_PAPER = 0, 1
-LAW_MEAN, LAW_ENSEMBLE = 0, 1
+LAW_MEAN, LAW_ENSEMBLE, LAW_SALTATION = 0, 1, 2
 
 # Status codes returned by ``integrate``.
 OK, MAX_STEPS, STEP_COLLAPSE, DIVERGED = 0, 1, 2, 3
@@ -421,6 +421,20 @@ def _apply_impact(y, ncoef, eta, law):
 
 
 @njit(cache=True)
+def _apply_saltation(y, ncoef, eta, v_minus, a_minus, a_plus):
+    """The saltation matrix of the impact applied to the deviation coefficients
+    (i >= 1): a sample that reaches the wall later or earlier than the mean leaves it
+    with x_i -> -eta x_i and v_i -> -eta v_i + (a+ + eta a-) / v- x_i, where a-, a+ are
+    the mean's accelerations just before and after the impact and v- its impact speed.
+    The mean's own jump (x_0 = delta, v_0 -> -eta v_0) is applied by the caller."""
+    k = (a_plus + eta * a_minus) / v_minus
+    for i in range(1, ncoef):
+        xi_ = y[i]
+        y[i] = -eta * xi_
+        y[ncoef + i] = -eta * y[ncoef + i] + k * xi_
+
+
+@njit(cache=True)
 def _log_event(log, count, t, v, kind):
     if count < log.shape[0]:
         log[count, 0] = t
@@ -533,7 +547,7 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
             # at rest on the wall with the net force into it (e.g. x0 = delta, v0 = 0):
             # no impact will be detected from here, so start sticking now
             y[0] = delta
-            if law == LAW_ENSEMBLE:
+            if law != LAW_MEAN:
                 for i in range(ncoef):
                     y[ncoef + i] = 0.0
             sticking = True
@@ -606,7 +620,16 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                     n_impacts += 1
                     kind = EV_GRAZE if v_minus < GRAZE_VELOCITY else EV_IMPACT
                     n_events = _log_event(log, n_events, t, v_minus, kind)
-                    _apply_impact(y, ncoef, eta, law)
+                    if law == LAW_SALTATION and v_minus > GRAZE_VELOCITY:
+                        a_minus = rhs(t, y, p, cfg, nodes, weights, U, pulse, False, ytmp, xk, vk)
+                        y[ncoef] = -eta * y[ncoef]
+                        a_plus = rhs(t, y, p, cfg, nodes, weights, U, pulse, False, ytmp, xk, vk)
+                        n_rhs += 2
+                        _apply_saltation(y, ncoef, eta, v_minus, a_minus, a_plus)
+                    elif law == LAW_SALTATION:  # grazing: no finite saltation; reflect v
+                        _apply_impact(y, ncoef, eta, LAW_ENSEMBLE)
+                    else:
+                        _apply_impact(y, ncoef, eta, law)
                     # chatter: impacts too slow to resolve with a net force into the wall
                     if eta < 1.0 and v_minus < chatter_v:
                         y[ncoef] = 0.0
@@ -614,7 +637,7 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                         n_rhs += 1
                         if acc > 0.0:
                             t_acc = t + 2.0 * eta * v_minus / (acc * (1.0 - eta))
-                            if law == LAW_ENSEMBLE:
+                            if law != LAW_MEAN:
                                 for i in range(ncoef):
                                     y[ncoef + i] = 0.0
                             sticking = True

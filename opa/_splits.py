@@ -195,16 +195,18 @@ def find_splits(
 ) -> tuple[list[Split], bool]:
     """Every change of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi].
 
-    The interval is scanned at ``scan`` equally spaced values; each pair of neighbours whose
-    sequences differ (:meth:`EventSequence.same_as`: other events, or an event time that
-    jumps by more than ``TIME_SLACK`` forcing periods) is bisected (single deterministic runs) until the bracket is shorter
-    than ``tol``; a third sequence met inside a bracket is followed as a split of its own.
-    Changes between two scan points with equal sequences (an even number of them) are not
-    seen; a bracket whose ends end up matching (fast but continuous event times) is
-    dropped. Brackets are bisected nearest to ``center`` (default: the middle) first, so
-    when ``max_splits`` cuts the list, the splits kept are those an ensemble centred
-    there meets first. ``cache`` (value -> EventSequence) lets calls for several horizons share runs;
-    the runs go to the largest horizon asked of the cache's first call.
+    The interval is scanned at ``scan`` equally spaced values; each pair of neighbours
+    whose sequences differ (:meth:`EventSequence.same_as`: other events, or an event time
+    that jumps by more than ``TIME_SLACK`` forcing periods) is bisected (single
+    deterministic runs) until the bracket is shorter than ``tol``; a third sequence met
+    inside a bracket is followed as a split of its own. Changes between two scan points
+    with equal sequences (an even number of them) are not seen; a bracket whose ends end
+    up matching (fast but continuous event times) is dropped. The scan's brackets are
+    bisected before those found inside them, and within each generation nearest to
+    ``center`` (default: the middle) first, so when ``max_splits`` cuts the list, the
+    splits kept are the ones the scan resolves, nearest first, rather than the members of
+    one cascade. ``cache`` (value -> EventSequence) lets calls for several horizons share
+    runs; the runs go to the largest horizon asked of the cache's first call.
 
     Returns the splits in increasing ``value`` and whether ``max_splits`` cut the list.
     """
@@ -231,13 +233,20 @@ def find_splits(
         return not seq(x).same_as(seq(y), horizon, slack)
 
     values = np.linspace(lo, hi, scan)
-    brackets = [(float(x), float(y)) for x, y in zip(values[:-1], values[1:])
+    # (generation, a, b): the scan's brackets are generation 0; a bracket set aside when
+    # a third sequence turns up inside another is one generation later. All of one
+    # generation are bisected before the next, so a cascade of splits packed into one
+    # scan interval (chatter) cannot use up max_splits before the other changes are seen.
+    brackets = [(0, float(x), float(y)) for x, y in zip(values[:-1], values[1:])
                 if differ(float(x), float(y))]
     center = 0.5 * (lo + hi) if center is None else center
 
     def distance(bracket):
-        x, y = bracket
+        x, y = bracket[-2:]
         return 0.0 if x <= center <= y else min(abs(x - center), abs(y - center))
+
+    def priority(bracket):
+        return bracket[0], distance(bracket)
 
     splits: list[Split] = []
     truncated = False
@@ -245,8 +254,8 @@ def find_splits(
         if len(splits) >= max_splits:
             truncated = True
             break
-        brackets.sort(key=distance)
-        a, b = brackets.pop(0)
+        brackets.sort(key=priority)
+        gen, a, b = brackets.pop(0)
         while b - a > tol:
             m = 0.5 * (a + b)
             if not differ(m, a):
@@ -255,10 +264,10 @@ def find_splits(
                 b = m
             else:  # a third sequence: follow the half nearer the centre, queue the other
                 if distance((a, m)) <= distance((m, b)):
-                    brackets.append((m, b))
+                    brackets.append((gen + 1, m, b))
                     b = m
                 else:
-                    brackets.append((a, m))
+                    brackets.append((gen + 1, a, m))
                     a = m
         if not differ(a, b):  # event times that moved fast, continuously: no split
             continue

@@ -44,6 +44,9 @@ from opa._model import (
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
 from opa._simulate import SimulationError, quadrature
 
+# The variational kernel implements the mean and ensemble laws (not saltation).
+STABILITY_LAWS = IMPACT_LAWS[:2]
+
 MODELS = ("dmr", "opa")
 MAX_CYCLE = 1000  # longest common period (in forcing periods) accepted for a map
 GRAZE_VELOCITY = 1e-3  # classification: impacts slower than this are (near) grazing
@@ -94,7 +97,7 @@ class ImpactSystem:
     def __post_init__(self):
         _choice("model", self.model, MODELS)
         _choice("truncation", self.truncation, TRUNCATIONS)
-        _choice("impact_law", self.impact_law, IMPACT_LAWS)
+        _choice("impact_law", self.impact_law, STABILITY_LAWS)
         _choice("uncertain", self.uncertain, UNCERTAIN_PARAMETERS)
         if not isinstance(self.oscillator, Oscillator):
             raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r}")

@@ -174,7 +174,7 @@ def register_stability(subparsers, model_flags, solver_flags) -> None:
     g.add_argument("--order", type=int, default=4, metavar="N", help="OPA order N (default 4)")
     g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
                    help="galerkin or paper (eq. 27) (default galerkin)")
-    g.add_argument("--impact-law", choices=IMPACT_LAWS, default="mean",
+    g.add_argument("--impact-law", choices=IMPACT_LAWS[:2], default="mean",
                    help="mean (eq. 28) or ensemble (default mean)")
     s = p.add_argument_group("orbit and branch")
     s.add_argument("--orbit-periods", type=int, default=None, metavar="K",
