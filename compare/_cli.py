@@ -158,3 +158,58 @@ def cmd_validate(args) -> int:
     print(f"\nwrote {os.path.join(cfg.outdir, 'validate.nc')}, "
           + ", ".join(written) + f" in {time.perf_counter() - start:.1f} s")
     return 0
+
+
+def register_converge(sub, model_flags, solver_flags) -> None:
+    p = sub.add_parser(
+        "converge",
+        help="multi-element OPA against Monte Carlo: error against elements, N and cost",
+        description="Convergence of multi-element OPA (uniform and adaptive elements, mean "
+        "and saltation impact laws) and multi-element collocation against a Sobol "
+        "reference, beside single-element OPA, collocation, MC and QMC, with right-hand "
+        "sides and wall times. Default: section 3.2 set, omega = 3.98, sigma = 0.05, 10 "
+        "forcing periods, 2^16 reference samples.",
+    )
+    model_flags(p)
+    g = p.add_argument_group("study")
+    g.add_argument("--sigma", type=float, default=0.05, metavar="S",
+                   help="intensity of the uncertain parameter (default 0.05)")
+    g.add_argument("--distribution", default="semicircle", metavar="LAW",
+                   help="law of xi: semicircle, uniform, beta:A,B, normal-trunc:K")
+    g.add_argument("--periods", type=float, default=10.0, metavar="P",
+                   help="window in forcing periods (default 10)")
+    g.add_argument("--order", type=int, default=1, metavar="N",
+                   help="OPA order of every element for the sweeps in K (default 1)")
+    g.add_argument("--budgets", type=_order_list, default=None, metavar="B1,B2,...",
+                   help="element budgets of the adaptive runs (default 4,8,...,256)")
+    g.add_argument("--uniform", type=_order_list, default=None, metavar="K1,K2,...",
+                   help="element counts of the uniform runs (default 1,2,...,128)")
+    g.add_argument("--reference", type=int, default=65536, metavar="M",
+                   help="Sobol samples of the reference (default 65536)")
+    g.add_argument("--outdir", default="results-elements", metavar="DIR",
+                   help="output folder (default results-elements)")
+    g.add_argument("--quiet", action="store_true", help="no log lines")
+    solver_flags(p, tolerance=1e-9)
+    p.set_defaults(func=cmd_converge)
+
+
+def cmd_converge(args) -> int:
+    from compare._convergence import ConvergenceConfig, run_convergence, summary_lines, \
+        write_report
+    from opa._cli import oscillator_from, options_from
+
+    _check_outdir(args.outdir)
+    kw = {k: v for k, v in (("budgets", args.budgets), ("uniform", args.uniform))
+          if v is not None}
+    cfg = ConvergenceConfig(oscillator=oscillator_from(args), options=options_from(args),
+                            sigma=args.sigma, distribution=args.distribution,
+                            periods=args.periods, order=args.order, reference=args.reference,
+                            outdir=args.outdir, **kw)
+    log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
+    ds = run_convergence(cfg, log=log)
+    written = write_report(ds, args.outdir, command="opa-mc " + shlex.join(
+        getattr(args, "argv", ["converge"])))
+    for line in summary_lines(ds):
+        print(f"* {line}")
+    print(f"\nwrote {os.path.join(args.outdir, 'convergence.nc')}, " + ", ".join(written))
+    return 0

@@ -250,12 +250,13 @@ def build_parser() -> argparse.ArgumentParser:
     _output_flags(sim)
     sim.set_defaults(func=cmd_simulate)
 
-    from compare._cli import register_validate
+    from compare._cli import register_converge, register_validate
     from opa._bifurcation_cli import register as register_bifurcation
 
     from opa._stability_cli import register_stability
 
     register_validate(sub, _model_flags, _solver_flags)
+    register_converge(sub, _model_flags, _solver_flags)
     register_bifurcation(sub, _model_flags, _common_flags)
     register_stability(sub, _model_flags, _solver_flags)
 

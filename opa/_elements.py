@@ -80,20 +80,40 @@ def element_rule(measure: Measure, order: int):
     return nodes, weights, np.ascontiguousarray(basis)
 
 
-def run_element(oscillator: Oscillator, options: SolverOptions, measure: Measure, *,
-                sigma: float, order: int, uncertain: str, impact_law: str,
-                times: np.ndarray) -> ElementRun:
-    """One element's OPA system over ``times``."""
+def run_elements(oscillator: Oscillator, options: SolverOptions, measures: list[Measure], *,
+                 sigma: float, order: int, uncertain: str, impact_law: str,
+                 times: np.ndarray) -> list[ElementRun]:
+    """The OPA systems of several elements over ``times``, in parallel (compiled kernel)."""
     p, cfg = pack_parameters(oscillator, options, sigma=sigma, order=order,
                              uncertain=uncertain, truncation="galerkin", impact_law=impact_law)
-    y0 = np.zeros(2 * (order + 1))
+    dim = 2 * (order + 1)
+    y0 = np.zeros(dim)
     y0[0] = oscillator.x0
     y0[order + 1] = oscillator.v0
-    out, _, stats = run_kernel(
-        y0, times, p, cfg, element_rule(measure, order), rtol=options.rtol, atol=options.atol,
-        label=f"element [{measure.a:.6g}, {measure.b:.6g}] of the OPA (N={order}) system")
-    return ElementRun(measure.a, measure.b, measure.probability(), out[:, : order + 1].T,
-                      out[:, order + 1:].T, stats["rhs_evaluations"], stats["impacts"])
+    rules = [element_rule(m, order) for m in measures]
+    nodes = np.stack([r[0] for r in rules])
+    weights = np.stack([r[1] for r in rules])
+    basis = np.ascontiguousarray(np.stack([r[2].T for r in rules]))  # (E, Q, N+2)
+    out = np.empty((len(measures), len(times), dim))
+    counters = np.zeros((len(measures), 5), dtype=np.int64)
+    K.run_elements(y0, np.asarray(times, float), p, cfg, nodes, weights, basis, options.rtol,
+                   options.atol, out, counters)
+    bad = np.flatnonzero(counters[:, 0] != K.OK)
+    if len(bad):
+        from opa._simulate import SimulationError
+
+        e = int(bad[0])
+        raise SimulationError(
+            f"element [{measures[e].a:.6g}, {measures[e].b:.6g}] of the OPA (N={order}) "
+            f"system stopped: {K.STATUS_MESSAGES[int(counters[e, 0])]}")
+    return [ElementRun(m.a, m.b, m.probability(), out[e, :, : order + 1].T,
+                       out[e, :, order + 1:].T, int(counters[e, 4]), int(counters[e, 2]))
+            for e, m in enumerate(measures)]
+
+
+def run_element(oscillator, options, measure, **kw) -> ElementRun:
+    """One element's OPA system (see :func:`run_elements`)."""
+    return run_elements(oscillator, options, [measure], **kw)[0]
 
 
 def assemble(runs: list[ElementRun]) -> dict[str, np.ndarray]:
@@ -170,25 +190,38 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
     kw = dict(sigma=sigma, order=order, uncertain=uncertain, impact_law=impact_law,
               times=times)
 
-    def run(a, b):
-        return run_element(oscillator, options, measure.restrict(a, b), **kw)
+    def run(pairs):
+        return run_elements(oscillator, options, [measure.restrict(a, b) for a, b in pairs],
+                            **kw)
 
-    runs = [run(a, b) for a, b in zip(edges[:-1], edges[1:])]
+    runs = run(list(zip(edges[:-1], edges[1:])))
     history = []
     while True:
         share = np.array([r.probability * float(r.var.max()) for r in runs])
         history.append((len(runs), float(share.max())))
-        if share.max() < tolerance or len(runs) >= max_elements:
+        room = max_elements - len(runs)
+        if share.max() < tolerance or room <= 0:
             break
-        k = int(np.argmax(share))
-        r = runs[k]
-        mid = float(measure.restrict(r.a, r.b).ppf(0.5))
-        if not (r.a < mid < r.b):
+        # one round: halve (in probability) every element within a factor 2 of the
+        # largest share and above the tolerance, the largest first, within the budget
+        pick = [k for k in np.argsort(-share)
+                if share[k] >= max(tolerance, 0.5 * share.max())][:room]
+        halves = {}
+        for k in pick:
+            r = runs[k]
+            mid = float(measure.restrict(r.a, r.b).ppf(0.5))
+            if r.a < mid < r.b:
+                halves[k] = [(r.a, mid), (mid, r.b)]
+        if not halves:
             break
-        runs[k: k + 1] = [run(r.a, mid), run(mid, r.b)]
+        new = iter(run([pair for k in sorted(halves) for pair in halves[k]]))
+        replaced = []
+        for k, r in enumerate(runs):
+            replaced += [next(new), next(new)] if k in halves else [r]
+        runs = replaced
         if log is not None:
-            log(f"  element [{r.a:.6g}, {r.b:.6g}] halved at {mid:.6g} "
-                f"(share {share[k]:.2e}); {len(runs)} elements")
+            log(f"  halved {len(halves)} elements (largest variance share "
+                f"{share.max():.2e}); {len(runs)} elements")
     return runs, history
 
 
@@ -259,8 +292,9 @@ def simulate_elements(oscillator, *, sigma, order, uncertain, impact_law, trunca
                     or edges[0] != measure.lo or edges[-1] != measure.hi):
                 raise ValueError(f"element edges must increase from {measure.lo} to "
                                  f"{measure.hi}, got {elements!r}")
-        runs = [run_element(oscillator, options, measure.restrict(a, b), **kw)
-                for a, b in zip(edges[:-1], edges[1:])]
+        runs = run_elements(oscillator, options,
+                            [measure.restrict(a, b) for a, b in zip(edges[:-1], edges[1:])],
+                            **kw)
     stats = assemble(runs)
     one = {"units": "1"}
     edges = np.array([r.a for r in runs] + [runs[-1].b])
@@ -313,4 +347,5 @@ def simulate_elements(oscillator, *, sigma, order, uncertain, impact_law, trunca
 
 
 __all__ = ["ElementRun", "adaptive_edges", "assemble", "collocation", "element_rule",
-           "run_element", "simulate_elements", "split_edges", "uniform_edges"]
+           "merge_smallest", "run_element", "run_elements", "simulate_elements",
+           "split_edges", "uniform_edges"]

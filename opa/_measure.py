@@ -49,6 +49,9 @@ class Measure:
     ppf_full: Callable | None = field(default=None, compare=False)
     a: float | None = None
     b: float | None = None
+    # recurrences computed so far, keyed by (a, b, n, m); shared by restrictions, which
+    # is why the key holds the interval
+    _cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def __post_init__(self):
         if not (math.isfinite(self.lo) and math.isfinite(self.hi) and self.lo < self.hi):
@@ -115,6 +118,13 @@ class Measure:
             raise ValueError(f"n must be a positive integer, got {n}")
         n = int(n)
         m = max(DISCRETISATION, 2 * n + 8) if m is None else m
+        key = (self.a, self.b, n, m)
+        if key not in self._cache:
+            self._cache[key] = self._lanczos(n, m)
+        alpha, bcoef = self._cache[key]
+        return alpha.copy(), bcoef.copy()
+
+    def _lanczos(self, n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
         if n > m:
             raise ValueError(f"n = {n} exceeds the discretisation m = {m}")
         x, w = self.discretise(m)
@@ -216,7 +226,8 @@ def from_chaospy(dist) -> Measure:
     except AttributeError:
         raise ValueError(f"distribution must be a name or a chaospy distribution, got "
                          f"{dist!r}") from None
-    if not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo > 1e6:
+    if (not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo > 1e6
+            or float(cdf(lo)) > 0.0 or float(cdf(hi)) < 1.0):  # chaospy cuts tails at ~8 sd
         raise ValueError(f"the distribution of xi must have a bounded support, got "
                          f"[{lo}, {hi}] (use a truncated law)")
     width = hi - lo

@@ -771,3 +771,17 @@ def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, stat
         status[m] = res[0]
         n_impacts[m] = res[2]
         n_rhs[m] = res[4]
+
+
+@njit(cache=True, parallel=True)
+def run_elements(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out, counters):
+    """Integrate E independent OPA systems (the elements of a multi-element system) in
+    parallel: element e has its own rule ``nodes[e], weights[e]`` and basis ``U[e]``
+    (node-major, (Q, N+2)). out: (E, n_out, dim); counters: (E, 5) with the status,
+    events, impacts, steps and right-hand sides of each."""
+    E = nodes.shape[0]
+    for e in prange(E):
+        log = np.empty((0, 3))
+        res = integrate(y0, t_out, p, cfg, nodes[e], weights[e], U[e], rtol, atol, out[e], log)
+        for j in range(5):
+            counters[e, j] = res[j]

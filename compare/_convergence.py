@@ -1,0 +1,330 @@
+"""Convergence of multi-element OPA against Monte Carlo, with its cost beside the peers.
+
+One run (:func:`run_convergence`) computes, on one model and one sigma over a window of
+forcing periods:
+
+* a Monte Carlo reference (scrambled Sobol, ``reference`` samples, its own seed);
+* multi-element OPA against the number of elements K at fixed N (equal-probability
+  elements, and the adaptive edges at the splits with refinement, for a budget of
+  elements), and against N at fixed K, for the ``mean`` and ``saltation`` impact laws;
+* the non-intrusive twin, multi-element Gauss collocation (Q nodes per element, each a
+  true impact system), on the same edges;
+* single-element OPA for N = 0..8, single-element collocation, and plain Monte Carlo and
+  scrambled Sobol at increasing M (seeds other than the reference's);
+
+each with its RMS error of the mean x_0 (and of the standard deviation) over the window,
+its right-hand-side evaluations (for OPA also times the Q nodes each one evaluates) and
+its wall time. Slopes are fitted to log error against log K. The errors are meaningful
+down to the reference's own standard error, which is stored beside them.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from mc._ensemble import simulate_mc
+from opa._basis import quadrature_order
+from opa._dataset import provenance_attrs, write_netcdf
+from opa._elements import collocation, uniform_edges
+from opa._measure import parse
+from opa._model import Oscillator, SolverOptions, preset, time_grid
+from opa._simulate import simulate_opa
+
+LAWS = ("mean", "saltation")
+
+
+@dataclass(frozen=True)
+class ConvergenceConfig:
+    """The section 3.2 set at omega = 3.98, sigma = 0.05, 10 periods, 2^16 Sobol samples."""
+
+    oscillator: Oscillator = field(default_factory=lambda: preset("3.2"))
+    options: SolverOptions = field(default_factory=lambda: SolverOptions(rtol=1e-9, atol=1e-9))
+    sigma: float = 0.05
+    uncertain: str = "mu"
+    distribution: str = "semicircle"
+    periods: float = 10.0
+    per_period: int = 8
+    order: int = 1
+    orders: tuple[int, ...] = (0, 1, 2, 4, 8)
+    uniform: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64, 128)
+    budgets: tuple[int, ...] = (4, 8, 16, 32, 64, 128, 256)
+    order_budget: int = 64
+    nodes: int = 2
+    single_nodes: tuple[int, ...] = (1, 2, 4, 8, 16)
+    mc_samples: tuple[int, ...] = (256, 512, 1024, 2048, 4096, 8192, 16384, 32768)
+    reference: int = 65536
+    seed: int = 1
+    outdir: str = "results-elements"
+
+    def __post_init__(self):
+        if not (self.sigma > 0):
+            raise ValueError(f"sigma must be > 0, got {self.sigma}")
+        for name in ("uniform", "budgets", "mc_samples", "orders", "single_nodes"):
+            seq = getattr(self, name)
+            if not seq or any(int(v) != v or v < 0 for v in seq):
+                raise ValueError(f"{name} must be non-negative integers, got {seq}")
+        if self.reference < 1024:
+            raise ValueError(f"reference must be >= 1024 samples, got {self.reference}")
+
+
+def _rms(a) -> float:
+    return float(np.sqrt(np.mean(np.square(a))))
+
+
+def run_convergence(cfg: ConvergenceConfig, *, log=print) -> xr.Dataset:
+    """Run the study; returns its dataset (also written to OUTDIR/convergence.nc)."""
+    osc, opts = cfg.oscillator, cfg.options
+    measure = parse(cfg.distribution)
+    times = time_grid(osc.omega, cfg.periods, cfg.per_period)
+    common = dict(sigma=cfg.sigma, uncertain=cfg.uncertain, times=times, options=opts,
+                  distribution=measure)
+    start = time.perf_counter()
+    log(f"reference: {cfg.reference} Sobol samples ...")
+    t0 = time.perf_counter()
+    ref = simulate_mc(osc, samples=cfg.reference, sampler="sobol", seed=cfg.seed, order=0,
+                      progress=False, **common)
+    ref_seconds = time.perf_counter() - t0
+    m_ref, sd_ref = ref.x_mean.values, np.sqrt(ref.x_var.values)
+    floor = _rms(ref.x_sem.values)
+
+    def errors(mean, var):
+        return _rms(mean - m_ref), _rms(np.sqrt(np.maximum(var, 0.0)) - sd_ref)
+
+    rows = []  # (method, law, size_name, size, N, err, sd_err, rhs, node_rhs, seconds)
+
+    def opa_row(method, law, size, order, **kw):
+        t = time.perf_counter()
+        ds = simulate_opa(osc, order=order, impact_law=law, **common, **kw)
+        sec = time.perf_counter() - t
+        e, s = errors(ds.x_mean.values, ds.x_var.values)
+        rhs = int(ds.attrs["rhs_evaluations"])
+        q = 1 if order == 0 else quadrature_order(order)
+        rows.append((method, law, size if size is not None else int(ds.attrs["elements"]),
+                     order, e, s, rhs, rhs * q, sec))
+        return ds
+
+    adaptive = {}  # budget -> the saltation law's adaptive edges
+    for law in LAWS:
+        log(f"multi-element OPA ({law} law) ...")
+        for k in cfg.uniform:
+            opa_row("ME-OPA uniform", law, k, cfg.order, elements=int(k))
+        for b in cfg.budgets:
+            ds = opa_row("ME-OPA adaptive", law, None, cfg.order, elements="adaptive",
+                         tolerance=1e-14, max_elements=int(b))
+            if law == "saltation":
+                adaptive[int(b)] = ds.element_edges.values
+        for n in cfg.orders:
+            opa_row("ME-OPA adaptive, N", law, None, n, elements="adaptive", tolerance=1e-14,
+                    max_elements=cfg.order_budget)
+            opa_row("OPA (one element), N", law, 1, n, elements=1)
+    log("collocation ...")
+    for method, sizes in (("ME-collocation uniform", cfg.uniform),
+                          ("ME-collocation adaptive", cfg.budgets)):
+        for k in sizes:
+            if method.endswith("uniform"):
+                edges = uniform_edges(measure, int(k))
+            else:  # the edges adaptive ME-OPA (saltation law) chose for that budget
+                edges = adaptive[int(k)]
+            t = time.perf_counter()
+            mean, var, rhs = collocation(osc, opts, measure, edges, cfg.nodes,
+                                         sigma=cfg.sigma, uncertain=cfg.uncertain,
+                                         times=times)
+            sec = time.perf_counter() - t
+            rows.append((method, "true system", len(edges) - 1, cfg.nodes, *errors(mean, var),
+                         rhs, rhs, sec))
+    for q in cfg.single_nodes:
+        t = time.perf_counter()
+        mean, var, rhs = collocation(osc, opts, measure, np.array([measure.lo, measure.hi]),
+                                     int(q), sigma=cfg.sigma, uncertain=cfg.uncertain,
+                                     times=times)
+        rows.append(("collocation (one element), Q", "true system", 1, int(q),
+                     *errors(mean, var), rhs, rhs, time.perf_counter() - t))
+    log("Monte Carlo and Sobol ladders ...")
+    for sampler, name in (("random", "MC"), ("sobol", "QMC (Sobol)")):
+        for m in cfg.mc_samples:
+            t = time.perf_counter()
+            ds = simulate_mc(osc, samples=int(m), sampler=sampler, seed=cfg.seed + 1,
+                             order=0, progress=False, **common)
+            rows.append((name, "true system", int(m), 0, *errors(ds.x_mean.values,
+                                                                  ds.x_var.values),
+                         int(ds.attrs["rhs_evaluations"]), int(ds.attrs["rhs_evaluations"]),
+                         time.perf_counter() - t))
+    cols = list(zip(*rows))
+    one = {"units": "1"}
+    ds = xr.Dataset(
+        {
+            "method": ("run", np.array(cols[0], dtype=object)),
+            "law": ("run", np.array(cols[1], dtype=object)),
+            "size": ("run", np.array(cols[2], dtype=np.int64),
+                     {"long_name": "elements (OPA, collocation) or samples (MC)", **one}),
+            "order": ("run", np.array(cols[3], dtype=np.int64),
+                      {"long_name": "N (OPA) or nodes per element (collocation)", **one}),
+            "error": ("run", np.array(cols[4]), {"long_name": "RMS error of E[x] over the "
+                                                 "window against the reference", **one}),
+            "sd_error": ("run", np.array(cols[5]), {"long_name": "RMS error of the standard "
+                                                    "deviation of x", **one}),
+            "rhs_evaluations": ("run", np.array(cols[6], dtype=np.int64),
+                                {"long_name": "right-hand-side evaluations", **one}),
+            "node_rhs_evaluations": ("run", np.array(cols[7], dtype=np.int64),
+                                     {"long_name": "right-hand sides times the nodes each "
+                                      "evaluates (OPA: Q = 2N + 1)", **one}),
+            "seconds": ("run", np.array(cols[8]), {"long_name": "wall time", "units": "s"}),
+        },
+        coords={"run": np.arange(len(rows))},
+        attrs=provenance_attrs("convergence", osc, opts, sigma=cfg.sigma, order=cfg.order,
+                               uncertain=cfg.uncertain, seed=cfg.seed, sampler="sobol"),
+    )
+    ds.attrs.update(
+        periods=float(cfg.periods), per_period=int(cfg.per_period),
+        distribution=measure.name, reference_samples=int(cfg.reference),
+        reference_sem=floor, reference_seconds=ref_seconds,
+        reference_rhs_evaluations=int(ref.attrs["rhs_evaluations"]),
+        wall_seconds=time.perf_counter() - start,
+    )
+    write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
+    return ds
+
+
+def _select(ds, method, law=None):
+    sel = ds.method.values == method
+    if law is not None:
+        sel &= ds.law.values == law
+    return np.flatnonzero(sel)
+
+
+def slope(ds, method, law, lo=None) -> float:
+    """Fitted slope of log error against log K (elements), over K >= lo."""
+    idx = _select(ds, method, law)
+    k = ds["size"].values[idx].astype(float)
+    e = ds.error.values[idx]
+    ok = (k >= (lo or 1)) & (e > 0)
+    if ok.sum() < 2:
+        return float("nan")
+    return float(np.polyfit(np.log(k[ok]), np.log(e[ok]), 1)[0])
+
+
+def cheapest_reaching(ds, method, target, law=None):
+    """The run of ``method`` with the fewest right-hand sides reaching ``target``."""
+    idx = [i for i in _select(ds, method, law) if ds.error.values[i] <= target]
+    return min(idx, key=lambda i: ds.rhs_evaluations.values[i]) if idx else None
+
+
+def table(ds, *, markdown=True) -> str:
+    head = ["method", "law", "K / M", "N / Q", "RMS error E[x]", "RMS error sd", "RHS",
+            "node RHS", "wall [s]"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for i in range(ds.sizes["run"]):
+        lines.append("| " + " | ".join([
+            str(ds.method.values[i]), str(ds.law.values[i]), str(int(ds["size"].values[i])),
+            str(int(ds.order.values[i])), f"{ds.error.values[i]:.2e}",
+            f"{ds.sd_error.values[i]:.2e}", f"{int(ds.rhs_evaluations.values[i]):,}",
+            f"{int(ds.node_rhs_evaluations.values[i]):,}", f"{ds.seconds.values[i]:.2f}",
+        ]) + " |")
+    return "\n".join(lines)
+
+
+def summary_lines(ds) -> list[str]:
+    out = []
+    a = ds.attrs
+    out.append(f"Reference: {a['reference_samples']} Sobol samples, RMS standard error "
+               f"{a['reference_sem']:.1e} (errors near it are not resolved).")
+    for law in LAWS:
+        for method in ("ME-OPA uniform", "ME-OPA adaptive"):
+            idx = _select(ds, method, law)
+            if len(idx) >= 2:
+                e = ds.error.values[idx]
+                k = ds["size"].values[idx]
+                out.append(f"{method}, {law} law, N = {int(ds.order.values[idx[0]])}: error "
+                           f"{e[0]:.1e} (K = {k[0]}) → {e[-1]:.1e} (K = {k[-1]}); fitted slope "
+                           f"{slope(ds, method, law, lo=2):.2f} in K for K ≥ 2.")
+    for target in (1e-3, 1e-4):
+        me = cheapest_reaching(ds, "ME-OPA adaptive", target, "saltation")
+        qmc = cheapest_reaching(ds, "QMC (Sobol)", target)
+        if me is None:
+            out.append(f"Adaptive ME-OPA (saltation) does not reach {target:g} within the "
+                       f"budgets tried.")
+            continue
+        text = (f"To reach {target:g}: adaptive ME-OPA (saltation law) with K = "
+                f"{int(ds['size'].values[me])} elements, {int(ds.rhs_evaluations.values[me]):,}"
+                f" right-hand sides ({int(ds.node_rhs_evaluations.values[me]):,} node "
+                f"evaluations), {ds.seconds.values[me]:.2f} s")
+        if qmc is not None:
+            r = ds.rhs_evaluations.values[qmc] / ds.rhs_evaluations.values[me]
+            rn = ds.rhs_evaluations.values[qmc] / ds.node_rhs_evaluations.values[me]
+            text += (f"; Sobol with M = {int(ds['size'].values[qmc])}: "
+                     f"{int(ds.rhs_evaluations.values[qmc]):,} right-hand sides, "
+                     f"{ds.seconds.values[qmc]:.2f} s — {r:.0f}× more right-hand sides "
+                     f"({rn:.0f}× more node evaluations).")
+        else:
+            text += "; no Sobol run of the ladder reaches it."
+        out.append(text)
+    return out
+
+
+def plot(ds, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
+    ax = axes[0]
+    for method, style in (("ME-OPA uniform", "o-"), ("ME-OPA adaptive", "s-"),
+                          ("ME-collocation uniform", "^--"), ("ME-collocation adaptive", "v--")):
+        for law in (*LAWS, "true system"):
+            idx = _select(ds, method, law)
+            if len(idx):
+                ax.loglog(ds["size"].values[idx], ds.error.values[idx], style, ms=4,
+                          label=f"{method} ({law})")
+    ax.axhline(ds.attrs["reference_sem"], color="k", ls=":", label="reference SE")
+    ax.set_xlabel("elements K")
+    ax.set_ylabel("RMS error of E[x]")
+    ax.legend(fontsize=6)
+    ax = axes[1]
+    for method in ("ME-OPA adaptive, N", "OPA (one element), N"):
+        for law in LAWS:
+            idx = _select(ds, method, law)
+            ax.semilogy(ds.order.values[idx], ds.error.values[idx], "o-", ms=4,
+                        label=f"{method} ({law})")
+    ax.axhline(ds.attrs["reference_sem"], color="k", ls=":")
+    ax.set_xlabel("N")
+    ax.legend(fontsize=6)
+    ax = axes[2]
+    for method in np.unique(ds.method.values):
+        if method.endswith(", N"):
+            continue
+        for law in np.unique(ds.law.values):
+            idx = _select(ds, method, law)
+            if len(idx):
+                ax.loglog(ds.rhs_evaluations.values[idx], ds.error.values[idx], "o-", ms=3,
+                          label=f"{method} ({law})")
+    ax.axhline(ds.attrs["reference_sem"], color="k", ls=":")
+    ax.set_xlabel("right-hand-side evaluations")
+    ax.legend(fontsize=6)
+    fig.suptitle(f"σ = {ds.attrs['sigma']:g}, ω = {ds.attrs['omega']:g}, "
+                 f"{ds.attrs['periods']:g} periods: error against K, N and cost")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def write_report(ds, outdir, command="opa-mc converge") -> list[str]:
+    os.makedirs(outdir, exist_ok=True)
+    png = plot(ds, os.path.join(outdir, "convergence.png"))
+    md = os.path.join(outdir, "convergence.md")
+    with open(md, "w") as fh:
+        fh.write(f"# Multi-element OPA against Monte Carlo\n\nCommand: `{command}` "
+                 f"({ds.attrs['wall_seconds']:.0f} s)\n\n")
+        fh.write("\n".join(f"- {line}" for line in summary_lines(ds)) + "\n\n")
+        fh.write(table(ds) + "\n\n![convergence](convergence.png)\n")
+    return [md, png]
+
+
+__all__ = ["ConvergenceConfig", "cheapest_reaching", "run_convergence", "slope",
+           "summary_lines", "table", "write_report"]

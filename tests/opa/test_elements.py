@@ -1,0 +1,166 @@
+"""Multi-element OPA: exact assembly, the no-impact limit, elements at a discontinuity
+established with scipy, the saltation impact law against finite differences of the scipy
+reference, and (slow) convergence against Monte Carlo at sigma = 0.05."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy import integrate
+
+from mc import simulate_mc
+from opa import Oscillator, SolverOptions, simulate_opa
+from opa._elements import ElementRun, assemble, run_element, run_elements, split_edges
+from opa._measure import beta, parse, semicircle
+from opa._model import time_grid
+from opa._splits import event_sequence
+from tests.reference import reference_trajectory
+from tests.reference_splits import GRAZING_CASE
+
+OPTIONS = SolverOptions(rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("law", [semicircle(), beta(2.0, 3.0)])
+def test_assembly_is_exact_for_a_polynomial_response(law):
+    """x(xi) = 1 + 2 xi - 3 xi^2 + xi^3 projected on each element's basis (degree 3,
+    exactly representable): the assembled mean and variance are its exact moments."""
+    poly = np.polynomial.Polynomial([1.0, 2.0, -3.0, 1.0])
+    edges = [-1.0, -0.3, 0.1, 0.8, 1.0]
+    runs = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        element = law.restrict(a, b)
+        x, w = element.gauss(6)
+        basis = element.basis(3, x)
+        coef = (basis * w) @ poly(x)
+        runs.append(ElementRun(a, b, element.probability(), coef[:, None], coef[:, None], 0, 0))
+    got = assemble(runs)
+    dens = {"semicircle": lambda t: 2 / math.pi * math.sqrt(1 - t * t),
+            "beta:2,3": lambda t: 12 * ((1 + t) / 2) * ((1 - t) / 2) ** 2 / 2}[law.name]
+    mean = integrate.quad(lambda t: dens(t) * poly(t), -1, 1)[0]
+    second = integrate.quad(lambda t: dens(t) * poly(t) ** 2, -1, 1)[0]
+    assert got["x_mean"][0] == pytest.approx(mean, abs=1e-13)
+    assert got["x_var"][0] == pytest.approx(second - mean**2, abs=1e-12)
+
+
+def test_without_impacts_one_element_is_the_paper_opa_and_more_converge_spectrally():
+    osc = Oscillator(delta=10.0, omega=3.98)  # the wall is never reached
+    times = time_grid(3.98, 3, 4)
+    kw = dict(sigma=0.2, times=times, options=OPTIONS)
+    one = simulate_opa(osc, order=4, **kw)
+    same = simulate_opa(osc, order=4, elements=1, **kw)
+    np.testing.assert_array_equal(one.x_mean.values, same.x_mean.values)
+    np.testing.assert_array_equal(one.x_var.values, same.x_var.values)
+    ref = simulate_opa(osc, order=10, elements=4, **kw)
+    err = [float(np.abs(simulate_opa(osc, order=n, elements=4, **kw).x_var.values
+                        - ref.x_var.values).max()) for n in (1, 2, 3, 4, 5)]
+    # geometric decay, about three decades per order, down to round-off by N = 4
+    assert all(b < 1e-2 * a for a, b in zip(err[:3], err[1:4])), err
+    assert max(err[3:]) < 1e-15, err
+    # and K elements of order N agree with one element of high order
+    np.testing.assert_allclose(ref.x_mean.values, simulate_opa(osc, order=10, **kw)
+                               .x_mean.values, atol=1e-11)
+
+
+def test_parallel_elements_equal_single_runs():
+    osc = Oscillator(omega=3.98)
+    times = time_grid(3.98, 4, 4)
+    law = semicircle()
+    kw = dict(sigma=0.02, order=2, uncertain="mu", impact_law="saltation", times=times)
+    parts = [law.restrict(-1.0, 0.0), law.restrict(0.0, 0.5), law.restrict(0.5, 1.0)]
+    together = run_elements(osc, OPTIONS, parts, **kw)
+    for element, run in zip(parts, together):
+        alone = run_element(osc, OPTIONS, element, **kw)
+        np.testing.assert_array_equal(run.x_coef, alone.x_coef)
+
+
+def test_an_element_edge_sits_on_the_scipy_grazing():
+    """GRAZING_CASE (tests/reference_splits.py): for mu < mu_split the sampled system
+    makes 3 impacts up to t_end, above it 2. With mu_bar = 0.78 and sigma = 0.01 the
+    split is at xi_s = (mu_split - 0.78) / 0.01; an element edge must sit there, and
+    every Gauss node of the two elements beside it must make its side's count."""
+    mu_bar, sigma = 0.78, 0.01
+    osc = Oscillator(mu=mu_bar, **GRAZING_CASE["model"])
+    t_end = GRAZING_CASE["t_end"]
+    edges, _ = split_edges(osc, OPTIONS, semicircle(), sigma=sigma, uncertain="mu",
+                           t_end=t_end)
+    xi_s = (GRAZING_CASE["mu_split"] - mu_bar) / sigma
+    k = int(np.argmin(np.abs(edges - xi_s)))
+    assert abs(edges[k] - xi_s) < 1e-5  # the split in mu to 1e-7 (see test_splits)
+    for (a, b), count in (((edges[k - 1], edges[k]), GRAZING_CASE["count_below"]),
+                          ((edges[k], edges[k + 1]), GRAZING_CASE["count_above"])):
+        nodes, _ = semicircle().restrict(a, b).gauss(4)
+        for xi in nodes:
+            seq = event_sequence(osc.replace(mu=mu_bar + sigma * xi), OPTIONS, t_end)
+            assert seq.count(t_end) == count
+
+
+def test_saltation_law_matches_finite_differences_of_the_reference():
+    """Small sigma, N = 1: x_1(t) = E[x U_1] ~ (sigma / 2) dx/dmu (U_1 = 2 xi,
+    E[xi U_1] = 1/2). Between the first and the second impact, dx/dmu of the scipy
+    reference by central differences must match x_1 / (sigma / 2) with the saltation
+    law; the ensemble and mean laws leave x_1 unreflected and do not."""
+    model = dict(a=0.5, c=0.05, f=1.5, omega=3.98, eta=0.8, delta=0.0, F0=0.1, a1=1.0,
+                 omega1=1.0, n=2, x0=-1.0, v0=0.0)
+    T = 2 * math.pi / 3.98
+    times = np.array([0.0, 1.5 * T, 2.0 * T, 3.0 * T])  # first impact at 1.03 T, next 3.73 T
+    h = 1e-6
+    plus = reference_trajectory(mu=0.8 + h, t_out=times, **model)
+    minus = reference_trajectory(mu=0.8 - h, t_out=times, **model)
+    dxdmu = (plus["x"] - minus["x"]) / (2 * h)
+    assert len(plus["impact_time"]) == 1 and len(minus["impact_time"]) == 1
+    sigma = 1e-5
+    osc = Oscillator(mu=0.8, **model)
+    got = {law: simulate_opa(osc, sigma=sigma, order=1, impact_law=law, times=times,
+                             options=OPTIONS).x_coef.values[1] / (sigma / 2)
+           for law in ("saltation", "ensemble", "mean")}
+    np.testing.assert_allclose(got["saltation"][1:], dxdmu[1:], rtol=1e-3)
+    for law in ("ensemble", "mean"):
+        assert np.max(np.abs(got[law][1:] / dxdmu[1:] - 1)) > 0.1
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(elements=4, truncation="paper"), "truncation='paper'"),
+    (dict(elements=0), "positive integer"),
+    (dict(elements="many"), "'adaptive'"),
+    (dict(elements=[-1.0, 0.5, 0.2, 1.0]), "edges must increase"),
+    (dict(elements=[-0.9, 1.0]), "edges must increase"),
+    (dict(elements="adaptive", max_elements=0), "max_elements"),
+    (dict(distribution="beta:2"), "distribution must be one of"),
+])
+def test_bad_element_arguments_are_named(kw, message):
+    with pytest.raises(ValueError, match=message):
+        simulate_opa(Oscillator(), sigma=0.01, order=1, periods=1, **kw)
+
+
+def test_monte_carlo_samples_the_same_law():
+    xi_mean = 2.0 / 5.0 * 2 - 1  # Beta(2, 3) on [-1, 1]
+    ds = simulate_mc(Oscillator(), sigma=0.05, samples=4096, distribution="beta:2,3",
+                     periods=1, progress=False, order=2, keep_paths=True)
+    assert float(ds.xi.mean()) == pytest.approx(xi_mean, abs=1e-3)
+    assert ds.attrs["distribution"] == "beta:2,3"
+    # the coefficients are on the law's own orthonormal basis (p_0 = 1)
+    np.testing.assert_allclose(ds.x_coef.values[0], ds.x_mean.values, rtol=1e-12)
+    p1 = parse("beta:2,3").basis(1, ds.xi.values)[1]
+    np.testing.assert_allclose(ds.x_coef.values[1], (p1 * ds.weight.values) @ ds.x.values,
+                               rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.slow
+def test_adaptive_elements_converge_against_monte_carlo_at_sigma_005():
+    """Section 3.2, omega = 3.98, sigma = 0.05, 10 periods: the paper's OPA is off by
+    7e-2; adaptive multi-element OPA (saltation law) reaches 1e-4 against 2^16 Sobol
+    samples and keeps falling with the element budget."""
+    osc = Oscillator(omega=3.98)
+    opts = SolverOptions(rtol=1e-9, atol=1e-9)
+    times = time_grid(3.98, 10, 8)
+    ref = simulate_mc(osc, sigma=0.05, samples=2**16, sampler="sobol", seed=1, order=0,
+                      times=times, options=opts, progress=False)
+    rms = lambda e: float(np.sqrt(np.mean(e**2)))  # noqa: E731
+    single = simulate_opa(osc, sigma=0.05, order=4, times=times, options=opts)
+    assert rms(single.x_mean.values - ref.x_mean.values) > 5e-2
+    errs = [rms(simulate_opa(osc, sigma=0.05, order=1, times=times, options=opts,
+                             impact_law="saltation", elements="adaptive", tolerance=1e-14,
+                             max_elements=b).x_mean.values - ref.x_mean.values)
+            for b in (16, 64, 256)]
+    assert errs[-1] < 1e-4
+    assert errs[0] > errs[1] > errs[2]
