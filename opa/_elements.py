@@ -205,7 +205,7 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
         # one round: halve (in probability) every element within a factor 2 of the
         # largest share and above the tolerance, the largest first, within the budget
         pick = [k for k in np.argsort(-share)
-                if share[k] >= max(tolerance, 0.5 * share.max())][:room]
+                if share[k] >= max(tolerance, 0.25 * share.max())][:room]
         halves = {}
         for k in pick:
             r = runs[k]

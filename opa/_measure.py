@@ -23,6 +23,7 @@ normal truncated at +-K standard deviations, scaled to [-1, 1]).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -99,7 +100,7 @@ class Measure:
         a, b = self.a, self.b
         ea = self.alpha - 1.0 if a == self.lo else 0.0
         eb = self.beta - 1.0 if b == self.hi else 0.0
-        t, w = special.roots_jacobi(m, eb, ea)  # weight (1 - t)^eb (1 + t)^ea on [-1, 1]
+        t, w = _jacobi_rule(m, eb, ea)  # weight (1 - t)^eb (1 + t)^ea on [-1, 1]
         x = a + 0.5 * (b - a) * (t + 1.0)
         rest = np.ones_like(x)
         if a != self.lo:
@@ -161,6 +162,15 @@ class Measure:
         """Orthonormal p_0..p_{n_max} at ``x``: shape ``(n_max + 1, *x.shape)``."""
         alpha, b = coefficients if coefficients is not None else self.recurrence(n_max + 1)
         return orthonormal(n_max, x, alpha, b)
+
+
+@functools.lru_cache(maxsize=32)
+def _jacobi_rule(m: int, eb: float, ea: float) -> tuple[np.ndarray, np.ndarray]:
+    """scipy's Gauss-Jacobi rule, cached: elements share a handful of (m, exponents)."""
+    t, w = special.roots_jacobi(m, eb, ea)
+    t.flags.writeable = False
+    w.flags.writeable = False
+    return t, w
 
 
 def semicircle() -> Measure:

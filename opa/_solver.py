@@ -785,3 +785,31 @@ def run_elements(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out, counters
         res = integrate(y0, t_out, p, cfg, nodes[e], weights[e], U[e], rtol, atol, out[e], log)
         for j in range(5):
             counters[e, j] = res[j]
+
+
+@njit(cache=True, parallel=True)
+def run_event_logs(y0, values, t_out, p, cfg, rtol, atol, logs, n_events, status):
+    """The event logs of M sampled deterministic systems, in parallel: sample m has the
+    uncertain parameter ``values[m]`` (absolute, not p_bar + sigma xi). logs: (M, cap, 3);
+    n_events (M,) may exceed cap, in which case the log was cut and must be rerun."""
+    M = values.shape[0]
+    nodes = np.zeros(1)
+    weights = np.ones(1)
+    U = np.zeros((1, 2))
+    U[0, 0] = 1.0
+    unc = cfg[C_UNCERTAIN]
+    idx = P_MU
+    if unc == UNCERTAIN_A:
+        idx = P_A
+    elif unc == UNCERTAIN_C:
+        idx = P_C
+    for m in prange(M):
+        pm = p.copy()
+        pm[idx] = values[m]
+        pm[P_SIGMA] = 0.0
+        cm = cfg.copy()
+        cm[C_NCOEF] = 1
+        out = np.empty((t_out.shape[0], 2))
+        res = integrate(y0, t_out, pm, cm, nodes, weights, U, rtol, atol, out, logs[m])
+        status[m] = res[0]
+        n_events[m] = res[1]

@@ -100,6 +100,36 @@ def event_sequence(oscillator: Oscillator, options: SolverOptions, t_end: float)
     _, log, _ = run_kernel([oscillator.x0, oscillator.v0], np.array([0.0, t_end]), p, cfg,
                            quadrature(0), rtol=options.rtol, atol=options.atol,
                            label="sampled system")
+    return _sequence_from_log(oscillator, log)
+
+
+def event_sequences(oscillator: Oscillator, options: SolverOptions, parameter: str,
+                    values, t_end: float) -> list[EventSequence]:
+    """The event sequences of the sampled systems with ``parameter`` at each of ``values``
+    (absolute values), run in parallel by the compiled kernel."""
+    values = np.asarray(values, dtype=float)
+    if parameter not in ("mu", "a", "c"):  # not a kernel-side uncertain parameter
+        return [event_sequence(oscillator.replace(**{parameter: float(v)}), options, t_end)
+                for v in values]
+    p, cfg = pack_parameters(oscillator, options, uncertain=parameter)
+    cap = 256
+    logs = np.empty((len(values), cap, 3))
+    n_events = np.zeros(len(values), dtype=np.int64)
+    status = np.zeros(len(values), dtype=np.int64)
+    K.run_event_logs(np.array([oscillator.x0, oscillator.v0]), values,
+                     np.array([0.0, t_end]), p, cfg, options.rtol, options.atol, logs,
+                     n_events, status)
+    out = []
+    for m, value in enumerate(values):
+        osc = oscillator.replace(**{parameter: float(value)})
+        if status[m] != K.OK or n_events[m] > cap:  # the single run raises or has room
+            out.append(event_sequence(osc, options, t_end))
+        else:
+            out.append(_sequence_from_log(osc, logs[m, : n_events[m]]))
+    return out
+
+
+def _sequence_from_log(oscillator: Oscillator, log: np.ndarray) -> EventSequence:
     codes = log[:, 2].astype(int)
     names = {K.EV_IMPACT: _IMPACT, K.EV_GRAZE: _IMPACT, K.EV_STICK: _STICK,
              K.EV_RELEASE: _RELEASE}
@@ -222,60 +252,67 @@ def find_splits(
         raise ValueError(f"horizon {horizon} is past the cached runs' end {t_end}")
 
     def seq(value: float) -> EventSequence:
-        if value not in cache:
-            cache[value] = event_sequence(oscillator.replace(**{parameter: value}), options,
-                                          t_end)
         return cache[value]
+
+    def ensure(values) -> None:
+        """Run every value not in the cache, in one parallel batch."""
+        todo = sorted({float(v) for v in values if float(v) not in cache})
+        for v, sq in zip(todo, event_sequences(oscillator, options, parameter, todo, t_end)):
+            cache[v] = sq
 
     slack = TIME_SLACK * oscillator.forcing_period
 
     def differ(x: float, y: float) -> bool:
         return not seq(x).same_as(seq(y), horizon, slack)
 
-    values = np.linspace(lo, hi, scan)
+    values = [float(v) for v in np.linspace(lo, hi, scan)]
+    ensure(values)
     # (generation, a, b): the scan's brackets are generation 0; a bracket set aside when
-    # a third sequence turns up inside another is one generation later. All of one
-    # generation are bisected before the next, so a cascade of splits packed into one
-    # scan interval (chatter) cannot use up max_splits before the other changes are seen.
-    brackets = [(0, float(x), float(y)) for x, y in zip(values[:-1], values[1:])
-                if differ(float(x), float(y))]
+    # a third sequence turns up inside another is one generation later. Brackets are
+    # taken generation by generation (nearest the centre first within one), so a cascade
+    # of splits packed into one scan interval (chatter) cannot use up max_splits before
+    # the other changes are seen; the brackets of one wave are bisected together, each
+    # level of the bisection one parallel batch of runs.
+    pending = [(0, x, y) for x, y in zip(values[:-1], values[1:]) if differ(x, y)]
     center = 0.5 * (lo + hi) if center is None else center
 
     def distance(bracket):
         x, y = bracket[-2:]
         return 0.0 if x <= center <= y else min(abs(x - center), abs(y - center))
 
-    def priority(bracket):
-        return bracket[0], distance(bracket)
-
     splits: list[Split] = []
-    truncated = False
-    while brackets:
-        if len(splits) >= max_splits:
-            truncated = True
-            break
-        brackets.sort(key=priority)
-        gen, a, b = brackets.pop(0)
-        while b - a > tol:
-            m = 0.5 * (a + b)
-            if not differ(m, a):
-                a = m
-            elif not differ(m, b):
-                b = m
-            else:  # a third sequence: follow the half nearer the centre, queue the other
-                if distance((a, m)) <= distance((m, b)):
-                    brackets.append((gen + 1, m, b))
-                    b = m
+    while pending and len(splits) < max_splits:
+        pending.sort(key=lambda br: (br[0], distance(br)))
+        wave = [list(br) for br in pending[: max_splits - len(splits)]]
+        del pending[: len(wave)]
+        while True:
+            open_ = [br for br in wave if br[2] - br[1] > tol]
+            if not open_:
+                break
+            ensure(0.5 * (br[1] + br[2]) for br in open_)
+            for br in open_:
+                gen, a, b = br
+                m = 0.5 * (a + b)
+                if not differ(m, a):
+                    br[1] = m
+                elif not differ(m, b):
+                    br[2] = m
+                elif distance((a, m)) <= distance((m, b)):  # a third sequence
+                    pending.append((gen + 1, m, b))
+                    br[2] = m
                 else:
-                    brackets.append((gen + 1, a, m))
-                    a = m
-        if not differ(a, b):  # event times that moved fast, continuously: no split
-            continue
-        kind, t, v = _classify(seq(a), seq(b), horizon, oscillator.forcing_period)
-        splits.append(Split(0.5 * (a + b), b - a, kind, t, v, seq(a).count(horizon),
-                            seq(b).count(horizon)))
+                    pending.append((gen + 1, a, m))
+                    br[1] = m
+        for _, a, b in wave:
+            if not differ(a, b):  # event times that moved fast, continuously: no split
+                continue
+            kind, t, v = _classify(seq(a), seq(b), horizon, oscillator.forcing_period)
+            splits.append(Split(0.5 * (a + b), b - a, kind, t, v, seq(a).count(horizon),
+                                seq(b).count(horizon)))
+    truncated = bool(pending)
     splits.sort(key=lambda s: s.value)
     return splits, truncated
 
 
-__all__ = ["EventSequence", "SPLIT_KINDS", "Split", "event_sequence", "find_splits"]
+__all__ = ["EventSequence", "SPLIT_KINDS", "Split", "event_sequence", "event_sequences",
+           "find_splits"]

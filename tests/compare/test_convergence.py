@@ -1,0 +1,89 @@
+"""The convergence study on a tiny configuration: its dataset against direct runs, the
+slope and cost helpers on synthetic data, and the CLI."""
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from compare._convergence import (
+    ConvergenceConfig,
+    cheapest_reaching,
+    run_convergence,
+    slope,
+    summary_lines,
+    write_report,
+)
+from mc import simulate_mc
+from opa import Oscillator, SolverOptions, simulate_opa
+from opa._cli import main
+from opa._model import time_grid
+
+TINY = dict(sigma=0.02, periods=2, per_period=4, orders=(0, 1), uniform=(1, 2),
+            budgets=(2, 4), order_budget=4, single_nodes=(1, 2), mc_samples=(64, 128),
+            reference=1024)
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    out = tmp_path_factory.mktemp("conv")
+    cfg = ConvergenceConfig(outdir=str(out), **TINY)
+    return cfg, run_convergence(cfg, log=lambda *a: None), out
+
+
+def test_rows_match_direct_runs(study):
+    cfg, ds, _ = study
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    ref = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=cfg.reference,
+                      sampler="sobol", seed=cfg.seed, order=0, times=times,
+                      options=cfg.options, progress=False)
+    i = int(np.flatnonzero((ds.method.values == "ME-OPA uniform") & (ds.law.values == "mean")
+                           & (ds["size"].values == 2))[0])
+    emr = simulate_opa(cfg.oscillator, sigma=cfg.sigma, order=cfg.order, elements=2,
+                       times=times, options=cfg.options)
+    err = float(np.sqrt(np.mean((emr.x_mean.values - ref.x_mean.values) ** 2)))
+    assert ds.error.values[i] == pytest.approx(err, rel=1e-12)
+    assert ds.rhs_evaluations.values[i] == emr.attrs["rhs_evaluations"]
+    assert ds.node_rhs_evaluations.values[i] == 3 * emr.attrs["rhs_evaluations"]  # Q = 3
+    assert ds.attrs["reference_sem"] == pytest.approx(
+        float(np.sqrt(np.mean(ref.x_sem.values ** 2))))
+    assert set(ds.method.values) >= {"ME-OPA uniform", "ME-OPA adaptive", "QMC (Sobol)", "MC",
+                                     "ME-collocation uniform", "ME-collocation adaptive",
+                                     "OPA (one element), N", "collocation (one element), Q"}
+
+
+def test_round_trip_and_report(study):
+    _, ds, out = study
+    with xr.open_dataset(out / "convergence.nc") as back:
+        np.testing.assert_array_equal(back.error.values, ds.error.values)
+        assert list(back.method.values) == list(ds.method.values)
+    written = write_report(ds, str(out), command="opa-mc converge (test)")
+    assert all((out / p.split("/")[-1]).exists() for p in written)
+    assert summary_lines(ds)[0].startswith("Reference: 1024 Sobol samples")
+
+
+def _synthetic(errors, sizes, rhs):
+    n = len(errors)
+    return xr.Dataset({
+        "method": ("run", np.array(["ME-OPA adaptive"] * n, dtype=object)),
+        "law": ("run", np.array(["saltation"] * n, dtype=object)),
+        "size": ("run", np.array(sizes)), "error": ("run", np.array(errors)),
+        "rhs_evaluations": ("run", np.array(rhs)),
+    })
+
+
+def test_slope_and_cheapest_on_synthetic_data():
+    k = np.array([2, 4, 8, 16, 32])
+    ds = _synthetic(3.0 * k ** -1.5, k, 1000 * k)
+    assert slope(ds, "ME-OPA adaptive", "saltation") == pytest.approx(-1.5, abs=1e-12)
+    i = cheapest_reaching(ds, "ME-OPA adaptive", 0.1, "saltation")
+    assert ds["size"].values[i] == 16  # 3 * 8^-1.5 = 0.133 > 0.1 >= 3 * 16^-1.5 = 0.047
+    assert cheapest_reaching(ds, "ME-OPA adaptive", 1e-9, "saltation") is None
+
+
+def test_converge_cli_refuses_bad_input(tmp_path, capsys):
+    assert main(["converge", "--sigma", "-1", "--outdir", str(tmp_path / "c")]) == 2
+    assert "sigma" in capsys.readouterr().err
+    target = tmp_path / "f"
+    target.write_text("")
+    assert main(["converge", "--outdir", str(target)]) == 2
+    assert "--outdir" in capsys.readouterr().err
