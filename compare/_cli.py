@@ -181,7 +181,7 @@ def register_converge(sub, model_flags, solver_flags) -> None:
     g.add_argument("--order", type=int, default=1, metavar="N",
                    help="OPA order of every element for the sweeps in K (default 1)")
     g.add_argument("--budgets", type=_order_list, default=None, metavar="B1,B2,...",
-                   help="element budgets of the adaptive runs (default 4,8,...,256)")
+                   help="element budgets of the adaptive runs (default 4,8,16,24,32,48,64,96,128,192,256)")
     g.add_argument("--uniform", type=_order_list, default=None, metavar="K1,K2,...",
                    help="element counts of the uniform runs (default 1,2,...,128)")
     g.add_argument("--reference", type=int, default=65536, metavar="M",

@@ -52,7 +52,7 @@ class ConvergenceConfig:
     order: int = 1
     orders: tuple[int, ...] = (0, 1, 2, 4, 8)
     uniform: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64, 128)
-    budgets: tuple[int, ...] = (4, 8, 16, 32, 64, 128, 256)
+    budgets: tuple[int, ...] = (4, 8, 16, 24, 32, 48, 64, 96, 128, 192, 256)
     order_budget: int = 64
     nodes: int = 2
     single_nodes: tuple[int, ...] = (1, 2, 4, 8, 16)

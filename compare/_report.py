@@ -19,7 +19,10 @@ import xarray as xr  # noqa: E402
 # Variant shown where one must be picked: the paper's OPA (mean impact law) with the
 # exact Galerkin truncation.
 HEADLINE = 0
-MARKERS = ("o", "s", "^", "v")
+MARKERS = ("o", "s", "^", "v", "D")
+# The impact laws drawn and summarised side by side: mean/galerkin, ensemble/galerkin,
+# saltation/galerkin (variant indices).
+LAWS = (0, 1, 4)
 KIND_COLOURS = {"grazing": "tab:red", "extra impact": "tab:orange", "chatter": "tab:purple",
                 "impulse order": "tab:brown", "horizon": "0.6"}
 
@@ -51,6 +54,11 @@ def star_phrase(lo: float, hi: float, smax: float) -> str:
     """'σ* = a–b', 'σ* < b' or 'σ* ≥ a' from the bisection bracket."""
     text = star_text(lo, hi, smax)
     return f"σ* {text}" if text[0] in "<≥" else f"σ* = {text}"
+
+
+def _laws(ds) -> list[int]:
+    """Indices of the variants compared across impact laws (those in the dataset)."""
+    return [v for v in LAWS if v < ds.sizes["variant"]]
 
 
 def _par(ds) -> str:
@@ -151,7 +159,8 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
     variants = [str(v) for v in ds.variant.values]
     smax = float(ds.sigma.max())
     head = [par, "H [periods]"] + [f"σ* {v}" for v in variants] + [
-        "σ* variance (mean/galerkin)", "first split at σ", "kind", "at t [periods]"]
+        f"σ* variance {variants[v]}" for v in _laws(ds)] + [
+        "first split at σ", "kind", "at t [periods]"]
     rows = []
     for q, value in enumerate(ds.value.values):
         for h, H in enumerate(ds.horizon.values):
@@ -160,8 +169,9 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
                 row.append(star_text(float(ds.sigma_star.values[q, v, h, criterion]),
                                      float(ds.sigma_star_upper.values[q, v, h, criterion]),
                                      smax))
-            row.append(star_text(float(ds.sigma_star.values[q, HEADLINE, h, 1]),
-                                 float(ds.sigma_star_upper.values[q, HEADLINE, h, 1]), smax))
+            for v in _laws(ds):
+                row.append(star_text(float(ds.sigma_star.values[q, v, h, 1]),
+                                     float(ds.sigma_star_upper.values[q, v, h, 1]), smax))
             sp = nearest_split(ds, q, h)
             row += ([f"{sp['distance']:.6f}", sp["kind"], f"{sp['time']:.2f}"] if sp else
                     [f"none ≤ {_g(smax)}", "", ""])
@@ -320,7 +330,7 @@ def findings(ds: xr.Dataset) -> list[str]:
     out.append(f"The paper's truncation (eq. (27)) against the Galerkin projection changes "
                f"that error by at most {np.nanmax(trunc):.1e} relative on the grid.")
     # variance
-    for v in (0, 1):
+    for v in _laws(ds):
         frac = ds.agrees.values[:, :, v, -1, :, 1].mean(axis=(0, 1))
         out.append(f"The variance ({variants[v]}, N = {nmax}) agrees within "
                    f"{ds.attrs['var_tolerance']:g} of the MC variance at "
@@ -360,11 +370,11 @@ def plot_map(ds, path):
             pr = ps[q][np.isfinite(ps[q])]
             ax.scatter(np.full(len(pr), x[q]), pr, marker="_", color="0.85", s=40, zorder=3,
                        label="σ probed" if q == 0 else None)
-        for v, style in ((0, "-"), (1, "--")):
+        for v, style, colour in zip(_laws(ds), ("-", "--", ":"), ("white", "gold", "cyan")):
             lo = ds.sigma_star.values[:, v, h, 0]
             hi = ds.sigma_star_upper.values[:, v, h, 0]
             top = np.where(np.isfinite(hi), lo, smax)
-            ax.plot(x, top, style, color="white" if v == 0 else "gold", lw=2, zorder=5,
+            ax.plot(x, top, style, color=colour, lw=2, zorder=5,
                     label=f"σ* {ds.variant.values[v]}")
         centre = nominal(ds)
         for q in range(len(x)):
@@ -438,7 +448,7 @@ def plot_error_vs_order(ds, path, q=0):
         for c, (title, err, n) in enumerate(windows):
             ax = axes[r, c]
             for v, name in enumerate(ds.variant.values):
-                ax.semilogy(N + 0.08 * (v - 1.5), np.maximum(err[v], 1e-16),
+                ax.semilogy(N + 0.07 * (v - 2), np.maximum(err[v], 1e-16),
                             MARKERS[v] + "-", ms=5, mfc="none" if v % 2 else None, lw=0.8,
                             label=str(name))
             ax.axhline(_window_sem(ds, q, s, n), color="k", ls="--", lw=1,
@@ -500,9 +510,9 @@ def plot_variance(ds, path, q=0):
         se = ds.mc_x_var_sem.values[q, s, :n]
         ax.fill_between(t, np.maximum(var - 2 * se, 1e-16), var + 2 * se, color="0.75")
         ax.semilogy(t, np.maximum(var, 1e-16), "k-", lw=1.6, label="MC Var[x] ± 2 SE")
-        for v in (0, 1):
+        for j, v in enumerate(_laws(ds)):
             ax.semilogy(t, np.maximum(ds.opa_x_var.values[q, s, v, -1, :n], 1e-16),
-                        ("-", "--")[v], lw=1, label=f"OPA {ds.variant.values[v]}, N = "
+                        ("-", "--", ":")[j], lw=1.2, label=f"OPA {ds.variant.values[v]}, N = "
                         f"{int(ds.N.max())}")
         positive = var[1:][var[1:] > 0]
         if len(positive):
@@ -588,7 +598,10 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     lines += ["## Verdicts", ""]
     for h in range(len(ds.horizon)):
         lines += [verdict_grid(ds, h, markdown=True), ""]
-        lines += [verdict_grid(ds, h, v=1, markdown=True), ""]
+        for v in _laws(ds)[1:]:
+            lines += [verdict_grid(ds, h, v=v, markdown=True), ""]
+        for v in _laws(ds):
+            lines += [verdict_grid(ds, h, v=v, criterion=1, markdown=True), ""]
     lines += ["## Impact counts", ""]
     for h in range(len(ds.horizon)):
         lines += [count_table(ds, h), ""]

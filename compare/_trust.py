@@ -38,7 +38,8 @@ def excess(err: np.ndarray, scale: np.ndarray, sem: np.ndarray, *, tol: float,
 def first_disagreement(t: np.ndarray, err: np.ndarray, scale: np.ndarray, sem: np.ndarray,
                        *, tol: float, z: float, floor: float) -> float:
     """The first output time at which the criterion fails (inf if it never does)."""
-    bad = np.flatnonzero(excess(err, scale, sem, tol=tol, z=z, floor=floor) > 0)
+    # not <= 0 rather than > 0: a diverged OPA run (NaN) disagrees from where it stopped
+    bad = np.flatnonzero(~(excess(err, scale, sem, tol=tol, z=z, floor=floor) <= 0))
     return float(t[bad[0]]) if len(bad) else float("inf")
 
 
@@ -47,7 +48,7 @@ def marginal(err, scale, sem, *, tol: float, z: float, floor: float, upto: int) 
     differs between no allowance for the noise and twice the allowance."""
     strict = excess(err[:upto], scale[:upto], sem[:upto], tol=tol, z=0.0, floor=floor)
     loose = excess(err[:upto], scale[:upto], sem[:upto], tol=tol, z=2 * z, floor=floor)
-    return bool((strict <= 0).all()) != bool((loose <= 0).all())
+    return bool((strict <= 0).all()) != bool((loose <= 0).all())  # NaN: never marginal
 
 
 def window_errors(err: np.ndarray, scale: np.ndarray, sem: np.ndarray,

@@ -40,11 +40,11 @@ from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
 from opa._dataset import provenance_attrs, write_netcdf
 from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions, preset, time_grid
-from opa._simulate import simulate_dmr, simulate_opa
+from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import SPLIT_KINDS, find_splits
 
 VARIANTS = (("mean", "galerkin"), ("ensemble", "galerkin"), ("mean", "paper"),
-            ("ensemble", "paper"))
+            ("ensemble", "paper"), ("saltation", "galerkin"))
 CRITERIA = ("mean", "variance")
 PAPER_SIGMAS = (0.01, 0.014, 0.02, 0.03)
 
@@ -285,15 +285,12 @@ class _Map:
         opa_var = np.empty((V, N, len(times)))
         first = np.empty((V, N))
         T = osc.forcing_period
-        for v, (law, trunc) in enumerate(VARIANTS):
-            for k, order in enumerate(orders):
-                ds = simulate_opa(osc, sigma=sigma, order=order, uncertain=cfg.uncertain,
-                                  truncation=trunc, impact_law=law, times=times,
-                                  options=cfg.options, allow_negative=True)
-                opa_mean[v, k] = ds.x_mean.values
-                opa_var[v, k] = ds.x_var.values
-                first[v, k] = (float(ds.impact_time[0]) / T if ds.sizes["impact"]
-                               else np.inf)
+        for k, order in enumerate(orders):  # the variants of one N run in parallel
+            opa_mean[:, k], opa_var[:, k], first[:, k] = opa_variants(
+                osc, sigma=sigma, order=order, uncertain=cfg.uncertain,
+                variants=[(law, trunc) for law, trunc in VARIANTS], times=times,
+                options=cfg.options)
+            first[:, k] /= T
         samples = cfg.samples
         while True:
             mc = self._mc(osc, value, sigma, samples, times)

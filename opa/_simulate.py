@@ -100,10 +100,12 @@ def kernel_quadrature(quad):
     return nodes, weights, np.ascontiguousarray(basis.T)
 
 
-def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory"):
+def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", partial=False):
     """Integrate and return (states (n_out, dim), event log (n, 3), counters dict).
 
-    ``quad`` is :func:`quadrature`'s (nodes, weights, basis (N+2, Q))."""
+    ``quad`` is :func:`quadrature`'s (nodes, weights, basis (N+2, Q)). A trajectory that
+    cannot be completed raises :class:`SimulationError`, or with ``partial`` returns the
+    outputs reached (NaN after) and the reason in ``counters["failure"]``."""
     nodes, weights, basis = kernel_quadrature(quad)
     capacity = max(64, 4 * len(times))
     while True:
@@ -115,15 +117,19 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory"):
         if n_events <= capacity:
             break
         capacity = int(n_events * 1.2) + 16
+    counters = {"steps": n_steps, "rhs_evaluations": n_rhs, "impacts": n_impacts}
     if status != K.OK:
         reached = np.isfinite(out[:, 0])
         t_last = times[reached][-1] if reached.any() else times[0]
-        raise SimulationError(
-            f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
-            f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} impacts). "
-            f"Try smaller tolerances, a smaller --max-step, or check the parameters."
-        )
-    return out, log[:n_events], {"steps": n_steps, "rhs_evaluations": n_rhs, "impacts": n_impacts}
+        message = (f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
+                   f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} "
+                   f"impacts)")
+        if not partial:
+            raise SimulationError(f"{message}. Try smaller tolerances, a smaller --max-step, "
+                                  f"or check the parameters.")
+        out[~np.isfinite(out).all(axis=1)] = np.nan
+        counters["failure"] = message
+    return out, log[:min(n_events, len(log))], counters
 
 
 def _times(oscillator, periods, per_period, times):
@@ -249,6 +255,7 @@ def simulate_opa(
     elements=None,
     tolerance: float = 1e-6,
     max_elements: int = 64,
+    partial: bool = False,
 ) -> xr.Dataset:
     """The OPA equivalent system of order N (the EMR, eqs. (24)-(28)).
 
@@ -270,6 +277,10 @@ def simulate_opa(
     ``tolerance`` or ``max_elements`` is reached). Each element runs its own OPA system
     of order N; the result holds the assembled ``x_mean, x_var, v_mean, v_var`` and the
     per-element coefficients, edges and probabilities.
+
+    ``partial``: a trajectory that cannot be completed (e.g. the OPA system diverges)
+    returns the outputs reached, NaN after, with the reason in ``attrs["failure"]``,
+    instead of raising :class:`SimulationError`.
 
     Returns
     -------
@@ -325,7 +336,7 @@ def simulate_opa(
         y0[:] = initial.ravel()
     out, log, stats = run_kernel(
         y0, times, p, cfg, quadrature(order), rtol=options.rtol, atol=options.atol,
-        label=f"OPA (N={order}) trajectory",
+        label=f"OPA (N={order}) trajectory", partial=partial,
     )
     xc = out[:, : order + 1].T
     vc = out[:, order + 1 :].T
@@ -351,4 +362,45 @@ def simulate_opa(
     )
     ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"],
                     allow_negative=int(allow_negative))
+    if "failure" in stats:
+        ds.attrs["failure"] = stats["failure"]
     return ds
+
+
+def opa_variants(oscillator: Oscillator, *, sigma: float, order: int, uncertain: str,
+                 variants, times: np.ndarray, options: SolverOptions):
+    """The OPA system of order N under several (impact law, truncation) variants, in
+    parallel: mean and variance of x over ``times`` (NaN after a trajectory that could not
+    be completed) and the time of each variant's first impact (inf: none).
+
+    Returns (x_mean (V, T), x_var (V, T), first_impact (V,))."""
+    order = check_order(order)
+    cfgs = []
+    for law, trunc in variants:
+        _choice("impact_law", law, IMPACT_LAWS)
+        _choice("truncation", trunc, TRUNCATIONS)
+        p, cfg = pack_parameters(oscillator, options, sigma=sigma, order=order,
+                                 uncertain=uncertain, truncation=trunc, impact_law=law)
+        cfgs.append(cfg)
+    nodes, weights, basis = kernel_quadrature(quadrature(order))
+    dim = 2 * (order + 1)
+    y0 = np.zeros(dim)
+    y0[0] = oscillator.x0
+    y0[order + 1] = oscillator.v0
+    V = len(cfgs)
+    cap = max(64, 4 * len(times))
+    out = np.full((V, len(times), dim), np.nan)
+    logs = np.empty((V, cap, 3))
+    counters = np.zeros((V, 5), dtype=np.int64)
+    K.run_configs(y0, np.asarray(times, float), p, np.stack(cfgs), nodes, weights, basis,
+                  options.rtol, options.atol, out, logs, counters)
+    first = np.full(V, np.inf)
+    for v in range(V):
+        if counters[v, 0] != K.OK:
+            out[v][~np.isfinite(out[v]).all(axis=1)] = np.nan
+        n = min(int(counters[v, 1]), cap)
+        hits = np.flatnonzero(np.isin(logs[v, :n, 2], (K.EV_IMPACT, K.EV_GRAZE)))
+        if len(hits):
+            first[v] = logs[v, hits[0], 0]
+    x = out[:, :, : order + 1]
+    return x[:, :, 0], (x[:, :, 1:] ** 2).sum(axis=2), first

@@ -813,3 +813,15 @@ def run_event_logs(y0, values, t_out, p, cfg, rtol, atol, logs, n_events, status
         res = integrate(y0, t_out, pm, cm, nodes, weights, U, rtol, atol, out, logs[m])
         status[m] = res[0]
         n_events[m] = res[1]
+
+
+@njit(cache=True, parallel=True)
+def run_configs(y0, t_out, p, cfgs, nodes, weights, U, rtol, atol, out, logs, counters):
+    """Integrate one OPA system of one order under B configurations (impact law,
+    truncation: rows of ``cfgs``) in parallel. out: (B, n_out, dim); logs: (B, cap, 3);
+    counters: (B, 5) with the status, events, impacts, steps and right-hand sides."""
+    B = cfgs.shape[0]
+    for b in prange(B):
+        res = integrate(y0, t_out, p, cfgs[b], nodes, weights, U, rtol, atol, out[b], logs[b])
+        for j in range(5):
+            counters[b, j] = res[j]

@@ -222,6 +222,7 @@ def find_splits(
     max_splits: int = 64,
     center: float | None = None,
     cache: dict | None = None,
+    order: str = "nearest",
 ) -> tuple[list[Split], bool]:
     """Every change of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi].
 
@@ -232,10 +233,12 @@ def find_splits(
     inside a bracket is followed as a split of its own. Changes between two scan points
     with equal sequences (an even number of them) are not seen; a bracket whose ends end
     up matching (fast but continuous event times) is dropped. The scan's brackets are
-    bisected before those found inside them, and within each generation nearest to
-    ``center`` (default: the middle) first, so when ``max_splits`` cuts the list, the
-    splits kept are the ones the scan resolves, nearest first, rather than the members of
-    one cascade. ``cache`` (value -> EventSequence) lets calls for several horizons share
+    bisected nearest to ``center`` (default: the middle) first (``order="nearest"``: when
+    ``max_splits`` cuts the list, the splits kept are those an ensemble centred there
+    meets first), or (``order="generation"``) every scan bracket before any bracket found
+    inside another, nearest first within a generation: then a cascade of splits packed
+    into one scan interval (chatter) cannot use up ``max_splits`` before the other
+    changes are seen. ``cache`` (value -> EventSequence) lets calls for several horizons share
     runs; the runs go to the largest horizon asked of the cache's first call.
 
     Returns the splits in increasing ``value`` and whether ``max_splits`` cut the list.
@@ -246,6 +249,8 @@ def find_splits(
         raise ValueError(f"scan must be >= 2, got {scan}")
     if not tol > 0:
         raise ValueError(f"tol must be > 0, got {tol}")
+    if order not in ("nearest", "generation"):
+        raise ValueError(f"order must be 'nearest' or 'generation', got {order!r}")
     cache = {} if cache is None else cache
     t_end = cache.setdefault("t_end", horizon)
     if horizon > t_end:
@@ -268,11 +273,10 @@ def find_splits(
     values = [float(v) for v in np.linspace(lo, hi, scan)]
     ensure(values)
     # (generation, a, b): the scan's brackets are generation 0; a bracket set aside when
-    # a third sequence turns up inside another is one generation later. Brackets are
-    # taken generation by generation (nearest the centre first within one), so a cascade
-    # of splits packed into one scan interval (chatter) cannot use up max_splits before
-    # the other changes are seen; the brackets of one wave are bisected together, each
-    # level of the bisection one parallel batch of runs.
+    # a third sequence turns up inside another is one generation later. The brackets of
+    # one wave are bisected together, each level of the bisection one parallel batch of
+    # runs; a "nearest" wave is two brackets (the machine's cores), so the budget goes
+    # to the nearest splits, a "generation" wave all the budget allows.
     pending = [(0, x, y) for x, y in zip(values[:-1], values[1:]) if differ(x, y)]
     center = 0.5 * (lo + hi) if center is None else center
 
@@ -282,8 +286,13 @@ def find_splits(
 
     splits: list[Split] = []
     while pending and len(splits) < max_splits:
-        pending.sort(key=lambda br: (br[0], distance(br)))
-        wave = [list(br) for br in pending[: max_splits - len(splits)]]
+        if order == "generation":
+            pending.sort(key=lambda br: (br[0], distance(br)))
+            size = max_splits - len(splits)
+        else:
+            pending.sort(key=distance)
+            size = min(2, max_splits - len(splits))
+        wave = [list(br) for br in pending[:size]]
         del pending[: len(wave)]
         while True:
             open_ = [br for br in wave if br[2] - br[1] > tol]
