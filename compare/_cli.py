@@ -95,6 +95,9 @@ def register_validate(sub, model_flags, solver_flags) -> None:
                    help="outputs per forcing period (default 8)")
     g.add_argument("--outdir", default=None, metavar="DIR", help="output folder (default results)")
     g.add_argument("--no-plots", action="store_true", help="skip the figures")
+    g.add_argument("--no-frontier", action="store_true",
+                   help="skip the cost-accuracy frontier (multi-element OPA, collocation, "
+                        "MC and Sobol at the first value and the largest sigma)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask distributed scheduler for the Monte Carlo chunks")
     g.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
@@ -117,7 +120,8 @@ def _check_outdir(path: str) -> None:
 
 
 def cmd_validate(args) -> int:
-    from compare._report import boundary_table, cause, findings, verdict_grid, write_report
+    from compare._report import (boundary_table, cause, findings, frontier_lines, verdict_grid,
+                                 write_report)
     from compare._trustmap import load_config, run_validation
 
     model = {name: getattr(args, name) for name in PARAMETER_NAMES
@@ -137,6 +141,7 @@ def cmd_validate(args) -> int:
         z=args.z, resolution=args.resolution, samples=args.samples,
         max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,
+        frontier=False if args.no_frontier else None,
     )
     _check_outdir(cfg.outdir)
     start = time.perf_counter()
@@ -155,6 +160,11 @@ def cmd_validate(args) -> int:
     print()
     for line in findings(ds):
         print(f"* {line}")
+    front = frontier_lines(ds)
+    if front:
+        print(f"\n{front[0]}")
+        for line in front[1:]:
+            print(f"* {line}")
     print(f"\nwrote {os.path.join(cfg.outdir, 'validate.nc')}, "
           + ", ".join(written) + f" in {time.perf_counter() - start:.1f} s")
     return 0

@@ -33,7 +33,7 @@ from opa._dataset import provenance_attrs, write_netcdf
 from opa._elements import collocation, uniform_edges
 from opa._measure import parse
 from opa._model import Oscillator, SolverOptions, preset, time_grid
-from opa._simulate import simulate_opa
+from opa._simulate import SimulationError, simulate_opa
 
 LAWS = ("mean", "saltation")
 
@@ -66,8 +66,10 @@ class ConvergenceConfig:
             raise ValueError(f"sigma must be > 0, got {self.sigma}")
         for name in ("uniform", "budgets", "mc_samples", "orders", "single_nodes"):
             seq = getattr(self, name)
-            if not seq or any(int(v) != v or v < 0 for v in seq):
+            if any(int(v) != v or v < 0 for v in seq):
                 raise ValueError(f"{name} must be non-negative integers, got {seq}")
+        if not self.budgets or not self.mc_samples:
+            raise ValueError("budgets and mc_samples must not be empty")
         if self.reference < 1024:
             raise ValueError(f"reference must be >= 1024 samples, got {self.reference}")
 
@@ -76,8 +78,9 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(np.square(a))))
 
 
-def run_convergence(cfg: ConvergenceConfig, *, log=print) -> xr.Dataset:
-    """Run the study; returns its dataset (also written to OUTDIR/convergence.nc)."""
+def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True) -> xr.Dataset:
+    """Run the study; returns its dataset (also written to OUTDIR/convergence.nc unless
+    ``write`` is false)."""
     osc, opts = cfg.oscillator, cfg.options
     measure = parse(cfg.distribution)
     times = time_grid(osc.omega, cfg.periods, cfg.per_period)
@@ -99,7 +102,13 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print) -> xr.Dataset:
 
     def opa_row(method, law, size, order, **kw):
         t = time.perf_counter()
-        ds = simulate_opa(osc, order=order, impact_law=law, **common, **kw)
+        try:
+            ds = simulate_opa(osc, order=order, impact_law=law, **common, **kw)
+        except SimulationError as err:  # a diverged OPA system: no error to report
+            log(f"  {method} ({law}), N = {order}, {kw}: {err}")
+            failures.append(f"{method} ({law} law), N = {order}, "
+                            f"{kw.get('max_elements', kw.get('elements'))}: {err}")
+            return None
         sec = time.perf_counter() - t
         e, s = errors(ds.x_mean.values, ds.x_var.values)
         rhs = int(ds.attrs["rhs_evaluations"])
@@ -109,6 +118,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print) -> xr.Dataset:
         return ds
 
     adaptive = {}  # budget -> the saltation law's adaptive edges
+    failures: list[str] = []
     for law in LAWS:
         log(f"multi-element OPA ({law} law) ...")
         for k in cfg.uniform:
@@ -116,7 +126,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print) -> xr.Dataset:
         for b in cfg.budgets:
             ds = opa_row("ME-OPA adaptive", law, None, cfg.order, elements="adaptive",
                          tolerance=1e-14, max_elements=int(b))
-            if law == "saltation":
+            if law == "saltation" and ds is not None:
                 adaptive[int(b)] = ds.element_edges.values
         for n in cfg.orders:
             opa_row("ME-OPA adaptive, N", law, None, n, elements="adaptive", tolerance=1e-14,
@@ -128,8 +138,10 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print) -> xr.Dataset:
         for k in sizes:
             if method.endswith("uniform"):
                 edges = uniform_edges(measure, int(k))
-            else:  # the edges adaptive ME-OPA (saltation law) chose for that budget
+            elif int(k) in adaptive:  # the edges adaptive ME-OPA (saltation) chose
                 edges = adaptive[int(k)]
+            else:
+                continue
             t = time.perf_counter()
             mean, var, rhs = collocation(osc, opts, measure, edges, cfg.nodes,
                                          sigma=cfg.sigma, uncertain=cfg.uncertain,
@@ -184,9 +196,11 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print) -> xr.Dataset:
         distribution=measure.name, reference_samples=int(cfg.reference),
         reference_sem=floor, reference_seconds=ref_seconds,
         reference_rhs_evaluations=int(ref.attrs["rhs_evaluations"]),
-        wall_seconds=time.perf_counter() - start,
+        wall_seconds=time.perf_counter() - start, failures=len(failures),
+        failure_text=" | ".join(failures) if failures else "none",
     )
-    write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
+    if write:
+        write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
     return ds
 
 
@@ -233,6 +247,8 @@ def summary_lines(ds) -> list[str]:
     a = ds.attrs
     out.append(f"Reference: {a['reference_samples']} Sobol samples, RMS standard error "
                f"{a['reference_sem']:.1e} (errors near it are not resolved).")
+    if a.get("failures", 0):
+        out.append(f"{a['failures']} OPA runs diverged and are left out: {a['failure_text']}")
     for law in LAWS:
         for method in ("ME-OPA uniform", "ME-OPA adaptive"):
             idx = _select(ds, method, law)

@@ -560,6 +560,33 @@ def plot_phase(ds, path):
     return [path]
 
 
+# -- the cost-accuracy frontier -------------------------------------------------------------
+def frontier_dataset(ds):
+    """The frontier part of a trust-map dataset in the shape of an ``opa-mc converge``
+    dataset (None if the map was run without it)."""
+    names = [n for n in ds.data_vars if n.startswith("frontier_")]
+    if not names:
+        return None
+    out = ds[names].rename({n: n[len("frontier_"):] for n in names}
+                           | {"frontier_run": "run"})
+    out.attrs = {k[len("frontier_"):]: v for k, v in ds.attrs.items()
+                 if k.startswith("frontier_")}
+    out.attrs["omega"] = ds.attrs["omega"]
+    return out
+
+
+def frontier_lines(ds) -> list[str]:
+    from compare._convergence import summary_lines
+
+    conv = frontier_dataset(ds)
+    if conv is None:
+        return []
+    head = (f"Cost against accuracy at {_par(ds)} = {_g(conv.attrs['value'])}, σ = "
+            f"{_g(conv.attrs['sigma'])}, over {conv.attrs['periods']:g} periods (RMS error of "
+            f"E[x] against {conv.attrs['reference_samples']} Sobol samples):")
+    return [head] + summary_lines(conv)
+
+
 # -- summary.md -----------------------------------------------------------------------------
 def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
                  command: str = "opa-mc validate") -> list[str]:
@@ -572,6 +599,11 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
         paths += plot_mean(ds, os.path.join(outdir, "mean_vs_mc.png"))
         paths += plot_variance(ds, os.path.join(outdir, "variance.png"))
         paths += plot_phase(ds, os.path.join(outdir, "phase.png"))
+        conv = frontier_dataset(ds)
+        if conv is not None:
+            from compare._convergence import plot as plot_frontier
+
+            paths.append(plot_frontier(conv, os.path.join(outdir, "frontier.png")))
     a = ds.attrs
     md = os.path.join(outdir, "summary.md")
     lines = [
@@ -595,6 +627,12 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
         for h in range(len(ds.horizon)):
             lines.append(f"- {cause(ds, q, h)}")
     lines += ["", "## Findings", ""] + [f"- {f}" for f in findings(ds)] + [""]
+    front = frontier_lines(ds)
+    if front:
+        from compare._convergence import table as frontier_table
+
+        lines += ["## Cost and accuracy", "", front[0], ""] + [f"- {f}" for f in front[1:]]
+        lines += ["", frontier_table(frontier_dataset(ds)), ""]
     lines += ["## Verdicts", ""]
     for h in range(len(ds.horizon)):
         lines += [verdict_grid(ds, h, markdown=True), ""]
@@ -613,5 +651,6 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     return [md] + paths
 
 
-__all__ = ["boundary_table", "cause", "count_table", "findings", "nearest_split",
+__all__ = ["boundary_table", "cause", "count_table", "findings", "frontier_dataset",
+           "frontier_lines", "nearest_split",
            "star_text", "verdict_grid", "write_report"]

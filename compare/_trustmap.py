@@ -91,6 +91,7 @@ class ValidateConfig:
     outdir: str = "results"
     plots: bool = True
     scheduler: str | None = None
+    frontier: bool = True
 
     def __post_init__(self):
         if self.parameter not in PARAMETER_NAMES or self.parameter in ("x0", "v0"):
@@ -132,8 +133,9 @@ class ValidateConfig:
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
         if not (math.isfinite(self.z) and self.z >= 0):
             raise ValueError(f"z must be >= 0, got {self.z}")
-        if not isinstance(self.plots, bool):
-            raise ValueError(f"plots must be true or false, got {self.plots!r}")
+        for name in ("plots", "frontier"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
 
     @property
     def nmax(self) -> int:
@@ -428,10 +430,42 @@ class _Map:
         self.bar = None
         ds = _assemble(cfg, results)
         ds = xr.merge([ds, _details(cfg, results)], combine_attrs="drop_conflicts")
+        if cfg.frontier:
+            self.log("cost-accuracy frontier at the largest sigma ...")
+            ds = xr.merge([ds, frontier(cfg)], combine_attrs="drop_conflicts")
         ds.attrs.update(_attrs(cfg))
         ds.attrs["wall_seconds"] = time.perf_counter() - start
         ds.attrs["mc_runs_computed"] = self.mc_runs
         return ds
+
+
+FRONTIER_BUDGETS = (8, 16, 32, 64)
+FRONTIER_SAMPLES = (256, 512, 1024, 2048, 4096, 8192)
+FRONTIER_REFERENCE = 32768
+
+
+def frontier(cfg: ValidateConfig) -> xr.Dataset:
+    """Cost against accuracy at the first swept value, the largest sigma and the first
+    horizon: the paper's OPA (N = 0..Nmax), adaptive multi-element OPA (mean and
+    saltation laws, element budgets 8..64), multi-element collocation, single-element
+    collocation, MC and scrambled Sobol, against a 2^15-sample Sobol reference
+    (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``."""
+    from compare._convergence import ConvergenceConfig, run_convergence
+
+    conv = ConvergenceConfig(
+        oscillator=cfg.oscillator_at(cfg.values[0]), options=cfg.options,
+        sigma=float(max(cfg.sigmas)), uncertain=cfg.uncertain, periods=cfg.horizons[0],
+        per_period=cfg.per_period, order=1, orders=tuple(sorted({0, 1, cfg.nmax})),
+        uniform=(), budgets=FRONTIER_BUDGETS, order_budget=FRONTIER_BUDGETS[-1],
+        single_nodes=(1, 2, 4, 8), mc_samples=FRONTIER_SAMPLES,
+        reference=FRONTIER_REFERENCE, seed=cfg.seed + 1, outdir=cfg.outdir)
+    ds = run_convergence(conv, log=lambda *a: None, write=False)
+    out = ds.rename({name: f"frontier_{name}" for name in ds.data_vars} | {"run": "frontier_run"})
+    out.attrs = {"frontier_" + k: v for k, v in ds.attrs.items()
+                 if k in ("sigma", "periods", "reference_samples", "reference_sem",
+                          "wall_seconds")}
+    out.attrs["frontier_value"] = float(cfg.values[0])
+    return out
 
 
 def _sequence(osc, cfg, cache, value):

@@ -39,6 +39,10 @@ MAX_ELEMENTS = 256
 # Splits located before the edges are chosen (all of them in the cases measured: 192 at
 # section 3.2, omega = 3.98, sigma = 0.05, 10 periods, in about a second).
 SPLIT_BUDGET = 1024
+# ... and at most this many per element of the budget (long horizons of a sensitive
+# system have splits everywhere; finding them all would cost more than the elements).
+SPLITS_PER_ELEMENT = 4
+_SPLIT_CACHE: dict = {}  # the splits of the last few problems (a study repeats them)
 # The splits may take at most 1/SPLIT_SHARE of the element budget; refinement has the
 # rest. Measured (opa-mc converge defaults, saltation law): with a quarter, 48 elements
 # reach an RMS error of 1e-4 where a half needs 64.
@@ -56,6 +60,7 @@ class ElementRun:
     v_coef: np.ndarray
     rhs_evaluations: int
     impacts: int
+    failure: str = ""  # why the element's system stopped early ("" if it did not)
 
     @property
     def var(self) -> np.ndarray:
@@ -86,8 +91,11 @@ def element_rule(measure: Measure, order: int):
 
 def run_elements(oscillator: Oscillator, options: SolverOptions, measures: list[Measure], *,
                  sigma: float, order: int, uncertain: str, impact_law: str,
-                 times: np.ndarray) -> list[ElementRun]:
-    """The OPA systems of several elements over ``times``, in parallel (compiled kernel)."""
+                 times: np.ndarray, partial: bool = False) -> list[ElementRun]:
+    """The OPA systems of several elements over ``times``, in parallel (compiled kernel).
+
+    An element whose system cannot be completed raises :class:`SimulationError`, or with
+    ``partial`` comes back with NaN after the failure and the reason in ``failure``."""
     p, cfg = pack_parameters(oscillator, options, sigma=sigma, order=order,
                              uncertain=uncertain, truncation="galerkin", impact_law=impact_law)
     dim = 2 * (order + 1)
@@ -102,16 +110,23 @@ def run_elements(oscillator: Oscillator, options: SolverOptions, measures: list[
     counters = np.zeros((len(measures), 5), dtype=np.int64)
     K.run_elements(y0, np.asarray(times, float), p, cfg, nodes, weights, basis, options.rtol,
                    options.atol, out, counters)
-    bad = np.flatnonzero(counters[:, 0] != K.OK)
-    if len(bad):
+    # a run the kernel calls complete but whose state is not finite (a jump that produced
+    # NaN, which the kernel does not check yet) is a failure too
+    reasons = [K.STATUS_MESSAGES[int(counters[e, 0])] if counters[e, 0] != K.OK else
+               "" if np.isfinite(out[e]).all() else "the state became non-finite"
+               for e in range(len(measures))]
+    failures = [f"element [{m.a:.6g}, {m.b:.6g}] of the OPA (N={order}) system stopped: "
+                f"{why}" if why else "" for m, why in zip(measures, reasons)]
+    if not partial and any(failures):
         from opa._simulate import SimulationError
 
-        e = int(bad[0])
-        raise SimulationError(
-            f"element [{measures[e].a:.6g}, {measures[e].b:.6g}] of the OPA (N={order}) "
-            f"system stopped: {K.STATUS_MESSAGES[int(counters[e, 0])]}")
+        raise SimulationError(next(f for f in failures if f))
+    for e, failure in enumerate(failures):
+        if failure:
+            out[e][~np.isfinite(out[e]).all(axis=1)] = np.nan
     return [ElementRun(m.a, m.b, m.probability(), out[e, :, : order + 1].T,
-                       out[e, :, order + 1:].T, int(counters[e, 4]), int(counters[e, 2]))
+                       out[e, :, order + 1:].T, int(counters[e, 4]), int(counters[e, 2]),
+                       failures[e])
             for e, m in enumerate(measures)]
 
 
@@ -155,9 +170,16 @@ def split_edges(oscillator, options, measure, *, sigma, uncertain, t_end, max_sp
     centre = getattr(oscillator, uncertain)
     if sigma == 0.0:
         return np.array([measure.lo, measure.hi]), []
-    found, _ = find_splits(oscillator, options, uncertain, centre + sigma * measure.lo,
-                           centre + sigma * measure.hi, t_end, tol=tol * sigma,
-                           max_splits=max_splits, center=centre, order="generation")
+    key = (oscillator, options, uncertain, sigma, measure.name, measure.lo, measure.hi,
+           t_end, max_splits, tol)
+    if key not in _SPLIT_CACHE:
+        if len(_SPLIT_CACHE) >= 8:
+            _SPLIT_CACHE.pop(next(iter(_SPLIT_CACHE)))
+        _SPLIT_CACHE[key] = find_splits(
+            oscillator, options, uncertain, centre + sigma * measure.lo,
+            centre + sigma * measure.hi, t_end, tol=tol * sigma, max_splits=max_splits,
+            center=centre, order="generation")[0]
+    found = _SPLIT_CACHE[key]
     cuts = sorted({(s.value - centre) / sigma for s in found if s.kind != "horizon"})
     cuts = [c for c in cuts if measure.lo < c < measure.hi]
     return np.array([measure.lo, *cuts, measure.hi]), found
@@ -189,27 +211,32 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
     if not (tolerance > 0 and math.isfinite(tolerance)):
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
     edges, _ = split_edges(oscillator, options, measure, sigma=sigma, uncertain=uncertain,
-                           t_end=float(times[-1]), max_splits=SPLIT_BUDGET)
+                           t_end=float(times[-1]),
+                           max_splits=min(SPLIT_BUDGET, SPLITS_PER_ELEMENT * max_elements))
     edges = merge_smallest(measure, edges, max(1, max_elements // SPLIT_SHARE))
     kw = dict(sigma=sigma, order=order, uncertain=uncertain, impact_law=impact_law,
               times=times)
 
     def run(pairs):
         return run_elements(oscillator, options, [measure.restrict(a, b) for a, b in pairs],
-                            **kw)
+                            partial=True, **kw)
 
     runs = run(list(zip(edges[:-1], edges[1:])))
     history = []
     while True:
-        share = np.array([r.probability * float(r.var.max()) for r in runs])
+        # an element whose system diverged has an infinite share: it is halved first
+        share = np.array([np.inf if r.failure else r.probability * float(r.var.max())
+                          for r in runs])
         history.append((len(runs), float(share.max())))
         room = max_elements - len(runs)
         if share.max() < tolerance or room <= 0:
             break
         # one round: halve (in probability) every element within a factor 2 of the
         # largest share and above the tolerance, the largest first, within the budget
+        finite = share[np.isfinite(share)]
+        top = finite.max() if len(finite) else 0.0
         pick = [k for k in np.argsort(-share)
-                if share[k] >= max(tolerance, 0.25 * share.max())][:room]
+                if share[k] >= max(tolerance, 0.25 * top)][:room]
         halves = {}
         for k in pick:
             r = runs[k]
@@ -226,6 +253,13 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
         if log is not None:
             log(f"  halved {len(halves)} elements (largest variance share "
                 f"{share.max():.2e}); {len(runs)} elements")
+    failed = [r.failure for r in runs if r.failure]
+    if failed:
+        from opa._simulate import SimulationError
+
+        raise SimulationError(f"{failed[0]} (and {len(failed) - 1} more elements), still "
+                              f"after refinement to {len(runs)} elements; raise "
+                              f"max_elements or use another impact law")
     return runs, history
 
 

@@ -739,15 +739,10 @@ def _locate_impact(t, y, h, theta, K, K2, y_new, ytmp, p, cfg, nodes, weights, U
 
 # ---------------------------------------------------------------------------
 # Monte Carlo: many sampled deterministic systems, parallel over samples
-@njit(cache=True, parallel=True)
-def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status):
-    """Integrate the true impact system for each sample value ``xi[m]``.
-
-    The uncertain parameter of sample m is ``p[uncertain] + p[P_SIGMA] * xi[m]``; each
-    sample is the deterministic system (N = 0), so its results do not depend on the
-    thread that ran it. paths: (M, n_out, 2); n_impacts, n_rhs, status: (M,).
-    """
-    M = xi.shape[0]
+@njit(cache=True)
+def _sampled_system(cfg):
+    """The one-point rule of a sampled deterministic system (N = 0) and the index in ``p``
+    of its uncertain parameter."""
     nodes = np.zeros(1)
     weights = np.ones(1)
     U = np.zeros((1, 2))
@@ -758,6 +753,19 @@ def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, stat
         idx = P_A
     elif unc == UNCERTAIN_C:
         idx = P_C
+    return nodes, weights, U, idx
+
+
+@njit(cache=True, parallel=True)
+def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status):
+    """Integrate the true impact system for each sample value ``xi[m]``.
+
+    The uncertain parameter of sample m is ``p[uncertain] + p[P_SIGMA] * xi[m]``; each
+    sample is the deterministic system (N = 0), so its results do not depend on the
+    thread that ran it. paths: (M, n_out, 2); n_impacts, n_rhs, status: (M,).
+    """
+    M = xi.shape[0]
+    nodes, weights, U, idx = _sampled_system(cfg)
     for m in prange(M):
         pm = p.copy()
         pm[idx] = p[idx] + p[P_SIGMA] * xi[m]
@@ -793,16 +801,7 @@ def run_event_logs(y0, values, t_out, p, cfg, rtol, atol, logs, n_events, status
     uncertain parameter ``values[m]`` (absolute, not p_bar + sigma xi). logs: (M, cap, 3);
     n_events (M,) may exceed cap, in which case the log was cut and must be rerun."""
     M = values.shape[0]
-    nodes = np.zeros(1)
-    weights = np.ones(1)
-    U = np.zeros((1, 2))
-    U[0, 0] = 1.0
-    unc = cfg[C_UNCERTAIN]
-    idx = P_MU
-    if unc == UNCERTAIN_A:
-        idx = P_A
-    elif unc == UNCERTAIN_C:
-        idx = P_C
+    nodes, weights, U, idx = _sampled_system(cfg)
     for m in prange(M):
         pm = p.copy()
         pm[idx] = values[m]
