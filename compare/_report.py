@@ -295,7 +295,7 @@ def findings(ds: xr.Dataset) -> list[str]:
         s0, s1 = np.flatnonzero(below)[-1], above[0]
         out.append(
             f"Across σ* it jumps from {_e(err[s0])} (σ = {_g(float(sig[s0]))}) to "
-            f"{_e(err[s1])} (σ = {_g(float(sig[s1]))}), a factor {err[s1] / err[s0]:.0f}; "
+            f"{_e(err[s1])} (σ = {_g(float(sig[s1]))}), a factor {err[s1] / err[s0]:.1f}; "
             f"no σ^p law fitted below σ* holds past it.")
     # does N matter for the verdict?
     for h, H in enumerate(ds.horizon.values):
