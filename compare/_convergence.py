@@ -246,7 +246,9 @@ def summary_lines(ds) -> list[str]:
     out = []
     a = ds.attrs
     out.append(f"Reference: {a['reference_samples']} Sobol samples, RMS standard error "
-               f"{a['reference_sem']:.1e} (errors near it are not resolved).")
+               f"{a['reference_sem']:.1e} (errors near it are not resolved). The adaptive "
+               f"runs share the splits located by the first of them: their wall times after "
+               f"it leave the split search out.")
     if a.get("failures", 0):
         out.append(f"{a['failures']} OPA runs diverged and are left out: {a['failure_text']}")
     for law in LAWS:
