@@ -49,8 +49,8 @@ def register_validate(sub, model_flags, solver_flags) -> None:
     p = sub.add_parser(
         "validate",
         help="the main job: the trust map of OPA against Monte Carlo, its boundary and why",
-        description="Run OPA (N = 0..8, both impact laws, both truncations) beside Monte "
-        "Carlo ensembles of the true sampled impact systems over a grid of sigma and one "
+        description="Run OPA (N = 0..8, the mean, ensemble and saltation impact laws, both "
+        "truncations) beside Monte Carlo ensembles of the true sampled impact systems over a grid of sigma and one "
         "model parameter; locate the trust boundary sigma* by bisection and the splits of "
         "the sampled systems' impact sequences. With no arguments: the embedded default "
         "(section 3.2 set, omega in {3.98, 4.035, 4.09, 4.145, 4.2}, sigma from 0.005 to "

@@ -63,7 +63,7 @@ class ValidateConfig:
     """What ``opa-mc validate`` runs; the defaults are the embedded default job.
 
     The section 3.2 set, omega in {3.98, 4.035, 4.09, 4.145, 4.2}, sigma from 0.005 to
-    0.05 (the paper's 0.01, 0.014, 0.02, 0.03 included), N = 0..8, all four variants,
+    0.05 (the paper's 0.01, 0.014, 0.02, 0.03 included), N = 0..8, all five variants,
     horizons of 10 and 50 forcing periods, 8 outputs per period, Sobol ensembles of 1024
     samples doubled up to 8192 where the verdict hangs on the MC noise, tolerance 0.1 of
     the spread for the mean and 0.25 of the variance for the variance, 3 standard errors
