@@ -154,7 +154,7 @@ def cmd_validate(args) -> int:
     for h in range(ds.sizes["horizon"]):
         print(verdict_grid(ds, h))
         print()
-    for q in range(ds.sizes["value"]):
+    for q in range(ds.sizes[ds.attrs["parameter"]]):
         for h in range(ds.sizes["horizon"]):
             print(f"* {cause(ds, q, h)}")
     print()

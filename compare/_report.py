@@ -61,6 +61,11 @@ def _laws(ds) -> list[int]:
     return [v for v in LAWS if v < ds.sizes["variant"]]
 
 
+def _vals(ds):
+    """The swept parameter's coordinate (named after the parameter, SPEC section 5)."""
+    return ds[ds.attrs["parameter"]]
+
+
 def _par(ds) -> str:
     return {"omega": "ω", "mu": "μ"}.get(ds.attrs["parameter"], ds.attrs["parameter"])
 
@@ -94,7 +99,7 @@ def nearest_split(ds, q: int, h: int):
 def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
     """One sentence: why sigma* is where it is, for value q and horizon h."""
     par, unc = _par(ds), _unc(ds)
-    value = float(ds.value[q])
+    value = float(_vals(ds)[q])
     H = float(ds.horizon[h])
     lo, hi = (float(ds.sigma_star.values[q, v, h, c]),
               float(ds.sigma_star_upper.values[q, v, h, c]))
@@ -162,7 +167,7 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
         f"σ* variance {variants[v]}" for v in _laws(ds)] + [
         "first split at σ", "kind", "at t [periods]"]
     rows = []
-    for q, value in enumerate(ds.value.values):
+    for q, value in enumerate(_vals(ds).values):
         for h, H in enumerate(ds.horizon.values):
             row = [_g(float(value)), f"{float(H):g}"]
             for v in range(len(variants)):
@@ -192,7 +197,7 @@ def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 
     orders = [int(n) for n in ds.N.values]
     head = [f"{par} \\ σ"] + [_g(float(s)) for s in ds.sigma.values]
     rows = []
-    for q, value in enumerate(ds.value.values):
+    for q, value in enumerate(_vals(ds).values):
         row = [_g(float(value))]
         for s in range(len(ds.sigma)):
             a = agrees[q, s].astype(bool)
@@ -218,7 +223,7 @@ def count_table(ds: xr.Dataset, h: int, *, markdown: bool = True) -> str:
     ensemble is not all alike."""
     head = [_par(ds), "σ", "impacts: probability"]
     rows = []
-    for q, value in enumerate(ds.value.values):
+    for q, value in enumerate(_vals(ds).values):
         for s, sigma in enumerate(ds.sigma.values):
             p = ds.count_prob.values[q, s, h]
             nz = np.flatnonzero(p > 0)
@@ -265,15 +270,15 @@ def findings(ds: xr.Dataset) -> list[str]:
         lo = ds.sigma_star.values[:, HEADLINE, h, 0]
         hi = ds.sigma_star_upper.values[:, HEADLINE, h, 0]
         txt = ", ".join(f"{par} = {_g(float(v))}: {star_text(a, b, float(sig.max()))}"
-                        for v, a, b in zip(ds.value.values, lo, hi))
+                        for v, a, b in zip(_vals(ds).values, lo, hi))
         out.append(f"Over {float(H):g} periods, σ* ({variants[HEADLINE]}, N = {nmax}) is {txt}.")
         res = float(ds.attrs["resolution"])
         at_split = []
-        for q in range(len(ds.value)):
+        for q in range(len(_vals(ds))):
             sp = nearest_split(ds, q, h)
             if (sp and np.isfinite(hi[q]) and lo[q] > 0
                     and lo[q] - 2 * res <= sp["distance"] <= hi[q] + 2 * res):
-                at_split.append(_g(float(ds.value[q])))
+                at_split.append(_g(float(_vals(ds)[q])))
         if at_split:
             out.append(f"Over {float(H):g} periods the boundary coincides (within "
                        f"{2 * res:g}) with the first split of the impact sequence at "
@@ -286,7 +291,7 @@ def findings(ds: xr.Dataset) -> list[str]:
     if below.sum() >= 3:
         slope = np.polyfit(np.log(sig[below]), np.log(err[below]), 1)[0]
         out.append(
-            f"At {par} = {_g(float(ds.value[q]))}, over {float(ds.horizon[h]):g} periods, "
+            f"At {par} = {_g(float(_vals(ds)[q]))}, over {float(ds.horizon[h]):g} periods, "
             f"the RMS error of x_0 ({variants[HEADLINE]}, N = {nmax}) grows like "
             f"σ^{slope:.2f} for σ = {_g(float(sig[below][0]))}…{_g(float(sig[below][-1]))} "
             f"(below σ*), from {_e(err[below][0])} to {_e(err[below][-1])}.")
@@ -316,7 +321,7 @@ def findings(ds: xr.Dataset) -> list[str]:
         ok = [f"σ = {_g(float(s))}: {_e(pre[i, -1])} (MC SE {_e(floor[i])})"
               for i, s in enumerate(sig)]
         out.append(f"Before OPA's first impact (t < {first:.2f} periods at "
-                   f"{par} = {_g(float(ds.value[q]))}) the error of x_0 at N = {nmax} is "
+                   f"{par} = {_g(float(_vals(ds)[q]))}) the error of x_0 at N = {nmax} is "
                    + "; ".join(ok[:: max(1, len(ok) // 4)]) + ".")
     # impact laws against each other, below sigma* of both
     e_mean = ds.err_mean.values[..., 0, -1, 0]
@@ -352,7 +357,7 @@ def plot_map(ds, path):
     sigma* (mean and ensemble law), every sigma probed, and the splits."""
     H = len(ds.horizon)
     fig, axes = plt.subplots(1, H, figsize=(5.6 * H, 4.6), squeeze=False, sharey=True)
-    x = ds.value.values
+    x = _vals(ds).values
     y = ds.sigma.values
     kinds = _kinds(ds)
     smax = float(y.max())
@@ -458,7 +463,7 @@ def plot_error_vs_order(ds, path, q=0):
                 ax.set_xlabel("N")
         axes[r, 0].set_ylabel("RMS error of x_0")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"{_par(ds)} = {_g(float(ds.value[q]))}")
+    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -492,7 +497,7 @@ def plot_mean(ds, path, q=0):
     axes[0, 0].set_ylabel("E[x]")
     axes[1, 0].set_ylabel("x_0 − E_MC[x]")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"{_par(ds)} = {_g(float(ds.value[q]))}, {ds.variant.values[HEADLINE]}")
+    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}, {ds.variant.values[HEADLINE]}")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -520,7 +525,7 @@ def plot_variance(ds, path, q=0):
         ax.set_title(f"σ = {float(ds.sigma[s]):g}")
         ax.set_xlabel("t [forcing periods]")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"Variance, {_par(ds)} = {_g(float(ds.value[q]))}")
+    fig.suptitle(f"Variance, {_par(ds)} = {_g(float(_vals(ds)[q]))}")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -613,7 +618,7 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
         f"Model: preset {a['preset']} (mu = {a['mu']:g}, a = {a['a']:g}, c = {a['c']:g}, "
         f"f = {a['f']:g}, eta = {a['eta']:g}, delta = {a['delta']:g}, F0 = {a['F0']:g}, "
         f"{a['impulse']} impulses), {a['parameter']} swept over "
-        f"{', '.join(_g(float(v)) for v in ds.value.values)}, uncertain {a['uncertain']} "
+        f"{', '.join(_g(float(v)) for v in _vals(ds).values)}, uncertain {a['uncertain']} "
         f"= {_g(nominal(ds))} + σ ξ, σ in {', '.join(_g(float(s)) for s in ds.sigma.values)}; "
         f"N = {int(ds.N.min())}..{int(ds.N.max())}; rtol = atol = {a['rtol']:g}; Monte "
         f"Carlo: scrambled Sobol, {a['samples']} samples, doubled up to {a['max_samples']} "
@@ -623,7 +628,7 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
         "## Trust boundary", "", boundary_table(ds, markdown=True), "",
         "## Why it breaks", "",
     ]
-    for q in range(len(ds.value)):
+    for q in range(len(_vals(ds))):
         for h in range(len(ds.horizon)):
             lines.append(f"- {cause(ds, q, h)}")
     lines += ["", "## Findings", ""] + [f"- {f}" for f in findings(ds)] + [""]

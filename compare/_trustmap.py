@@ -434,6 +434,7 @@ class _Map:
             self.log("cost-accuracy frontier at the largest sigma ...")
             ds = xr.merge([ds, frontier(cfg)], combine_attrs="drop_conflicts")
         ds.attrs.update(_attrs(cfg))
+        ds = ds.rename({"value": cfg.parameter})  # the sweep dimension (SPEC section 5)
         ds.attrs["wall_seconds"] = time.perf_counter() - start
         ds.attrs["mc_runs_computed"] = self.mc_runs
         return ds

@@ -141,11 +141,21 @@ def test_count_distribution_sums_to_one_and_matches_the_ensemble_range(tiny):
     # the fewest and the most impacts a Monte Carlo sample made up to the longest horizon
     # are counts the located splits give a positive probability (the samples need not
     # reach every count: a few have probabilities below 1 / samples)
-    for q in range(ds.sizes["value"]):
+    for q in range(ds.sizes[cfg_parameter(ds)]):
         for s in range(ds.sizes["sigma"]):
             assert p[q, s, -1, ds.mc_impacts_min.values[q, s]] > 0
             assert p[q, s, -1, ds.mc_impacts_max.values[q, s]] > 0
     assert (p[..., -1, :] > 0).sum(axis=-1).max() > 1  # some ensemble is split
+
+
+def cfg_parameter(ds):
+    return ds.attrs["parameter"]
+
+
+def test_sweep_dimension_is_named_after_the_parameter(tiny):
+    _, ds, _ = tiny
+    assert "omega" in ds.dims and "value" not in ds.dims
+    np.testing.assert_array_equal(ds.omega.values, TINY["values"])
 
 
 def test_report_files_and_tables(tiny):
