@@ -60,6 +60,7 @@ class ConvergenceConfig:
     reference: int = 65536
     seed: int = 1
     outdir: str = "results-elements"
+    allow_negative: bool = False
 
     def __post_init__(self):
         if not (self.sigma > 0):
@@ -85,7 +86,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True) ->
     measure = parse(cfg.distribution)
     times = time_grid(osc.omega, cfg.periods, cfg.per_period)
     common = dict(sigma=cfg.sigma, uncertain=cfg.uncertain, times=times, options=opts,
-                  distribution=measure)
+                  distribution=measure, allow_negative=cfg.allow_negative)
     start = time.perf_counter()
     log(f"reference: {cfg.reference} Sobol samples ...")
     t0 = time.perf_counter()
@@ -246,9 +247,9 @@ def summary_lines(ds) -> list[str]:
     out = []
     a = ds.attrs
     out.append(f"Reference: {a['reference_samples']} Sobol samples, RMS standard error "
-               f"{a['reference_sem']:.1e} (errors near it are not resolved). The adaptive "
-               f"runs share the splits located by the first of them: their wall times after "
-               f"it leave the split search out.")
+               f"{a['reference_sem']:.1e} (errors near it are not resolved). An adaptive "
+               f"run's wall time includes its split search unless one of the last 8 "
+               f"searches was of the same problem with the same split budget.")
     if a.get("failures", 0):
         out.append(f"{a['failures']} OPA runs diverged and are left out: {a['failure_text']}")
     for law in LAWS:

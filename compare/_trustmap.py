@@ -27,6 +27,7 @@ import dataclasses
 import hashlib
 import json
 import math
+import numbers
 import os
 import time
 import tomllib
@@ -94,6 +95,18 @@ class ValidateConfig:
     frontier: bool = True
 
     def __post_init__(self):
+        for name in ("samples", "max_samples", "per_period", "seed"):
+            value = getattr(self, name)
+            if not isinstance(value, numbers.Integral) or isinstance(value, bool):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+        for name in ("tolerance", "var_tolerance", "z", "resolution", "split_resolution"):
+            value = getattr(self, name)
+            if not isinstance(value, numbers.Real) or isinstance(value, bool):
+                raise ValueError(f"{name} must be a number, got {value!r}")
+        for name in ("outdir", "preset", "parameter", "uncertain"):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise ValueError(f"{name} must be a non-empty string, got "
+                                 f"{getattr(self, name)!r}")
         if self.parameter not in PARAMETER_NAMES or self.parameter in ("x0", "v0"):
             raise ValueError(f"parameter must be a model parameter, got {self.parameter!r}")
         if self.parameter == self.uncertain:
@@ -397,7 +410,8 @@ class _Map:
                     hi = failing[0]
                     lo = max([s for s in known if s < hi], default=0.0)
                     lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
-                    star[v, h, c] = (lo, hi)
+                    # the probes are stored under sigma rounded to 12 digits
+                    star[v, h, c] = (np.round(lo, 12), np.round(hi, 12))
                     steps[v, h, c] = n
         return star, steps, probes
 
@@ -459,13 +473,15 @@ def frontier(cfg: ValidateConfig) -> xr.Dataset:
         per_period=cfg.per_period, order=1, orders=tuple(sorted({0, 1, cfg.nmax})),
         uniform=(), budgets=FRONTIER_BUDGETS, order_budget=FRONTIER_BUDGETS[-1],
         single_nodes=(1, 2, 4, 8), mc_samples=FRONTIER_SAMPLES,
-        reference=FRONTIER_REFERENCE, seed=cfg.seed + 1, outdir=cfg.outdir)
+        reference=FRONTIER_REFERENCE, seed=cfg.seed + 1, outdir=cfg.outdir,
+        allow_negative=True)
     ds = run_convergence(conv, log=lambda *a: None, write=False)
     out = ds.rename({name: f"frontier_{name}" for name in ds.data_vars} | {"run": "frontier_run"})
     out.attrs = {"frontier_" + k: v for k, v in ds.attrs.items()
                  if k in ("sigma", "periods", "reference_samples", "reference_sem",
                           "wall_seconds")}
     out.attrs["frontier_value"] = float(cfg.values[0])
+    out.attrs["frontier_omega"] = float(cfg.oscillator_at(cfg.values[0]).omega)
     return out
 
 
@@ -731,7 +747,7 @@ def _details(cfg: ValidateConfig, results) -> xr.Dataset:
 def _attrs(cfg: ValidateConfig) -> dict:
     attrs = provenance_attrs(
         "validate", cfg.oscillator, cfg.options, sigma=max(cfg.sigmas), order=cfg.nmax,
-        uncertain=cfg.uncertain, truncation="galerkin,paper", impact_law="mean,ensemble",
+        uncertain=cfg.uncertain, truncation="galerkin,paper", impact_law="mean,ensemble,saltation",
         seed=cfg.seed, sampler="sobol",
     )
     attrs.update(

@@ -24,6 +24,7 @@ law into the true sampled system: non-intrusive, every node its own impact seque
 from __future__ import annotations
 
 import math
+import numbers
 import time as _time
 from dataclasses import dataclass
 
@@ -205,7 +206,8 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
     ``P_k max_t s_k(t)`` until it is below ``tolerance`` or ``max_elements`` is reached.
 
     Returns (runs, history) where history lists (elements, largest share) per step."""
-    if not (isinstance(max_elements, int) and 1 <= max_elements <= MAX_ELEMENTS):
+    if not (isinstance(max_elements, numbers.Integral) and not isinstance(max_elements, bool)
+            and 1 <= max_elements <= MAX_ELEMENTS):
         raise ValueError(f"max_elements must be an integer in 1..{MAX_ELEMENTS}, got "
                          f"{max_elements!r}")
     if not (tolerance > 0 and math.isfinite(tolerance)):
@@ -231,8 +233,9 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
         room = max_elements - len(runs)
         if share.max() < tolerance or room <= 0:
             break
-        # one round: halve (in probability) every element within a factor 2 of the
-        # largest share and above the tolerance, the largest first, within the budget
+        # one round: halve (in probability) every element within a factor 4 of the
+        # largest finite share and above the tolerance, the largest first, within the
+        # budget (diverged elements first of all)
         finite = share[np.isfinite(share)]
         top = finite.max() if len(finite) else 0.0
         pick = [k for k in np.argsort(-share)

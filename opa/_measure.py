@@ -34,6 +34,9 @@ from scipy import special, stats
 from opa._basis import orthonormal
 
 DISCRETISATION = 400  # points of the Gauss-Jacobi discretisation (exact below this degree)
+# Lanczos costs O(m n^2) memory-time for n coefficients on m >= 2n points: 1000 nodes take
+# a second and 32 MB; far more is better served by sampling.
+MAX_GAUSS = 1000
 
 
 @dataclass(frozen=True)
@@ -151,6 +154,10 @@ class Measure:
 
     def gauss(self, q: int) -> tuple[np.ndarray, np.ndarray]:
         """The ``q``-point Gauss rule of the restricted law (Golub-Welsch), ascending."""
+        if int(q) != q or not 1 <= q <= MAX_GAUSS:
+            raise ValueError(f"a Gauss rule of the {self.name} law takes 1 to {MAX_GAUSS} "
+                             f"nodes, got {q}")
+        q = int(q)
         alpha, b = self.recurrence(q)
         if q == 1:
             return alpha.copy(), np.ones(1)

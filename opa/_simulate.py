@@ -304,8 +304,9 @@ def simulate_opa(
         from opa._elements import simulate_elements
         from opa._measure import parse
 
-        if initial is not None:
-            raise ValueError("initial is not supported with elements or a distribution")
+        if initial is not None or partial:
+            raise ValueError("initial and partial are not supported with elements or a "
+                             "distribution")
         measure = parse(distribution)
         check_support(oscillator, unc, measure)
         return simulate_elements(

@@ -516,7 +516,10 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                     y[ncoef] += strength
                     if y[0] >= delta and y[ncoef] > 0.0:
                         v_minus = y[ncoef]
-                        _apply_impact(y, ncoef, eta, law)
+                        # a kick into the wall at a fixed time: the reset's Jacobian is
+                        # diag(1, -eta), so the saltation law reflects every v_i
+                        _apply_impact(y, ncoef, eta,
+                                      LAW_ENSEMBLE if law == LAW_SALTATION else law)
                         n_events = _log_event(log, n_events, t, v_minus, EV_IMPACT)
                         n_impacts += 1
                     if sticking and y[ncoef] != 0.0:

@@ -178,6 +178,11 @@ def test_config_errors_name_the_key(tmp_path):
         load_config(None, preset="3.4")
     with pytest.raises(ValueError, match="values are needed"):
         load_config(None, parameter="f")
+    for key, value, message in (("z", "3", "z must be a number"),
+                                ("max_samples", "x", "max_samples must be an integer"),
+                                ("outdir", 3, "outdir must be a non-empty string")):
+        with pytest.raises(ValueError, match=message):
+            load_config(None, **{key: value})
     bad = tmp_path / "bad.toml"
     bad.write_text("sigmas = [0.01,\n")
     with pytest.raises(ValueError, match="not valid TOML"):
@@ -195,9 +200,12 @@ def test_config_errors_name_the_key(tmp_path):
     (["--tolerance", "-1"], "tolerance"),
 ])
 def test_cli_bad_input_exits_2_with_one_line(argv, needle, tmp_path, capsys):
-    with pytest.raises(SystemExit) if needle is None else _nothing():
-        code = main(["validate", "--outdir", str(tmp_path / "r"), *argv])
-        assert code == 2
+    if needle is None:  # argparse's own check
+        with pytest.raises(SystemExit) as excinfo:
+            main(["validate", "--outdir", str(tmp_path / "r"), *argv])
+        assert excinfo.value.code == 2
+    else:
+        assert main(["validate", "--outdir", str(tmp_path / "r"), *argv]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err
     if needle:
@@ -209,11 +217,3 @@ def test_cli_refuses_an_unwritable_outdir_before_computing(tmp_path, capsys):
     target.write_text("x")
     assert main(["validate", "--outdir", str(target)]) == 2
     assert "--outdir" in capsys.readouterr().err
-
-
-class _nothing:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return False
