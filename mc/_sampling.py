@@ -183,24 +183,28 @@ def sample_xi(
     """
     _check_sampler(sampler, samples, seed)
     samples = int(samples)
+    measure = None
     if distribution is not None:
         from opa._measure import parse
 
         measure = parse(distribution)
-        if measure.name != "semicircle" or not measure.is_whole:
-            return _sample_measure(measure, sampler, samples, seed, replicates)
+        if measure.name == "semicircle" and measure.is_whole:
+            measure = None  # the closed forms below
     if sampler == "gauss":
-        return gauss_nodes(samples)
+        return gauss_nodes(samples) if measure is None else measure.gauss(samples)
+    ppf = semicircle_ppf if measure is None else measure.ppf
     weights = np.full(samples, 1.0 / samples)
     if sampler == "random":
         rng = np.random.default_rng(seed)
+        if measure is not None:
+            return ppf(rng.random(samples)), weights
         xi = 2.0 * rng.beta(_BETA_SHAPE, _BETA_SHAPE, size=samples) - 1.0
         return xi, weights
     if isinstance(replicates, bool) or int(replicates) != replicates or replicates < 1:
         raise ValueError(f"replicates must be a positive integer, got {replicates!r}")
     replicates = int(replicates)
     if replicates == 1:
-        return semicircle_ppf(_sobol_uniform(samples, seed)), weights
+        return ppf(_sobol_uniform(samples, seed)), weights
     if samples % replicates:
         raise ValueError(
             f"samples must be a multiple of replicates = {replicates}, got {samples}"
@@ -208,24 +212,7 @@ def sample_xi(
     children = np.random.SeedSequence(seed).spawn(replicates)
     per = samples // replicates
     u = np.concatenate([_sobol_uniform(per, np.random.default_rng(c)) for c in children])
-    return semicircle_ppf(u), weights
-
-
-def _sample_measure(measure, sampler, samples, seed, replicates):
-    """The samplers for another law: uniforms through its quantile function."""
-    if sampler == "gauss":
-        return measure.gauss(samples)
-    weights = np.full(samples, 1.0 / samples)
-    if sampler == "random":
-        return measure.ppf(np.random.default_rng(seed).random(samples)), weights
-    if int(replicates) == 1:
-        return measure.ppf(_sobol_uniform(samples, seed)), weights
-    if samples % replicates:
-        raise ValueError(f"samples must be a multiple of replicates = {replicates}, got {samples}")
-    children = np.random.SeedSequence(seed).spawn(int(replicates))
-    per = samples // int(replicates)
-    u = np.concatenate([_sobol_uniform(per, np.random.default_rng(c)) for c in children])
-    return measure.ppf(u), weights
+    return ppf(u), weights
 
 
 def _sobol_uniform(samples: int, seed) -> np.ndarray:

@@ -76,16 +76,9 @@ def element_rule(measure: Measure, order: int):
     the element's mean."""
     if measure.name == "semicircle" and measure.is_whole:
         return quadrature(order)
-    coefficients = measure.recurrence(max(order + 2, quadrature_order(order)))
     q = 1 if order == 0 else quadrature_order(order)
-    alpha, b = coefficients
-    if q == 1:
-        nodes, weights = alpha[:1].copy(), np.ones(1)
-    else:
-        jac = np.diag(alpha[:q]) + np.diag(b[1:q], 1) + np.diag(b[1:q], -1)
-        nodes, vecs = np.linalg.eigh(jac)
-        weights = vecs[0] ** 2
-        weights /= weights.sum()
+    coefficients = measure.recurrence(max(order + 2, q))
+    nodes, weights = measure.gauss(q, coefficients)
     basis = measure.basis(order + 1, nodes, coefficients)
     return nodes, weights, np.ascontiguousarray(basis)
 
@@ -272,8 +265,7 @@ def collocation(oscillator, options, measure, edges, q, *, sigma, uncertain, tim
     xs, ws = [], []
     for a, b in zip(edges[:-1], edges[1:]):
         element = measure.restrict(a, b)
-        nodes, weights = element.gauss(q) if q > 1 else (
-            element.recurrence(1)[0][:1].copy(), np.ones(1))
+        nodes, weights = element.gauss(q)
         xs.append(nodes)
         ws.append(weights * element.probability())
     xi = np.concatenate(xs)

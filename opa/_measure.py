@@ -152,13 +152,15 @@ class Measure:
                 q_prev, q = q, r / bcoef[k + 1]
         return alpha, bcoef
 
-    def gauss(self, q: int) -> tuple[np.ndarray, np.ndarray]:
-        """The ``q``-point Gauss rule of the restricted law (Golub-Welsch), ascending."""
+    def gauss(self, q: int, coefficients=None) -> tuple[np.ndarray, np.ndarray]:
+        """The ``q``-point Gauss rule of the restricted law (Golub-Welsch), ascending;
+        ``coefficients``: a recurrence of at least ``q`` terms already computed."""
         if int(q) != q or not 1 <= q <= MAX_GAUSS:
             raise ValueError(f"a Gauss rule of the {self.name} law takes 1 to {MAX_GAUSS} "
                              f"nodes, got {q}")
         q = int(q)
-        alpha, b = self.recurrence(q)
+        alpha, b = self.recurrence(q) if coefficients is None else coefficients
+        alpha, b = alpha[:q], b[:q]
         if q == 1:
             return alpha.copy(), np.ones(1)
         vals, vecs = np.linalg.eigh(np.diag(alpha) + np.diag(b[1:], 1) + np.diag(b[1:], -1))
