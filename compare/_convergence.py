@@ -21,8 +21,9 @@ down to the reference's own standard error, which is stored beside them.
 from __future__ import annotations
 
 import os
+import re
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import xarray as xr
@@ -79,22 +80,48 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(np.square(a))))
 
 
-def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True) -> xr.Dataset:
+def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
+                    memo=None) -> xr.Dataset:
     """Run the study; returns its dataset (also written to OUTDIR/convergence.nc unless
-    ``write`` is false)."""
+    ``write`` is false).
+
+    Every run of the study (the reference, each row) is one call
+    ``memo(name, spec, compute)``: ``spec`` is a JSON-able dict of everything the run
+    depends on, ``compute()`` does the run and returns a dict of arrays, numbers and
+    strings, and ``memo`` returns that dict or the one an identical earlier call returned
+    (the trust map keeps them in its parts, :class:`compare._trustmap.Parts`). Without
+    ``memo`` every run is done. The dataset's ``wall_seconds`` is the sum of the runs' wall
+    times (for reused runs, the time they took when they were done).
+    """
     osc, opts = cfg.oscillator, cfg.options
     measure = parse(cfg.distribution)
     times = time_grid(osc.omega, cfg.periods, cfg.per_period)
     common = dict(sigma=cfg.sigma, uncertain=cfg.uncertain, times=times, options=opts,
                   distribution=measure, allow_negative=cfg.allow_negative)
-    start = time.perf_counter()
+    # what every run depends on; the errors also depend on the reference (samples, seed)
+    settings = {"oscillator": osc.as_dict(), "options": asdict(opts), "sigma": cfg.sigma,
+                "uncertain": cfg.uncertain, "distribution": cfg.distribution,
+                "periods": cfg.periods, "per_period": cfg.per_period,
+                "allow_negative": cfg.allow_negative, "reference": cfg.reference,
+                "seed": cfg.seed}
+
+    def run(name, spec, compute):
+        spec = {**settings, "run": name, **spec}
+        return compute() if memo is None else memo(name, spec, compute)
+
+    def reference():
+        t0 = time.perf_counter()
+        ref = simulate_mc(osc, samples=cfg.reference, sampler="sobol", seed=cfg.seed,
+                          order=0, progress=False, **common)
+        return {"x_mean": ref.x_mean.values, "x_var": ref.x_var.values,
+                "x_sem": ref.x_sem.values, "rhs": int(ref.attrs["rhs_evaluations"]),
+                "seconds": time.perf_counter() - t0}
+
     log(f"reference: {cfg.reference} Sobol samples ...")
-    t0 = time.perf_counter()
-    ref = simulate_mc(osc, samples=cfg.reference, sampler="sobol", seed=cfg.seed, order=0,
-                      progress=False, **common)
-    ref_seconds = time.perf_counter() - t0
-    m_ref, sd_ref = ref.x_mean.values, np.sqrt(ref.x_var.values)
-    floor = _rms(ref.x_sem.values)
+    ref = run("reference", {}, reference)
+    m_ref, sd_ref = ref["x_mean"], np.sqrt(ref["x_var"])
+    floor = _rms(ref["x_sem"])
+    seconds = [ref["seconds"]]
 
     def errors(mean, var):
         return _rms(mean - m_ref), _rms(np.sqrt(np.maximum(var, 0.0)) - sd_ref)
@@ -102,21 +129,36 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True) ->
     rows = []  # (method, law, size_name, size, N, err, sd_err, rhs, node_rhs, seconds)
 
     def opa_row(method, law, size, order, **kw):
-        t = time.perf_counter()
-        try:
-            ds = simulate_opa(osc, order=order, impact_law=law, **common, **kw)
-        except SimulationError as err:  # a diverged OPA system: no error to report
-            log(f"  {method} ({law}), N = {order}, {kw}: {err}")
+        def compute():
+            t = time.perf_counter()
+            try:
+                ds = simulate_opa(osc, order=order, impact_law=law, **common, **kw)
+            except SimulationError as err:  # a diverged OPA system: no error to report
+                return {"failure": str(err), "seconds": time.perf_counter() - t}
+            sec = time.perf_counter() - t
+            e, s = errors(ds.x_mean.values, ds.x_var.values)
+            out = {"error": e, "sd_error": s, "rhs": int(ds.attrs["rhs_evaluations"]),
+                   "elements": int(ds.attrs["elements"]), "seconds": sec}
+            if "element_edges" in ds:
+                out["edges"] = ds.element_edges.values
+            return out
+
+        name = f"{method}-{law}-N{order}-K{kw.get('max_elements', kw.get('elements'))}"
+        result = run(_slug(name), {"method": method, "law": law, "order": order, **kw},
+                     compute)
+        seconds.append(result["seconds"])
+        if "failure" in result:
+            log(f"  {method} ({law}), N = {order}, {kw}: {result['failure']}")
             failures.append(f"{method} ({law} law), N = {order}, "
-                            f"{kw.get('max_elements', kw.get('elements'))}: {err}")
+                            f"{kw.get('max_elements', kw.get('elements'))}: "
+                            f"{result['failure']}")
             return None
-        sec = time.perf_counter() - t
-        e, s = errors(ds.x_mean.values, ds.x_var.values)
-        rhs = int(ds.attrs["rhs_evaluations"])
+        rhs = result["rhs"]
         q = 1 if order == 0 else quadrature_order(order)
-        rows.append((method, law, size if size is not None else int(ds.attrs["elements"]),
-                     order, e, s, rhs, rhs * q, sec))
-        return ds
+        rows.append((method, law, size if size is not None else result["elements"],
+                     order, result["error"], result["sd_error"], rhs, rhs * q,
+                     result["seconds"]))
+        return result
 
     adaptive = {}  # budget -> the saltation law's adaptive edges
     failures: list[str] = []
@@ -125,14 +167,31 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True) ->
         for k in cfg.uniform:
             opa_row("ME-OPA uniform", law, k, cfg.order, elements=int(k))
         for b in cfg.budgets:
-            ds = opa_row("ME-OPA adaptive", law, None, cfg.order, elements="adaptive",
-                         tolerance=1e-14, max_elements=int(b))
-            if law == "saltation" and ds is not None:
-                adaptive[int(b)] = ds.element_edges.values
+            result = opa_row("ME-OPA adaptive", law, None, cfg.order, elements="adaptive",
+                             tolerance=1e-14, max_elements=int(b))
+            if law == "saltation" and result is not None:
+                adaptive[int(b)] = result["edges"]
         for n in cfg.orders:
             opa_row("ME-OPA adaptive, N", law, None, n, elements="adaptive", tolerance=1e-14,
                     max_elements=cfg.order_budget)
             opa_row("OPA (one element), N", law, 1, n, elements=1)
+
+    def collocation_row(method, edges, nodes):
+        def compute():
+            t = time.perf_counter()
+            mean, var, rhs = collocation(osc, opts, measure, edges, nodes, sigma=cfg.sigma,
+                                         uncertain=cfg.uncertain, times=times)
+            sec = time.perf_counter() - t
+            e, s = errors(mean, var)
+            return {"error": e, "sd_error": s, "rhs": int(rhs), "seconds": sec}
+
+        result = run(_slug(f"{method}-K{len(edges) - 1}-Q{nodes}"),
+                     {"method": method, "edges": np.asarray(edges, float).tolist(),
+                      "nodes": int(nodes)}, compute)
+        seconds.append(result["seconds"])
+        rows.append((method, "true system", len(edges) - 1, int(nodes), result["error"],
+                     result["sd_error"], result["rhs"], result["rhs"], result["seconds"]))
+
     log("collocation ...")
     for method, sizes in (("ME-collocation uniform", cfg.uniform),
                           ("ME-collocation adaptive", cfg.budgets)):
@@ -143,30 +202,27 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True) ->
                 edges = adaptive[int(k)]
             else:
                 continue
-            t = time.perf_counter()
-            mean, var, rhs = collocation(osc, opts, measure, edges, cfg.nodes,
-                                         sigma=cfg.sigma, uncertain=cfg.uncertain,
-                                         times=times)
-            sec = time.perf_counter() - t
-            rows.append((method, "true system", len(edges) - 1, cfg.nodes, *errors(mean, var),
-                         rhs, rhs, sec))
+            collocation_row(method, edges, cfg.nodes)
     for q in cfg.single_nodes:
-        t = time.perf_counter()
-        mean, var, rhs = collocation(osc, opts, measure, np.array([measure.lo, measure.hi]),
-                                     int(q), sigma=cfg.sigma, uncertain=cfg.uncertain,
-                                     times=times)
-        rows.append(("collocation (one element), Q", "true system", 1, int(q),
-                     *errors(mean, var), rhs, rhs, time.perf_counter() - t))
+        collocation_row("collocation (one element), Q", np.array([measure.lo, measure.hi]),
+                        int(q))
     log("Monte Carlo and Sobol ladders ...")
     for sampler, name in (("random", "MC"), ("sobol", "QMC (Sobol)")):
         for m in cfg.mc_samples:
-            t = time.perf_counter()
-            ds = simulate_mc(osc, samples=int(m), sampler=sampler, seed=cfg.seed + 1,
-                             order=0, progress=False, **common)
-            rows.append((name, "true system", int(m), 0, *errors(ds.x_mean.values,
-                                                                  ds.x_var.values),
-                         int(ds.attrs["rhs_evaluations"]), int(ds.attrs["rhs_evaluations"]),
-                         time.perf_counter() - t))
+            def compute(sampler=sampler, m=m):
+                t = time.perf_counter()
+                ds = simulate_mc(osc, samples=int(m), sampler=sampler, seed=cfg.seed + 1,
+                                 order=0, progress=False, **common)
+                e, s = errors(ds.x_mean.values, ds.x_var.values)
+                return {"error": e, "sd_error": s, "rhs": int(ds.attrs["rhs_evaluations"]),
+                        "seconds": time.perf_counter() - t}
+
+            result = run(_slug(f"{name}-M{int(m)}"),
+                         {"sampler": sampler, "samples": int(m), "ladder_seed": cfg.seed + 1},
+                         compute)
+            seconds.append(result["seconds"])
+            rows.append((name, "true system", int(m), 0, result["error"], result["sd_error"],
+                         result["rhs"], result["rhs"], result["seconds"]))
     cols = list(zip(*rows))
     one = {"units": "1"}
     ds = xr.Dataset(
@@ -195,14 +251,19 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True) ->
     ds.attrs.update(
         periods=float(cfg.periods), per_period=int(cfg.per_period),
         distribution=measure.name, reference_samples=int(cfg.reference),
-        reference_sem=floor, reference_seconds=ref_seconds,
-        reference_rhs_evaluations=int(ref.attrs["rhs_evaluations"]),
-        wall_seconds=time.perf_counter() - start, failures=len(failures),
+        reference_sem=floor, reference_seconds=ref["seconds"],
+        reference_rhs_evaluations=int(ref["rhs"]),
+        wall_seconds=float(sum(seconds)), failures=len(failures),
         failure_text=" | ".join(failures) if failures else "none",
     )
     if write:
         write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
     return ds
+
+
+def _slug(text: str) -> str:
+    """A file-name-safe form of a run's name."""
+    return re.sub(r"[^A-Za-z0-9.]+", "-", text).strip("-")
 
 
 def _select(ds, method, law=None):

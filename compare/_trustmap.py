@@ -17,8 +17,20 @@ systems' impact sequences are scanned along the uncertain parameter
 (:func:`opa._splits.find_splits`): their splits, what happens there, and the distribution
 of impact counts at every grid point say *why* the boundary is where it is.
 
-Monte Carlo runs are written to ``OUTDIR/parts/`` as they finish and reused by a rerun with
-the same settings, so an interrupted map resumes.
+Every piece of work is written to ``OUTDIR/parts/`` as it finishes (:class:`Parts`) and
+reused by a rerun, so an interrupted map resumes and a finished one is reassembled without
+integrating anything. Each file name ends in a hash of everything that determines its
+content, and the file stores that hash too::
+
+    mc_<q><value>_sigma<sigma>_M<samples>_<key>.nc   a Monte Carlo ensemble's moments
+    opa_<q><value>_sigma<sigma>_N<order>_<key>.npz   OPA at one N, the five variants
+    splits_<q><value>_<key>.npz                      the split scan at one value
+    details_<q><value>_sigma<sigma>_<key>.nc         phase portraits, EMR_0 against DMR
+    frontier_<run>_<key>.npz                         one run of the cost-accuracy study
+
+A part that cannot be read, or whose stored hash is not the expected one (a file copied
+or left from other settings), is named in the log, moved aside to ``<name>.bad`` and
+computed again; temporaries left by a killed run are removed when the next one starts.
 """
 
 from __future__ import annotations
@@ -29,6 +41,8 @@ import json
 import math
 import numbers
 import os
+import re
+import tempfile
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -42,7 +56,7 @@ from mc._sampling import semicircle_cdf
 from opa._dataset import provenance_attrs, write_netcdf
 from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions, preset, time_grid
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
-from opa._splits import SPLIT_KINDS, find_splits
+from opa._splits import SPLIT_KINDS, Split, find_splits
 
 VARIANTS = (("mean", "galerkin"), ("ensemble", "galerkin"), ("mean", "paper"),
             ("ensemble", "paper"), ("saltation", "galerkin"))
@@ -163,13 +177,27 @@ class ValidateConfig:
 
     def key(self, value: float, sigma: float, samples: int) -> str:
         """A hash of everything one Monte Carlo run of the map depends on."""
-        blob = json.dumps(
-            [self.oscillator_at(value).as_dict(), dataclasses.asdict(self.options), sigma,
-             self.uncertain, samples, self.seed, max(self.horizons), self.per_period,
-             self.nmax],
-            sort_keys=True, default=str,
-        )
-        return hashlib.sha256(blob.encode()).hexdigest()[:12]
+        return digest([self.oscillator_at(value).as_dict(), dataclasses.asdict(self.options),
+                       sigma, self.uncertain, samples, self.seed, max(self.horizons),
+                       self.per_period, self.nmax])
+
+    def opa_key(self, value: float, sigma: float, order: int) -> str:
+        """A hash of everything the OPA runs of the map at one point and one N depend on."""
+        return digest(["opa", self.oscillator_at(value).as_dict(),
+                       dataclasses.asdict(self.options), float(sigma), int(order),
+                       self.uncertain, VARIANTS, max(self.horizons), self.per_period])
+
+    def splits_key(self, value: float) -> str:
+        """A hash of everything the split scan at one swept value depends on."""
+        return digest(["splits", self.oscillator_at(value).as_dict(),
+                       dataclasses.asdict(self.options), self.uncertain, max(self.sigmas),
+                       min(self.sigmas), self.horizons, self.split_resolution])
+
+
+def digest(payload) -> str:
+    """A 12-hex-digit hash of ``payload`` (anything ``json`` writes, floats exactly)."""
+    blob = json.dumps(payload, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:12]
 
 
 def load_config(path: str | None, **overrides) -> ValidateConfig:
@@ -239,6 +267,195 @@ def noise_floor(options: SolverOptions) -> float:
     return 10.0 * (options.rtol + options.atol)
 
 
+# --------------------------------------------------------------------------- parts on disk
+
+# Temporaries are named .tmp-opa-mc-<pid>-<random><suffix> (as opa._dataset names them), so
+# that the next run can tell whether their writer is still alive.
+_TEMP_PREFIX = ".tmp-opa-mc-"
+_TEMPORARY = re.compile(re.escape(_TEMP_PREFIX) + r"(\d+)-")
+_STALE_AGE = 60.0  # seconds untouched after which a temporary with no pid is stale
+
+
+class Parts:
+    """Finished pieces of work in one directory, each found again by the hash of what
+    determines it.
+
+    :meth:`dataset` (netCDF) and :meth:`arrays` (``.npz``: arrays, numbers, strings) return
+    the part stored under ``<stem>_<key>`` when it is readable and stores ``key``;
+    otherwise they compute it, write it atomically (a temporary in the same directory,
+    flushed, then renamed over the name) and return what was written, read back, so that
+    a fresh result and a reused one are the same to the bit. A part that cannot be read
+    or stores another key is logged, renamed to ``<name>.bad`` (replacing an older one)
+    and computed again.
+    """
+
+    def __init__(self, directory: str, log):
+        self.directory = directory
+        self.log = log
+        self.computed = 0  # parts written by this object
+        self.set_aside = 0
+
+    def clean(self) -> list[str]:
+        """Remove the temporaries that killed writers left: those that name a process
+        that is no longer running, and those without a pid that are empty or untouched
+        for a minute. Returns their names."""
+        removed = []
+        try:
+            entries = list(os.scandir(self.directory))
+        except OSError:
+            return removed
+        for entry in entries:
+            if not entry.name.startswith(".tmp-"):
+                continue
+            try:
+                match = _TEMPORARY.match(entry.name)
+                if match:
+                    stale = not _running(int(match[1]))
+                else:
+                    info = entry.stat(follow_symlinks=False)
+                    stale = info.st_size == 0 or time.time() - info.st_mtime > _STALE_AGE
+                if stale and entry.is_file(follow_symlinks=False):
+                    os.remove(entry.path)
+                    removed.append(entry.name)
+            except OSError:  # gone already, or not ours to remove
+                continue
+        if removed:
+            self.log(f"parts: removed {len(removed)} temporary file(s) an interrupted run "
+                     f"left behind: {', '.join(sorted(removed))}")
+        return removed
+
+    def dataset(self, stem: str, key: str, compute, *, check=None) -> xr.Dataset:
+        """The netCDF part ``<stem>_<key>.nc``; ``compute()`` returns an ``xr.Dataset``.
+
+        ``check(ds)`` judges a stored part that carries no key (written by an older
+        version): it returns why the part does not fit, or None to accept it.
+        """
+        path = os.path.join(self.directory, f"{stem}_{key}.nc")
+
+        def save(ds, tmp):
+            ds.assign_attrs(part_key=key).to_netcdf(tmp, engine="netcdf4")
+
+        ds = self._get(path, key, _read_dataset, compute, save, check)
+        ds.attrs.pop("part_key", None)
+        return ds
+
+    def arrays(self, stem: str, key: str, compute) -> dict:
+        """The ``.npz`` part ``<stem>_<key>.npz``; ``compute()`` returns a dict of arrays,
+        numbers and strings (0-d entries come back as Python scalars)."""
+        path = os.path.join(self.directory, f"{stem}_{key}.npz")
+
+        def save(content, tmp):
+            if "part_key" in content:
+                raise ValueError("part_key is a reserved name in a part")
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **content, part_key=np.str_(key))
+
+        out = self._get(path, key, _read_arrays, compute, save, None)
+        out.pop("part_key")
+        return out
+
+    def _get(self, path, key, read, compute, save, check):
+        found = self._load(path, key, read, check)
+        if found is not None:
+            return found
+        content = compute()  # before the temporary exists: a kill here leaves nothing
+        self._write(path, lambda tmp: save(content, tmp))
+        self.computed += 1
+        return read(path)  # what the next run will read, not what was computed
+
+    def _load(self, path, key, read, check):
+        if not os.path.lexists(path):
+            return None
+        try:
+            content = read(path)
+        except Exception as err:  # noqa: BLE001 -- whatever makes it unreadable: recompute
+            reason = f"cannot be read ({type(err).__name__}: {err})".replace("\n", " ")
+        else:
+            stored = _stored_key(content)
+            if stored == key:
+                return content
+            if stored is None and check is not None:
+                reason = check(content)
+                if reason is None:
+                    return content
+            elif stored is None:
+                reason = "stores no key"
+            else:
+                reason = f"stores the key {stored}, not {key}: it belongs to other settings"
+        name = os.path.basename(path)
+        os.replace(path, path + ".bad")
+        self.set_aside += 1
+        self.log(f"parts: {name} {reason}; moved aside to {name}.bad, computing it again")
+        return None
+
+    def _write(self, path, write):
+        suffix = os.path.splitext(path)[1]
+        fd, tmp = tempfile.mkstemp(prefix=f"{_TEMP_PREFIX}{os.getpid()}-", suffix=suffix,
+                                   dir=self.directory)
+        os.close(fd)
+        try:
+            write(tmp)
+            os.chmod(tmp, 0o666 & ~_umask())  # what open() would give, not mkstemp's 0o600
+            fd = os.open(tmp, os.O_RDONLY)
+            try:
+                os.fsync(fd)  # complete on disk before it takes the name
+            finally:
+                os.close(fd)
+            os.replace(tmp, path)
+        except BaseException:
+            try:
+                os.remove(tmp)
+            except OSError:
+                pass
+            raise
+
+
+def _read_dataset(path: str) -> xr.Dataset:
+    with xr.open_dataset(path, engine="netcdf4") as ds:
+        return ds.load()
+
+
+def _read_arrays(path: str) -> dict:
+    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as npz:  # closed on errors too
+        content = {name: npz[name] for name in npz.files}
+    return {name: (a.item() if a.ndim == 0 else a) for name, a in content.items()}
+
+
+def _stored_key(content) -> str | None:
+    stored = content.attrs.get("part_key") if isinstance(content, xr.Dataset) \
+        else content.get("part_key")
+    return None if stored is None else str(stored)
+
+
+def _plain(value):
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _umask() -> int:
+    try:  # Linux tells without changing it
+        with open("/proc/self/status", encoding="ascii") as status:
+            for line in status:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    old = os.umask(0o077)
+    os.umask(old)
+    return old
+
+
+def _running(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # someone else's process
+        return True
+    return True
+
+
 @dataclass
 class Point:
     """One (q, sigma) of the map: the MC reference, the OPA curves and their verdicts."""
@@ -263,35 +480,71 @@ class _Map:
         self.cfg = cfg
         self.log = log
         self.progress = progress
-        self.parts = os.path.join(cfg.outdir, "parts")
+        self.parts = Parts(os.path.join(cfg.outdir, "parts"), log)
         self.floor = noise_floor(cfg.options)
         self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
         self.mc_runs = 0
+        self.opa_runs = 0
         self.bar = None
+
+    def _name(self, value, sigma=None) -> str:
+        name = f"{self.cfg.parameter}{value:g}"
+        return name if sigma is None else f"{name}_sigma{sigma:.6g}"
 
     # -- one point ---------------------------------------------------------------------
     def _mc(self, osc, value, sigma, samples, times):
-        path = os.path.join(self.parts, f"mc_{self.cfg.parameter}{value:g}_sigma{sigma:.6g}_"
-                            f"M{samples}_{self.cfg.key(value, sigma, samples)}.nc")
-        if os.path.exists(path):
-            with xr.open_dataset(path) as ds:
-                return ds.load()
-        start = time.perf_counter()
-        ds = simulate_mc(osc, sigma=sigma, samples=samples, sampler="sobol", seed=self.cfg.seed,
-                         order=0, uncertain=self.cfg.uncertain, times=times,
-                         options=self.cfg.options, scheduler=self.cfg.scheduler,
-                         progress=False, allow_negative=True)
-        ds = ds.drop_vars(["xi", "weight", "sample", "n_impacts"]).assign_attrs(
-            impacts_min=int(ds.n_impacts.min()), impacts_max=int(ds.n_impacts.max()),
-            wall_seconds=time.perf_counter() - start)
-        write_netcdf(ds, path)
-        self.mc_runs += 1
-        return ds
+        cfg = self.cfg
+
+        def compute():
+            start = time.perf_counter()
+            ds = simulate_mc(osc, sigma=sigma, samples=samples, sampler="sobol", seed=cfg.seed,
+                             order=0, uncertain=cfg.uncertain, times=times,
+                             options=cfg.options, scheduler=cfg.scheduler,
+                             progress=False, allow_negative=True)
+            self.mc_runs += 1
+            return ds.drop_vars(["xi", "weight", "sample", "n_impacts"]).assign_attrs(
+                impacts_min=int(ds.n_impacts.min()), impacts_max=int(ds.n_impacts.max()),
+                wall_seconds=time.perf_counter() - start)
+
+        def check(ds):  # a part of an older version, which stored no key
+            expected = {**provenance_attrs("mc", osc, cfg.options, sigma=sigma,
+                                           uncertain=cfg.uncertain, seed=cfg.seed),
+                        "samples": samples}
+            wrong = [f"{name}={_plain(ds.attrs.get(name))!r} (expected {expected[name]!r})"
+                     for name in (*PARAMETER_NAMES, "sigma", "uncertain", "seed", "samples",
+                                  "rtol", "atol")
+                     if ds.attrs.get(name) != expected[name]]
+            if ds.sizes.get("time", 0) != len(times):
+                wrong.append(f"{ds.sizes.get('time', 0)} outputs")
+            return f"does not fit these settings ({', '.join(wrong)})" if wrong else None
+
+        return self.parts.dataset(f"mc_{self._name(value, sigma)}_M{samples}",
+                                  cfg.key(value, sigma, samples), compute, check=check)
+
+    def _opa(self, osc, value, sigma, order, times) -> dict:
+        """Every variant of OPA at one N: x_mean, x_var (variant, output), first_impact
+        (variant,) in time units, and the wall time."""
+        cfg = self.cfg
+
+        def compute():
+            start = time.perf_counter()
+            mean, var, first = opa_variants(
+                osc, sigma=sigma, order=order, uncertain=cfg.uncertain,
+                variants=[(law, trunc) for law, trunc in VARIANTS], times=times,
+                options=cfg.options)
+            self.opa_runs += 1
+            return {"x_mean": mean, "x_var": var, "first_impact": first,
+                    "seconds": time.perf_counter() - start}
+
+        return self.parts.arrays(f"opa_{self._name(value, sigma)}_N{order}",
+                                 cfg.opa_key(value, sigma, order), compute)
 
     def evaluate(self, value: float, sigma: float, orders=None) -> Point:
-        """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts."""
+        """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts.
+
+        The point's wall time is that of its runs (OPA, and every Monte Carlo ensemble
+        it took), as stored in the parts: a reused point reports what it cost."""
         cfg = self.cfg
-        start = time.perf_counter()
         osc = cfg.oscillator_at(value)
         times = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
         orders = cfg.orders if orders is None else orders
@@ -300,20 +553,21 @@ class _Map:
         opa_var = np.empty((V, N, len(times)))
         first = np.empty((V, N))
         T = osc.forcing_period
+        seconds = 0.0
         for k, order in enumerate(orders):  # the variants of one N run in parallel
-            opa_mean[:, k], opa_var[:, k], first[:, k] = opa_variants(
-                osc, sigma=sigma, order=order, uncertain=cfg.uncertain,
-                variants=[(law, trunc) for law, trunc in VARIANTS], times=times,
-                options=cfg.options)
-            first[:, k] /= T
+            run = self._opa(osc, value, sigma, order, times)
+            opa_mean[:, k], opa_var[:, k] = run["x_mean"], run["x_var"]
+            first[:, k] = run["first_impact"] / T
+            seconds += run["seconds"]
         samples = cfg.samples
         while True:
             mc = self._mc(osc, value, sigma, samples, times)
+            seconds += float(mc.attrs["wall_seconds"])
             point = self._judge(sigma, samples, mc, opa_mean, opa_var, first, times / T)
             if samples * 2 > cfg.max_samples or not self._hangs_on_noise(point):
                 break
             samples *= 2
-        point.seconds = time.perf_counter() - start
+        point.seconds = seconds
         return point
 
     def _hangs_on_noise(self, point: Point) -> bool:
@@ -365,24 +619,33 @@ class _Map:
                      agrees)
 
     # -- one value of the swept parameter ------------------------------------------------
-    def splits(self, value: float):
-        """Splits of the sampled systems' event sequences over the largest ensemble, per
-        horizon, and the per-horizon count segments."""
+    def splits(self, value: float) -> tuple[float, list[HorizonSplits]]:
+        """The centre of the ensembles and, per horizon (in ``cfg.horizons`` order), the
+        splits of the sampled systems' event sequences over the largest ensemble."""
         cfg = self.cfg
         osc = cfg.oscillator_at(value)
         centre = getattr(osc, cfg.uncertain)
-        smax = max(cfg.sigmas)
-        T = osc.forcing_period
-        cache: dict = {"t_end": max(cfg.horizons) * T}
-        found = []
-        for h in sorted(cfg.horizons, reverse=True):
-            splits, truncated = find_splits(
-                osc, cfg.options, cfg.uncertain, centre - smax, centre + smax, h * T,
-                tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache)
-            found.append((h, splits, truncated))
-        seq_centre = cache.get(centre) or _sequence(osc, cfg, cache, centre)
-        found.sort(key=lambda item: cfg.horizons.index(item[0]))
-        return centre, found, seq_centre, T
+
+        def compute():
+            smax = max(cfg.sigmas)
+            T = osc.forcing_period
+            cache: dict = {"t_end": max(cfg.horizons) * T}
+            found = {}
+            for h in sorted(cfg.horizons, reverse=True):
+                found[h] = find_splits(
+                    osc, cfg.options, cfg.uncertain, centre - smax, centre + smax, h * T,
+                    tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache)
+            seq_centre = cache.get(centre) or _sequence(osc, cfg, cache, centre)
+            scans = []
+            for h in cfg.horizons:
+                speed, when = seq_centre.slowest_impact(h * T)
+                scans.append(HorizonSplits(h, found[h][0], bool(found[h][1]), speed, when / T,
+                                           seq_centre.count(h * T)))
+            return _splits_to_arrays(scans)
+
+        stored = self.parts.arrays(f"splits_{self._name(value)}", cfg.splits_key(value),
+                                   compute)
+        return centre, _splits_from_arrays(stored)
 
     def boundary(self, value, grid: dict[float, Point]):
         """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection."""
@@ -424,7 +687,8 @@ class _Map:
         from tqdm.auto import tqdm
 
         cfg = self.cfg
-        os.makedirs(self.parts, exist_ok=True)
+        os.makedirs(self.parts.directory, exist_ok=True)
+        self.parts.clean()
         total = len(cfg.values) * len(cfg.sigmas)
         results = []
         start = time.perf_counter()
@@ -443,15 +707,29 @@ class _Map:
                 results.append((value, split_info, grid, star, steps, probes))
         self.bar = None
         ds = _assemble(cfg, results)
-        ds = xr.merge([ds, _details(cfg, results)], combine_attrs="drop_conflicts")
+        ds = xr.merge([ds, self.details(results)], combine_attrs="drop_conflicts")
         if cfg.frontier:
             self.log("cost-accuracy frontier at the largest sigma ...")
-            ds = xr.merge([ds, frontier(cfg)], combine_attrs="drop_conflicts")
+            ds = xr.merge([ds, frontier(cfg, parts=self.parts)], combine_attrs="drop_conflicts")
         ds.attrs.update(_attrs(cfg))
         ds = ds.rename({"value": cfg.parameter})  # the sweep dimension (SPEC section 5)
+        # what this run did (the rest of the dataset is the same for a rerun)
         ds.attrs["wall_seconds"] = time.perf_counter() - start
         ds.attrs["mc_runs_computed"] = self.mc_runs
+        ds.attrs["opa_runs_computed"] = self.opa_runs
+        ds.attrs["parts_computed"] = self.parts.computed
+        ds.attrs["parts_set_aside"] = self.parts.set_aside
         return ds
+
+    def details(self, results) -> xr.Dataset:
+        """:func:`_details` at the first swept value, kept as a part."""
+        cfg = self.cfg
+        value, sigma = cfg.values[0], _phase_sigma(cfg, results[0][2])
+        key = digest(["details", cfg.oscillator_at(value).as_dict(),
+                      dataclasses.asdict(cfg.options), float(sigma), cfg.nmax, cfg.uncertain,
+                      cfg.horizons, cfg.per_period, cfg.seed, DENSE_PER_PERIOD])
+        return self.parts.dataset(f"details_{self._name(value, sigma)}", key,
+                                  lambda: _details(cfg, sigma))
 
 
 FRONTIER_BUDGETS = (8, 16, 32, 64)
@@ -459,12 +737,13 @@ FRONTIER_SAMPLES = (256, 512, 1024, 2048, 4096, 8192)
 FRONTIER_REFERENCE = 32768
 
 
-def frontier(cfg: ValidateConfig) -> xr.Dataset:
+def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
     """Cost against accuracy at the first swept value, the largest sigma and the first
     horizon: the paper's OPA (N = 0..Nmax), adaptive multi-element OPA (mean and
     saltation laws, element budgets 8..64), multi-element collocation, single-element
     collocation, MC and scrambled Sobol, against a 2^15-sample Sobol reference
-    (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``."""
+    (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``.
+    With ``parts``, every run of the study is kept there (``frontier_<run>_<key>.npz``)."""
     from compare._convergence import ConvergenceConfig, run_convergence
 
     conv = ConvergenceConfig(
@@ -475,7 +754,11 @@ def frontier(cfg: ValidateConfig) -> xr.Dataset:
         single_nodes=(1, 2, 4, 8), mc_samples=FRONTIER_SAMPLES,
         reference=FRONTIER_REFERENCE, seed=cfg.seed + 1, outdir=cfg.outdir,
         allow_negative=True)
-    ds = run_convergence(conv, log=lambda *a: None, write=False)
+    memo = None
+    if parts is not None:
+        def memo(run, spec, compute):
+            return parts.arrays(f"frontier_{run}", digest(spec), compute)
+    ds = run_convergence(conv, log=lambda *a: None, write=False, memo=memo)
     out = ds.rename({name: f"frontier_{name}" for name in ds.data_vars} | {"run": "frontier_run"})
     out.attrs = {"frontier_" + k: v for k, v in ds.attrs.items()
                  if k in ("sigma", "periods", "reference_samples", "reference_sem",
@@ -491,6 +774,48 @@ def _sequence(osc, cfg, cache, value):
     seq = event_sequence(osc.replace(**{cfg.uncertain: value}), cfg.options, cache["t_end"])
     cache[value] = seq
     return seq
+
+
+@dataclass
+class HorizonSplits:
+    """What the split scan at one swept value found up to one horizon."""
+
+    horizon: float  # forcing periods
+    splits: list[Split]  # sorted by value
+    truncated: bool  # more splits exist than were located
+    slowest_speed: float  # the nominal system's slowest impact within the horizon (NaN: none)
+    slowest_time: float  # its time, forcing periods
+    count: int  # the nominal system's impacts up to the horizon
+
+
+_SPLIT_FIELDS = ("value", "tol", "kind", "time", "speed", "left", "right")
+
+
+def _splits_to_arrays(scans: list[HorizonSplits]) -> dict:
+    every = [(h, sp) for h, scan in enumerate(scans) for sp in scan.splits]
+    out = {"horizon": np.array([s.horizon for s in scans], float),
+           "truncated": np.array([s.truncated for s in scans], np.int8),
+           "slowest_speed": np.array([s.slowest_speed for s in scans], float),
+           "slowest_time": np.array([s.slowest_time for s in scans], float),
+           "count": np.array([s.count for s in scans], np.int64),
+           "split_horizon": np.array([h for h, _ in every], np.int64)}
+    for name in _SPLIT_FIELDS:
+        dtype = str if name == "kind" else (np.int64 if name in ("left", "right") else float)
+        out[f"split_{name}"] = np.array([getattr(sp, name) for _, sp in every], dtype=dtype)
+    return out
+
+
+def _splits_from_arrays(stored: dict) -> list[HorizonSplits]:
+    scans = []
+    for h in range(len(stored["horizon"])):
+        idx = np.flatnonzero(stored["split_horizon"] == h)
+        splits = [Split(**{name: stored[f"split_{name}"][i].item() for name in _SPLIT_FIELDS})
+                  for i in idx]
+        scans.append(HorizonSplits(float(stored["horizon"][h]), splits,
+                                   bool(stored["truncated"][h]),
+                                   float(stored["slowest_speed"][h]),
+                                   float(stored["slowest_time"][h]), int(stored["count"][h])))
+    return scans
 
 
 def count_distribution(centre, sigma, splits, count_at_centre) -> dict[int, float]:
@@ -522,7 +847,7 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
     mc_seconds, mc_rhs, seconds = f(Q, S), np.zeros((Q, S), np.int64), f(Q, S)
     star = f(Q, V, H, 2, 2)
     steps = np.zeros((Q, V, H, 2), np.int64)
-    max_split = max(1, max(len(sp) for r in results for (_, sp, _) in r[1][1]))
+    max_split = max(1, max(len(scan.splits) for r in results for scan in r[1][1]))
     sv, skind, stime, sspeed = f(Q, H, max_split), np.full((Q, H, max_split), -1, np.int8), \
         f(Q, H, max_split), f(Q, H, max_split)
     sleft, sright = (np.full((Q, H, max_split), -1, np.int64) for _ in range(2))
@@ -534,7 +859,8 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
     probe_sigma = f(Q, max_probes)
     probe_agrees = np.full((Q, max_probes, V, H, 2), -1, np.int8)
     counts: dict = {}
-    for q, (value, (centre, found, seq_centre, T), grid, st, stp, probes) in enumerate(results):
+    for q, (value, (centre, scans), grid, st, stp, probes) in enumerate(results):
+        T = cfg.oscillator_at(value).forcing_period
         for s, sigma in enumerate(cfg.sigmas):
             p = grid[float(sigma)]
             errors[q, s], agrees[q, s], disagree[q, s] = p.errors, p.agrees, p.disagree
@@ -550,10 +876,10 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         for j, (sig, point) in enumerate(sorted(probes.items())):
             probe_sigma[q, j] = sig
             probe_agrees[q, j] = point.agrees[:, -1]
-        for h, (horizon, splits, truncated) in enumerate(found):
-            struncated[q, h] = truncated
-            slow_speed[q, h], slow_time[q, h] = seq_centre.slowest_impact(horizon * T)
-            slow_time[q, h] /= T
+        for h, scan in enumerate(scans):
+            splits = scan.splits
+            struncated[q, h] = scan.truncated
+            slow_speed[q, h], slow_time[q, h] = scan.slowest_speed, scan.slowest_time
             real = [sp for sp in splits if sp.kind != "horizon"]
             if real:
                 near = min(real, key=lambda sp: abs(sp.value - centre))
@@ -564,8 +890,7 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                 skind[q, h, j] = SPLIT_KINDS.index(sp.kind)
                 sleft[q, h, j], sright[q, h, j] = sp.left, sp.right
             for s, sigma in enumerate(cfg.sigmas):
-                counts[(q, s, h)] = count_distribution(centre, sigma, splits,
-                                                       seq_centre.count(horizon * T))
+                counts[(q, s, h)] = count_distribution(centre, sigma, splits, scan.count)
     kmax = max(max(d) for d in counts.values())
     count_prob = np.zeros((Q, S, H, kmax + 1))
     for (q, s, h), dist in counts.items():
@@ -687,14 +1012,17 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
 DENSE_PER_PERIOD = 64
 
 
-def _details(cfg: ValidateConfig, results) -> xr.Dataset:
-    """Dense-output phase portraits at the first swept value, and how far EMR_0 (sigma = 0,
-    N = Nmax) stays from the DMR, at each horizon."""
+def _phase_sigma(cfg: ValidateConfig, grid: dict[float, Point]) -> float:
+    """The first grid sigma where mean/galerkin fails over the first horizon, else the last."""
+    return next((s for s in cfg.sigmas if not grid[float(s)].agrees[0, -1, 0, 0]),
+                cfg.sigmas[-1])
+
+
+def _details(cfg: ValidateConfig, sig: float) -> xr.Dataset:
+    """Dense-output phase portraits at the first swept value and ``sig``, and how far EMR_0
+    (sigma = 0, N = Nmax) stays from the DMR, at each horizon."""
     value = cfg.values[0]
     osc = cfg.oscillator_at(value)
-    grid = results[0][2]
-    # the first grid sigma where mean/galerkin fails over the first horizon, else the last
-    sig = next((s for s in cfg.sigmas if not grid[float(s)].agrees[0, -1, 0, 0]), cfg.sigmas[-1])
     times = time_grid(osc.omega, cfg.horizons[0], DENSE_PER_PERIOD)
     curves = {}
     for law in ("mean", "ensemble"):

@@ -212,10 +212,81 @@ def compute_point(task: PointTask) -> dict:
     }
 
 
-def _init_worker() -> None:
+def _init_worker(owner: int | None = None) -> None:
+    """Set up a pool worker: one numba thread, and no life beyond the pool's owner.
+
+    The worker's parent is the fork server, not ``owner`` (the process that made the
+    pool); the fork server ends when ``owner`` does (:func:`exit_with_parent`, started by
+    the preload ``opa._warm_worker``) and takes the worker with it through the kernel's
+    parent-death signal. The watcher on ``owner`` is the fallback where that signal is not
+    available; it can only act between two kernel calls, which hold the GIL.
+    """
     import numba
 
     numba.set_num_threads(1)
+    _kill_on_parent_death()
+    if owner is not None:
+        exit_with_parent(owner)
+
+
+def _kill_on_parent_death() -> bool:
+    """Ask Linux for SIGKILL when this process's parent ends (prctl PR_SET_PDEATHSIG).
+
+    Only for processes forked by a single-threaded parent that forks from its main thread
+    (the fork server): the signal follows the parent *thread*, not the parent process.
+    """
+    if not sys.platform.startswith("linux"):
+        return False
+    import ctypes
+    import signal
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig = 1
+        if libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0) != 0:
+            return False
+    except (OSError, AttributeError):
+        return False
+    return True
+
+
+def exit_with_parent(owner: int | None = None, interval: float = 0.5) -> None:
+    """End this process (``os._exit``) once its parent, or process ``owner``, has ended.
+
+    A daemon thread looks every ``interval`` seconds: a process whose parent ends is
+    handed to another (``os.getppid`` changes), which also holds for a parent that is a
+    zombie nobody has reaped yet; ``owner`` counts as ended when it is gone or a zombie.
+    """
+    import threading
+    import time
+
+    parent = os.getppid()
+
+    def watch():
+        while os.getppid() == parent and (owner is None or _alive(owner)):
+            time.sleep(interval)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="opa-exit-with-parent", daemon=True).start()
+
+
+def _alive(pid: int) -> bool:
+    """Whether process ``pid`` runs; a zombie (ended, not yet reaped) does not."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            return fh.read().rsplit(b")", 1)[1].split()[0] not in (b"Z", b"X")
+    except FileNotFoundError:
+        if os.path.exists("/proc/self/stat"):
+            return False  # /proc is there, the process is not
+    except (OSError, IndexError):
+        pass
+    try:  # no /proc: signal 0 tells whether the pid exists (a zombie counts as alive)
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        pass
+    return True
 
 
 # --------------------------------------------------------------------------- parts on disk
@@ -501,15 +572,18 @@ def local_executor(workers: int = DEFAULT_WORKERS):
     Processes come from a fork server (not a plain fork, which is unsafe once numba's
     thread pool has started in this process). Reuse it across sweeps with
     ``sweep(..., executor=pool)`` to pay the start-up (imports and loading the compiled
-    kernel, about 2-3 s) once.
+    kernel, about 2-3 s) once. The fork server and the workers end within about a second
+    when this process ends, also when it is killed without a chance to shut them down.
     """
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["opa._bifurcation", "opa._warm_worker"])
+    # the workers must not outlive this process, even when it is killed (SIGKILL leaves
+    # no chance to shut the pool down): see _init_worker and opa._warm_worker
     return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx,
-                               initializer=_init_worker)
+                               initializer=_init_worker, initargs=(os.getpid(),))
 
 
 def _run_dask(tasks, finish, scheduler) -> None:

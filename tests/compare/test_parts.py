@@ -1,0 +1,221 @@
+"""The trust map's parts on disk: a rerun reuses every finished piece of work, and a part
+that is damaged, foreign or half-written is named, set aside and computed again."""
+
+import os
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import compare._convergence as convergence
+import compare._trustmap as trustmap
+from compare import load_config, run_validation
+from compare._convergence import ConvergenceConfig, run_convergence
+from compare._trustmap import Parts, digest
+
+# one swept value, two sigmas, N = 0 and 1, one horizon, no frontier: about a second
+SMALL = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1), horizons=(4,), samples=64,
+             max_samples=64, per_period=4, frontier=False)
+# what differs between two runs by nature: when and how long this run took, what it did
+RUN_ATTRS = ("history", "wall_seconds", "mc_runs_computed", "opa_runs_computed",
+             "parts_computed", "parts_set_aside")
+INTEGRATORS = {
+    trustmap: ("opa_variants", "simulate_mc", "simulate_opa", "simulate_dmr", "find_splits",
+               "_sequence"),
+    convergence: ("simulate_opa", "simulate_mc", "collocation"),
+}
+
+
+def _run(outdir):
+    lines = []
+    cfg = load_config(None, outdir=str(outdir), **SMALL)
+    ds = run_validation(cfg, progress=False, log=lines.append)
+    return ds, lines
+
+
+@pytest.fixture(scope="module")
+def clean(tmp_path_factory):
+    out = tmp_path_factory.mktemp("clean")
+    ds, _ = _run(out)
+    return ds, out / "parts"
+
+
+@pytest.fixture
+def copy(clean, tmp_path):
+    """A fresh output directory holding the clean run's parts."""
+    shutil.copytree(clean[1], tmp_path / "parts")
+    return tmp_path
+
+
+def _forbid_integration(monkeypatch):
+    def refuse(*args, **kwargs):
+        raise AssertionError("integrated although every part was on disk")
+
+    for module, names in INTEGRATORS.items():
+        for name in names:
+            monkeypatch.setattr(module, name, refuse)
+
+
+def _same(a: xr.Dataset, b: xr.Dataset, *, timings: bool = True):
+    """Identical data, coordinates and attributes, apart from what describes the run
+    itself; without ``timings``, also apart from the wall times (a recomputed part took
+    its own time)."""
+    a, b = a.copy(), b.copy()
+    for ds in (a, b):
+        for name in RUN_ATTRS:
+            ds.attrs.pop(name, None)
+    if not timings:
+        seconds = [name for name in a.data_vars if a[name].attrs.get("units") == "s"]
+        assert seconds  # the comparison below leaves something out
+        a, b = a.drop_vars(seconds), b.drop_vars(seconds)
+    xr.testing.assert_identical(a, b)
+
+
+def _part(outdir, prefix, index=0):
+    names = sorted(p for p in os.listdir(outdir / "parts") if p.startswith(prefix + "_")
+                   and not p.endswith(".bad"))
+    return outdir / "parts" / names[index]
+
+
+def test_a_finished_map_is_reassembled_without_integrating(clean, copy, monkeypatch):
+    _forbid_integration(monkeypatch)
+    ds, lines = _run(copy)
+    assert ds.attrs["parts_computed"] == 0 and ds.attrs["mc_runs_computed"] == 0
+    assert not [line for line in lines if line.startswith("parts:")]
+    _same(ds, clean[0])
+    with xr.open_dataset(copy / "validate.nc") as back:
+        _same(back.load(), clean[0])
+
+
+@pytest.mark.parametrize("prefix", ["mc", "opa", "splits", "details"])
+@pytest.mark.parametrize("length", ["half", "empty"])
+def test_a_damaged_part_is_named_set_aside_and_recomputed(clean, copy, prefix, length):
+    path = _part(copy, prefix)
+    data = path.read_bytes()
+    damaged = data[: len(data) // 2] if length == "half" else b""
+    path.write_bytes(damaged)
+    bad = path.with_name(path.name + ".bad")
+    bad.write_bytes(b"an older part set aside")
+
+    ds, lines = _run(copy)
+
+    named = [line for line in lines if path.name in line]
+    assert len(named) == 1 and "cannot be read" in named[0], lines
+    assert bad.read_bytes() == damaged  # the older one replaced
+    assert ds.attrs["parts_computed"] == 1 and ds.attrs["parts_set_aside"] == 1
+    assert ds.attrs["mc_runs_computed"] == (prefix == "mc")
+    assert ds.attrs["opa_runs_computed"] == (prefix == "opa")
+    _same(ds, clean[0], timings=False)
+    _, again = _run(copy)  # the recomputed part is whole
+    assert not [line for line in again if line.startswith("parts:")]
+
+
+@pytest.mark.parametrize("prefix", ["mc", "opa"])
+def test_a_part_of_other_settings_is_found_by_its_stored_key(clean, copy, prefix):
+    """The sigma = 0.03 part copied under the name of the sigma = 0.01 one."""
+    target = _part(copy, f"{prefix}_omega3.98_sigma0.01")
+    shutil.copyfile(_part(copy, f"{prefix}_omega3.98_sigma0.03"), target)
+
+    ds, lines = _run(copy)
+
+    named = [line for line in lines if target.name in line]
+    assert len(named) == 1 and "stores the key" in named[0], lines
+    assert target.with_name(target.name + ".bad").exists()
+    assert ds.attrs["parts_set_aside"] == 1
+    _same(ds, clean[0], timings=False)
+
+
+def _rewrite(path, **attrs):
+    """The netCDF part as an older version wrote it: without its key, ``attrs`` changed."""
+    with xr.open_dataset(path) as ds:
+        ds = ds.load()
+    ds.attrs.pop("part_key", None)
+    ds.attrs.update(attrs)
+    ds.to_netcdf(path, engine="netcdf4")
+
+
+def test_a_monte_carlo_part_without_a_key_is_judged_by_its_attributes(clean, copy):
+    path = _part(copy, "mc_omega3.98_sigma0.01")
+    _rewrite(path)
+    ds, lines = _run(copy)
+    assert ds.attrs["parts_computed"] == 0, lines  # written by an older version: kept
+    _same(ds, clean[0])
+
+    _rewrite(path, sigma=0.03)
+    ds, lines = _run(copy)
+    named = [line for line in lines if path.name in line]
+    assert len(named) == 1 and "sigma=0.03 (expected 0.01)" in named[0], lines
+    assert ds.attrs["mc_runs_computed"] == 1
+    _same(ds, clean[0], timings=False)
+
+
+def _dead_pid() -> int:
+    child = subprocess.Popen(["true"])
+    child.wait()
+    return child.pid
+
+
+def test_temporaries_of_killed_writers_are_removed(clean, copy):
+    parts = copy / "parts"
+    dead = parts / f".tmp-opa-mc-{_dead_pid()}-x1y2.nc"
+    dead.write_bytes(b"half a netCDF file")
+    empty = parts / ".tmp-a8b7c6.nc"  # an older version's name, no pid: removed when empty
+    empty.write_bytes(b"")
+    live = parts / f".tmp-opa-mc-{os.getpid()}-z9.npz"  # a writer still running
+    live.write_bytes(b"")
+    young = parts / ".tmp-d5e4f3.nc"  # no pid, written to a moment ago
+    young.write_bytes(b"data")
+
+    ds, lines = _run(copy)
+
+    assert not dead.exists() and not empty.exists()
+    assert live.exists() and young.exists()
+    named = [line for line in lines if dead.name in line]
+    assert len(named) == 1 and empty.name in named[0]
+    assert ds.attrs["parts_computed"] == 0
+    _same(ds, clean[0])
+
+
+def test_parts_round_trip_and_refuse_a_reserved_name(tmp_path):
+    parts = Parts(str(tmp_path), log=lambda *a: None)
+    content = {"a": np.arange(3.0), "s": "text", "n": 7, "x": 0.1 + 0.2,
+               "e": np.array([], dtype=str)}
+    got = parts.arrays("thing", "k1", lambda: content)
+    again = parts.arrays("thing", "k1", lambda: pytest.fail("recomputed"))
+    for out in (got, again):
+        assert set(out) == set(content)
+        np.testing.assert_array_equal(out["a"], content["a"])
+        assert out["s"] == "text" and out["n"] == 7 and out["x"] == 0.1 + 0.2
+        assert out["e"].shape == (0,)
+    with pytest.raises(ValueError, match="reserved"):
+        parts.arrays("other", "k2", lambda: {"part_key": 1})
+    assert [p for p in os.listdir(tmp_path) if p.startswith(".tmp")] == []
+    assert os.stat(tmp_path / "thing_k1.npz").st_mode & 0o044  # not mkstemp's 0o600
+
+
+CONVERGENCE = dict(sigma=0.02, periods=2, per_period=4, orders=(0, 1), uniform=(1, 2),
+                   budgets=(2, 4), order_budget=4, single_nodes=(1, 2), mc_samples=(64, 128),
+                   reference=1024)
+
+
+def test_the_convergence_study_runs_each_run_once(tmp_path, monkeypatch):
+    cfg = ConvergenceConfig(outdir=str(tmp_path), **CONVERGENCE)
+    parts = Parts(str(tmp_path), log=lambda *a: None)
+
+    def memo(run, spec, compute):
+        return parts.arrays(f"frontier_{run}", digest(spec), compute)
+
+    first = run_convergence(cfg, log=lambda *a: None, write=False, memo=memo)
+    assert parts.computed == len(os.listdir(tmp_path)) == first.sizes["run"] + 1  # + reference
+    plain = run_convergence(cfg, log=lambda *a: None, write=False)
+    # the same rows as without parts, apart from the wall times
+    _same(first.drop_vars("seconds").drop_attrs(deep=False),
+          plain.drop_vars("seconds").drop_attrs(deep=False))
+
+    _forbid_integration(monkeypatch)
+    again = run_convergence(cfg, log=lambda *a: None, write=False, memo=memo)
+    _same(again, first)
+    assert again.attrs["wall_seconds"] == first.attrs["wall_seconds"] == pytest.approx(
+        float(first.seconds.sum()) + first.attrs["reference_seconds"])
