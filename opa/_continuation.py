@@ -41,6 +41,8 @@ from opa._stability import (
     PeriodicOrbit,
     _orbit,
     _residual,
+    check_count,
+    check_time,
     default_tolerance,
     flow,
     periodic_orbit,
@@ -52,6 +54,10 @@ BIFURCATION_KINDS = ("period-doubling", "fold", "neimark-sacker", "grazing", "im
 PD, FOLD, NS, GRAZING, IMPULSE_IMPACT = range(5)
 FOLD_MULTIPLIER = 0.25  # a turn of the branch is a fold only with a multiplier this close to 1
 NEAR = 1e-2  # a branch end is put down to grazing / an impulse when these are this small
+# Hard bounds on the loops: step halvings of the corrector (from step down to min_step)
+# and branches per call (doubled branches and branches across impulse-impact borders).
+MAX_HALVINGS = 64
+MAX_BRANCHES = 200
 
 
 @dataclass(eq=False)
@@ -194,6 +200,9 @@ def follow(system: ImpactSystem, parameter: str, orbit: PeriodicOrbit, stop: flo
     and the raw list of detected events ``(kind, index_a, index_b)`` between points.
     """
     start = system.parameter(parameter)
+    _check_steps(step, max_step, max_points, min_step)
+    if not math.isfinite(stop):
+        raise ValueError(f"stop must be finite, got {stop}")
     tol = default_tolerance(system) if tol is None else tol
     lo, hi = bounds if bounds is not None else (min(start, stop), max(start, stop))
     L = max(hi - lo, 1e-12)
@@ -214,7 +223,9 @@ def follow(system: ImpactSystem, parameter: str, orbit: PeriodicOrbit, stop: flo
     while len(branch.orbits) < max_points:
         u = np.concatenate([y, [lam / L]])
         got = None
-        while ds >= min_step:
+        for _ in range(MAX_HALVINGS):
+            if ds < min_step:
+                break
             try:
                 got = cont.correct(u + ds * t, t)
             except (SimulationError, ValueError):
@@ -274,6 +285,20 @@ def follow(system: ImpactSystem, parameter: str, orbit: PeriodicOrbit, stop: flo
     else:
         branch.end = f"max_points ({max_points}) reached"
     return branch, events
+
+
+def _check_steps(step, max_step, max_points, min_step=None) -> None:
+    """Arclength steps finite and positive (min_step <= step); max_points >= 1."""
+    steps = [("step", step), ("max_step", max_step)]
+    if min_step is not None:
+        steps.append(("min_step", min_step))
+    for name, value in steps:
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not (
+                math.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+    if min_step is not None and min_step > step:
+        raise ValueError(f"min_step must be <= step, got min_step = {min_step}, step = {step}")
+    check_count("max_points", max_points, 1)
 
 
 def _append(branch: Branch, value: float, orbit: PeriodicOrbit, events: list) -> None:
@@ -461,8 +486,9 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
             raise ValueError(f"{name} must be finite, got {value}")
     if start == stop:
         raise ValueError(f"start and stop must differ, got {start}")
-    if int(depth) < 0:
-        raise ValueError(f"depth must be >= 0, got {depth}")
+    depth = check_count("depth", depth, 0)
+    _check_steps(step, max_step, max_points)
+    t0 = check_time("t0", t0, system.forcing_period)
     bounds = (min(start, stop), max(start, stop))
     tol = default_tolerance(system) if tol is None else tol
     seed = start if seed is None else float(seed)
@@ -474,6 +500,16 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
     bifurcations: list[Bifurcation] = []
     queue = [(sys0, orbit, end, None, -1, 0) for end in (stop, start) if end != seed]
     crossings, max_crossings = 0, 20
+
+    def room() -> bool:
+        """Whether one more branch may be queued (MAX_BRANCHES bounds the loop below)."""
+        if len(branches) + len(queue) < MAX_BRANCHES:
+            return True
+        note = f"; no further branches (MAX_BRANCHES = {MAX_BRANCHES} reached)"
+        if not branches[-1].end.endswith(note):
+            branches[-1].end += note
+        return False
+
     while queue:
         sys_b, orb, target, tangent, parent, level = queue.pop(0)
         branch, events = follow(sys_b, parameter, orb, target, step=step, max_step=max_step,
@@ -501,7 +537,8 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
                     bif.x, bif.v = float(o_pd.state[0]), float(o_pd.state[o_pd.system.order + 1])
                     stable_side = branch.orbits[ia].stable or branch.orbits[ib].stable
                     if level < depth and stable_side:
-                        doubled = _doubled_seed(o_pd, parameter, switch_amplitude, tol)
+                        doubled = (_doubled_seed(o_pd, parameter, switch_amplitude, tol)
+                                   if room() else None)
                         if doubled is not None:
                             sys2, o2, ahead = doubled
                             bif.child = len(branches) + len(queue)
@@ -531,7 +568,7 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
                         o = branch.orbits[ia]
                 bif = Bifurcation(kind, value, b_id, located, o if located else None,
                                   x=float(o.state[0]), v=float(o.state[o.system.order + 1]))
-                if kind == "impulse-impact" and crossings < max_crossings:
+                if kind == "impulse-impact" and crossings < max_crossings and room():
                     # the orbit may go on beyond the discontinuity with the events swapped
                     across = _cross_impulse(system, parameter, branch, value, bounds, tol)
                     if across is not None:

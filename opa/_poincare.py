@@ -36,6 +36,21 @@ GRAZE_VELOCITY = 1e-2
 GRAZE_GAP = 1e-4
 #: relative tolerance deciding that an output time is a stroboscopic time k 2 pi / omega
 _STROBE_TOL = 1e-9
+#: most impulse times ``impulse_times`` lists (a bound on the array it allocates)
+MAX_IMPULSE_TIMES = 10_000_000
+
+
+def _optional_time(name: str, value) -> float | None:
+    """None, or ``value`` as a finite float (a NaN bound would silently select nothing)."""
+    if value is None:
+        return None
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}")
+    return value
 
 
 # --------------------------------------------------------------------------- array layer
@@ -261,6 +276,9 @@ def grazing_points(values: np.ndarray, period: np.ndarray, impacts: np.ndarray,
 def stroboscopic_mask(t: np.ndarray, forcing_period: float, start: float | None = None,
                       end: float | None = None) -> np.ndarray:
     """True at outputs on stroboscopic times ``k 2 pi/omega`` within ``(start, end]``."""
+    start, end = _optional_time("start", start), _optional_time("end", end)
+    if not (math.isfinite(forcing_period) and forcing_period > 0):
+        raise ValueError(f"forcing_period must be finite and > 0, got {forcing_period}")
     t = np.asarray(t, dtype=float)
     k = t / forcing_period
     mask = np.abs(k - np.round(k)) <= _STROBE_TOL * np.maximum(1.0, np.abs(k))
@@ -273,7 +291,13 @@ def stroboscopic_mask(t: np.ndarray, forcing_period: float, start: float | None 
 
 def impulse_times(t_end: float, omega1: float, *, impulse_at_zero: bool = True) -> np.ndarray:
     """Impulse times ``j 2 pi/omega1`` up to ``t_end`` (as the solver computes them)."""
+    t_end = _optional_time("t_end", t_end)
+    if not (math.isfinite(omega1) and omega1 > 0):
+        raise ValueError(f"omega1 must be finite and > 0, got {omega1}")
     T1 = 2.0 * math.pi / omega1
+    if t_end / T1 > MAX_IMPULSE_TIMES:
+        raise ValueError(f"t_end = {t_end:g} holds {t_end / T1:.3g} impulse times, more than "
+                         f"{MAX_IMPULSE_TIMES:g}")
     j = np.arange(0 if impulse_at_zero else 1, int(t_end // T1) + 2)
     tj = j * T1
     return tj[tj <= t_end]
@@ -347,7 +371,8 @@ def identify(
     or force jumps, ``sticking`` (n,) True while resting on the wall."""
     t = np.asarray(t, dtype=float)
     T = float(forcing_period)
-    lo = float(t[0]) if start is None else float(start)
+    start = _optional_time("start", start)
+    lo = float(t[0]) if start is None else start
     hi = float(t[-1])
     strobe = stroboscopic_mask(t, T, start)
     period, residual, nearest = detect_period(x[strobe], v[strobe], tol=period_tol,
@@ -435,6 +460,7 @@ def constraint_section(ds: xr.Dataset, *, start: float | None = None,
     ``impact_v(point)`` = pre-impact velocity x'(t-) > 0 (the rebound is ``-eta`` times
     it), for the impacts in ``(start, end]``; empty for Monte Carlo means.
     """
+    start, end = _optional_time("start", start), _optional_time("end", end)
     if "impact_time" in ds:
         ti = ds.impact_time.values
         vi = ds.impact_velocity.values

@@ -47,19 +47,43 @@ IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
 TRUNC_GALERKIN, TRUNC_PAPER = 0, 1
 LAW_MEAN, LAW_ENSEMBLE, LAW_SALTATION = 0, 1, 2
 
+# Escape bound: a state component |x_i| or |v_i| at or beyond
+#
+#     ESCAPE_FACTOR * (1 + max_j |y_j(t0)| + |delta|
+#                      + (|f| + |F0| (1 + |a1|)) (1 + 1/omega + 1/omega^2))
+#
+# ends the run as escaped (``escape_bound``). The bracket is the problem's own scale: the
+# start, the wall, and the largest force (harmonic amplitude plus the largest impulse or
+# pulse height) together with the velocity (force / omega) and displacement
+# (force / omega^2) it drives over a forcing period. The paper's motions stay more than
+# 3000 times inside the bound (|x|, |v| < 11 over 300 periods of every preset, against
+# bounds of 4e3 to 3.5e4; a Dirac kick F0 moves v by at most F0 (1 + |a1|)). The factor
+# is 1e3, not larger, because a runaway with the van der Pol term is stiff: with c < 0
+# the damping mu v^3 holds |v| near (|c| x^3 / mu)^(1/3) ~ |x| and the stable step falls
+# like 1/x^2, so the steps needed to reach |x| = X grow like X^2 (about 6e6 steps to
+# |x| = 3e3, 1e15 to the former fixed bound 1e8). With 1e3 such a DMR run stops in about
+# a second (the OPA system of order 4 in about 15 s) instead of running to max_steps.
+ESCAPE_FACTOR = 1e3
+
 # Status codes returned by ``integrate``.
-OK, MAX_STEPS, STEP_COLLAPSE, DIVERGED = 0, 1, 2, 3
+OK, MAX_STEPS, STEP_COLLAPSE, DIVERGED, ESCAPED, BAD_TIME = 0, 1, 2, 3, 4, 5
 STATUS_MESSAGES = {
     OK: "ok",
     MAX_STEPS: "the maximum number of steps was reached",
     STEP_COLLAPSE: "the step size collapsed below round-off",
-    DIVERGED: "the trajectory diverged (|state| > 1e8 or non-finite)",
+    DIVERGED: ("the trajectory diverged: the state became non-finite (NaN or inf), the "
+               "vector field overflowing even at the smallest step or a jump (impact, "
+               "impulse, release) giving a non-finite state"),
+    ESCAPED: ("the trajectory diverged: the state escaped (|x| or |x'| beyond the escape "
+              "bound 1000 (1 + max|y(t0)| + |delta| + (|f| + |F0| (1 + |a1|)) (1 + 1/omega "
+              "+ 1/omega^2)))"),
+    BAD_TIME: ("a time is not finite (NaN or inf), or too large for the impulse times to "
+               "be resolved"),
 }
 
 # Kinds in the event log.
 EV_IMPACT, EV_GRAZE, EV_STICK, EV_RELEASE = 0, 1, 2, 3
 
-DIVERGENCE_LIMIT = 1e8
 GRAZE_VELOCITY = 1e-6  # pre-impact velocity below which an impact is logged as a graze
 
 # ---------------------------------------------------------------------------
@@ -287,8 +311,15 @@ def error_norm(y, y_new, K, h, rtol, atol):
         e = 0.0
         for r in range(7):
             e += DP_E[r] * K[r, j]
-        scale = atol + rtol * max(abs(y[j]), abs(y_new[j]))
-        worst = max(worst, abs(h * e) / scale)
+        size = abs(y_new[j])
+        scale = atol + rtol * max(abs(y[j]), size)
+        r = abs(h * e) / scale
+        # A non-finite trial state or stage is an infinite error, so the step is rejected
+        # (written with comparisons that fail for NaN: numba's max drops a NaN argument).
+        if not (r < np.inf and size < np.inf):
+            return np.inf
+        if r > worst:
+            worst = r
     return worst
 
 
@@ -435,6 +466,42 @@ def _apply_saltation(y, ncoef, eta, v_minus, a_minus, a_plus):
 
 
 @njit(cache=True)
+def escape_bound(y0, p):
+    """The |x_i|, |v_i| beyond which the state counts as escaped (see ESCAPE_FACTOR)."""
+    start = 0.0
+    for j in range(y0.shape[0]):
+        a = abs(y0[j])
+        if not (a <= start):  # NaN propagates
+            start = a
+    w = p[P_OMEGA]
+    drive = abs(p[P_F]) + abs(p[P_F0]) * (1.0 + abs(p[P_A1]))
+    return ESCAPE_FACTOR * (1.0 + start + abs(p[P_DELTA])
+                            + drive * (1.0 + 1.0 / w + 1.0 / (w * w)))
+
+
+@njit(cache=True, inline="always")
+def state_status(y, escape):
+    """OK, ESCAPED (some |y_j| >= escape) or DIVERGED (some y_j NaN or inf).
+
+    Every comparison is false for NaN, so a NaN component cannot pass."""
+    status = OK
+    for j in range(y.shape[0]):
+        a = abs(y[j])
+        if not (a < escape):
+            if not (a < np.inf):
+                return DIVERGED
+            status = ESCAPED
+    return status
+
+
+@njit(cache=True)
+def _fill_nan(out_y, start):
+    for kk in range(start, out_y.shape[0]):
+        for jj in range(out_y.shape[1]):
+            out_y[kk, jj] = np.nan
+
+
+@njit(cache=True)
 def _log_event(log, count, t, v, kind):
     if count < log.shape[0]:
         log[count, 0] = t
@@ -461,6 +528,10 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
     Returns
     -------
     status, n_events, n_impacts, n_steps, n_rhs
+
+    The state is checked after every accepted step and every jump (impact, impulse
+    kick, sticking, release): a NaN or inf component ends the run with DIVERGED, a
+    component beyond ``escape_bound`` with ESCAPED; outputs not reached are NaN.
     """
     dim = y0.shape[0]
     ncoef = cfg[C_NCOEF]
@@ -487,8 +558,20 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
 
     n_out = t_out.shape[0]
     t = t_out[0]
+    escape = escape_bound(y0, p)
     # first impulse at or after the start (t_0 = 0 only when the impulse at zero is on)
-    j_imp = max(0 if cfg[C_AT_ZERO] != 0 else 1, int(np.ceil(t_out[0] / T1 - 1e-12)))
+    j_first = np.ceil(t / T1 - 1e-12)
+    status = OK
+    if not (abs(t) < np.inf and abs(t_out[n_out - 1]) < np.inf):
+        status = BAD_TIME  # a NaN end time would never be reached
+    elif use_impulses and not (abs(j_first) < 2.0**53):
+        status = BAD_TIME  # impulse index beyond exact integers: times not resolvable
+    elif state_status(y, escape) != OK:
+        status = DIVERGED
+    if status != OK:
+        _fill_nan(out_y, 0)
+        return status, 0, 0, 0, 0
+    j_imp = max(0 if cfg[C_AT_ZERO] != 0 else 1, int(j_first) if use_impulses else 0)
     pulse = 0.0
     pulse_end = np.inf
     sticking = False
@@ -496,12 +579,18 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
     n_impacts = 0
     n_steps = 0
     n_rhs = 0
-    status = OK
     t_imp = _next_impulse_time(j_imp, T1) if use_impulses else np.inf
-    t_end = t_out[n_out - 1]
     h = 0.0
     k_out = 0
+    # Every pass of the outer loop takes a step or passes a breakpoint (output, impulse,
+    # pulse end) closer than round-off; the cap only matters for the latter, e.g. impulse
+    # times denser than the resolution of t, which would otherwise loop without a step.
+    n_passes = 0
     while True:
+        n_passes += 1
+        if n_passes > 2 * (max_steps + n_out):
+            status = MAX_STEPS
+            break
         # ---- breakpoint handling at time t
         if use_impulses:
             if pulse_model and t >= pulse_end:
@@ -525,8 +614,13 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                     if sticking and y[ncoef] != 0.0:
                         sticking = False
                         n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+                    status = state_status(y, escape)
+                    if status != OK:
+                        break
                 j_imp += 1
                 t_imp = _next_impulse_time(j_imp, T1)
+            if status != OK:
+                break
         while k_out < n_out and t_out[k_out] <= t:
             for jj in range(dim):
                 out_y[k_out, jj] = y[jj]
@@ -647,6 +741,9 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                             n_events = _log_event(log, n_events, t_acc, 0.0, EV_STICK)
                         else:
                             y[ncoef] = -eta * v_minus
+                    status = state_status(y, escape)
+                    if status != OK:
+                        break
                     rhs(t, y, p, cfg, nodes, weights, U, pulse, sticking, K[0], xk, vk)
                     n_rhs += 1
                     h = max(h_next * 0.5, 1e-10)
@@ -682,6 +779,9 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                     y[ncoef] = 0.0
                     sticking = False
                     n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+                    status = state_status(y, escape)
+                    if status != OK:
+                        break
                     rhs(t, y, p, cfg, nodes, weights, U, pulse, sticking, K[0], xk, vk)
                     n_rhs += 1
                     h = h_next
@@ -698,18 +798,12 @@ def integrate(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out_y, log):
                 y[0] = delta
                 y[ncoef] = 0.0
             h = h_next
-            big = 0.0
-            for jj in range(dim):
-                big = max(big, abs(y[jj]))
-            if not (big < DIVERGENCE_LIMIT):
-                status = DIVERGED
+            status = state_status(y, escape)
+            if status != OK:
                 break
         if status != OK:
             break
-    # fill what was not reached with NaN
-    for kk in range(k_out, n_out):
-        for jj in range(dim):
-            out_y[kk, jj] = np.nan
+    _fill_nan(out_y, k_out)  # what was not reached
     return status, n_events, n_impacts, n_steps, n_rhs
 
 

@@ -52,6 +52,12 @@ MAX_CYCLE = 1000  # longest common period (in forcing periods) accepted for a ma
 GRAZE_VELOCITY = 1e-3  # classification: impacts slower than this are (near) grazing
 GRAZE_GAP = 1e-3  # classification: free-flight maxima closer than this to the wall
 CRITICAL_TOL = 1e-3  # classification: |mu + 1|, |mu - 1|, ||mu| - 1| below this
+# Times: the kernel cannot take a step shorter than STEP_FLOOR |t| (round-off of t), so a
+# time is resolvable only while that floor is at most TIME_RESOLUTION of a forcing period,
+# i.e. |t| <= 1e8 T (t + T == t long before that for t = 1e300).
+STEP_FLOOR = 1e-14
+TIME_RESOLUTION = 1e-6
+LINE_SEARCH_HALVINGS = 20  # Newton's backtracking: step lengths 1, 1/2, ..., ~1e-6
 
 
 class ConvergenceError(SimulationError):
@@ -240,6 +246,30 @@ def _cycle_or_raise(system: ImpactSystem, periods: int) -> int:
     return k0
 
 
+def check_time(name: str, value, period: float) -> float:
+    """``value`` as a finite time the integrator can resolve, else ValueError naming it.
+
+    A NaN or infinite time never ends an integration, and near a huge time the round-off
+    of t exceeds the steps the motion needs (t + T == t for t = 1e300): refuse both.
+    """
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}")
+    floor = STEP_FLOOR * abs(value)
+    if floor > TIME_RESOLUTION * period or value + period == value:
+        limit = TIME_RESOLUTION * period / STEP_FLOOR
+        raise ValueError(
+            f"{name} = {value:g} is too large to resolve the motion: near it no step can be "
+            f"shorter than {STEP_FLOOR:g} |{name}| = {floor:.3g}, more than {TIME_RESOLUTION:g} "
+            f"of the forcing period {period:.6g}; use |{name}| <= {limit:.3g} (the forcing "
+            f"repeats, so a section time can be taken modulo its period)"
+        )
+    return value
+
+
 def _as_state(system: ImpactSystem, state) -> np.ndarray:
     y = np.asarray(state, dtype=float)
     if y.shape == (2, system.order + 1):
@@ -278,7 +308,8 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
     Parameters
     ----------
     state : (D,) or (2, N+1) state at ``times[0]`` (right-continuous).
-    times : increasing times; the state is returned at each.
+    times : increasing times; the state is returned at each. They must be finite and
+        resolvable (``check_time``: |t| <= 1e8 T), else ValueError.
     tangent : None, ``"identity"`` (the Jacobian of the flow map) or an array (D, m) of
         tangent vectors carried with the variational equation and the saltation matrices.
     include_start : apply an impulse that falls on ``times[0]`` (for a transient started
@@ -287,8 +318,12 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
     p, cfg, nodes, weights, U = system._packed
     y = _as_state(system, state)
     times = np.ascontiguousarray(times, dtype=float)
-    if times.ndim != 1 or len(times) < 2 or np.any(np.diff(times) <= 0):
-        raise ValueError("times must be a strictly increasing 1-D array of length >= 2")
+    if times.ndim != 1 or len(times) < 2:
+        raise ValueError(f"times must be a 1-D array of length >= 2, got shape {times.shape}")
+    for name, value in (("the start time", times[0]), ("the end time", times[-1])):
+        check_time(name, value, system.forcing_period)
+    if not np.all(np.diff(times) > 0):  # false for NaN as well
+        raise ValueError("times must be finite and strictly increasing")
     if y[0] > system.oscillator.delta:
         raise ValueError(f"state x_0 = {y[0]:.10g} is beyond the wall delta = "
                          f"{system.oscillator.delta:g}")
@@ -305,7 +340,7 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
             raise ValueError(f"tangent must have {D} rows, got shape {W.shape}")
     m = W.shape[1]
     capacity = 64
-    while True:
+    for attempt in range(2):  # a log cut at its capacity is rerun once, large enough
         z = np.concatenate([y, W.ravel()])
         out = np.empty((len(times), D))
         stats = np.empty((len(times) - 1, V.N_STATS))
@@ -321,6 +356,9 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
         if n_log <= capacity:
             break
         capacity = n_log + 16
+    else:
+        raise SimulationError(f"{system.model} variational flow: the impact count changed "
+                              f"between two identical runs ({n_log} impacts)")
     return Flow(
         times=times,
         states=out,
@@ -337,7 +375,8 @@ def poincare_map(system: ImpactSystem, state, *, periods: int = 1, t0: float = 0
                  jacobian: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
     """The stroboscopic map ``P^k: y(t0) -> y(t0 + k T)`` and its exact Jacobian.
 
-    ``periods`` (k) must be a multiple of ``impulse_cycle`` when ``F0 != 0``.
+    ``periods`` (k) must be a multiple of ``impulse_cycle`` when ``F0 != 0``; ``t0`` must
+    be finite and resolvable (``check_time``).
 
     Returns
     -------
@@ -353,15 +392,22 @@ def poincare_map(system: ImpactSystem, state, *, periods: int = 1, t0: float = 0
     """
     periods = _periods(periods)
     _cycle_or_raise(system, periods)
+    t0 = check_time("t0", t0, system.forcing_period)
     times = t0 + np.array([0.0, periods]) * system.forcing_period
     res = flow(system, state, times, tangent="identity" if jacobian else None)
     return res.states[-1].copy(), res.tangent
 
 
+def check_count(name: str, value, minimum: int) -> int:
+    """``value`` as an int >= minimum (a whole float is accepted), else ValueError."""
+    if (isinstance(value, bool) or not isinstance(value, (int, float, np.number))
+            or not math.isfinite(value) or int(value) != value or value < minimum):
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
 def _periods(periods) -> int:
-    if isinstance(periods, bool) or int(periods) != periods or periods < 1:
-        raise ValueError(f"periods must be an integer >= 1, got {periods}")
-    return int(periods)
+    return check_count("periods", periods, 1)
 
 
 # --------------------------------------------------------------------------- periodic orbits
@@ -515,7 +561,11 @@ def shoot(system: ImpactSystem, guess, *, periods: int = 1, t0: float = 0.0,
     """
     periods = _periods(periods)
     _cycle_or_raise(system, periods)
+    t0 = check_time("t0", t0, system.forcing_period)
     tol = default_tolerance(system) if tol is None else float(tol)
+    if not tol > 0.0:
+        raise ValueError(f"tol must be > 0, got {tol}")
+    max_iter = check_count("max_iter", max_iter, 0)
     y = _as_state(system, guess)
     T = system.forcing_period
     end = np.array([t0, t0 + periods * T])
@@ -535,19 +585,17 @@ def shoot(system: ImpactSystem, guess, *, periods: int = 1, t0: float = 0.0,
         except np.linalg.LinAlgError:
             dy = np.linalg.lstsq(J - eye, -G, rcond=None)[0]
         lam = 1.0
-        while True:
+        for _ in range(LINE_SEARCH_HALVINGS):
             y_try = y + lam * dy
             if y_try[0] <= delta:
                 try:
                     r_try = _residual(y_try, flow(system, y_try, end).states[-1])
-                except SimulationError:
+                except (SimulationError, ValueError):
                     r_try = math.inf
                 if r_try < res or lam < 1e-3:
                     break
             lam *= 0.5
-            if lam < 1e-6:
-                break
-        y = y_try if y_try[0] <= delta else y
+        y = y_try if y_try[0] <= delta and np.all(np.isfinite(y_try)) else y
     raise ConvergenceError(
         f"Newton shooting for a period-{periods} orbit did not converge: residual {res:.3g} "
         f"after {max_iter} iterations (tolerance {tol:g})"
@@ -589,7 +637,8 @@ def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = No
         from the oscillator's x0, v0 (higher OPA coefficients 0) and start from there.
     periods : k, the period in forcing periods; default: the smallest stroboscopic
         repeat (up to ``max_period``) seen after the transient, else ``impulse_cycle``.
-    t0 : section time (the orbit is sampled at t0 + j T).
+    t0 : section time (the orbit is sampled at t0 + j T). The transient runs from 0 to
+        ``(t0 mod k0 T) + transient T`` (the forcing repeats every k0 T, ``impulse_cycle``).
     tol : Newton tolerance on max |P^k(y) - y| / (1 + max |y|) (``shoot``).
 
     Returns
@@ -608,18 +657,23 @@ def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = No
     if k0 is None:
         _cycle_or_raise(system, 1)
     T = system.forcing_period
+    t0 = check_time("t0", t0, T)
     hint = ""
     if guess is None:
-        if int(transient) < 0:
-            raise ValueError(f"transient must be >= 0, got {transient}")
+        transient = check_count("transient", transient, 0)
         n_tr = int(math.ceil(transient / k0)) * k0
         y0 = system.initial_state()
+        # the phase of t0 in the forcing's period: the same motion, without integrating
+        # from 0 up to a large t0
+        phase = math.fmod(t0, k0 * T)
+        if phase < 0.0:
+            phase += k0 * T
         start = 0.0
-        if t0 != 0.0 or n_tr > 0:
-            tr = flow(system, y0, [0.0, t0 + n_tr * T],
+        if phase != 0.0 or n_tr > 0:
+            tr = flow(system, y0, [0.0, phase + n_tr * T],
                       include_start=system.options.impulse_at_zero)
             y0 = tr.states[-1]
-            start = t0 + n_tr * T
+            start = phase + n_tr * T
         if periods is None:
             n_rec = 2 * max_period
             n_rec = int(math.ceil(n_rec / k0)) * k0
@@ -703,11 +757,11 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
     periods : forcing periods averaged over; transient : forcing periods dropped first.
     t0 : start time of the transient; initial : start state (default x0, v0, zeros).
     """
-    periods, transient = _periods(periods), int(transient)
-    if transient < 0:
-        raise ValueError(f"transient must be >= 0, got {transient}")
+    periods, transient = _periods(periods), check_count("transient", transient, 0)
     p, cfg, nodes, weights, U = system._packed
     T = system.forcing_period
+    t0 = check_time("t0", t0, T)
+    check_time("the end time t0 + (transient + periods) T", t0 + (transient + periods) * T, T)
     D = system.dim
     y = system.initial_state() if initial is None else _as_state(system, initial)
     start = bool(system.options.impulse_at_zero) and t0 == 0.0
@@ -753,7 +807,7 @@ def transverse_lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000,
         raise ValueError("transverse_lyapunov_exponent needs model 'opa', sigma = 0 and "
                          f"order >= 1, got model {system.model!r}, sigma = {system.sigma}, "
                          f"order {system.order}")
-    periods, transient = _periods(periods), int(transient)
+    periods, transient = _periods(periods), check_count("transient", transient, 0)
     one = dataclasses.replace(system, order=1)
     T = one.forcing_period
     y = one.initial_state()
@@ -799,9 +853,7 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
         matrices; works with impulses).
     """
     _choice("engine", engine, ("solver", "plain"))
-    periods, transient = _periods(periods), int(transient)
-    if transient < 0:
-        raise ValueError(f"transient must be >= 0, got {transient}")
+    periods, transient = _periods(periods), check_count("transient", transient, 0)
     T = system.forcing_period
     delta = system.oscillator.delta
     impacts, vmin = 0, math.inf

@@ -45,6 +45,7 @@ from numba import njit
 # The tableau and status codes are plain constants shared with the solver (no jitted code
 # is imported across modules, so numba's per-module cache stays consistent).
 from opa._solver import (  # noqa: E402
+    BAD_TIME,
     DIVERGED,
     DP_A,
     DP_B,
@@ -52,6 +53,8 @@ from opa._solver import (  # noqa: E402
     DP_E,
     DP_P,
     ERROR_EXPONENT,
+    ESCAPE_FACTOR,
+    ESCAPED,
     MAX_FACTOR,
     MAX_STEPS,
     MIN_FACTOR,
@@ -80,7 +83,6 @@ LAW_MEAN, LAW_ENSEMBLE = 0, 1
 S_IMPACTS, S_MIN_VELOCITY, S_STICKS, S_STEPS, S_STICKING, S_GAP = 0, 1, 2, 3, 4, 5
 N_STATS = 6
 
-DIVERGENCE_LIMIT = 1e8
 # Impulse times within this (relative) distance of the end of an interval belong to it.
 SNAP = 1e-10
 
@@ -227,9 +229,47 @@ def error_norm(z, z_new, K, h, rtol, atol):
         e = 0.0
         for r in range(7):
             e += DP_E[r] * K[r, j]
-        scale = atol + rtol * max(abs(z[j]), abs(z_new[j]))
-        worst = max(worst, abs(h * e) / scale)
+        size = abs(z_new[j])
+        scale = atol + rtol * max(abs(z[j]), size)
+        r = abs(h * e) / scale
+        # non-finite trial state or stage: infinite error, the step is rejected (tests that
+        # fail for NaN; numba's max drops a NaN argument)
+        if not (r < np.inf and size < np.inf):
+            return np.inf
+        if r > worst:
+            worst = r
     return worst
+
+
+@njit(cache=True)
+def escape_bound(y0, p):
+    """|x_i|, |v_i| beyond which the state counts as escaped: the formula of
+    ``opa._solver.escape_bound`` (see ``opa._solver.ESCAPE_FACTOR`` for the reasoning)."""
+    start = 0.0
+    for j in range(y0.shape[0]):
+        a = abs(y0[j])
+        if not (a <= start):  # NaN propagates
+            start = a
+    w = p[V_OMEGA]
+    drive = abs(p[V_F]) + abs(p[V_F0]) * (1.0 + abs(p[V_A1]))
+    return ESCAPE_FACTOR * (1.0 + start + abs(p[V_DELTA])
+                            + drive * (1.0 + 1.0 / w + 1.0 / (w * w)))
+
+
+@njit(cache=True)
+def augmented_status(z, dim, escape):
+    """OK; ESCAPED when a state component |y_j| >= escape; DIVERGED when a state or
+    tangent component is NaN or inf (comparisons are false for NaN, so it cannot pass).
+    The tangent W may grow large (it is only renormalised by the caller), so only its
+    finiteness is checked."""
+    status = OK
+    for j in range(z.shape[0]):
+        a = abs(z[j])
+        if not (a < np.inf):
+            return DIVERGED
+        if j < dim and not (a < escape):
+            status = ESCAPED
+    return status
 
 
 @njit(cache=True)
@@ -422,13 +462,24 @@ def _hold(z, m, n, ensemble):
 
 @njit(cache=True)
 def _first_impulse(t0, include_start, T1, at_zero):
-    """Index j of the first impulse t_j = j T1 of the interval starting at t0."""
+    """Index j of the first impulse t_j = j T1 of the interval starting at t0, or -1
+    when t0 / T1 is beyond exact integers (impulse times not resolvable).
+
+    The loops fix the rounding of floor(t0 / T1) and the snap window; a few passes
+    suffice unless impulses are denser than the snap window (then j is approximate)."""
     snap = SNAP * max(1.0, abs(t0))
-    j = int(np.floor(t0 / T1)) - 1
-    while j * T1 < t0 - snap:
+    jf = np.floor(t0 / T1) - 1.0
+    if not (abs(jf) < 2.0**53):
+        return -1
+    j = int(jf)
+    for _ in range(8):
+        if j * T1 >= t0 - snap:
+            break
         j += 1
     if not include_start:
-        while j * T1 <= t0 + snap:
+        for _ in range(8):
+            if j * T1 > t0 + snap:
+                break
             j += 1
     if j < 0:
         j = 0
@@ -440,7 +491,8 @@ def _first_impulse(t0, include_start, T1, at_zero):
 # ---------------------------------------------------------------------------
 # Driver
 @njit(cache=True)
-def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, stats, log):
+def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, escape, stats,
+            log):
     """Integrate the augmented state ``z`` in place from t0 to t1 (t1 > t0).
 
     Parameters
@@ -448,6 +500,8 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
     z : (D + D m,) state and row-major tangent matrix W (D, m).
     include_start : apply an impulse that falls on t0 (otherwise it is taken to belong
         to the previous interval: states are right-continuous, impulses at t1 are applied).
+    escape : the escape bound of the state (``escape_bound``); the augmented state is
+        checked after every accepted step and every jump (``augmented_status``).
     stats : (N_STATS,) output: impacts, smallest pre-impact velocity, sticking episodes,
         steps, 1 if sticking at t1, smallest gap delta - x_0 at free-flight maxima.
     log : (cap, 2) rows (time, pre-impact velocity) of the impacts; rows beyond cap are
@@ -491,8 +545,12 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
     n_log = 0
 
     t = t0
+    if not (abs(t0) < np.inf and abs(t1) < np.inf):
+        return BAD_TIME, 0  # a NaN end would never be reached
     at_zero = cfg[G_AT_ZERO] != 0
-    j_imp = _first_impulse(t0, include_start, T1, at_zero)
+    j_imp = _first_impulse(t0, include_start, T1, at_zero) if use_impulses else 0
+    if j_imp < 0:
+        return BAD_TIME, 0
     t_imp = j_imp * T1 if use_impulses else np.inf
     force = 0.0
     force_end = np.inf
@@ -511,7 +569,14 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
     n_steps = 0
     status = OK
     h = 0.0
+    # each pass takes a step or passes a breakpoint; the cap only matters for breakpoints
+    # closer than round-off (see opa._solver.integrate)
+    n_passes = 0
     while True:
+        n_passes += 1
+        if n_passes > 2 * max_steps + 2:
+            status = MAX_STEPS
+            break
         # ---- fixed-time events at t
         if use_impulses:
             if pulse_model and t >= force_end - snap:
@@ -539,8 +604,13 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
                         stats[S_IMPACTS] += 1.0
                     if sticking and z[n] != 0.0:
                         sticking = False
+                    status = augmented_status(z, dim, escape)
+                    if status != OK:
+                        break
                 j_imp += 1
                 t_imp = j_imp * T1
+            if status != OK:
+                break
         if t >= t1:
             break
         t_break = t1
@@ -622,6 +692,10 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
                             stats[S_STICKS] += 1.0
                         else:
                             z[n] = -eta * v_minus
+                    # the saltation matrix divides by v_0-: near grazing W can overflow
+                    status = augmented_status(z, dim, escape)
+                    if status != OK:
+                        break
                     vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
                     h = max(h_next * 0.5, 1e-10)
                     if t >= t_break:
@@ -654,6 +728,9 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
                     z[0] = delta
                     z[n] = 0.0
                     sticking = False
+                    status = augmented_status(z, dim, escape)
+                    if status != OK:
+                        break
                     vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
                     h = h_next
                     if t >= t_break:
@@ -671,11 +748,8 @@ def advance(z, m, t0, t1, include_start, p, cfg, nodes, weights, U, rtol, atol, 
                 z[0] = delta
                 z[n] = 0.0
             h = h_next
-            big = 0.0
-            for j in range(dim):
-                big = max(big, abs(z[j]))
-            if not big < DIVERGENCE_LIMIT:
-                status = DIVERGED
+            status = augmented_status(z, dim, escape)
+            if status != OK:
                 break
         if status != OK:
             break
@@ -705,11 +779,15 @@ def flow_points(z, m, times, include_start, renormalise, p, cfg, nodes, weights,
     size = z.shape[0]
     for j in range(dim):
         out[0, j] = z[j]
+    # one bound for the whole call, from the state at times[0]
+    escape = escape_bound(z[:dim], p)
+    if augmented_status(z, dim, escape) != OK:
+        return DIVERGED, 0
     n_log = 0
     for i in range(times.shape[0] - 1):
         sub = log[min(n_log, log.shape[0]):]
         status, count = advance(z, m, times[i], times[i + 1], include_start and i == 0, p, cfg,
-                                nodes, weights, U, rtol, atol, stats[i], sub)
+                                nodes, weights, U, rtol, atol, escape, stats[i], sub)
         n_log += count
         if status != OK:
             return status, n_log
