@@ -9,26 +9,62 @@ are formed; chunk statistics (weight, mean, centred sum of squares, Chebyshev mo
 are merged in chunk order with Chan's pairwise update. Memory is therefore
 O(chunk * T + N * T), independent of the number of samples, and the result depends
 only on the seed and the chunk size, never on the thread count or on where a chunk ran,
-which is what makes the Dask backend return exactly the local result.
+which is what makes the Dask backend return exactly the local result. To keep it so, no
+statistic goes through BLAS: a BLAS product's summation order depends on its thread
+count, while numpy's reduction of a fresh C-ordered array along axis 0 adds the rows one
+after the other.
+
+With ``checkpoint``, each finished chunk is written to a directory as it finishes
+(``mc._checkpoint``); a rerun with the same inputs loads those chunks instead of
+computing them again and returns the bit-identical result.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 import sys
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import xarray as xr
 
-from mc._sampling import SAMPLERS, sample_xi
+from mc._checkpoint import Checkpoint, digest, stats_arrays
+from mc._sampling import _check_sampler, sample_xi
 from opa import _solver as K
 from opa._basis import chebyshev_u, orthonormal
-from opa._dataset import provenance_attrs, time_coord
-from opa._model import Oscillator, SolverOptions, Uncertainty, _choice, check_order
+from opa._dataset import check_memory, package_version, provenance_attrs, time_coord
+from opa._model import Oscillator, SolverOptions, Uncertainty, check_order
 from opa._simulate import SimulationError, _times, pack_parameters
 
+if TYPE_CHECKING:
+    from distributed import Client
+
 CHUNK_BYTES = 32 * 2**20
+# Memory a sample takes outside the paths: xi, its weight, replicate index and impact
+# count and the sample coordinate (8 bytes each), the sampler's uniforms (up to 16 for a
+# Sobol' set rounded up to a power of two) and the quantile function's temporaries.
+SAMPLE_BYTES = 96
+# Seconds between checks that a Dask cluster still has workers.
+_POLL = 0.5
+
+
+class DaskError(SimulationError):
+    """The Dask cluster failed the run: its workers all died, it never had any, or the
+    scheduler went away. (A SimulationError, so the CLI reports it as a failed run.)"""
+
+
+def _weighted_sum(w: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """sum_m w[m] x[m, :] for x of shape (M, T), in a fixed order of summation.
+
+    ``w @ x`` would go through BLAS, whose result depends on its thread count in the last
+    bits; numpy adds the rows of the fresh C-ordered product one after the other.
+    """
+    return (w[:, None] * x).sum(axis=0)
 
 
 @dataclass
@@ -60,23 +96,26 @@ class ChunkStats:
         rep_weight = np.zeros(replicates)
         for r in np.unique(rep):
             sel = rep == r
-            x_rep[r] = w[sel] @ x[sel]
-            v_rep[r] = w[sel] @ v[sel]
-            x2_rep[r] = w[sel] @ x[sel] ** 2
+            x_rep[r] = _weighted_sum(w[sel], x[sel])
+            v_rep[r] = _weighted_sum(w[sel], v[sel])
+            x2_rep[r] = _weighted_sum(w[sel], x[sel] ** 2)
             rep_weight[r] = w[sel].sum()
-        xm = w @ x / W
-        vm = w @ v / W
+        xm = _weighted_sum(w, x) / W
+        vm = _weighted_sum(w, v) / W
         # (N+1, M): Chebyshev U for the semicircle, else the law's orthonormal polynomials
         basis = chebyshev_u(order, xi) if recurrence is None else orthonormal(order, xi,
                                                                                *recurrence)
+        moments = np.empty((len(basis), x.shape[1]))
+        for i, u in enumerate(basis):
+            moments[i] = _weighted_sum(u * w, x)
         return cls(
             weight=W,
             count=len(w),
             x_mean=xm,
-            x_m2=w @ (x - xm) ** 2,
+            x_m2=_weighted_sum(w, (x - xm) ** 2),
             v_mean=vm,
-            v_m2=w @ (v - vm) ** 2,
-            x_moment=(basis * w) @ x,
+            v_m2=_weighted_sum(w, (v - vm) ** 2),
+            x_moment=moments,
             x_rep=x_rep,
             v_rep=v_rep,
             x2_rep=x2_rep,
@@ -122,8 +161,10 @@ def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep
     if len(bad):
         m = bad[0]
         return None, n_impacts, status, (m, xi[m], int(status[m]))
-    stats = ChunkStats.of(paths[:, :, 0], paths[:, :, 1], xi, w, order, rep, replicates,
-                          recurrence)
+    # C-ordered copies: the reductions' order then depends on nothing but the shape
+    x = np.ascontiguousarray(paths[:, :, 0])
+    v = np.ascontiguousarray(paths[:, :, 1])
+    stats = ChunkStats.of(x, v, xi, w, order, rep, replicates, recurrence)
     stats.rhs_evaluations = int(n_rhs.sum())
     return stats, n_impacts, status, (paths if keep_paths else None)
 
@@ -153,9 +194,13 @@ def simulate_mc(
     times: np.ndarray | None = None,
     keep_paths: bool = False,
     chunk_size: int | None = None,
-    scheduler: str | None = None,
+    scheduler: str | Client | None = None,
     progress: bool | None = None,
     distribution=None,
+    checkpoint: str | os.PathLike | None = None,
+    connect_timeout: float = 5.0,
+    worker_timeout: float | None = 60.0,
+    log: Callable[[str], object] | None = None,
 ) -> xr.Dataset:
     """Monte Carlo ensemble of the sampled impact system, eq. (1), p = p_bar + sigma xi.
 
@@ -175,7 +220,20 @@ def simulate_mc(
     chunk_size : samples per task (default: about 32 MiB of paths per chunk).
     scheduler : address of a Dask distributed scheduler (``tcp://host:port``) or a
         ``distributed.Client``; chunks then run as tasks there. Default: local threads.
+        The result is bit-identical to the local one.
     progress : show a progress bar (default: when stderr is a terminal).
+    checkpoint : directory where each finished chunk is written as it finishes, with a
+        manifest of everything that determines the result. A rerun with the same
+        directory and the same inputs loads the finished chunks instead of computing
+        them (the progress bar counts them as done) and returns the bit-identical
+        result; a directory of another run is refused. Damaged chunk files are reported
+        through ``log``, renamed ``*.bad`` and computed again. Remove the directory with
+        ``mc.remove_checkpoint`` once the result is saved.
+    connect_timeout : seconds to wait for the Dask scheduler to answer.
+    worker_timeout : seconds a Dask cluster may have no worker at all (all died, or none
+        ever started) before the run fails with :class:`DaskError`; None waits forever.
+    log : callable taking one line, for damaged checkpoint files and resume notes;
+        default: ``warnings.warn`` for damage and silence otherwise.
 
     Returns
     -------
@@ -183,18 +241,49 @@ def simulate_mc(
     v_sem (time)``, ``x_coef (order, time)``, ``n_impacts, xi, weight (sample)``.
     For ``gauss`` the weights are the quadrature weights, variances are weighted and
     the standard errors are NaN (a quadrature has no sampling error).
+
+    Raises
+    ------
+    ValueError
+        Bad input, named with its value; sizes beyond the memory budget
+        (``opa._dataset.check_memory``, ``$OPA_MC_MEMORY_BUDGET``); a checkpoint of
+        another run; a scheduler that does not answer within ``connect_timeout``.
+    SimulationError
+        A sample's trajectory could not be completed.
+    DaskError
+        The Dask cluster lost all its workers (or never had any) for ``worker_timeout``
+        seconds, a chunk killed the workers that ran it, or the scheduler went away.
     """
     oscillator = oscillator or Oscillator()
     options = options or SolverOptions()
-    _choice("sampler", sampler, SAMPLERS)
+    _check_sampler(sampler, samples, seed)
+    samples = int(samples)
+    check_memory("sampling", samples * SAMPLE_BYTES,
+                 f"samples {samples} x {SAMPLE_BYTES} bytes")
     order = check_order(order)
+    _check_dask_timeouts(connect_timeout, worker_timeout)
+    if checkpoint is not None and not isinstance(checkpoint, (str, os.PathLike)):
+        raise ValueError(f"checkpoint must be a directory path, got {checkpoint!r:.60}")
+    if scheduler is not None and not isinstance(scheduler, str):
+        _connect(scheduler, connect_timeout)  # only checks that it is a Client
     unc = Uncertainty(sigma, uncertain, allow_negative)
     unc.check(oscillator)
     times = _times(oscillator, periods, per_period, times)
+    T = len(times)
     if sampler != "sobol":
         replicates = 1
     elif replicates is None:
         replicates = 16 if samples % 16 == 0 and samples >= 64 else 1
+    size = min(_chunk_size(T, chunk_size), samples)
+    if keep_paths:
+        check_memory("keep_paths", samples * T * 2 * 8,
+                     f"samples {samples} x {T} outputs x 2 states")
+    check_memory("a chunk of paths", size * T * 2 * 8 * 2,
+                 f"chunk_size {size} x {T} outputs x 2 states, with the statistics' "
+                 f"temporaries")
+    check_memory("x_coef", (order + 1) * T * 8 * 2,
+                 f"order + 1 = {order + 1} coefficients x {T} outputs, running sum and "
+                 f"a chunk's")
     measure = None
     if distribution is not None:
         from opa._measure import parse
@@ -205,76 +294,334 @@ def simulate_mc(
         if measure.name == "semicircle" and measure.is_whole:
             measure = None
     xi, w = sample_xi(sampler, samples, seed, replicates, distribution=measure)
+    check_memory("the replicate sums", 3 * replicates * T * 8 * 2,
+                 f"3 x replicates {replicates} x {T} outputs, running sums and a chunk's")
     recurrence = None if measure is None else measure.recurrence(order + 1)
     rep = np.arange(len(xi)) // (len(xi) // replicates)
     p, cfg = pack_parameters(oscillator, options, sigma=unc.sigma, uncertain=uncertain)
     y0 = np.array([oscillator.x0, oscillator.v0])
-    size = _chunk_size(len(times), chunk_size)
     bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
     args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths, recurrence)
 
-    total = None
-    n_impacts = np.empty(len(xi), dtype=np.int64)
-    paths = np.empty((len(xi), len(times), 2)) if keep_paths else None
-    # chunks arrive in order and are merged at once: memory does not grow with M
-    for (lo, hi), (stats, imp, status, extra) in _run_chunks(
-        y0, xi, w, rep, replicates, bounds, args, scheduler, progress
-    ):
-        if stats is None:
-            m, xi_m, code = extra
-            raise SimulationError(
-                f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {uncertain} = "
-                f"{getattr(oscillator, uncertain) + unc.sigma * xi_m:.6g}) stopped: "
-                f"{K.STATUS_MESSAGES[code]}"
-            )
-        n_impacts[lo:hi] = imp
-        if keep_paths:
-            paths[lo:hi] = extra
-        total = stats if total is None else total.merge(stats)
+    # connect before the checkpoint is made: a wrong address leaves nothing behind
+    client, own = (None, False) if scheduler is None else _connect(scheduler, connect_timeout)
+    try:
+        check = _chunk_check(T, order, replicates, keep_paths)
+        store, finished = None, set()
+        if checkpoint is not None:
+            store = Checkpoint(checkpoint, _manifest(
+                oscillator, options, unc, sampler, samples, seed, replicates, order, times,
+                measure, recurrence, xi, w, bounds, keep_paths), log)
+            finished = store.finished(bounds, check)
+            if finished and log is not None:
+                log(f"resuming from checkpoint {store.directory}: {len(finished)} of "
+                    f"{len(bounds)} chunks already finished")
+        runner = _Chunks(y0, xi, w, rep, replicates, bounds, args, store, finished, check)
+        if progress is None:
+            progress = sys.stderr.isatty()
+        if client is None:
+            results = runner.local(progress)
+        else:
+            results = runner.dask(client, progress, worker_timeout)
+        total = None
+        n_impacts = np.empty(len(xi), dtype=np.int64)
+        paths = np.empty((len(xi), T, 2)) if keep_paths else None
+        try:
+            # chunks arrive in order and are merged at once: memory does not grow with M
+            for (lo, hi), (stats, imp, status, extra) in results:
+                if stats is None:
+                    m, xi_m, code = extra
+                    raise SimulationError(
+                        f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {uncertain} = "
+                        f"{getattr(oscillator, uncertain) + unc.sigma * xi_m:.6g}) stopped: "
+                        f"{K.STATUS_MESSAGES[code]}"
+                    )
+                n_impacts[lo:hi] = imp
+                if keep_paths:
+                    paths[lo:hi] = extra
+                total = stats if total is None else total.merge(stats)
+        finally:
+            results.close()  # a Dask run cancels the tasks left now, not at collection
+    finally:
+        if own:
+            client.close()
     return _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler,
                     seed, order, replicates, "semicircle" if measure is None else measure.name)
 
 
-def _run_chunks(y0, xi, w, rep, replicates, bounds, args, scheduler, progress):
-    """Yield ``((lo, hi), chunk result)`` in chunk order."""
-    if progress is None:
-        progress = sys.stderr.isatty()
-    if scheduler is not None:
-        yield from _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler,
-                                    progress)
-        return
-    from tqdm.auto import tqdm
+def _check_dask_timeouts(connect_timeout, worker_timeout) -> None:
+    for name, value, optional in (("connect_timeout", connect_timeout, False),
+                                  ("worker_timeout", worker_timeout, True)):
+        if value is None and optional:
+            continue
+        try:
+            good = (not isinstance(value, (bool, str, bytes)) and math.isfinite(float(value))
+                    and float(value) > 0)
+        except (TypeError, ValueError, OverflowError):
+            good = False
+        if not good:
+            allowed = "a number of seconds > 0" + (" or None" if optional else "")
+            raise ValueError(f"{name} must be {allowed}, got {value!r}")
 
-    with tqdm(total=len(xi), unit="sample", disable=not progress, desc="Monte Carlo") as bar:
-        for lo, hi in bounds:
-            yield (lo, hi), run_chunk(y0, xi[lo:hi], w[lo:hi], rep[lo:hi], replicates, *args)
-            bar.update(hi - lo)
+
+def _manifest(oscillator, options, unc, sampler, samples, seed, replicates, order, times,
+              measure, recurrence, xi, w, bounds, keep_paths) -> dict:
+    """Everything that determines the result of a run, for its checkpoint."""
+    if measure is None:
+        law = "semicircle"
+    else:
+        law = {key: getattr(measure, key) for key in ("name", "lo", "hi", "alpha", "beta",
+                                                      "a", "b")}
+        law["recurrence"] = [digest(np.asarray(c)) for c in recurrence]
+    return {
+        "opa_mc_version": package_version(),
+        "oscillator": oscillator.as_dict(),
+        "options": dataclasses.asdict(options),
+        "sigma": unc.sigma,
+        "uncertain": unc.parameter,
+        "distribution": law,
+        "sampler": sampler,
+        "samples": samples,
+        "seed": None if seed is None else int(seed),
+        "replicates": int(replicates),
+        "order": int(order),
+        "times": {"count": len(times), "first": float(times[0]), "last": float(times[-1]),
+                  "sha256": digest(times)},
+        "xi": digest(xi),
+        "weight": digest(w),
+        "chunks": [list(b) for b in bounds],
+        "keep_paths": bool(keep_paths),
+    }
 
 
-def _run_chunks_dask(y0, xi, w, rep, replicates, bounds, args, scheduler, progress):
-    """Chunks as Dask tasks; results are yielded (and released) in submission order, so
-    the merge order, hence the result, is the local one."""
-    from distributed import Client
-    from tqdm.auto import tqdm
+def _chunk_check(T: int, order: int, replicates: int, keep_paths: bool):
+    """check(arrays, lo, hi): None when a loaded chunk has every field with its shape and
+    kind, else what is wrong."""
+    R = replicates
+    fields = {"weight": ((), "f"), "count": ((), "i"), "x_mean": ((T,), "f"),
+              "x_m2": ((T,), "f"), "v_mean": ((T,), "f"), "v_m2": ((T,), "f"),
+              "x_moment": ((order + 1, T), "f"), "x_rep": ((R, T), "f"),
+              "v_rep": ((R, T), "f"), "x2_rep": ((R, T), "f"), "rep_weight": ((R,), "f"),
+              "rhs_evaluations": ((), "i"), "run": ((), "U")}
 
-    own = not isinstance(scheduler, Client)
-    client = Client(scheduler) if own else scheduler
+    def check(arrays, lo, hi):
+        expected = {**fields, "n_impacts": ((hi - lo,), "i")}
+        if keep_paths:
+            expected["paths"] = ((hi - lo, T, 2), "f")
+        if set(arrays) != set(expected):
+            return f"fields {sorted(set(arrays) ^ set(expected))} missing or unexpected"
+        for name, (shape, kind) in expected.items():
+            if arrays[name].shape != shape or arrays[name].dtype.kind != kind:
+                return f"{name} has shape {arrays[name].shape} and dtype {arrays[name].dtype}"
+        if int(arrays["count"]) != hi - lo:
+            return f"count {int(arrays['count'])} for {hi - lo} samples"
+        return None
+
+    return check
+
+
+def _from_arrays(a: dict, keep_paths: bool):
+    """A chunk result (stats, n_impacts, status, paths) from its checkpoint arrays."""
+    stats = ChunkStats(
+        weight=float(a["weight"]), count=int(a["count"]), x_mean=a["x_mean"],
+        x_m2=a["x_m2"], v_mean=a["v_mean"], v_m2=a["v_m2"], x_moment=a["x_moment"],
+        x_rep=a["x_rep"], v_rep=a["v_rep"], x2_rep=a["x2_rep"], rep_weight=a["rep_weight"],
+        rhs_evaluations=int(a["rhs_evaluations"]),
+    )
+    n_impacts = a["n_impacts"].astype(np.int64)
+    status = np.full(len(n_impacts), K.OK, dtype=np.int64)
+    return stats, n_impacts, status, (a["paths"] if keep_paths else None)
+
+
+@dataclass
+class _Chunks:
+    """The chunks of one run; ``local`` and ``dask`` yield ``((lo, hi), result)`` in
+    chunk order, loading finished chunks from the checkpoint and saving new ones."""
+
+    y0: np.ndarray
+    xi: np.ndarray
+    w: np.ndarray
+    rep: np.ndarray
+    replicates: int
+    bounds: list
+    args: tuple
+    store: Checkpoint | None
+    finished: set
+    check: Callable
+
+    @property
+    def keep_paths(self) -> bool:
+        return bool(self.args[6])  # (times, p, cfg, rtol, atol, order, keep_paths, recurrence)
+
+    def task(self, i: int) -> tuple:
+        lo, hi = self.bounds[i]
+        return (self.y0, self.xi[lo:hi], self.w[lo:hi], self.rep[lo:hi], self.replicates,
+                *self.args)
+
+    def compute(self, i: int):
+        return run_chunk(*self.task(i))
+
+    def loaded(self, i: int):
+        """Chunk i from the checkpoint; computed (and saved) again if its file went bad
+        since it was first read."""
+        lo, hi = self.bounds[i]
+        arrays = self.store.load(i, lo, hi, self.check)
+        if arrays is None:
+            result = self.compute(i)
+            self.save(i, result)
+            return result
+        return _from_arrays(arrays, self.keep_paths)
+
+    def save(self, i: int, result) -> None:
+        stats, n_impacts, _, extra = result
+        if self.store is None or stats is None:
+            return
+        arrays = {**stats_arrays(stats), "n_impacts": np.asarray(n_impacts)}
+        if self.keep_paths:
+            arrays["paths"] = extra
+        self.store.save(i, *self.bounds[i], arrays)
+
+    def done_samples(self) -> int:
+        return sum(hi - lo for i, (lo, hi) in enumerate(self.bounds) if i in self.finished)
+
+    def local(self, progress: bool):
+        from tqdm.auto import tqdm
+
+        with tqdm(total=len(self.xi), initial=self.done_samples(), unit="sample",
+                  disable=not progress, desc="Monte Carlo") as bar:
+            for i, (lo, hi) in enumerate(self.bounds):
+                if i in self.finished:
+                    yield (lo, hi), self.loaded(i)
+                    continue
+                result = self.compute(i)
+                self.save(i, result)
+                bar.update(hi - lo)
+                yield (lo, hi), result
+
+    def dask(self, client, progress: bool, worker_timeout: float | None):
+        """Chunks as Dask tasks on ``client``. Results are merged (and released) in
+        submission order, so the result is the local one; with a checkpoint each result
+        is saved as soon as it arrives, whatever its order."""
+        from distributed import wait
+        from tqdm.auto import tqdm
+
+        futures = {}
+        watchdog = _Watchdog(client, worker_timeout,
+                             lambda: sum(f is not None for f in futures.values()))
+        try:
+            for i in range(len(self.bounds)):
+                if i not in self.finished:
+                    futures[i] = client.submit(run_chunk, *self.task(i), True, pure=False)
+            unsaved = set(futures) if self.store is not None else set()
+            with tqdm(total=len(self.bounds), initial=len(self.finished), unit="chunk",
+                      disable=not progress, desc="Monte Carlo (dask)") as bar:
+                for i, bound in enumerate(self.bounds):
+                    if i in self.finished:
+                        yield bound, self.loaded(i)
+                        continue
+                    current = futures[i]
+                    while not current.done():
+                        self._save_arrived(futures, unsaved, i, watchdog)
+                        watched = [futures[j] for j in unsaved] or [current]
+                        try:
+                            wait(watched, timeout=watchdog.poll, return_when="FIRST_COMPLETED")
+                        except TimeoutError:
+                            watchdog.check()
+                    result = _result(current, bound, watchdog)
+                    if i in unsaved:
+                        unsaved.discard(i)
+                        self.save(i, result)
+                    futures[i] = None  # let the cluster forget it
+                    bar.update(1)
+                    yield bound, result
+        finally:
+            left = [f for f in futures.values() if f is not None]
+            if left:
+                client.cancel(left)
+
+    def _save_arrived(self, futures, unsaved, current: int, watchdog) -> None:
+        """Save every result that has arrived, but chunk ``current``'s (its caller's)."""
+        for j in sorted(unsaved):
+            if j != current and futures[j].done():
+                self.save(j, _result(futures[j], self.bounds[j], watchdog))
+                unsaved.discard(j)
+
+
+def _connect(scheduler, connect_timeout: float):
+    """(client, whether we own it) for an address or a distributed.Client; a Client is
+    returned as it is, so this also checks the type of ``scheduler``."""
     try:
-        futures = [
-            client.submit(run_chunk, y0, xi[lo:hi], w[lo:hi], rep[lo:hi], replicates, *args,
-                          True, pure=False)
-            for lo, hi in bounds
-        ]
-        with tqdm(total=len(futures), unit="chunk", disable=not progress,
-                  desc="Monte Carlo (dask)") as bar:
-            for i, bound in enumerate(bounds):
-                result = futures[i].result()
-                futures[i] = None  # let the cluster forget it
-                bar.update(1)
-                yield bound, result
-    finally:
-        if own:
-            client.close()
+        from distributed import Client
+    except ImportError:
+        raise ValueError("scheduler needs the 'distributed' package") from None
+    if isinstance(scheduler, Client):
+        return scheduler, False
+    if not isinstance(scheduler, str):
+        raise ValueError(f"scheduler must be an address such as 'tcp://host:8786' or a "
+                         f"distributed.Client, got {scheduler!r:.60}")
+    try:
+        return Client(scheduler, timeout=connect_timeout), True
+    except (OSError, TimeoutError):
+        raise ValueError(f"scheduler {scheduler!r} did not answer within "
+                         f"{connect_timeout:g} s (connect_timeout); check the address and "
+                         f"that the scheduler is running") from None
+    except (ValueError, TypeError) as err:
+        raise ValueError(f"scheduler {scheduler!r} is not a Dask scheduler address "
+                         f"({err})") from None
+
+
+def _result(future, bound, watchdog):
+    """A finished task's result; cluster failures become DaskError.
+
+    A finished task's result can still be lost with its worker (the scheduler then
+    computes it again), so the wait is watched like the wait for the task itself.
+    """
+    from concurrent.futures import CancelledError
+
+    from distributed import KilledWorker
+
+    lo, hi = bound
+    while True:
+        try:
+            return future.result(timeout=watchdog.poll)
+        except TimeoutError:
+            watchdog.check()
+        except KilledWorker as err:
+            first = str(err).splitlines()[0] if str(err) else "KilledWorker"
+            raise DaskError(f"Dask workers died running samples {lo}..{hi - 1}: "
+                            f"{first}") from None
+        except CancelledError:
+            raise DaskError(f"the Dask scheduler dropped the task of samples {lo}..{hi - 1} "
+                            f"(it restarted or went away)") from None
+
+
+class _Watchdog:
+    """Fails the run when the cluster has had no worker for ``timeout`` seconds; waits
+    last ``poll`` seconds between checks."""
+
+    def __init__(self, client, timeout: float | None, unfinished: Callable[[], int]):
+        self.client = client
+        self.timeout = timeout
+        self.unfinished = unfinished
+        self.poll = _POLL if timeout is None else min(_POLL, timeout / 4)
+        self.empty_since = None  # when the cluster was first seen without workers
+
+    def check(self) -> None:
+        if self.timeout is None:
+            return
+        try:
+            workers = len(self.client.nthreads())
+        except (OSError, TimeoutError) as err:
+            raise DaskError(f"lost the Dask scheduler ({err})") from None
+        now = time.monotonic()
+        if workers:
+            self.empty_since = None
+        elif self.empty_since is None:
+            self.empty_since = now
+        elif now - self.empty_since > self.timeout:
+            raise DaskError(f"the Dask cluster has had no workers for {self.timeout:g} s "
+                            f"(all died or none started) with {self.unfinished()} chunks "
+                            f"unfinished; start workers or raise worker_timeout")
 
 
 def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler, seed,

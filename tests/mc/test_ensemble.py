@@ -25,6 +25,10 @@ seed that draws two samples inside it.
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+import textwrap
 import tracemalloc
 
 import numba
@@ -318,8 +322,69 @@ def test_section_32_ensemble_with_chattering_samples_finishes():
 
 REPRO = dict(sigma=SIGMA, samples=200, sampler="random", seed=5, periods=8, per_period=2,
              options=FAST, order=3)  # fmt: skip
-STAT_NAMES = ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_coef", "n_impacts",
-              "xi", "weight")  # fmt: skip
+STAT_NAMES = ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_var_sem", "x_coef",
+              "n_impacts", "xi", "weight")  # fmt: skip
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def run_with_blas_threads(threads: int, script: str, out) -> dict:
+    """Run ``script`` (which saves arrays to sys.argv[1]) in a fresh interpreter whose
+    OpenBLAS has ``threads`` threads; its arrays."""
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": str(threads), "OMP_NUM_THREADS": str(threads)}
+    subprocess.run([sys.executable, "-c", textwrap.dedent(script), str(out)], cwd=ROOT,
+                   env=env, check=True)  # fmt: skip
+    with np.load(out) as data:
+        return {name: data[name] for name in data.files}
+
+
+CHUNK_STATS = """
+import sys
+import numpy as np
+from mc._ensemble import ChunkStats
+rng = np.random.default_rng(0)
+M, T = 1024, 1501  # 1500 or 1501 outputs split unevenly between two BLAS threads
+x, v = rng.standard_normal((2, M, T))
+xi = rng.uniform(-1, 1, M)
+w = rng.uniform(0.5, 1.5, M) / M
+s = ChunkStats.of(x, v, xi, w, 6, np.arange(M) // (M // 16), 16)
+np.savez(sys.argv[1], **{k: np.asarray(getattr(s, k)) for k in s.__dataclass_fields__})
+"""
+
+
+def test_chunk_statistics_do_not_depend_on_the_blas_thread_count(tmp_path):
+    """Matrix products (``w @ x``) sum in an order that depends on the BLAS thread count:
+    one against two OpenBLAS threads changed x_mean, x_m2, v_mean and v_m2 (hence x_var,
+    x_sem) in the last bit at 4 of these 1501 outputs. The statistics now never go
+    through BLAS. (On a one-core machine OpenBLAS may run one thread either way; the
+    test then passes trivially.)"""
+    one = run_with_blas_threads(1, CHUNK_STATS, tmp_path / "one.npz")
+    two = run_with_blas_threads(2, CHUNK_STATS, tmp_path / "two.npz")
+    assert set(one) == set(two) and "x_moment" in one
+    for name in one:
+        np.testing.assert_array_equal(one[name], two[name], err_msg=name)
+
+
+ENSEMBLE = """
+import sys
+import numpy as np
+import mc, opa
+ds = mc.simulate_mc(opa.preset("3.2", omega=3.98), sigma=0.05, samples=1024, seed=3,
+                    periods=15, per_period=100, chunk_size=1024, order=6, progress=False,
+                    options=opa.SolverOptions(rtol=1e-7, atol=1e-7))
+np.savez(sys.argv[1], **{k: ds[k].values for k in ds.data_vars})
+"""
+
+
+@pytest.mark.slow
+def test_ensemble_does_not_depend_on_the_blas_thread_count(tmp_path):
+    """The whole ensemble, 1024 samples of 1501 outputs, under one and two OpenBLAS
+    threads: every statistic equal bit for bit (before, x_mean, v_mean, x_var, v_var,
+    x_sem and v_sem were not)."""
+    one = run_with_blas_threads(1, ENSEMBLE, tmp_path / "one.npz")
+    two = run_with_blas_threads(2, ENSEMBLE, tmp_path / "two.npz")
+    assert set(STAT_NAMES) <= set(one)
+    for name in one:
+        np.testing.assert_array_equal(one[name], two[name], err_msg=name)
 
 
 def test_same_seed_same_result_whatever_the_thread_count():
@@ -445,9 +510,38 @@ def test_dask_local_cluster_gives_exactly_the_local_result():
         (dict(uncertain="f"), r"uncertain must be one of .*got 'f'"),
         (dict(sigma=0.9), r"makes mu = 0.8 - sigma negative"),
         (dict(chunk_size=0), r"chunk_size must be a positive integer, got 0"),
+        (dict(samples=True), r"samples must be a positive integer, got True"),
+        (dict(samples="64"), r"samples must be a positive integer, got '64'"),
+        (dict(samples=1e12), r"samples must be a positive integer, got 1000000000000.0"),
+        (dict(samples=10**15), r"^sampling needs 85.3 PiB \(samples 1000000000000000 x 96 "
+                               r"bytes\), more than the memory budget of .* \(set "
+                               r"OPA_MC_MEMORY_BUDGET to change it\)$"),
+        (dict(checkpoint=3), r"checkpoint must be a directory path, got 3"),
     ],
 )  # fmt: skip
 def test_bad_input_names_the_parameter_and_the_value(kwargs, message):
     arguments = dict(sigma=SIGMA, samples=16, sampler="random", seed=0, periods=1)
+    with pytest.raises(ValueError, match=message):
+        mc.simulate_mc(SECTION_32, **{**arguments, **kwargs})
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        (dict(samples=1024, keep_paths=True),
+         r"^keep_paths needs 1.6 MiB \(samples 1024 x 101 outputs x 2 states\), more than "
+         r"the memory budget of 1 MiB \(set OPA_MC_MEMORY_BUDGET to change it\)$"),
+        (dict(samples=16, order=500),
+         r"^x_coef needs 790.6 KiB \(order \+ 1 = 501 coefficients x 101 outputs, running "
+         r"sum and a chunk's\), more than the memory budget of 512 KiB"),
+        (dict(samples=4096, chunk_size=4096),
+         r"^a chunk of paths needs 12.6 MiB \(chunk_size 4096 x 101 outputs"),
+    ],
+)  # fmt: skip
+def test_sizes_beyond_the_memory_budget_are_refused_up_front(monkeypatch, kwargs, message):
+    """OPA_MC_MEMORY_BUDGET (here 1 MiB or 512 KiB) bounds what a run may allocate."""
+    budget = "512K" if "order" in kwargs else "1M"
+    monkeypatch.setenv("OPA_MC_MEMORY_BUDGET", budget)
+    arguments = dict(sigma=SIGMA, sampler="random", seed=0, periods=1, per_period=100)
     with pytest.raises(ValueError, match=message):
         mc.simulate_mc(SECTION_32, **{**arguments, **kwargs})

@@ -1,0 +1,229 @@
+"""Tests for the checkpoint of mc.simulate_mc (mc._checkpoint): nothing is lost, nothing
+is computed twice, nothing is left behind, and the resumed result is the uninterrupted
+one bit for bit (SPEC section 7)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+import mc
+import opa
+from mc import _ensemble
+
+OSC = opa.preset("3.2", omega=3.98)
+# 6 chunks of 16 samples, 16 randomised-QMC replicates, paths kept
+RUN = dict(sigma=0.05, samples=96, sampler="sobol", seed=3, periods=3, per_period=4,
+           chunk_size=16, order=3, options=opa.SolverOptions(rtol=1e-8, atol=1e-8),
+           progress=False)  # fmt: skip
+VARIABLES = ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_var_sem", "x_coef",
+             "n_impacts", "xi", "weight", "x", "v")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def fresh():
+    """The uninterrupted run, without a checkpoint."""
+    return mc.simulate_mc(OSC, keep_paths=True, **RUN)
+
+
+def assert_identical(ds, reference):
+    for name in VARIABLES:
+        np.testing.assert_array_equal(ds[name].values, reference[name].values, err_msg=name)
+    differing = {k for k in reference.attrs if ds.attrs.get(k) != reference.attrs[k]}
+    assert differing <= {"history"}  # history holds a time stamp
+
+
+def chunk_files(directory) -> list[str]:
+    return sorted(n for n in os.listdir(directory) if n.startswith("chunk-"))
+
+
+@pytest.fixture
+def counted(monkeypatch):
+    """The chunks computed (not loaded), by their first sample."""
+    computed = []
+    original = _ensemble.run_chunk
+
+    def run_chunk(y0, xi, *args, **kwargs):
+        computed.append(len(xi))
+        return original(y0, xi, *args, **kwargs)
+
+    monkeypatch.setattr(_ensemble, "run_chunk", run_chunk)
+    return computed
+
+
+def test_rerun_loads_every_finished_chunk_and_is_bit_identical(tmp_path, fresh, counted):
+    parts = tmp_path / "run.nc.parts"
+    first = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    assert len(counted) == 6
+    assert chunk_files(parts) == [f"chunk-{i:06d}-{16 * i}-{16 * i + 16}.npz" for i in range(6)]
+    assert json.loads((parts / "manifest.json").read_text())["seed"] == 3
+    again = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    assert len(counted) == 6  # nothing computed twice
+    assert_identical(first, fresh)
+    assert_identical(again, fresh)
+
+
+def test_lost_and_damaged_chunks_are_recomputed_and_the_result_is_bit_identical(
+        tmp_path, fresh, counted):
+    parts = tmp_path / "parts"
+    mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    names = chunk_files(parts)
+    os.remove(parts / names[1])  # lost
+    data = (parts / names[3]).read_bytes()
+    (parts / names[3]).write_bytes(data[: len(data) // 2])  # truncated
+    (parts / names[4]).write_bytes(b"")  # zero bytes
+    counted.clear()
+    lines = []
+    resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, log=lines.append, **RUN)
+    assert_identical(resumed, fresh)
+    assert len(counted) == 3
+    damaged = [line for line in lines if " is damaged " in line]
+    assert len(damaged) == 2
+    for name, line in zip((names[3], names[4]), damaged):
+        assert str(parts / name) in line and "\n" not in line
+        assert (parts / (name + ".bad")).exists()
+    assert chunk_files(parts) == sorted([*names, names[3] + ".bad", names[4] + ".bad"])
+    assert any("3 of 6 chunks already finished" in line for line in lines)
+
+
+def test_a_damaged_chunk_warns_by_default(tmp_path, fresh):
+    parts = tmp_path / "parts"
+    mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    name = chunk_files(parts)[0]
+    (parts / name).write_bytes(b"not a zip file")
+    with pytest.warns(RuntimeWarning, match=rf"checkpoint chunk .*{name} is damaged"):
+        resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    assert_identical(resumed, fresh)
+
+
+def test_a_chunk_with_wrong_contents_is_recomputed(tmp_path, fresh):
+    """A readable file whose arrays do not fit (here: a chunk of the statistics without
+    paths, copied over) is damage too."""
+    parts = tmp_path / "parts"
+    mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    name = chunk_files(parts)[2]
+    with np.load(parts / name) as data:
+        arrays = {k: data[k] for k in data.files if k != "paths"}
+    with open(parts / name, "wb") as file:
+        np.savez(file, **arrays)
+    lines = []
+    resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, log=lines.append, **RUN)
+    assert any("missing or unexpected" in line for line in lines)
+    assert_identical(resumed, fresh)
+
+
+@pytest.mark.parametrize(
+    ("change", "key"),
+    [
+        (dict(seed=4), r"seed is 3 there, 4 here"),
+        (dict(sigma=0.04), r"sigma is 0.05 there, 0.04 here"),
+        (dict(chunk_size=32), r"chunks is 6 entries there, 3 entries here"),
+        (dict(keep_paths=False), r"keep_paths is true there, false here"),
+        (dict(options=opa.SolverOptions(rtol=1e-9, atol=1e-8)), r"options.rtol is 1e-08 there"),
+        (dict(oscillator=opa.preset("3.2", omega=3.9)), r"oscillator.omega is 3.98 there"),
+        (dict(per_period=5), r"times.count is 13 there, 16 here"),
+    ],
+)  # fmt: skip
+def test_a_checkpoint_of_another_run_is_refused(tmp_path, change, key):
+    parts = tmp_path / "parts"
+    first = {"oscillator": OSC, "keep_paths": True, **RUN}
+    mc.simulate_mc(checkpoint=parts, **first)
+    before = {n: (parts / n).read_bytes() for n in os.listdir(parts)}
+    with pytest.raises(ValueError, match=rf"checkpoint '.*parts' belongs to another run: "
+                                         rf"{key}") as err:  # fmt: skip
+        mc.simulate_mc(checkpoint=parts, **{**first, **change})
+    assert "\n" not in str(err.value)
+    assert {n: (parts / n).read_bytes() for n in os.listdir(parts)} == before  # untouched
+
+
+def test_chunk_files_without_a_manifest_are_refused(tmp_path):
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    (parts / "chunk-000000-0-16.npz").write_bytes(b"")
+    with pytest.raises(ValueError, match=r"holds chunk files but no manifest.json"):
+        mc.simulate_mc(OSC, checkpoint=parts, **RUN)
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match=r"checkpoint '.*file' is not a directory"):
+        mc.simulate_mc(OSC, checkpoint=tmp_path / "file", **RUN)
+
+
+def dead_pid() -> int:
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    child.wait()
+    return child.pid
+
+
+def test_temporaries_of_a_killed_writer_are_removed_and_remove_checkpoint_cleans_up(
+        tmp_path, fresh):
+    parts = tmp_path / "parts"
+    mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    stale = parts / f".tmp-opa-mc-{dead_pid()}-abc.npz"
+    stale.write_bytes(b"half a chunk")
+    resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    assert not stale.exists()
+    assert_identical(resumed, fresh)
+    (parts / (chunk_files(parts)[0] + ".bad")).write_bytes(b"")
+    mc.remove_checkpoint(parts)
+    assert not parts.exists()
+    mc.remove_checkpoint(parts)  # already gone: fine
+    # a directory holding other files keeps them (and itself)
+    mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    (parts / "notes.txt").write_text("mine")
+    mc.remove_checkpoint(parts)
+    assert os.listdir(parts) == ["notes.txt"]
+
+
+def test_progress_counts_loaded_chunks_as_done(tmp_path, capsys):
+    parts = tmp_path / "parts"
+    mc.simulate_mc(OSC, checkpoint=parts, **RUN)
+    capsys.readouterr()
+    mc.simulate_mc(OSC, checkpoint=parts, **{**RUN, "progress": True})
+    err = capsys.readouterr().err
+    assert "96/96" in err and " 0/96" not in err
+
+
+KILLED_RUN = """
+import sys
+import mc, opa
+mc.simulate_mc(opa.preset("3.2", omega=3.98), sigma=0.05, samples=1024, sampler="sobol",
+               seed=5, periods=40, per_period=2, chunk_size=8, order=2,
+               options=opa.SolverOptions(rtol=1e-9, atol=1e-9), progress=False,
+               checkpoint=sys.argv[1])
+"""
+
+
+def test_a_run_killed_mid_way_resumes_bit_identical(tmp_path):
+    """SIGKILL after the first chunk files appear (no chance to clean up), then resume."""
+    parts = tmp_path / "parts"
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    child = subprocess.Popen([sys.executable, "-c", textwrap.dedent(KILLED_RUN), str(parts)],
+                             cwd=root)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 120
+        while (not parts.exists() or len(chunk_files(parts)) < 3) and child.poll() is None:
+            assert time.monotonic() < deadline, "no chunk file within 120 s"
+            time.sleep(0.02)
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+    kept = len(chunk_files(parts))
+    assert 3 <= kept < 128, kept  # killed mid-run
+    kwargs = dict(sigma=0.05, samples=1024, sampler="sobol", seed=5, periods=40, per_period=2,
+                  chunk_size=8, order=2, options=opa.SolverOptions(rtol=1e-9, atol=1e-9),
+                  progress=False)  # fmt: skip
+    lines = []
+    resumed = mc.simulate_mc(OSC, checkpoint=parts, log=lines.append, **kwargs)
+    assert not any(" is damaged " in line for line in lines)
+    assert len(chunk_files(parts)) == 128
+    assert not [n for n in os.listdir(parts) if n.startswith(".tmp")]
+    fresh = mc.simulate_mc(OSC, **kwargs)
+    for name in VARIABLES[:-2]:
+        np.testing.assert_array_equal(resumed[name].values, fresh[name].values, err_msg=name)
