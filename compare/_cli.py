@@ -10,25 +10,49 @@ import time
 
 import numpy as np
 
+from opa._argtypes import positive_int, whole_number
+
 from opa._model import PARAMETER_NAMES
+
+# Largest grid of swept values, sigmas or orders on the command line: every point of a
+# trust map runs Monte Carlo ensembles, so even this is days of work.
+MAX_GRID = 1000
 
 
 def _float_list(text: str) -> tuple[float, ...]:
+    """'0.01,0.02' as distinct numbers."""
     try:
-        return tuple(float(v) for v in text.split(",") if v.strip())
+        values = tuple(float(v) for v in text.split(",") if v.strip())
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") \
+            from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"expected at least one number, got {text!r}")
+    if len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"values must be distinct, got {text!r}")
+    return values
 
 
 def _order_list(text: str) -> tuple[int, ...]:
-    """'0:8' (inclusive range) or '0,1,2,4,8'."""
+    """'0:8' (inclusive range, A <= B) or '0,1,2,4,8' (distinct)."""
     try:
         if ":" in text:
             lo, hi = (int(v) for v in text.split(":"))
-            return tuple(range(lo, hi + 1))
-        return tuple(int(v) for v in text.split(",") if v.strip())
+            if lo > hi:
+                raise argparse.ArgumentTypeError(f"A:B needs A <= B, got {text!r}")
+            values = tuple(range(lo, hi + 1))
+        else:
+            values = tuple(int(v) for v in text.split(",") if v.strip())
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected A:B or comma-separated integers, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected A:B or comma-separated integers, got "
+                                         f"{text!r}") from None
+    if not values:
+        raise argparse.ArgumentTypeError(f"expected at least one integer, got {text!r}")
+    if len(set(values)) != len(values):
+        raise argparse.ArgumentTypeError(f"values must be distinct, got {text!r}")
+    if len(values) > MAX_GRID:
+        raise argparse.ArgumentTypeError(f"at most {MAX_GRID} values, got {len(values)}")
+    return values
 
 
 def _sweep(text: str) -> tuple[str, tuple[float, ...]]:
@@ -37,11 +61,12 @@ def _sweep(text: str) -> tuple[str, tuple[float, ...]]:
         name, spec = text.split("=", 1)
         start, stop, count = spec.split(":")
         count = int(count)
-        if count < 1:
-            raise ValueError
+        if not 1 <= count <= MAX_GRID:
+            raise argparse.ArgumentTypeError(f"COUNT must be in 1..{MAX_GRID}, got {text!r}")
         values = np.linspace(float(start), float(stop), count)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected NAME=START:STOP:COUNT, got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected NAME=START:STOP:COUNT, got {text!r}") \
+            from None
     return name.strip(), tuple(float(np.round(v, 12)) for v in values)
 
 
@@ -85,13 +110,13 @@ def register_validate(sub, model_flags, solver_flags) -> None:
                    help="MC standard errors allowed for the reference's noise (default 3)")
     g.add_argument("--resolution", type=float, default=None, metavar="DS",
                    help="bisection resolution of sigma* (default 1e-3)")
-    g.add_argument("--samples", type=int, default=None, metavar="M",
+    g.add_argument("--samples", type=positive_int, default=None, metavar="M",
                    help="Sobol samples per ensemble (default 1024)")
-    g.add_argument("--max-samples", type=int, default=None, metavar="M",
+    g.add_argument("--max-samples", type=positive_int, default=None, metavar="M",
                    help="samples are doubled up to M where the verdict hangs on the MC "
                         "noise (default 8192)")
-    g.add_argument("--seed", type=int, default=None, metavar="K", help="random seed (default 0)")
-    g.add_argument("--per-period", type=int, default=None, metavar="K",
+    g.add_argument("--seed", type=whole_number, default=None, metavar="K", help="random seed (default 0)")
+    g.add_argument("--per-period", type=positive_int, default=None, metavar="K",
                    help="outputs per forcing period (default 8)")
     g.add_argument("--outdir", default=None, metavar="DIR", help="output folder (default results)")
     g.add_argument("--no-plots", action="store_true", help="skip the figures")
@@ -107,8 +132,9 @@ def register_validate(sub, model_flags, solver_flags) -> None:
 
 def _check_outdir(path: str) -> None:
     """Fail before computing when the output folder cannot be written."""
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise ValueError(f"--outdir {path} exists and is not a folder")
+    from opa._paths import check_output_dir
+
+    check_output_dir("--outdir", path)
     try:
         os.makedirs(os.path.join(path, "parts"), exist_ok=True)
         probe = os.path.join(path, ".write-test")
@@ -188,13 +214,13 @@ def register_converge(sub, model_flags, solver_flags) -> None:
                    help="law of xi: semicircle, uniform, beta:A,B, normal-trunc:K")
     g.add_argument("--periods", type=float, default=10.0, metavar="P",
                    help="window in forcing periods (default 10)")
-    g.add_argument("--order", type=int, default=1, metavar="N",
+    g.add_argument("--order", type=whole_number, default=1, metavar="N",
                    help="OPA order of every element for the sweeps in K (default 1)")
     g.add_argument("--budgets", type=_order_list, default=None, metavar="B1,B2,...",
                    help="element budgets of the adaptive runs (default 4,8,16,24,32,48,64,96,128,192,256)")
     g.add_argument("--uniform", type=_order_list, default=None, metavar="K1,K2,...",
                    help="element counts of the uniform runs (default 1,2,...,128)")
-    g.add_argument("--reference", type=int, default=65536, metavar="M",
+    g.add_argument("--reference", type=positive_int, default=65536, metavar="M",
                    help="Sobol samples of the reference (default 65536)")
     g.add_argument("--outdir", default="results-elements", metavar="DIR",
                    help="output folder (default results-elements)")

@@ -53,8 +53,9 @@ import xarray as xr
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
 from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
-from opa._dataset import provenance_attrs, write_netcdf
-from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions, preset, time_grid
+from opa._dataset import check_memory, provenance_attrs, write_netcdf
+from opa._model import (PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
+                        preset, time_grid)
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import SPLIT_KINDS, Split, find_splits
 
@@ -163,6 +164,31 @@ class ValidateConfig:
         for name in ("plots", "frontier"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
+        self._check_sizes()
+
+    def _check_sizes(self) -> None:
+        """Refuse maps that cannot finish or fit: grid sizes, orders, run lengths, memory."""
+        if not isinstance(self.oscillator, Oscillator):
+            raise ValueError(f"oscillator must be an Oscillator, got {self.oscillator!r:.60}")
+        if not isinstance(self.options, SolverOptions):
+            raise ValueError(f"options must be a SolverOptions, got {self.options!r:.60}")
+        for name in ("values", "sigmas", "orders", "horizons"):
+            if len(getattr(self, name)) > MAX_GRID:
+                raise ValueError(f"{name}: at most {MAX_GRID} entries, got "
+                                 f"{len(getattr(self, name))}")
+        check_order(self.nmax)
+        if self.max_samples > MAX_SAMPLES:
+            raise ValueError(f"max_samples must be at most {MAX_SAMPLES}, got {self.max_samples}")
+        for value in self.values:
+            osc = self.oscillator_at(value)
+            try:
+                check_span(osc, max(self.horizons) * osc.forcing_period)
+            except ValueError as err:
+                raise ValueError(f"horizons up to {max(self.horizons):g} forcing periods at "
+                                 f"{self.parameter} = {value:g}: {err}") from None
+        outputs = round(max(self.horizons) * self.per_period) + 1
+        check_memory(f"horizons up to {max(self.horizons):g} periods x per_period "
+                     f"{self.per_period}", outputs * (2 * self.nmax + 8) * 8 * len(VARIANTS))
 
     @property
     def nmax(self) -> int:
@@ -198,6 +224,13 @@ def digest(payload) -> str:
     """A 12-hex-digit hash of ``payload`` (anything ``json`` writes, floats exactly)."""
     blob = json.dumps(payload, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:12]
+
+
+# Largest grid of values, sigmas, orders or horizons: every point runs Monte Carlo
+# ensembles, so 1000 values is already days of work on two cores.
+MAX_GRID = 1000
+# Largest ensemble the map may double up to (2^20 samples, hours per point).
+MAX_SAMPLES = 2**20
 
 
 def load_config(path: str | None, **overrides) -> ValidateConfig:

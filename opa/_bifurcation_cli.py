@@ -12,6 +12,8 @@ import time
 
 import numpy as np
 
+from opa._argtypes import MAX_SWEEP_VALUES, positive_int, whole_number
+
 from opa._bifurcation import CONTINUATIONS, DEFAULT_WORKERS, MODELS, SWEEPABLE
 from opa._model import IMPULSE_MODELS
 from opa._poincare import GRAZE_GAP, GRAZE_VELOCITY, PERIOD_TOL
@@ -54,8 +56,9 @@ def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
         except ValueError:
             raise ValueError(f"--sweep {spec!r}: COUNT must be an integer >= 1, "
                              f"got {fields[2]!r}") from None
-        if count < 1:
-            raise ValueError(f"--sweep {spec!r}: COUNT must be an integer >= 1, got {count}")
+        if not 1 <= count <= MAX_SWEEP_VALUES:
+            raise ValueError(f"--sweep {spec!r}: COUNT must be an integer in 1.."
+                             f"{MAX_SWEEP_VALUES}, got {count}")
         if count == 1 and start != stop:
             raise ValueError(f"--sweep {spec!r}: COUNT = 1 needs START == STOP")
         if count > 1 and start == stop:
@@ -63,6 +66,8 @@ def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
         values = np.linspace(start, stop, count)
     else:
         values = np.array([number(v, "value") for v in rhs.split(",")])
+        if len(values) > MAX_SWEEP_VALUES:
+            raise ValueError(f"--sweep: at most {MAX_SWEEP_VALUES} values, got {len(values)}")
         if len(np.unique(values)) != len(values):
             raise ValueError(f"--sweep {spec!r}: values must be distinct")
     return name, values
@@ -123,16 +128,33 @@ def _summary(ds) -> list[str]:
     return lines
 
 
+def _check_sizes(osc, param, values, args) -> None:
+    """Refuse sweeps that cannot finish or fit: the span of each run and the sections."""
+    from opa._dataset import check_memory
+    from opa._model import check_span
+
+    span = args.transient + args.record
+    swept = [float(values.min()), float(values.max())] if param in ("omega", "omega1") else []
+    for value in swept:
+        varied = osc.replace(**{param: value})
+        check_span(varied, span * varied.forcing_period)
+    check_span(osc, span * osc.forcing_period)
+    check_memory(f"{len(values)} sweep values x {args.record} x {args.per_period} section "
+                 f"points", len(values) * (args.record * args.per_period + 1) * 8 * 6)
+
+
 def cmd_bifurcation(args) -> int:
     from opa._bifurcation import sweep
-    from opa._cli import options_from, oscillator_from
+    from opa._cli import check_outputs, options_from, oscillator_from
 
+    check_outputs(args)
     if args.periods is not None:
         raise ValueError("--periods does not apply to bifurcation sweeps; use --transient P "
                          "and --record P")
     param, values = parse_sweep(args.sweep)
     osc = oscillator_from(args)
     opts = options_from(args)
+    _check_sizes(osc, param, values, args)
     start = time.perf_counter()
     ds = sweep(
         args.model, param, values, osc, transient=args.transient, record=args.record,
@@ -165,8 +187,10 @@ def cmd_bifurcation(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
+    from opa._cli import check_outputs
     from opa._figures import FIGURES, reproduce
 
+    check_outputs(args)
     names = list(FIGURES) if args.figure == "all" else [args.figure]
     start = time.perf_counter()
     paths = reproduce(args.figure, args.outdir, full=args.full, impulse=args.impulse,
@@ -225,15 +249,15 @@ def register(subparsers, model_flags, common_flags) -> None:
     g.add_argument("--section", choices=SECTIONS, default="both",
                    help="Poincaré section(s) in the --plot figure (the dataset holds both; "
                         "default both)")
-    g.add_argument("--transient", type=int, default=500, metavar="P",
+    g.add_argument("--transient", type=whole_number, default=500, metavar="P",
                    help="forcing periods dropped before recording (default 500)")
-    g.add_argument("--record", type=int, default=100, metavar="P",
+    g.add_argument("--record", type=positive_int, default=100, metavar="P",
                    help="forcing periods recorded (default 100)")
     g.add_argument("--continuation", choices=CONTINUATIONS, default="fixed",
                    help="fixed: every value starts from --x0/--v0; forward/backward: each "
                         "value starts from the final state of the previous one, sweeping "
                         "up/down (sequential) (default fixed)")
-    g.add_argument("--workers", type=int, default=DEFAULT_WORKERS, metavar="W",
+    g.add_argument("--workers", type=positive_int, default=DEFAULT_WORKERS, metavar="W",
                    help=f"local worker processes (default {DEFAULT_WORKERS}; 1: in process)")
     g.add_argument("--period-tol", type=float, default=PERIOD_TOL, metavar="TOL",
                    help=f"relative tolerance of the stroboscopic repeat (default {PERIOD_TOL:g})")
@@ -268,9 +292,9 @@ def register(subparsers, model_flags, common_flags) -> None:
                    help="impulse model for every figure (default dirac)")
     r.add_argument("--pulse-width", type=float, default=0.1, metavar="TAU",
                    help="width of the rectangular pulses with --impulse pulse (default 0.1)")
-    r.add_argument("--order", type=int, default=4, metavar="N",
+    r.add_argument("--order", type=whole_number, default=4, metavar="N",
                    help="OPA order N of EMR_0 and EMR (default 4)")
-    r.add_argument("--workers", type=int, default=DEFAULT_WORKERS, metavar="W",
+    r.add_argument("--workers", type=positive_int, default=DEFAULT_WORKERS, metavar="W",
                    help=f"local worker processes for sweeps (default {DEFAULT_WORKERS})")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask distributed scheduler address for the sweeps")

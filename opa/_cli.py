@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 
@@ -25,7 +26,8 @@ from opa._model import (
     SolverOptions,
 )
 
-EXIT_USAGE = 2
+from opa._argtypes import EXIT_USAGE, Parser, positive_int, whole_number
+
 EXIT_SIMULATION = 3
 
 
@@ -48,7 +50,7 @@ def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
     g = parser.add_argument_group("run")
     g.add_argument("--periods", type=float, default=100.0, metavar="P",
                    help="length in forcing periods 2 pi/omega (default 100)")
-    g.add_argument("--per-period", type=int, default=1, metavar="K",
+    g.add_argument("--per-period", type=positive_int, default=1, metavar="K",
                    help="outputs per forcing period: t_j = j (2 pi/omega)/K, j = 0..P K; "
                         "K = 1 gives the stroboscopic samples (default 1)")
     g.add_argument("--sigma", type=float, default=0.01, metavar="S",
@@ -57,7 +59,7 @@ def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
                    help="which parameter is uncertain (default mu)")
     g.add_argument("--allow-negative", action="store_true",
                    help="allow p_bar - sigma < 0 for the uncertain parameter")
-    g.add_argument("--order", type=int, default=4, metavar="N",
+    g.add_argument("--order", type=whole_number, default=4, metavar="N",
                    help="OPA truncation order / highest MC Chebyshev coefficient (default 4)")
     g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
                    help="galerkin: exact projection; paper: eq. (27), drops sigma/2 Y_{N+1} "
@@ -67,11 +69,12 @@ def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
                         "is multiplied by -eta; saltation: the impact's saltation matrix "
                         "maps the deviation coefficients (default mean)")
     if mc:
-        g.add_argument("--samples", type=int, default=1024, metavar="M",
+        g.add_argument("--samples", type=positive_int, default=1024, metavar="M",
                        help="Monte Carlo samples (default 1024)")
         g.add_argument("--sampler", choices=("random", "sobol", "gauss"), default="sobol",
                        help="random, scrambled sobol, or gauss collocation (default sobol)")
-        g.add_argument("--seed", type=int, default=0, metavar="K", help="random seed (default 0)")
+        g.add_argument("--seed", type=whole_number, default=0, metavar="K",
+                       help="random seed (default 0)")
         g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                        help="Dask distributed scheduler address (default: local threads)")
     _solver_flags(parser)
@@ -100,7 +103,7 @@ def _element_flags(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--tolerance", type=float, default=1e-6, metavar="TOL",
                    help="adaptive elements: refine while an element's variance share "
                         "P_k max_t Var_k exceeds TOL (default 1e-6)")
-    g.add_argument("--max-elements", type=int, default=64, metavar="K",
+    g.add_argument("--max-elements", type=positive_int, default=64, metavar="K",
                    help="adaptive elements: the element budget (default 64)")
 
 
@@ -172,10 +175,21 @@ def _summary_events(ds) -> str:
     return ", ".join(parts)
 
 
+def check_outputs(args) -> None:
+    """Refuse --out, --plot and --outdir that could not be written, before computing."""
+    from opa._paths import FIGURE_SUFFIXES, check_output_dir, check_output_file
+
+    check_output_file("--out", getattr(args, "out", None))
+    check_output_file("--plot", getattr(args, "plot", None), suffixes=FIGURE_SUFFIXES)
+    if getattr(args, "outdir", None) is not None:
+        check_output_dir("--outdir", args.outdir)
+
+
 def cmd_simulate(args) -> int:
     from opa._dataset import write_netcdf
     from opa._plot import plot_run
 
+    check_outputs(args)
     osc = oscillator_from(args)
     opts = options_from(args)
     if args.model != "opa" and args.elements is not None:
@@ -232,7 +246,7 @@ def cmd_simulate(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="opa-mc",
         description="Orthogonal polynomial approximation (OPA) of a vibro-impact oscillator "
         "with an uncertain parameter, checked against Monte Carlo ensembles of the true "
@@ -263,7 +277,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(err: BaseException) -> str:
+    return " ".join(str(err).split()) or type(err).__name__
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. Mistakes print one line and return 2; a run that cannot be
+    completed returns 3; anything unforeseen prints one line naming the error (set
+    OPA_MC_TRACEBACK=1 for the traceback) and returns 1."""
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
@@ -272,14 +293,28 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except (ValueError, CliError) as err:
-        print(f"opa-mc: error: {err}", file=sys.stderr)
+        print(f"opa-mc: error: {_one_line(err)}", file=sys.stderr)
         return EXIT_USAGE
     except SimulationError as err:
-        print(f"opa-mc: simulation failed: {err}", file=sys.stderr)
+        print(f"opa-mc: simulation failed: {_one_line(err)}", file=sys.stderr)
         return EXIT_SIMULATION
+    except MemoryError:
+        print("opa-mc: error: out of memory; ask for fewer outputs, samples or sweep values",
+              file=sys.stderr)
+        return EXIT_USAGE
+    except OSError as err:
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"opa-mc: error: {where}{err.strerror or _one_line(err)}", file=sys.stderr)
+        return EXIT_USAGE
     except KeyboardInterrupt:
         print("opa-mc: interrupted", file=sys.stderr)
         return 130
+    except Exception as err:  # noqa: BLE001 -- one line, never a traceback, unless asked
+        if os.environ.get("OPA_MC_TRACEBACK"):
+            raise
+        print(f"opa-mc: internal error: {type(err).__name__}: {_one_line(err)} (please "
+              f"report it; OPA_MC_TRACEBACK=1 shows the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -38,25 +38,69 @@ PARAMETER_DOCS = {
 }
 
 
+# Largest truncation order N: the OPA system has 2(N+1) states and 2N+1 Gauss nodes, so
+# one right-hand side costs O(N^2); N = 500 is already ~10^6 operations per evaluation.
+MAX_ORDER = 500
+# Runs longer than this many time units are refused: at the paper's frequencies that is
+# about 10^7 forcing periods, far past any study in the paper, and it keeps t well inside
+# the range where a step of 1e-6 still changes t in floating point.
+MAX_TIME = 1e8
+# Forcing and impulse periods shorter than this cannot be resolved by the integrator.
+MIN_PERIOD = 1e-6
+# At most this many impulses in one run (each one restarts the integrator).
+MAX_IMPULSES = 10**7
+
+
 def _finite(name: str, value) -> float:
+    """``value`` as a finite float; bools and strings are refused, not converted."""
+    if isinstance(value, (bool, str, bytes)) or type(value).__name__ == "bool_":
+        raise ValueError(f"{name} must be a real number, got {value!r}")
     try:
         value = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} must be a real number, got {value!r}") from None
     if not math.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value}")
     return value
 
 
-def check_order(order) -> int:
-    """The truncation order N as an int, refusing bools, non-integers and N < 0."""
+def check_order(order, maximum: int = MAX_ORDER) -> int:
+    """The truncation order N as an int, refusing bools, non-integers, N < 0 and
+    N > ``maximum``."""
     try:
-        whole = not isinstance(order, bool) and float(order) == int(order)
+        whole = (not isinstance(order, (bool, str, bytes))
+                 and math.isfinite(float(order)) and float(order) == int(order))
     except (TypeError, ValueError, OverflowError):
         whole = False
     if not whole or int(order) < 0:
         raise ValueError(f"order (N) must be an integer >= 0, got {order!r}")
+    if int(order) > maximum:
+        raise ValueError(f"order (N) must be at most {maximum}, got {order!r}")
     return int(order)
+
+
+def check_count(name: str, value, minimum: int = 1, maximum: int | None = None) -> int:
+    """A whole number in [minimum, maximum] (bools, strings and fractions refused)."""
+    try:
+        whole = (not isinstance(value, (bool, str, bytes))
+                 and math.isfinite(float(value)) and float(value) == int(value))
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole or int(value) < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    if maximum is not None and int(value) > maximum:
+        raise ValueError(f"{name} must be at most {maximum}, got {value!r}")
+    return int(value)
+
+
+def check_instance(name: str, value, kind, default=None):
+    """``value`` if it is a ``kind`` (``default`` when None), else a ValueError naming it."""
+    if value is None:
+        return default
+    if not isinstance(value, kind):
+        raise ValueError(f"{name} must be a {kind.__name__}, got {type(value).__name__} "
+                         f"{value!r:.60}")
+    return value
 
 
 def _choice(name: str, value: str, options: tuple[str, ...]) -> str:
@@ -170,7 +214,7 @@ class SolverOptions:
 
     def __post_init__(self):
         _choice("impulse", self.impulse, IMPULSE_MODELS)
-        if self.impulse_at_zero not in (True, False, 0, 1):
+        if isinstance(self.impulse_at_zero, str) or self.impulse_at_zero not in (True, False, 0, 1):
             raise ValueError(f"impulse_at_zero must be True or False, got {self.impulse_at_zero!r}")
         for name in ("rtol", "atol"):
             value = _finite(name, getattr(self, name))
@@ -192,11 +236,13 @@ class SolverOptions:
         if not chatter > 0.0:
             raise ValueError(f"chatter_velocity must be > 0, got {chatter}")
         object.__setattr__(self, "chatter_velocity", chatter)
+        if isinstance(self.max_step, (bool, str, bytes)):
+            raise ValueError(f"max_step must be a number > 0, got {self.max_step!r}")
         try:
             max_step = float(self.max_step)
         except (TypeError, ValueError):
             raise ValueError(f"max_step must be a number > 0, got {self.max_step!r}") from None
-        if not max_step > 0.0:
+        if not max_step > 0.0 or math.isnan(max_step):
             raise ValueError(f"max_step must be > 0, got {max_step}")
         object.__setattr__(self, "max_step", max_step)
 
@@ -218,6 +264,8 @@ class Uncertainty:
             raise ValueError(f"sigma must be >= 0, got {sigma}")
         object.__setattr__(self, "sigma", sigma)
         _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS)
+        if self.allow_negative not in (True, False) or isinstance(self.allow_negative, str):
+            raise ValueError(f"allow_negative must be True or False, got {self.allow_negative!r}")
 
     def check(self, oscillator: Oscillator) -> None:
         """Refuse ``p_bar - sigma < 0`` unless allowed."""
@@ -236,12 +284,42 @@ def time_grid(omega: float, periods: float, per_period: int):
     periods = _finite("periods", periods)
     if periods <= 0:
         raise ValueError(f"periods must be > 0, got {periods}")
-    if int(per_period) != per_period or per_period < 1:
-        raise ValueError(f"per_period must be a positive integer, got {per_period}")
-    count = int(round(periods * per_period))
+    per_period = check_count("per_period", per_period)
+    count = round(periods * per_period)
     if count < 1:
         raise ValueError(f"periods * per_period must be >= 1, got {periods} * {per_period}")
+    span = periods * 2.0 * math.pi / omega
+    if span > MAX_TIME:
+        raise ValueError(f"periods = {periods:g} forcing periods of 2 pi/omega = "
+                         f"{2 * math.pi / omega:.3g} span t = {span:.3g}, beyond the longest "
+                         f"run of {MAX_TIME:g} time units")
+    from opa._dataset import check_memory
+
+    check_memory(f"{count + 1} output times (periods {periods:g} x per_period "
+                 f"{per_period})", (count + 1) * 8 * 4)
     return np.arange(count + 1) * (2.0 * math.pi / omega / per_period)
+
+
+def check_span(oscillator: Oscillator, t_end: float, impulse: bool = True) -> None:
+    """Refuse runs the integrator cannot resolve or finish: a forcing or impulse period
+    below MIN_PERIOD, a span beyond MAX_TIME, or more than MAX_IMPULSES impulses."""
+    t_end = _finite("the end time", t_end)
+    if abs(t_end) > MAX_TIME:
+        raise ValueError(f"the run spans t = {t_end:.3g}, beyond the longest run of "
+                         f"{MAX_TIME:g} time units")
+    period = 2.0 * math.pi / oscillator.omega
+    if oscillator.f != 0.0 and period < MIN_PERIOD:
+        raise ValueError(f"omega = {oscillator.omega:g} gives a forcing period 2 pi/omega = "
+                         f"{period:.3g}, below the resolvable {MIN_PERIOD:g}")
+    if impulse and oscillator.F0 != 0.0:
+        period1 = 2.0 * math.pi / oscillator.omega1
+        if period1 < MIN_PERIOD:
+            raise ValueError(f"omega1 = {oscillator.omega1:g} gives an impulse period 2 pi/"
+                             f"omega1 = {period1:.3g}, below the resolvable {MIN_PERIOD:g}")
+        count = abs(t_end) / period1
+        if count > MAX_IMPULSES:
+            raise ValueError(f"omega1 = {oscillator.omega1:g} puts {count:.3g} impulses in "
+                             f"t in [0, {t_end:.3g}], more than {MAX_IMPULSES:g}")
 
 
 __all__ = [

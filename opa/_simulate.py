@@ -16,7 +16,9 @@ from opa import _solver as K
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
 from opa._dataset import provenance_attrs, time_coord
 from opa._model import (
+    check_instance,
     check_order,
+    check_span,
     IMPACT_LAWS,
     TRUNCATIONS,
     Oscillator,
@@ -125,21 +127,40 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", parti
                    f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} "
                    f"impacts)")
         if not partial:
-            raise SimulationError(f"{message}. Try smaller tolerances, a smaller --max-step, "
-                                  f"or check the parameters.")
+            raise SimulationError(f"{message}. {advice(status)}")
         out[~np.isfinite(out).all(axis=1)] = np.nan
         counters["failure"] = message
     return out, log[:min(n_events, len(log))], counters
 
 
-def _times(oscillator, periods, per_period, times):
+def advice(status: int) -> str:
+    """What to try after a kernel status: tolerances help a collapsed step, not an escape."""
+    if status in (K.ESCAPED, K.DIVERGED):
+        return ("The parameters drive the state out of every bound: check them (e.g. the "
+                "signs of a and c, the sizes of f, F0 and mu).")
+    if status == K.BAD_TIME:
+        return "Check the output times: they must be finite, with impulse times resolvable."
+    return "Try smaller tolerances, a smaller --max-step, or check the parameters."
+
+
+def _times(oscillator, periods, per_period, times, dim: int = 2):
+    """The output times (the grid of ``periods`` and ``per_period`` unless ``times`` is
+    given), refusing runs that cannot be resolved, finished or held in memory."""
     if times is None:
-        return time_grid(oscillator.omega, periods, per_period)
-    times = np.asarray(times, dtype=float)
-    if times.ndim != 1 or len(times) < 1 or not np.all(np.isfinite(times)):
-        raise ValueError("times must be a non-empty 1-D array of finite values")
-    if np.any(np.diff(times) <= 0):
-        raise ValueError("times must be strictly increasing")
+        times = time_grid(oscillator.omega, periods, per_period)
+    else:
+        try:
+            times = np.asarray(times, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError("times must be a 1-D array of numbers") from None
+        if times.ndim != 1 or len(times) < 1 or not np.all(np.isfinite(times)):
+            raise ValueError("times must be a non-empty 1-D array of finite values")
+        if np.any(np.diff(times) <= 0):
+            raise ValueError("times must be strictly increasing")
+    check_span(oscillator, float(times[-1]))
+    from opa._dataset import check_memory
+
+    check_memory(f"{len(times)} outputs x {dim} states", len(times) * (dim + 1) * 8 * 2)
     return times
 
 
@@ -205,8 +226,8 @@ def simulate_dmr(
     >>> ds.x.sizes["time"]
     11
     """
-    oscillator = oscillator or Oscillator()
-    options = options or SolverOptions()
+    oscillator = check_instance("oscillator", oscillator, Oscillator, Oscillator())
+    options = check_instance("options", options, SolverOptions, SolverOptions())
     times = _times(oscillator, periods, per_period, times)
     p, cfg = pack_parameters(oscillator, options)
     out, log, stats = run_kernel(
@@ -294,8 +315,8 @@ def simulate_opa(
     >>> ds.x_coef.shape
     (5, 11)
     """
-    oscillator = oscillator or Oscillator()
-    options = options or SolverOptions()
+    oscillator = check_instance("oscillator", oscillator, Oscillator, Oscillator())
+    options = check_instance("options", options, SolverOptions, SolverOptions())
     order = check_order(order)
     _choice("truncation", truncation, TRUNCATIONS)
     _choice("impact_law", impact_law, IMPACT_LAWS)
@@ -316,7 +337,7 @@ def simulate_opa(
             elements=1 if elements is None else elements, tolerance=tolerance,
             max_elements=max_elements, allow_negative=allow_negative)
     unc.check(oscillator)
-    times = _times(oscillator, periods, per_period, times)
+    times = _times(oscillator, periods, per_period, times, dim=2 * (order + 1))
     p, cfg = pack_parameters(
         oscillator, options, sigma=unc.sigma, order=order, uncertain=uncertain,
         truncation=truncation, impact_law=impact_law,

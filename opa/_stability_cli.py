@@ -12,6 +12,8 @@ import time
 
 import numpy as np
 
+from opa._argtypes import MAX_SWEEP_VALUES, positive_int, whole_number
+
 from opa._model import IMPACT_LAWS, TRUNCATIONS, UNCERTAIN_PARAMETERS
 
 
@@ -39,8 +41,8 @@ def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
         raise ValueError(f"--sweep {spec!r}: {usage}") from None
     if not (math.isfinite(start) and math.isfinite(stop)) or start == stop:
         raise ValueError(f"--sweep {spec!r}: START and STOP must be finite and differ")
-    if count < 1:
-        raise ValueError(f"--sweep {spec!r}: COUNT must be >= 1, got {count}")
+    if not 1 <= count <= MAX_SWEEP_VALUES:
+        raise ValueError(f"--sweep {spec!r}: COUNT must be in 1..{MAX_SWEEP_VALUES}, got {count}")
     return name, start, stop, count
 
 
@@ -69,7 +71,10 @@ def _format_multipliers(mu: np.ndarray, count: int = 4) -> str:
 
 
 def cmd_stability(args) -> int:
-    from opa._continuation import (
+    from opa._cli import check_outputs
+
+    check_outputs(args)
+    from opa._continuation import (  # noqa: E402 -- the paths are checked first, cheaply
         BIFURCATION_KINDS,
         Branch,
         branch_dataset,
@@ -171,18 +176,18 @@ def register_stability(subparsers, model_flags, solver_flags) -> None:
                    help="which parameter is uncertain (default mu)")
     g.add_argument("--allow-negative", action="store_true",
                    help="allow p_bar - sigma < 0 for the uncertain parameter")
-    g.add_argument("--order", type=int, default=4, metavar="N", help="OPA order N (default 4)")
+    g.add_argument("--order", type=whole_number, default=4, metavar="N", help="OPA order N (default 4)")
     g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
                    help="galerkin or paper (eq. 27) (default galerkin)")
     g.add_argument("--impact-law", choices=IMPACT_LAWS[:2], default="mean",
                    help="mean (eq. 28) or ensemble (default mean)")
     s = p.add_argument_group("orbit and branch")
-    s.add_argument("--orbit-periods", type=int, default=None, metavar="K",
+    s.add_argument("--orbit-periods", type=positive_int, default=None, metavar="K",
                    help="period of the orbit in forcing periods (default: detected after "
                         "the transient)")
     s.add_argument("--t0", type=float, default=0.0,
                    help="section time: the orbit is sampled at t0 + j 2 pi/omega (default 0)")
-    s.add_argument("--transient", type=int, default=300, metavar="P",
+    s.add_argument("--transient", type=whole_number, default=300, metavar="P",
                    help="forcing periods run from x0, v0 before shooting (default 300)")
     s.add_argument("--sweep", default=None, metavar="NAME=START:STOP[:COUNT]",
                    help="follow the branch in NAME from START to STOP with at least COUNT "
@@ -190,13 +195,13 @@ def register_stability(subparsers, model_flags, solver_flags) -> None:
     s.add_argument("--seed-value", type=float, default=None, metavar="VALUE",
                    help="find the first orbit at this parameter value (default START) and "
                         "follow it both ways")
-    s.add_argument("--depth", type=int, default=1,
+    s.add_argument("--depth", type=whole_number, default=1,
                    help="levels of period-doubled branches to switch onto (default 1)")
-    s.add_argument("--max-points", type=int, default=500,
+    s.add_argument("--max-points", type=positive_int, default=500,
                    help="largest number of orbits on one branch (default 500)")
     s.add_argument("--lyapunov", action="store_true",
                    help="also compute the largest Lyapunov exponent (variational, saltation)")
-    s.add_argument("--lyapunov-periods", type=int, default=2000, metavar="P",
+    s.add_argument("--lyapunov-periods", type=positive_int, default=2000, metavar="P",
                    help="forcing periods averaged for the Lyapunov exponent (default 2000)")
     s.add_argument("--benettin", action="store_true",
                    help="with --lyapunov: the two-trajectory check as well")

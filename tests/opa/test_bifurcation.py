@@ -305,7 +305,7 @@ def cli(argv):
         ("cc=0.01:0.1:3", "unknown parameter 'cc'"),
         ("c=x:0.1:3", "START 'x' is not a number"),
         ("c=0.01:0.1:2.5", "COUNT must be an integer >= 1, got '2.5'"),
-        ("c=0.01:0.1:0", "COUNT must be an integer >= 1, got 0"),
+        ("c=0.01:0.1:0", "COUNT must be an integer in 1..100000, got 0"),
         ("c=0.1:0.1:5", "START and STOP are equal"),
         ("c=0.1,0.1", "distinct"),
         ("c=0.01:inf:3", "STOP must be finite"),

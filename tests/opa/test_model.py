@@ -171,8 +171,17 @@ def test_max_steps_must_be_a_whole_number_named_in_the_message(value):
 
 @pytest.mark.parametrize("name", ["rtol", "atol", "max_step", "pulse_width"])
 def test_solver_numbers_are_stored_as_floats(name):
-    opts = SolverOptions(**{name: "0.01"})
-    assert type(getattr(opts, name)) is float
+    import numpy as np
+
+    opts = SolverOptions(**{name: np.float32(0.25)})
+    assert type(getattr(opts, name)) is float and getattr(opts, name) == 0.25
+
+
+@pytest.mark.parametrize("name", ["rtol", "atol", "max_step", "pulse_width"])
+@pytest.mark.parametrize("value", ["0.01", True])
+def test_solver_numbers_refuse_strings_and_bools(name, value):
+    with pytest.raises(ValueError, match=name):
+        SolverOptions(**{name: value})
 
 
 def test_pulse_width_must_be_shorter_than_the_impulse_period():

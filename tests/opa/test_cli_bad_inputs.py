@@ -1,0 +1,340 @@
+"""The hostile-user corpus: every bad input gets one line naming the culprit, exit 2.
+
+Each case runs ``opa-mc`` in process (``opa._cli.main``) under a time bound and checks
+the exit status, that stderr is one line, that it names the parameter, path or value,
+and that no traceback was printed. Valid input that argparse used to refuse (negative
+numbers in exponent notation) must be accepted. The Python API raises ``ValueError``
+naming the argument. Runs that integrate and fail exit 3 with a reason, never NaN with 0.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from opa._cli import main
+
+TIME_LIMIT = 60  # seconds per case: a bad input is refused before any long computing
+
+
+class Timeout(Exception):
+    pass
+
+
+@contextlib.contextmanager
+def time_bound(seconds: int):
+    """Fail a case that runs past ``seconds`` (raised in Python code between kernels)."""
+
+    def handler(signum, frame):
+        raise Timeout(f"still running after {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, handler)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+def run_cli(argv, capsys):
+    """Run ``opa-mc argv``: (exit status, stdout, stderr, seconds)."""
+    start = time.perf_counter()
+    with time_bound(TIME_LIMIT):
+        try:
+            status = main(list(argv))
+        except SystemExit as exc:  # argparse
+            status = exc.code
+    out, err = capsys.readouterr()
+    return status, out, err, time.perf_counter() - start
+
+
+def assert_one_line_error(status, err, names, argv):
+    assert status == 2, f"opa-mc {' '.join(argv)}: exit {status}, stderr {err!r}"
+    assert "Traceback" not in err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, f"opa-mc {' '.join(argv)}: expected one line, got {lines}"
+    for name in names if isinstance(names, tuple) else (names,):
+        assert name in lines[0], f"opa-mc {' '.join(argv)}: {name!r} not named in {lines[0]!r}"
+
+
+DMR = ["simulate", "dmr", "--periods", "2"]
+OPA = ["simulate", "opa", "--periods", "2"]
+MC = ["simulate", "mc", "--periods", "2", "--samples", "64", "--quiet"]
+
+# (argv, what the message must name)
+BAD_CLI = [
+    # model parameters
+    (DMR + ["--eta", "0"], "eta"),
+    (DMR + ["--eta", "1.5"], "eta"),
+    (DMR + ["--omega", "0"], "omega"),
+    (DMR + ["--omega", "nan"], "omega"),
+    (DMR + ["--omega", "-inf"], "omega"),
+    (DMR + ["--mu", "inf"], "mu"),
+    (DMR + ["--n", "0"], "n"),
+    (DMR + ["--omega1", "-1"], "omega1"),
+    (DMR + ["--x0", "1"], "x0"),
+    (DMR + ["--x0", "0", "--v0", "1"], "v0"),
+    (DMR + ["--omega", "x"], "--omega"),
+    (DMR + ["--omega", "1e-300"], "periods"),
+    (DMR + ["--omega1", "1e300"], "omega1"),
+    (DMR + ["--f", "1", "--omega", "1e300"], "omega"),
+    (DMR + ["--preset", "9.9"], "--preset"),
+    # run length and sizes
+    (["simulate", "dmr", "--periods", "1e9"], "periods"),
+    (["simulate", "dmr", "--periods", "0"], "periods"),
+    (["simulate", "dmr", "--periods", "-3"], "periods"),
+    (["simulate", "dmr", "--periods", "nan"], "periods"),
+    (["simulate", "dmr", "--periods", "inf"], "periods"),
+    (DMR + ["--per-period", "0"], "--per-period"),
+    (DMR + ["--per-period", "1.5"], "--per-period"),
+    (["simulate", "dmr", "--periods", "1000", "--per-period", "1000000000"], "output"),
+    (OPA + ["--order", "-1"], "--order"),
+    (OPA + ["--order", "2.5"], "--order"),
+    (OPA + ["--order", "100000"], "order"),
+    (MC + ["--samples", "0"], "--samples"),
+    (MC + ["--samples", "x"], "--samples"),
+    (MC + ["--samples", "1e12"], "samples"),
+    (MC + ["--order", "100000"], "order"),
+    # uncertainty
+    (OPA + ["--sigma", "-0.1"], "sigma"),
+    (OPA + ["--sigma", "nan"], "sigma"),
+    (OPA + ["--mu", "0.005", "--sigma", "0.01"], "allow_negative"),
+    (OPA + ["--uncertain", "f"], "--uncertain"),
+    (OPA + ["--impact-law", "magic"], "--impact-law"),
+    (OPA + ["--truncation", "x"], "--truncation"),
+    (OPA + ["--distribution", "cauchy"], "cauchy"),
+    (OPA + ["--elements", "0"], "element"),
+    (OPA + ["--elements", "many"], "--elements"),
+    (DMR + ["--elements", "4"], "--elements"),
+    (DMR + ["--distribution", "uniform"], "--distribution"),
+    (MC + ["--sampler", "lhs"], "--sampler"),
+    (MC + ["--seed", "-1"], "--seed"),
+    # solver
+    (DMR + ["--rtol", "0"], "rtol"),
+    (DMR + ["--rtol", "2"], "rtol"),
+    (DMR + ["--atol", "nan"], "atol"),
+    (DMR + ["--pulse-width", "0", "--impulse", "pulse"], "pulse_width"),
+    (DMR + ["--pulse-width", "100", "--impulse", "pulse"], "pulse_width"),
+    (DMR + ["--chatter-velocity", "-1"], "chatter_velocity"),
+    (DMR + ["--max-step", "0"], "max_step"),
+    (DMR + ["--impulse", "gauss"], "--impulse"),
+    # output paths, checked before computing
+    (DMR + ["--out", ""], "--out"),
+    (DMR + ["--out", "/proc/opa-mc-test.nc"], "/proc"),
+    (DMR + ["--out", "/"], "--out"),
+    (DMR + ["--out", "/etc/hostname/x.nc"], "/etc/hostname"),
+    (DMR + ["--plot", "/tmp"], "--plot"),
+    (DMR + ["--plot", "run.xyz"], ".xyz"),
+    (DMR + ["--plot", "/proc/opa-mc-test.png"], "/proc"),
+    (["validate", "--outdir", "/proc/opa-mc-test"], "/proc"),
+    (["validate", "--outdir", "/etc/hostname"], "/etc/hostname"),
+    (["validate", "--outdir", ""], "outdir"),
+    (["converge", "--outdir", "/proc/opa-mc-test"], "/proc"),
+    (["reproduce", "fig3", "--outdir", "/etc/hostname"], "/etc/hostname"),
+    (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--out", "/proc/x.nc"], "/proc"),
+    (["stability", "dmr", "--out", "/proc/x.nc"], "/proc"),
+    # sweeps and grids
+    (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:1000000000"], "COUNT"),
+    (["bifurcation", "dmr", "--sweep", "q=0.01:0.1:3"], "'q'"),
+    (["bifurcation", "dmr", "--sweep", "c=0.1:0.1:3"], "START"),
+    (["bifurcation", "dmr", "--sweep", "c"], "--sweep"),
+    (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--periods", "10"], "--periods"),
+    (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--workers", "0"], "--workers"),
+    (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--record", "0"], "--record"),
+    (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--transient", "1e9"], "span"),
+    (["stability", "dmr", "--sweep", "c=0.1:0.02:0"], "COUNT"),
+    (["stability", "dmr", "--t0", "nan"], "t0"),
+    (["stability", "dmr", "--t0", "inf"], "t0"),
+    (["stability", "dmr", "--t0", "1e300"], "t0"),
+    (["validate", "--sigmas", "0.01,0.01"], "--sigmas"),
+    (["validate", "--sigmas", "x"], "--sigmas"),
+    (["validate", "--sigmas", "-0.01"], "sigmas"),
+    (["validate", "--orders", "8:0"], "--orders"),
+    (["validate", "--orders", "0:100000"], "--orders"),
+    (["validate", "--horizons", "1e9"], "horizon"),
+    (["validate", "--samples", "10"], "samples"),
+    (["validate", "--sweep", "omega=3:4:100000000"], "--sweep"),
+    (["validate", "--config", "/nonexistent/opa-mc.toml"], "/nonexistent/opa-mc.toml"),
+    (["converge", "--budgets", "8:0"], "--budgets"),
+    (["converge", "--sigma", "-1"], "sigma"),
+    # flags
+    (["simulate", "dmr", "--no-such-flag"], "--no-such-flag"),
+    (["simulate", "fem"], "fem"),
+    (["reproduce", "fig99"], "fig99"),
+]
+
+
+@pytest.mark.parametrize("argv,names", BAD_CLI, ids=[" ".join(a) for a, _ in BAD_CLI])
+def test_bad_input_gets_one_line_and_exit_2(argv, names, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, out, err, seconds = run_cli(argv, capsys)
+    assert_one_line_error(status, err, names, argv)
+    assert seconds < TIME_LIMIT
+
+
+def write(tmp_path, name, content: bytes | str):
+    path = tmp_path / name
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    return str(path)
+
+
+BAD_TOML = [
+    ('sigmas = "0.01"\n', "sigmas"),
+    ("model = 3\n", "model"),
+    ('plots = "no"\n', "plots"),
+    ("samples = 1e3\n", "samples"),
+    ("sigmas = [0.01, 0.01]\n", "sigmas"),
+    ("[model]\neta = 2\n", "eta"),
+    ("[solver]\nrtol = true\n", "rtol"),
+    ("[model]\nomega = true\n", "omega"),
+    ("colour = 1\n", "colour"),
+    ("sigmas = [0.01,\n", "TOML"),
+]
+
+
+@pytest.mark.parametrize("content,name", BAD_TOML, ids=[c for c, _ in BAD_TOML])
+def test_bad_config_file(content, name, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = write(tmp_path, "bad.toml", content)
+    status, out, err, _ = run_cli(["validate", "--config", path], capsys)
+    assert_one_line_error(status, err, name, ["validate", "--config", path])
+
+
+def test_binary_config_file_is_named(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = write(tmp_path, "binary.toml", bytes(range(256)))
+    status, out, err, _ = run_cli(["validate", "--config", path], capsys)
+    assert_one_line_error(status, err, path, ["validate", "--config", path])
+
+
+@pytest.mark.parametrize("argv", [
+    DMR + ["--a", "-1e-3"],
+    DMR + ["--x0", "-1e-9"],
+    DMR + ["--v0", "-2.5E+0"],
+])
+def test_negative_numbers_in_exponent_notation_are_values(argv, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, out, err, _ = run_cli(argv + ["--out", "run.nc"], capsys)
+    assert status == 0, err
+    import xarray as xr
+
+    with xr.open_dataset(tmp_path / "run.nc") as ds:
+        flag, value = argv[-2].lstrip("-"), float(argv[-1])
+        assert ds.attrs[flag] == value
+        assert np.isfinite(ds.x.values).all()
+
+
+@pytest.mark.parametrize("argv", [
+    DMR + ["--mu", "1e300"],
+    DMR + ["--v0", "1e200"],
+    DMR + ["--f", "1e300"],
+    DMR + ["--c", "1e300"],
+    OPA + ["--mu", "1e300"],
+    MC + ["--mu", "1e300"],
+    ["simulate", "dmr", "--preset", "3.1", "--F0", "1e12", "--periods", "5"],
+    ["simulate", "dmr", "--c", "-1", "--periods", "50"],
+])
+def test_divergence_exits_3_and_writes_nothing(argv, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, out, err, seconds = run_cli(argv + ["--out", "run.nc"], capsys)
+    assert status == 3, f"exit {status}: {out} {err}"
+    assert "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "run.nc").exists()
+    assert seconds < 30
+
+
+def test_failed_output_path_costs_no_computing(capsys, tmp_path, monkeypatch):
+    """The path is checked first: a run that would take minutes is refused at once."""
+    monkeypatch.chdir(tmp_path)
+    status, out, err, seconds = run_cli(
+        ["simulate", "mc", "--samples", "100000", "--periods", "1000", "--out",
+         "/proc/none.nc"], capsys)
+    assert status == 2 and seconds < 10
+
+
+# --- the Python API: ValueError naming the argument -------------------------------------
+
+def _api_cases():
+    from compare import ValidateConfig
+    from mc import simulate_mc
+    from opa import Oscillator, SolverOptions, simulate_dmr, simulate_opa
+    from opa._model import Uncertainty
+
+    return [
+        (lambda: simulate_dmr("x"), "oscillator"),
+        (lambda: simulate_dmr(options="fast"), "options"),
+        (lambda: simulate_opa(Oscillator(), order="4"), "order"),
+        (lambda: simulate_opa(Oscillator(), order=True), "order"),
+        (lambda: simulate_dmr(Oscillator(), periods=math.nan), "periods"),
+        (lambda: simulate_dmr(Oscillator(), periods="10"), "periods"),
+        (lambda: simulate_dmr(Oscillator(), per_period=0), "per_period"),
+        (lambda: simulate_dmr(Oscillator(), times=[0.0, math.inf]), "times"),
+        (lambda: simulate_dmr(Oscillator(), times=["a"]), "times"),
+        (lambda: simulate_dmr(Oscillator(omega=1e-300)), "periods"),
+        (lambda: simulate_mc(Oscillator(), samples=10**12), "samples"),
+        (lambda: simulate_mc(Oscillator(), samples=2.5), "samples"),
+        (lambda: simulate_mc(Oscillator(), samples=200_000, periods=1000, per_period=100,
+                             keep_paths=True), "keep_paths"),
+        (lambda: Oscillator(omega=True), "omega"),
+        (lambda: Oscillator(mu="0.8"), "mu"),
+        (lambda: Oscillator(eta=np.nan), "eta"),
+        (lambda: SolverOptions(rtol=True), "rtol"),
+        (lambda: SolverOptions(impulse_at_zero="no"), "impulse_at_zero"),
+        (lambda: SolverOptions(max_step=math.nan), "max_step"),
+        (lambda: Uncertainty(0.01, "mu", allow_negative="yes"), "allow_negative"),
+        (lambda: ValidateConfig(sigmas=0.01), "sigmas"),
+        (lambda: ValidateConfig(sigmas=(0.01, 0.01)), "sigmas"),
+        (lambda: ValidateConfig(plots="no"), "plots"),
+        (lambda: ValidateConfig(samples=True), "samples"),
+    ]
+
+
+def test_api_bad_arguments_raise_value_error_naming_them():
+    failures = []
+    for i, (call, name) in enumerate(_api_cases()):
+        with time_bound(TIME_LIMIT):
+            try:
+                call()
+            except ValueError as err:
+                if name not in str(err):
+                    failures.append(f"case {i}: {name!r} not in {err}")
+            except Exception as err:  # noqa: BLE001 -- report every wrong kind of failure
+                failures.append(f"case {i}: {type(err).__name__}: {err}")
+            else:
+                failures.append(f"case {i}: accepted, expected a ValueError naming {name!r}")
+    assert not failures, "\n".join(failures)
+
+
+def test_api_divergence_raises_and_returns_no_nan():
+    from opa import Oscillator, simulate_dmr, simulate_opa
+    from opa._simulate import SimulationError
+
+    for call in (lambda: simulate_dmr(Oscillator(mu=1e300), periods=2),
+                 lambda: simulate_opa(Oscillator(mu=1e300), sigma=0.01, periods=2)):
+        with time_bound(TIME_LIMIT), pytest.raises(SimulationError):
+            call()
+
+
+def test_unknown_errors_are_one_line_too(capsys, monkeypatch):
+    """A bug is reported in one line with exit 1 (the traceback on request)."""
+    import opa._cli as cli
+
+    def boom(args):
+        raise RuntimeError("an unforeseen failure\nwith two lines")
+
+    monkeypatch.setattr(cli, "cmd_simulate", boom)
+    parser_main = cli.main
+    monkeypatch.delenv("OPA_MC_TRACEBACK", raising=False)
+    status, out, err, _ = run_cli(["simulate", "dmr"], capsys)
+    assert status == 1
+    assert err.count("\n") == 1 and "RuntimeError: an unforeseen failure with two lines" in err
+    monkeypatch.setenv("OPA_MC_TRACEBACK", "1")
+    with pytest.raises(RuntimeError):
+        parser_main(["simulate", "dmr"])
