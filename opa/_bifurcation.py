@@ -27,13 +27,13 @@ import math
 import os
 import shutil
 import sys
-import tempfile
+import warnings
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import xarray as xr
 
-from opa._dataset import provenance_attrs, write_netcdf
+from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
 from opa._model import (
     check_order,
     PARAMETER_NAMES,
@@ -300,33 +300,32 @@ def _part_path(parts: str, index: int) -> str:
     return os.path.join(parts, f"point-{index:05d}.npz")
 
 
-def _atomic_write(path: str, write) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=os.path.splitext(path)[1],
-                               dir=os.path.dirname(path))
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.remove(tmp)
-        raise
-
-
 def _write_part(parts: str, result: dict) -> None:
     arrays = {k: np.asarray(v) for k, v in result.items()}
-    _atomic_write(_part_path(parts, result["index"]), lambda fh: np.savez(fh, **arrays))
+    atomic_write(_part_path(parts, result["index"]), lambda tmp: np.savez(tmp, **arrays),
+                 suffix=".npz", clean=False)
 
 
 def _read_part(path: str) -> dict:
-    with np.load(path, allow_pickle=False) as z:
+    # our own handle: np.load leaks its file when the archive is damaged
+    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
         out = {k: z[k] for k in z.files}
     for k, v in out.items():
         if v.ndim == 0:
             out[k] = v.item()
     return out
+
+
+def _write_text(path: str, text: str) -> None:
+    with open(path, "w") as fh:
+        fh.write(text)
+
+
+def _set_aside(path: str, why: str) -> None:
+    """Move a damaged part to ``<path>.bad`` (replacing an older one) and say so."""
+    os.replace(path, path + ".bad")
+    warnings.warn(f"sweep part {path} {why}; moved aside to {os.path.basename(path)}.bad, "
+                  f"computing it again", RuntimeWarning, stacklevel=3)
 
 
 def _open_parts(out: str | None, manifest: dict) -> tuple[str | None, dict]:
@@ -336,8 +335,12 @@ def _open_parts(out: str | None, manifest: dict) -> tuple[str | None, dict]:
     parts = _parts_dir(out)
     path = os.path.join(parts, _MANIFEST)
     if os.path.exists(path):
-        with open(path) as fh:
-            old = json.load(fh)
+        try:
+            with open(path) as fh:
+                old = json.load(fh)
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+            raise ValueError(f"{path} cannot be read: remove {parts} to start the sweep "
+                             f"over") from None
         if old != manifest:
             keys = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
             raise ValueError(
@@ -347,12 +350,21 @@ def _open_parts(out: str | None, manifest: dict) -> tuple[str | None, dict]:
     else:
         os.makedirs(parts, exist_ok=True)
         text = json.dumps(manifest, indent=1, sort_keys=True)
-        _atomic_write(path, lambda fh: fh.write(text.encode()))
+        atomic_write(path, lambda tmp: _write_text(tmp, text), clean=False)
+    clean_stale_temporaries(parts)
     done = {}
     for name in sorted(os.listdir(parts)):
         if name.startswith("point-") and name.endswith(".npz"):
-            result = _read_part(os.path.join(parts, name))
-            done[int(result["index"])] = result
+            try:
+                result = _read_part(os.path.join(parts, name))
+                index = int(result["index"])
+            except Exception as err:  # noqa: BLE001 -- any damage: recompute the point
+                _set_aside(os.path.join(parts, name), f"cannot be read ({type(err).__name__})")
+                continue
+            if name != os.path.basename(_part_path(parts, index)):
+                _set_aside(os.path.join(parts, name), f"holds point {index}")
+                continue
+            done[index] = result
     return parts, done
 
 

@@ -138,6 +138,9 @@ def _output_flags(parser: argparse.ArgumentParser) -> None:
     o.add_argument("--out", default=None, metavar="FILE.nc", help="write the dataset here")
     o.add_argument("--plot", default=None, metavar="FILE.png", help="write a figure here")
     o.add_argument("--quiet", action="store_true", help="no progress bars or summaries")
+    o.add_argument("--keep-parts", action="store_true",
+                   help="simulate mc: keep OUT.parts/ (the finished chunks, from which a "
+                        "killed run resumes) after writing OUT")
 
 
 def oscillator_from(args) -> Oscillator:
@@ -218,11 +221,16 @@ def cmd_simulate(args) -> int:
     else:
         from mc import simulate_mc
 
+        # with --out, finished chunks are kept in OUT.parts/ so a killed run resumes
+        parts = f"{args.out}.parts" if args.out else None
         ds = simulate_mc(osc, sigma=args.sigma, samples=args.samples, sampler=args.sampler,
                          seed=args.seed, order=args.order, uncertain=args.uncertain,
                          allow_negative=args.allow_negative, periods=args.periods,
                          per_period=args.per_period, options=opts, scheduler=args.scheduler,
-                         progress=not args.quiet, distribution=args.distribution)
+                         progress=not args.quiet, distribution=args.distribution,
+                         checkpoint=parts, connect_timeout=args.connect_timeout,
+                         log=None if args.quiet else
+                         (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
         sem = float(ds.x_sem[-1])
         final = (f"E[x] = {float(ds.x_mean[-1]):.8g} ± {sem:.2g} (SE), Var[x] = "
                  f"{float(ds.x_var[-1]):.4g}; impacts per sample "
@@ -230,6 +238,10 @@ def cmd_simulate(args) -> int:
     elapsed = time.perf_counter() - start
     if args.out:
         write_netcdf(ds, args.out)
+        if args.model == "mc" and not args.keep_parts:
+            from mc import remove_checkpoint
+
+            remove_checkpoint(f"{args.out}.parts")
     if args.plot:
         plot_run(ds, args.plot, per_period=args.per_period)
     if not args.quiet:
@@ -260,6 +272,9 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("model", choices=("dmr", "opa", "mc"))
     _model_flags(sim)
     _common_flags(sim)
+    sim.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
+                     help="simulate mc: seconds to wait for the Dask scheduler to answer "
+                          "(default 5)")
     _element_flags(sim)
     _output_flags(sim)
     sim.set_defaults(func=cmd_simulate)

@@ -16,6 +16,8 @@ import subprocess
 import sys
 import time
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -203,6 +205,37 @@ def test_interrupted_sweep_resumes_without_loss_or_rework(tmp_path, monkeypatch,
         assert written == [0, 1, 2]
     elif continuation == "backward":
         assert written == [5, 4, 3]
+
+
+def test_damaged_parts_are_set_aside_and_recomputed(tmp_path, monkeypatch):
+    """A truncated, an empty and a misnamed part, plus a killed writer's temporary: the
+    rerun names each, moves it to .bad, recomputes exactly those points and loses nothing."""
+    osc = preset("3.1")
+    values = np.linspace(0.02, 0.08, 5)
+    kw = {"transient": 30, "record": 10, "per_period": 8, "workers": 1}
+    reference = sweep("dmr", "c", values, osc, **kw)
+    out = tmp_path / "sweep.nc"
+    with monkeypatch.context() as m:
+        interrupt_after(m, 4)
+        with pytest.raises(Interrupt):
+            sweep("dmr", "c", values, osc, out=out, **kw)
+    parts = str(out) + ".parts"
+    point = [os.path.join(parts, f"point-{i:05d}.npz") for i in range(5)]
+    data = Path(point[0]).read_bytes()
+    Path(point[0]).write_bytes(data[: len(data) // 2])  # truncated
+    Path(point[1]).write_bytes(b"")  # empty
+    os.replace(point[2], os.path.join(parts, "point-00009.npz"))  # holds point 2
+    stale = os.path.join(parts, ".tmp-opa-mc-999999999-x.npz")
+    Path(stale).write_bytes(b"")  # a temporary of a writer that is gone
+    with monkeypatch.context() as m:
+        computed = count_computed(m)
+        with pytest.warns(RuntimeWarning, match="moved aside") as caught:
+            resumed = sweep("dmr", "c", values, osc, out=out, keep_parts=True, **kw)
+    assert sorted(computed) == [0, 1, 2, 4]
+    assert len(caught) == 3
+    assert os.path.exists(point[0] + ".bad") and os.path.exists(point[1] + ".bad")
+    assert not os.path.exists(stale)
+    assert_same(resumed, reference)
 
 
 def test_resume_refuses_different_settings(tmp_path, monkeypatch):
