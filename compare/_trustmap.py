@@ -42,7 +42,6 @@ import math
 import numbers
 import os
 import re
-import tempfile
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -53,7 +52,8 @@ import xarray as xr
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
 from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
-from opa._dataset import check_memory, provenance_attrs, write_netcdf
+from opa._dataset import (atomic_write, check_memory, clean_stale_temporaries, provenance_attrs,
+                          write_netcdf)
 from opa._model import (PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
                         preset, time_grid)
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
@@ -304,9 +304,6 @@ def noise_floor(options: SolverOptions) -> float:
 
 # Temporaries are named .tmp-opa-mc-<pid>-<random><suffix> (as opa._dataset names them), so
 # that the next run can tell whether their writer is still alive.
-_TEMP_PREFIX = ".tmp-opa-mc-"
-_TEMPORARY = re.compile(re.escape(_TEMP_PREFIX) + r"(\d+)-")
-_STALE_AGE = 60.0  # seconds untouched after which a temporary with no pid is stale
 
 
 class Parts:
@@ -329,32 +326,12 @@ class Parts:
         self.set_aside = 0
 
     def clean(self) -> list[str]:
-        """Remove the temporaries that killed writers left: those that name a process
-        that is no longer running, and those without a pid that are empty or untouched
-        for a minute. Returns their names."""
-        removed = []
-        try:
-            entries = list(os.scandir(self.directory))
-        except OSError:
-            return removed
-        for entry in entries:
-            if not entry.name.startswith(".tmp-"):
-                continue
-            try:
-                match = _TEMPORARY.match(entry.name)
-                if match:
-                    stale = not _running(int(match[1]))
-                else:
-                    info = entry.stat(follow_symlinks=False)
-                    stale = info.st_size == 0 or time.time() - info.st_mtime > _STALE_AGE
-                if stale and entry.is_file(follow_symlinks=False):
-                    os.remove(entry.path)
-                    removed.append(entry.name)
-            except OSError:  # gone already, or not ours to remove
-                continue
+        """Remove the temporaries that killed writers left (see
+        :func:`opa._dataset.clean_stale_temporaries`). Returns their names."""
+        removed = sorted(os.path.basename(p) for p in clean_stale_temporaries(self.directory))
         if removed:
             self.log(f"parts: removed {len(removed)} temporary file(s) an interrupted run "
-                     f"left behind: {', '.join(sorted(removed))}")
+                     f"left behind: {', '.join(removed)}")
         return removed
 
     def dataset(self, stem: str, key: str, compute, *, check=None) -> xr.Dataset:
@@ -422,25 +399,7 @@ class Parts:
         return None
 
     def _write(self, path, write):
-        suffix = os.path.splitext(path)[1]
-        fd, tmp = tempfile.mkstemp(prefix=f"{_TEMP_PREFIX}{os.getpid()}-", suffix=suffix,
-                                   dir=self.directory)
-        os.close(fd)
-        try:
-            write(tmp)
-            os.chmod(tmp, 0o666 & ~_umask())  # what open() would give, not mkstemp's 0o600
-            fd = os.open(tmp, os.O_RDONLY)
-            try:
-                os.fsync(fd)  # complete on disk before it takes the name
-            finally:
-                os.close(fd)
-            os.replace(tmp, path)
-        except BaseException:
-            try:
-                os.remove(tmp)
-            except OSError:
-                pass
-            raise
+        atomic_write(path, write, suffix=os.path.splitext(path)[1], clean=False)
 
 
 def _read_dataset(path: str) -> xr.Dataset:
@@ -462,31 +421,6 @@ def _stored_key(content) -> str | None:
 
 def _plain(value):
     return value.item() if isinstance(value, np.generic) else value
-
-
-def _umask() -> int:
-    try:  # Linux tells without changing it
-        with open("/proc/self/status", encoding="ascii") as status:
-            for line in status:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    old = os.umask(0o077)
-    os.umask(old)
-    return old
-
-
-def _running(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # someone else's process
-        return True
-    return True
 
 
 @dataclass

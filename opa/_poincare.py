@@ -28,6 +28,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
+from opa._model import _finite
+
 #: default relative tolerance of the stroboscopic repeat, see ``detect_period``
 PERIOD_TOL = 1e-4
 #: an impact slower than this counts as grazing
@@ -42,15 +44,7 @@ MAX_IMPULSE_TIMES = 10_000_000
 
 def _optional_time(name: str, value) -> float | None:
     """None, or ``value`` as a finite float (a NaN bound would silently select nothing)."""
-    if value is None:
-        return None
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value}")
-    return value
+    return None if value is None else _finite(name, value)
 
 
 # --------------------------------------------------------------------------- array layer

@@ -31,6 +31,7 @@ import numpy as np
 
 from opa import _variational as V
 from opa._model import (
+    _finite,
     check_order,
     IMPACT_LAWS,
     PARAMETER_NAMES,
@@ -252,12 +253,7 @@ def check_time(name: str, value, period: float) -> float:
     A NaN or infinite time never ends an integration, and near a huge time the round-off
     of t exceeds the steps the motion needs (t + T == t for t = 1e300): refuse both.
     """
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value}")
+    value = _finite(name, value)
     floor = STEP_FLOOR * abs(value)
     if floor > TIME_RESOLUTION * period or value + period == value:
         limit = TIME_RESOLUTION * period / STEP_FLOOR

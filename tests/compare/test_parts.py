@@ -4,6 +4,7 @@ that is damaged, foreign or half-written is named, set aside and computed again.
 import os
 import shutil
 import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -162,7 +163,8 @@ def test_temporaries_of_killed_writers_are_removed(clean, copy):
     dead = parts / f".tmp-opa-mc-{_dead_pid()}-x1y2.nc"
     dead.write_bytes(b"half a netCDF file")
     empty = parts / ".tmp-a8b7c6.nc"  # an older version's name, no pid: removed when empty
-    empty.write_bytes(b"")
+    empty.write_bytes(b"")  # and untouched for a minute (a writer of that version is gone)
+    os.utime(empty, (time.time() - 120, time.time() - 120))
     live = parts / f".tmp-opa-mc-{os.getpid()}-z9.npz"  # a writer still running
     live.write_bytes(b"")
     young = parts / ".tmp-d5e4f3.nc"  # no pid, written to a moment ago

@@ -338,3 +338,43 @@ def test_unknown_errors_are_one_line_too(capsys, monkeypatch):
     monkeypatch.setenv("OPA_MC_TRACEBACK", "1")
     with pytest.raises(RuntimeError):
         parser_main(["simulate", "dmr"])
+
+
+# --- the real entry point, as a user's shell runs it ---------------------------------------
+
+def _run_process(argv, cwd, timeout=TIME_LIMIT):
+    import subprocess
+    import sys
+
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-c", "import sys; from opa._cli import main; "
+                           "sys.exit(main())", *argv], cwd=cwd, capture_output=True,
+                          text=True, timeout=timeout)
+    return proc.returncode, proc.stdout, proc.stderr, time.perf_counter() - start
+
+
+QUICK_PROCESS = [
+    (DMR + ["--eta", "0"], "eta"),
+    (DMR + ["--out", "/proc/opa-mc-test.nc"], "/proc"),
+    (["stability", "dmr", "--t0", "nan"], "t0"),
+    (MC + ["--scheduler", "tcp://127.0.0.1:1"], "tcp://127.0.0.1:1"),
+]
+
+
+@pytest.mark.parametrize("argv,names", QUICK_PROCESS, ids=[" ".join(a) for a, _ in QUICK_PROCESS])
+def test_real_process_prints_one_line(argv, names, tmp_path):
+    status, out, err, seconds = _run_process(argv, tmp_path)
+    assert_one_line_error(status, err, names, argv)
+
+
+@pytest.mark.slow
+def test_whole_corpus_in_real_processes(tmp_path):
+    """Every bad input of the corpus, each in its own process: exit 2, one line, in time."""
+    failures = []
+    for argv, names in BAD_CLI:
+        status, out, err, seconds = _run_process(argv, tmp_path)
+        try:
+            assert_one_line_error(status, err, names, argv)
+        except AssertionError as exc:
+            failures.append(str(exc).splitlines()[0])
+    assert not failures, "\n".join(failures)
