@@ -5,8 +5,8 @@ variants, horizons 10 and 50, bisection of sigma*, split search) in at most 5 mi
 cores with a cold numba cache and at most 2 minutes warm. *Cold*: an empty
 ``NUMBA_CACHE_DIR`` (every kernel compiles). *Warm*: the cache the cold run filled, and a
 fresh output folder (every Monte Carlo run and OPA run is computed again; only the
-compiled code is reused). *Resume*: a rerun into the same folder (finished Monte Carlo runs
-are read back from ``parts/``).
+compiled code is reused). *Resume*: a rerun into the same folder (every finished Monte Carlo
+ensemble, OPA run, split scan and frontier run is read back from ``parts/``).
 
 The full default is slow (minutes) and marked ``slow``; the smoke mode (CI) runs a tiny map
 through the same path, cold then warm, to keep the harness honest.
