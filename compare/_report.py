@@ -62,7 +62,7 @@ def _laws(ds) -> list[int]:
 
 
 def _vals(ds):
-    """The swept parameter's coordinate (named after the parameter, SPEC section 5)."""
+    """The swept parameter's coordinate (named after the parameter, docs/datasets.md)."""
     return ds[ds.attrs["parameter"]]
 
 

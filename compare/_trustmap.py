@@ -679,7 +679,7 @@ class _Map:
             self.log("cost-accuracy frontier at the largest sigma ...")
             ds = xr.merge([ds, frontier(cfg, parts=self.parts)], combine_attrs="drop_conflicts")
         ds.attrs.update(_attrs(cfg))
-        ds = ds.rename({"value": cfg.parameter})  # the sweep dimension (SPEC section 5)
+        ds = ds.rename({"value": cfg.parameter})  # the sweep dimension (docs/datasets.md)
         # what this run did (the rest of the dataset is the same for a rerun)
         ds.attrs["wall_seconds"] = time.perf_counter() - start
         ds.attrs["mc_runs_computed"] = self.mc_runs

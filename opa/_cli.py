@@ -1,4 +1,4 @@
-"""The ``opa-mc`` command line (SPEC section 6).
+"""The ``opa-mc`` command line (``opa-mc COMMAND --help`` explains every flag).
 
 Every model parameter is a flag of its own name (``--omega 3.98 --F0 0``); the common
 flags are shared by every subcommand. User mistakes get one line on stderr naming the

@@ -1,4 +1,4 @@
-"""Dataset conventions shared by every model (SPEC section 5): attributes, safe I/O and
+"""Dataset conventions shared by every model (docs/datasets.md): attributes, safe I/O and
 the memory budget that sizes are checked against before any work starts."""
 
 from __future__ import annotations

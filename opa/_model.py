@@ -187,7 +187,7 @@ def preset(name: str, **changes) -> Oscillator:
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """Numerical and modelling choices of the integrator (SPEC section 3-4).
+    """Numerical and modelling choices of the integrator (README, 'Choices the paper leaves open').
 
     Attributes
     ----------
@@ -278,7 +278,7 @@ class Uncertainty:
 
 
 def time_grid(omega: float, periods: float, per_period: int):
-    """Output times t_j = j (2 pi / omega) / K, j = 0 .. P K (SPEC section 6)."""
+    """Output times t_j = j (2 pi / omega) / K, j = 0 .. P K (the ``--per-period`` grid)."""
     import numpy as np
 
     periods = _finite("periods", periods)

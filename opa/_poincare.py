@@ -15,7 +15,7 @@ impact) and period doubling along a sweep (period ``p -> 2p`` between neighbours
 The module has two layers: array functions (``detect_period``, ``free_flight_maxima``,
 ``period_doubling``, ...) that never see xarray, and labelled wrappers
 (``phase_section``, ``constraint_section``, ``identify_motion``) that take the ``dmr``,
-``opa`` and ``mc`` datasets of SPEC section 5. For the OPA system the sections are those
+``opa`` and ``mc`` datasets of docs/datasets.md. For the OPA system the sections are those
 of the mean ``x_0`` (the EMR); for a Monte Carlo ensemble those of the mean path, which
 has no impacts of its own (each sample hits the wall at its own time).
 """

@@ -2,7 +2,7 @@
 
 This layer validates input, packs it into the flat vectors the compiled kernel takes,
 turns the kernel's status codes into exceptions, and builds the ``dmr`` and ``opa``
-datasets of SPEC section 5.
+datasets of docs/datasets.md.
 """
 
 from __future__ import annotations
@@ -217,7 +217,7 @@ def simulate_dmr(
     Returns
     -------
     xarray.Dataset with ``x(time)``, ``v(time)``, ``impact_time(impact)``,
-    ``impact_velocity(impact)`` and the provenance attributes of SPEC section 5.
+    ``impact_velocity(impact)`` and the provenance attributes of docs/datasets.md.
     States at an impulse time are recorded just after the impulse (right-continuous).
 
     Examples

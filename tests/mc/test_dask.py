@@ -1,6 +1,6 @@
 """Tests for the Dask backend of mc.simulate_mc: failures of the cluster end the run with
 one clear line instead of a traceback or a silent wait, and a Dask run checkpoints and
-resumes like a local one, bit for bit (SPEC section 7)."""
+resumes like a local one, bit for bit (README, 'Errors, limits and resuming')."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """Tests for opa._dataset: atomic netCDF files with the umask's mode, the cleaning of
-temporaries that crashed writes left behind, and the memory budget (SPEC section 7)."""
+temporaries that crashed writes left behind, and the memory budget (README, 'Errors, limits and resuming')."""
 
 from __future__ import annotations
 
