@@ -3,7 +3,10 @@
 The MC statistics carry their own standard errors, so every error is read against the
 MC noise: an OPA mean is "within MC noise" at time t when
 ``|x_0(t) - E_MC[x](t)| <= z * SE(t) + floor`` (``floor`` absorbs the integrator's
-tolerance where the ensemble has not spread yet, e.g. at t = 0).
+tolerance where the ensemble has not spread yet, e.g. at t = 0), and likewise the
+variance against ``x_var_sem`` and each coefficient ``x_i = E[x U_i]`` against
+``x_coef_sem``. A NaN standard error (a Gauss-quadrature ensemble has no sampling error)
+leaves the band at ``floor``.
 """
 
 from __future__ import annotations
@@ -21,34 +24,91 @@ def _check_same_grid(a: xr.Dataset, b: xr.Dataset) -> None:
         )
 
 
+def _within(err: np.ndarray, sem: np.ndarray, z: float, floor: float) -> np.ndarray:
+    """1 where ``|err| <= z sem + floor`` (a NaN sem counts as no noise), else 0."""
+    noise = np.where(np.isfinite(sem), z * sem, 0.0) + floor
+    return (np.abs(err) <= noise).astype(np.int8)
+
+
 def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
                  floor: float = 1e-7) -> xr.Dataset:
     """Pointwise comparison of an ``opa`` dataset with an ``mc`` dataset.
 
+    Each OPA statistic is compared with its MC estimate and the error is read against that
+    estimate's standard error: the verdict ``*within_noise`` is 1 where
+
+        |err| <= z SE + floor,
+
+    i.e. where the difference cannot be told from the MC noise at ``z`` standard errors
+    (a NaN SE, from a Gauss-quadrature ensemble, leaves only ``floor``).
+
+    Parameters
+    ----------
+    opa_ds : ``opa`` dataset: ``x_mean, x_var (time)``, ``x_coef (order, time)``.
+    mc_ds : ``mc`` dataset of :func:`mc.simulate_mc` on the same time grid: the estimates
+        ``x_mean, x_var``, ``x_coef`` and their standard errors ``x_sem, x_var_sem``,
+        ``x_coef_sem``.
+    z : width of the noise band in standard errors.
+    floor : absolute tolerance added to the band (the integrators' accuracy where the
+        ensemble has no spread, e.g. the mean at t = 0).
+
     Returns
     -------
-    xarray.Dataset with
-    ``err_mean(time)`` = x_0 - E_MC[x], ``mc_sem(time)``, ``err_var(time)`` = OPA
-    variance - MC variance, ``err_coef(order, time)`` for the orders both carry, and
-    ``within_noise(time)`` (1 where ``|err_mean| <= z SE + floor``).
+    xarray.Dataset with, for the mean, ``err_mean(time)`` = x_0 - E_MC[x],
+    ``mc_sem(time)`` and ``within_noise(time)``; for the variance ``err_var(time)`` =
+    OPA variance - MC variance, ``var_sem(time)`` and ``var_within_noise(time)``; for
+    the coefficients of the orders both carry ``err_coef(order, time)`` = x_i -
+    E_MC[x U_i], ``coef_sem(order, time)`` and ``coef_within_noise(order, time)``.
+
+    Raises
+    ------
+    ValueError
+        Different time grids, or an ``mc`` dataset without the standard errors (written
+        before ``x_coef_sem`` existed: run the ensemble again).
+
+    Examples
+    --------
+    At t = 0 every sample starts at x0, so E[x U_i] = 0 for i >= 1; the MC estimate
+    x0 mean(U_i(xi)) is not, but its error lies within the noise::
+
+        cmp = compare_runs(simulate_opa(osc, sigma=0.05, order=4),
+                           simulate_mc(osc, sigma=0.05, samples=256, sampler="random"))
+        cmp.err_coef[1:, 0]           # up to ~0.1
+        cmp.coef_within_noise[1:, 0]  # all 1
     """
     _check_same_grid(opa_ds, mc_ds)
+    missing = [name for name in ("x_sem", "x_var_sem", "x_coef_sem") if name not in mc_ds]
+    if missing:
+        raise ValueError(f"the mc dataset lacks the standard errors {missing} (written by "
+                         f"an older simulate_mc?); run the ensemble again")
     n = min(opa_ds.sizes["order"], mc_ds.sizes["order"])
     err = opa_ds.x_mean.values - mc_ds.x_mean.values
     sem = mc_ds.x_sem.values
-    noise = np.where(np.isfinite(sem), z * sem, 0.0) + floor
+    err_var = opa_ds.x_var.values - mc_ds.x_var.values
+    var_sem = mc_ds.x_var_sem.values
+    err_coef = opa_ds.x_coef.values[:n] - mc_ds.x_coef.values[:n]
+    coef_sem = mc_ds.x_coef_sem.values[:n]
+    band = f"{z} SE + {floor}"
     ds = xr.Dataset(
         {
             "err_mean": ("time", err, {"long_name": "x_0 - E_MC[x]", "units": "1"}),
             "mc_sem": ("time", sem, {"long_name": "MC standard error of E[x]", "units": "1"}),
-            "err_var": ("time", opa_ds.x_var.values - mc_ds.x_var.values,
+            "err_var": ("time", err_var,
                         {"long_name": "OPA variance - MC variance", "units": "1"}),
-            "err_coef": (("order", "time"),
-                         opa_ds.x_coef.values[:n] - mc_ds.x_coef.values[:n],
+            "var_sem": ("time", var_sem,
+                        {"long_name": "MC standard error of Var[x]", "units": "1"}),
+            "err_coef": (("order", "time"), err_coef,
                          {"long_name": "x_i - E_MC[x U_i]", "units": "1"}),
-            "within_noise": ("time", (np.abs(err) <= noise).astype(np.int8),
-                             {"long_name": f"1 where |err_mean| <= {z} SE + {floor}",
-                              "units": "1"}),
+            "coef_sem": (("order", "time"), coef_sem,
+                         {"long_name": "MC standard error of E[x U_i]", "units": "1"}),
+            "within_noise": ("time", _within(err, sem, z, floor),
+                             {"long_name": f"1 where |err_mean| <= {band}", "units": "1"}),
+            "var_within_noise": ("time", _within(err_var, var_sem, z, floor),
+                                 {"long_name": f"1 where |err_var| <= {band}",
+                                  "units": "1"}),
+            "coef_within_noise": (("order", "time"), _within(err_coef, coef_sem, z, floor),
+                                  {"long_name": f"1 where |err_coef| <= {band}",
+                                   "units": "1"}),
         },
         coords={"time": opa_ds.time, "order": np.arange(n)},
         attrs={"z": float(z), "floor": float(floor), "omega": float(opa_ds.attrs["omega"])},

@@ -13,7 +13,9 @@ uncertain parameter, the sampler, seed, samples and replicates, the order, the o
 times, the law of xi, the chunk bounds and keep_paths, plus digests of the sample points
 and weights (so a change in the sampler's library is noticed too). A rerun with the same
 directory and an identical manifest loads the finished chunks; any difference means the
-directory belongs to another run and is refused. The chunks are merged in their fixed
+directory belongs to another run and is refused. The manifest also carries the format
+of the chunk files (``FORMAT``): a directory written by a version whose chunks hold other
+fields is refused the same way, naming both formats. The chunks are merged in their fixed
 order whether loaded or computed, so the resumed result is bit-identical.
 """
 
@@ -32,7 +34,9 @@ import numpy as np
 from opa._dataset import TEMP_PREFIX, atomic_write, clean_stale_temporaries
 
 MANIFEST = "manifest.json"
-FORMAT = "opa-mc monte-carlo checkpoint 1"
+# Version of the chunk files' contents. 2: ChunkStats gained x_moment_m2 and x_moment_rep
+# (the coefficients' standard errors); chunks of format 1 lack them.
+FORMAT = "opa-mc monte-carlo checkpoint 2"
 _CHUNK = re.compile(r"chunk-(\d+)-(\d+)-(\d+)\.npz")
 
 
@@ -116,6 +120,11 @@ class Checkpoint:
         except (OSError, ValueError) as err:
             raise ValueError(f"checkpoint {self.directory!r} has an unreadable {MANIFEST} "
                              f"({err}); use a new directory or delete it") from None
+        if isinstance(old, dict) and old.get("format") != FORMAT:
+            raise ValueError(f"checkpoint {self.directory!r} holds chunks of another format "
+                             f"({old.get('format', 'none')!r}; this version reads "
+                             f"{FORMAT!r}): it cannot be resumed; use a new directory or "
+                             f"delete it (mc.remove_checkpoint) to start over")
         found = _first_difference(old, self.manifest)
         if found:
             key, before, now = found

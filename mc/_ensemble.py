@@ -5,9 +5,10 @@ uncertain parameter ``p = p_bar + sigma xi``: its own impacts, chatter and stick
 integrated by the same compiled kernel as the DMR (``opa._solver.run_samples``).
 
 Samples are processed in fixed chunks. A chunk's paths live only while its statistics
-are formed; chunk statistics (weight, mean, centred sum of squares, Chebyshev moments)
+are formed; chunk statistics (weight, mean, centred sum of squares, Chebyshev moments
+with their centred sums of squares, and the sums over each randomised-QMC replicate)
 are merged in chunk order with Chan's pairwise update. Memory is therefore
-O(chunk * T + N * T), independent of the number of samples, and the result depends
+O(chunk * T + R * N * T), independent of the number of samples, and the result depends
 only on the seed and the chunk size, never on the thread count or on where a chunk ran,
 which is what makes the Dask backend return exactly the local result. To keep it so, no
 statistic goes through BLAS: a BLAS product's summation order depends on its thread
@@ -78,6 +79,8 @@ class ChunkStats:
     v_mean: np.ndarray
     v_m2: np.ndarray
     x_moment: np.ndarray  # (N+1, T) sum w x U_i(xi)
+    x_moment_m2: np.ndarray  # (N+1, T) sum w (x U_i - mean of x U_i)^2 (coefficients' SE)
+    x_moment_rep: np.ndarray  # (R, N+1, T) sum w x U_i(xi) over each replicate
     x_rep: np.ndarray  # (R, T) sum w x over each randomised-QMC replicate
     v_rep: np.ndarray
     x2_rep: np.ndarray  # (R, T) sum w x^2 over each replicate (for the variance's SE)
@@ -106,8 +109,19 @@ class ChunkStats:
         basis = chebyshev_u(order, xi) if recurrence is None else orthonormal(order, xi,
                                                                                *recurrence)
         moments = np.empty((len(basis), x.shape[1]))
+        moments_m2 = np.empty_like(moments)
         for i, u in enumerate(basis):
             moments[i] = _weighted_sum(u * w, x)
+            moments_m2[i] = _weighted_sum(w, (u[:, None] * x - moments[i] / W) ** 2)
+        if replicates == 1:
+            moments_rep = moments[None].copy()  # what the loop below would sum, bit for bit
+        else:
+            moments_rep = np.zeros((replicates, *moments.shape))
+            for r in np.unique(rep):
+                sel = rep == r
+                x_r = x[sel]
+                for i, u in enumerate(basis):
+                    moments_rep[r, i] = _weighted_sum((u * w)[sel], x_r)
         return cls(
             weight=W,
             count=len(w),
@@ -116,6 +130,8 @@ class ChunkStats:
             v_mean=vm,
             v_m2=_weighted_sum(w, (v - vm) ** 2),
             x_moment=moments,
+            x_moment_m2=moments_m2,
+            x_moment_rep=moments_rep,
             x_rep=x_rep,
             v_rep=v_rep,
             x2_rep=x2_rep,
@@ -129,6 +145,7 @@ class ChunkStats:
         g = self.weight * other.weight / W
         dx = other.x_mean - self.x_mean
         dv = other.v_mean - self.v_mean
+        dc = other.x_moment / other.weight - self.x_moment / self.weight
         return ChunkStats(
             weight=W,
             count=self.count + other.count,
@@ -137,6 +154,8 @@ class ChunkStats:
             v_mean=self.v_mean + dv * f,
             v_m2=self.v_m2 + other.v_m2 + dv**2 * g,
             x_moment=self.x_moment + other.x_moment,
+            x_moment_m2=self.x_moment_m2 + other.x_moment_m2 + dc**2 * g,
+            x_moment_rep=self.x_moment_rep + other.x_moment_rep,
             x_rep=self.x_rep + other.x_rep,
             v_rep=self.v_rep + other.v_rep,
             x2_rep=self.x2_rep + other.x2_rep,
@@ -214,9 +233,10 @@ def simulate_mc(
         the standard error (randomised QMC); default 16 when M is a multiple of 16 and
         M >= 64, else 1 (then the standard error is the naive sqrt(Var/M), which
         overstates a QMC error). Ignored by the other samplers.
-    order : N, the highest Chebyshev coefficient estimated, E[x U_i(xi)] for i <= N.
+    order : N, the highest Chebyshev coefficient estimated, E[x U_i(xi)] for i <= N,
+        each with its standard error (``x_coef_sem``, formed like ``x_sem``).
     keep_paths : also return every sample path (memory O(M T)); otherwise only the
-        streamed statistics are kept (memory O(N T)).
+        streamed statistics are kept (memory O(R N T)).
     chunk_size : samples per task (default: about 32 MiB of paths per chunk).
     scheduler : address of a Dask distributed scheduler (``tcp://host:port``) or a
         ``distributed.Client``; chunks then run as tasks there. Default: local threads.
@@ -238,9 +258,21 @@ def simulate_mc(
     Returns
     -------
     xarray.Dataset ``mc`` of SPEC section 5: ``x_mean, v_mean, x_var, v_var, x_sem,
-    v_sem (time)``, ``x_coef (order, time)``, ``n_impacts, xi, weight (sample)``.
-    For ``gauss`` the weights are the quadrature weights, variances are weighted and
-    the standard errors are NaN (a quadrature has no sampling error).
+    v_sem, x_var_sem (time)``, ``x_coef, x_coef_sem (order, time)``, ``n_impacts, xi,
+    weight (sample)``. For ``gauss`` the weights are the quadrature weights, variances
+    are weighted and the standard errors are NaN (a quadrature has no sampling error).
+
+    Every standard error is formed the same way, for the estimate
+    ``c_hat = sum_m w_m y_m / W`` of ``E[y]`` with ``y = x`` (``x_sem``), ``y = x'``
+    (``v_sem``) or ``y = x U_i(xi)`` (``x_coef_sem``):
+
+    * R > 1 randomised-QMC replicates (``sobol``): ``SE = std_r(c_hat_r) / sqrt(R)``
+      (ddof 1), ``c_hat_r`` the estimate from replicate r alone;
+    * otherwise (``random``, or R = 1): ``SE = sqrt(s^2 / M)`` with the weighted sample
+      variance ``s^2 = M / (M - 1) sum_m w_m (y_m - c_hat)^2 / W``.
+
+    ``x_var_sem`` is the spread of the replicates' variances / sqrt(R), or without
+    replicates the normal-theory ``Var sqrt(2 / (M - 1))``.
 
     Raises
     ------
@@ -296,6 +328,9 @@ def simulate_mc(
     xi, w = sample_xi(sampler, samples, seed, replicates, distribution=measure)
     check_memory("the replicate sums", 3 * replicates * T * 8 * 2,
                  f"3 x replicates {replicates} x {T} outputs, running sums and a chunk's")
+    check_memory("x_coef_sem", (replicates + 1) * (order + 1) * T * 8 * 2,
+                 f"(replicates {replicates} + 1) x order + 1 = {order + 1} coefficients x "
+                 f"{T} outputs, running sums and a chunk's")
     recurrence = None if measure is None else measure.recurrence(order + 1)
     rep = np.arange(len(xi)) // (len(xi) // replicates)
     p, cfg = pack_parameters(oscillator, options, sigma=unc.sigma, uncertain=uncertain)
@@ -400,7 +435,8 @@ def _chunk_check(T: int, order: int, replicates: int, keep_paths: bool):
     R = replicates
     fields = {"weight": ((), "f"), "count": ((), "i"), "x_mean": ((T,), "f"),
               "x_m2": ((T,), "f"), "v_mean": ((T,), "f"), "v_m2": ((T,), "f"),
-              "x_moment": ((order + 1, T), "f"), "x_rep": ((R, T), "f"),
+              "x_moment": ((order + 1, T), "f"), "x_moment_m2": ((order + 1, T), "f"),
+              "x_moment_rep": ((R, order + 1, T), "f"), "x_rep": ((R, T), "f"),
               "v_rep": ((R, T), "f"), "x2_rep": ((R, T), "f"), "rep_weight": ((R,), "f"),
               "rhs_evaluations": ((), "i"), "run": ((), "U")}
 
@@ -425,7 +461,8 @@ def _from_arrays(a: dict, keep_paths: bool):
     stats = ChunkStats(
         weight=float(a["weight"]), count=int(a["count"]), x_mean=a["x_mean"],
         x_m2=a["x_m2"], v_mean=a["v_mean"], v_m2=a["v_m2"], x_moment=a["x_moment"],
-        x_rep=a["x_rep"], v_rep=a["v_rep"], x2_rep=a["x2_rep"], rep_weight=a["rep_weight"],
+        x_moment_m2=a["x_moment_m2"], x_moment_rep=a["x_moment_rep"], x_rep=a["x_rep"],
+        v_rep=a["v_rep"], x2_rep=a["x2_rep"], rep_weight=a["rep_weight"],
         rhs_evaluations=int(a["rhs_evaluations"]),
     )
     n_impacts = a["n_impacts"].astype(np.int64)
@@ -633,6 +670,7 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
         x_sem = np.full_like(x_var, np.nan)
         v_sem = np.full_like(v_var, np.nan)
         x_var_sem = np.full_like(x_var, np.nan)
+        x_coef_sem = np.full_like(total.x_moment, np.nan)
     else:
         corr = M / (M - 1) if M > 1 else math.nan
         x_var = total.x_m2 / total.weight * corr
@@ -647,11 +685,14 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
             m_r = total.x_rep / wr
             var_r = np.maximum(total.x2_rep / wr - m_r**2, 0.0)
             x_var_sem = np.std(var_r, axis=0, ddof=1) / np.sqrt(replicates)
+            x_coef_sem = (np.std(total.x_moment_rep / share, axis=0, ddof=1)
+                          / np.sqrt(replicates))
         else:
             x_sem = np.sqrt(x_var / M)
             v_sem = np.sqrt(v_var / M)
             # normal-theory standard error of a sample variance
             x_var_sem = x_var * math.sqrt(2.0 / (M - 1)) if M > 1 else np.full_like(x_var, math.nan)
+            x_coef_sem = np.sqrt(total.x_moment_m2 / total.weight * corr / M)
     data = {
         "x_mean": ("time", total.x_mean, {"long_name": "Monte Carlo mean E[x]", "units": "1"}),
         "v_mean": ("time", total.v_mean, {"long_name": "Monte Carlo mean E[x']", "units": "1"}),
@@ -663,6 +704,9 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
                                           "units": "1"}),
         "x_coef": (("order", "time"), total.x_moment / total.weight,
                    {"long_name": "Monte Carlo estimate of E[x U_i(xi)]", "units": "1"}),
+        "x_coef_sem": (("order", "time"), x_coef_sem,
+                       {"long_name": "standard error of the estimate of E[x U_i(xi)]",
+                        "units": "1"}),
         "n_impacts": ("sample", n_impacts, {"long_name": "impacts of each sample", "units": "1"}),
         "xi": ("sample", xi, {"long_name": "uncertain variable xi (semicircle on [-1, 1])",
                               "units": "1"}),

@@ -323,7 +323,7 @@ def test_section_32_ensemble_with_chattering_samples_finishes():
 REPRO = dict(sigma=SIGMA, samples=200, sampler="random", seed=5, periods=8, per_period=2,
              options=FAST, order=3)  # fmt: skip
 STAT_NAMES = ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_var_sem", "x_coef",
-              "n_impacts", "xi", "weight")  # fmt: skip
+              "x_coef_sem", "n_impacts", "xi", "weight")  # fmt: skip
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
@@ -355,11 +355,14 @@ def test_chunk_statistics_do_not_depend_on_the_blas_thread_count(tmp_path):
     """Matrix products (``w @ x``) sum in an order that depends on the BLAS thread count:
     one against two OpenBLAS threads changed x_mean, x_m2, v_mean and v_m2 (hence x_var,
     x_sem) in the last bit at 4 of these 1501 outputs. The statistics now never go
-    through BLAS. (On a one-core machine OpenBLAS may run one thread either way; the
-    test then passes trivially.)"""
+    through BLAS, the coefficients' sums of squares and replicate sums (x_coef_sem)
+    included. (On a one-core machine OpenBLAS may run one thread either way; the test
+    then passes trivially.)"""
     one = run_with_blas_threads(1, CHUNK_STATS, tmp_path / "one.npz")
     two = run_with_blas_threads(2, CHUNK_STATS, tmp_path / "two.npz")
-    assert set(one) == set(two) and "x_moment" in one
+    assert set(one) == set(two)
+    assert {"x_moment", "x_moment_m2", "x_moment_rep"} <= set(one)
+    assert one["x_moment_rep"].shape == (16, 7, 1501)
     for name in one:
         np.testing.assert_array_equal(one[name], two[name], err_msg=name)
 
@@ -378,8 +381,8 @@ np.savez(sys.argv[1], **{k: ds[k].values for k in ds.data_vars})
 @pytest.mark.slow
 def test_ensemble_does_not_depend_on_the_blas_thread_count(tmp_path):
     """The whole ensemble, 1024 samples of 1501 outputs, under one and two OpenBLAS
-    threads: every statistic equal bit for bit (before, x_mean, v_mean, x_var, v_var,
-    x_sem and v_sem were not)."""
+    threads: every statistic equal bit for bit, x_coef_sem included (before, x_mean,
+    v_mean, x_var, v_var, x_sem and v_sem were not)."""
     one = run_with_blas_threads(1, ENSEMBLE, tmp_path / "one.npz")
     two = run_with_blas_threads(2, ENSEMBLE, tmp_path / "two.npz")
     assert set(STAT_NAMES) <= set(one)
@@ -410,7 +413,8 @@ def test_chunk_size_changes_only_the_round_off_of_the_statistics():
     for ds in runs[1:]:
         for name in ("x", "v", "n_impacts", "xi", "weight"):
             np.testing.assert_array_equal(ds[name].values, runs[0][name].values, err_msg=name)
-        for name in ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_coef"):
+        for name in ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_coef",
+                     "x_coef_sem"):
             np.testing.assert_allclose(ds[name].values, runs[0][name].values, rtol=1e-13,
                                        atol=1e-14, err_msg=name)  # fmt: skip
 
@@ -428,7 +432,7 @@ def test_without_keep_paths_only_streamed_statistics_are_returned():
         for name, var in ds.data_vars.items():
             assert not {"sample", "time"} <= set(var.dims), name
             assert var.size <= max(ds.sizes["sample"], ds.sizes["order"] * ds.sizes["time"])
-    for name in ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_coef"):
+    for name in ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_coef", "x_coef_sem"):
         np.testing.assert_allclose(chunked[name].values, whole[name].values, rtol=1e-13,
                                    atol=1e-14, err_msg=name)  # fmt: skip
     np.testing.assert_array_equal(chunked.n_impacts.values, whole.n_impacts.values)
@@ -536,6 +540,10 @@ def test_bad_input_names_the_parameter_and_the_value(kwargs, message):
          r"sum and a chunk's\), more than the memory budget of 512 KiB"),
         (dict(samples=4096, chunk_size=4096),
          r"^a chunk of paths needs 12.6 MiB \(chunk_size 4096 x 101 outputs"),
+        (dict(samples=256, sampler="sobol", order=40, chunk_size=64),
+         r"^x_coef_sem needs 1.1 MiB \(\(replicates 16 \+ 1\) x order \+ 1 = 41 "
+         r"coefficients x 101 outputs, running sums and a chunk's\), more than the memory "
+         r"budget of 512 KiB"),
     ],
 )  # fmt: skip
 def test_sizes_beyond_the_memory_budget_are_refused_up_front(monkeypatch, kwargs, message):

@@ -25,7 +25,7 @@ RUN = dict(sigma=0.05, samples=96, sampler="sobol", seed=3, periods=3, per_perio
            chunk_size=16, order=3, options=opa.SolverOptions(rtol=1e-8, atol=1e-8),
            progress=False)  # fmt: skip
 VARIABLES = ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_var_sem", "x_coef",
-             "n_impacts", "xi", "weight", "x", "v")  # fmt: skip
+             "x_coef_sem", "n_impacts", "xi", "weight", "x", "v")  # fmt: skip
 
 
 @pytest.fixture(scope="module")
@@ -118,6 +118,42 @@ def test_a_chunk_with_wrong_contents_is_recomputed(tmp_path, fresh):
     resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, log=lines.append, **RUN)
     assert any("missing or unexpected" in line for line in lines)
     assert_identical(resumed, fresh)
+
+
+def test_a_chunk_without_the_coefficient_sums_of_squares_is_recomputed(tmp_path, fresh):
+    """A chunk as the previous format wrote it (no x_moment_m2, x_moment_rep), under this
+    run's own id, is damage: recomputed, and the result (x_coef_sem included) is the
+    uninterrupted one bit for bit."""
+    parts = tmp_path / "parts"
+    mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    name = chunk_files(parts)[1]
+    with np.load(parts / name) as data:
+        arrays = {k: data[k] for k in data.files if k not in ("x_moment_m2", "x_moment_rep")}
+    with open(parts / name, "wb") as file:
+        np.savez(file, **arrays)
+    lines = []
+    resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, log=lines.append, **RUN)
+    damaged = [line for line in lines if " is damaged " in line]
+    assert len(damaged) == 1 and "x_moment_m2" in damaged[0] and "x_moment_rep" in damaged[0]
+    assert_identical(resumed, fresh)
+
+
+def test_a_checkpoint_of_the_previous_format_is_refused_naming_both(tmp_path):
+    """Format 1 chunks lack the coefficients' SE sums: the directory is another run's,
+    refused in one line that names both formats, and left untouched."""
+    parts = tmp_path / "parts"
+    mc.simulate_mc(OSC, checkpoint=parts, **RUN)
+    manifest = json.loads((parts / "manifest.json").read_text())
+    assert manifest["format"] == "opa-mc monte-carlo checkpoint 2"
+    manifest["format"] = "opa-mc monte-carlo checkpoint 1"
+    (parts / "manifest.json").write_text(json.dumps(manifest))
+    before = {n: (parts / n).read_bytes() for n in os.listdir(parts)}
+    with pytest.raises(ValueError, match=r"holds chunks of another format \('opa-mc "
+                                         r"monte-carlo checkpoint 1'; this version reads "
+                                         r"'opa-mc monte-carlo checkpoint 2'\)") as err:
+        mc.simulate_mc(OSC, checkpoint=parts, **RUN)
+    assert "\n" not in str(err.value)
+    assert {n: (parts / n).read_bytes() for n in os.listdir(parts)} == before
 
 
 @pytest.mark.parametrize(
