@@ -20,7 +20,7 @@ RUN = dict(sigma=0.05, samples=96, sampler="sobol", seed=3, periods=3, per_perio
            chunk_size=16, order=3, options=opa.SolverOptions(rtol=1e-8, atol=1e-8),
            progress=False)  # fmt: skip
 VARIABLES = ("x_mean", "v_mean", "x_var", "v_var", "x_sem", "v_sem", "x_var_sem", "x_coef",
-             "n_impacts", "xi", "weight")  # fmt: skip
+             "x_coef_sem", "n_impacts", "xi", "weight")  # fmt: skip
 
 
 def test_a_scheduler_that_does_not_answer_fails_in_connect_timeout_with_one_line(tmp_path):
