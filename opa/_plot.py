@@ -1,6 +1,17 @@
-"""Figures for single runs: time history and phase portrait with section points."""
+"""Drawing blocks: single runs (``plot_run``), bifurcation diagrams (``plot_bifurcation``)
+and the panels of the paper's figures (``opa._figures``).
+
+Colours name the model the same way in every figure: DMR black, EMR_0 orange, EMR blue,
+Monte Carlo mean green; Poincaré points are red.
+
+Bifurcation lines are drawn only from *located* bifurcations, the ones a sweep dataset
+lists in its ``bifurcation_*`` variables (:func:`_located_marks`); the brute-force period
+labels of a sweep are never turned into lines.
+"""
 
 from __future__ import annotations
+
+import math
 
 import matplotlib
 
@@ -8,6 +19,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
+
+from opa._poincare import mean_state, stroboscopic_mask  # noqa: E402
+
+COLORS = {"DMR": "black", "EMR_0": "tab:orange", "EMR": "tab:blue", "MC mean": "tab:green"}
+SECTION_COLOR = "tab:red"
 
 
 def _state(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray, str]:
@@ -58,3 +74,266 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------- located marks
+
+
+#: names the bifurcation variables may carry (the sweep's, ``opa._continuation``'s)
+_VALUE_VARS = ("bifurcation_parameter", "bifurcation_value", "bifurcation_values",
+               "located_parameter")
+_KIND_VARS = ("bifurcation_kind", "bifurcation_type", "located_kind")
+_LOCATED_VARS = ("bifurcation_located",)
+_KIND_ALIASES = {"period-doubling": "period-doubling", "period doubling": "period-doubling",
+                 "pd": "period-doubling", "doubling": "period-doubling",
+                 "flip": "period-doubling", "fold": "fold", "saddle-node": "fold",
+                 "limit-point": "fold", "neimark-sacker": "neimark-sacker",
+                 "torus": "neimark-sacker", "grazing": "grazing", "graze": "grazing",
+                 "impulse-impact": "impulse-impact"}
+_MARK_STYLE = {
+    "period-doubling": dict(color="tab:green", ls="--", name="period doubling"),
+    "fold": dict(color="tab:red", ls="-.", name="fold"),
+    "neimark-sacker": dict(color="tab:purple", ls="--", name="Neimark-Sacker"),
+    "grazing": dict(color="tab:orange", ls=":", name="grazing"),
+    "impulse-impact": dict(color="tab:gray", ls=":", name="impulse meets impact"),
+    "bifurcation": dict(color="tab:brown", ls="--", name="bifurcation"),
+}
+
+
+def _kind_name(raw) -> str:
+    text = str(raw).strip().lower().replace("_", "-")
+    return _KIND_ALIASES.get(text, _KIND_ALIASES.get(text.replace("-", " "), text or
+                                                      "bifurcation"))
+
+
+def _kinds(ds: xr.Dataset, size: int) -> list[str]:
+    var = next((ds[n] for n in _KIND_VARS if n in ds.variables), None)
+    if var is None or var.size != size:
+        return ["bifurcation"] * size
+    raw = np.atleast_1d(var.values)
+    if raw.dtype.kind in "USO":
+        return [_kind_name(k) for k in raw]
+    meanings = str(var.attrs.get("flag_meanings", "")).split()
+    if not meanings:
+        try:
+            from opa._continuation import BIFURCATION_KINDS as meanings
+        except ImportError:  # the continuation module is optional here
+            meanings = ()
+    flags = var.attrs.get("flag_values")
+    flags = list(np.atleast_1d(flags)) if flags is not None else list(range(len(meanings)))
+    out = []
+    for k in raw:
+        try:
+            out.append(_kind_name(meanings[flags.index(int(k))]))
+        except (ValueError, IndexError, TypeError):
+            out.append("bifurcation")
+    return out
+
+
+def _located_marks(ds: xr.Dataset) -> list[tuple[float, str, bool]]:
+    """Located bifurcations listed in a sweep (or branch) dataset, as drawn markers.
+
+    Reads the parameter values from ``bifurcation_parameter`` (or ``bifurcation_value``,
+    ``bifurcation_<swept parameter>``), their kinds from ``bifurcation_kind`` (strings,
+    or flags decoded with the ``flag_meanings`` attribute) and, where present,
+    ``bifurcation_located`` (0: an interpolated estimate). Values outside the swept
+    range and non-finite ones are dropped. A dataset without such variables gives ``[]``:
+    nothing is drawn.
+
+    Returns
+    -------
+    ``[(value, kind, located), ...]`` sorted by value; ``kind`` is one of
+    "period-doubling", "fold", "neimark-sacker", "grazing", "impulse-impact" or
+    "bifurcation" (unknown).
+    """
+    param = ds.attrs.get("sweep_parameter")
+    names = list(_VALUE_VARS) + ([f"bifurcation_{param}"] if param else [])
+    var = next((ds[n] for n in names if n in ds.variables), None)
+    if var is None:
+        return []
+    try:
+        values = np.atleast_1d(np.asarray(var.values, dtype=float)).ravel()
+    except (TypeError, ValueError):
+        return []
+    kinds = _kinds(ds, values.size)
+    located = np.ones(values.size, dtype=bool)
+    for name in _LOCATED_VARS:
+        if name in ds.variables and ds[name].size == values.size:
+            located = np.atleast_1d(ds[name].values).astype(bool).ravel()
+    lo, hi = -math.inf, math.inf
+    if param and param in ds.coords and ds[param].size:
+        span = np.asarray(ds[param].values, dtype=float)
+        lo, hi = float(np.nanmin(span)), float(np.nanmax(span))
+    marks = [(float(v), k, bool(b)) for v, k, b in zip(values, kinds, located)
+             if math.isfinite(v) and lo <= v <= hi]
+    return sorted(marks)
+
+
+def mark_name(kind: str, located: bool) -> str:
+    name = _MARK_STYLE.get(kind, _MARK_STYLE["bifurcation"])["name"]
+    return name if located else f"{name} (estimated)"
+
+
+def draw_marks(ax, marks) -> None:
+    """Vertical lines at located bifurcations, one legend entry per kind."""
+    seen = {t.get_label() for t in ax.get_lines()}
+    for value, kind, located in marks:
+        style = _MARK_STYLE.get(kind, _MARK_STYLE["bifurcation"])
+        name = mark_name(kind, located)
+        ax.axvline(value, color=style["color"], ls=style["ls"], lw=1.0,
+                   alpha=1.0 if located else 0.6, label=None if name in seen else name)
+        seen.add(name)
+
+
+def describe_marks(marks, param: str) -> str:
+    """The caption's words for ``draw_marks``: exactly the lines drawn."""
+    if not marks:
+        return "no bifurcation lines: the sweep dataset lists no located bifurcations"
+    parts = {}
+    for value, kind, located in marks:
+        parts.setdefault(mark_name(kind, located), []).append(f"{value:.5g}")
+    return "located bifurcations (vertical lines): " + "; ".join(
+        f"{name} at {param} = {', '.join(v)}" for name, v in parts.items())
+
+
+# --------------------------------------------------------------------------- diagrams
+
+
+SYMBOLS = {"omega": "ω", "sigma": "σ", "mu": "μ", "eta": "η", "delta": "Δ", "omega1": "ω1"}
+SECTION_LABELS = {"phase": ("x at t = k 2π/ω", "phase plane"),
+                  "constraint": ("impact velocity x'(t-) at x = Δ", "constraint plane")}
+
+
+def diagram(ax, ds: xr.Dataset, section: str, *, color: str = "black",
+            label: str | None = None, ms: float | None = None, marker: str = ".",
+            zorder: float = 2) -> int:
+    """Section points of a sweep against the swept parameter; returns how many drawn.
+
+    ``section``: "phase" (stroboscopic x) or "constraint" (pre-impact velocity).
+    """
+    param = ds.attrs["sweep_parameter"]
+    values = ds[param].values
+    y = ds.section_x.values if section == "phase" else ds.impact_v.values
+    xs = np.broadcast_to(values[:, None], y.shape)
+    ok = np.isfinite(y)
+    if ms is None:
+        ms = 4.0 if len(values) <= 40 else 2.2
+    hollow = marker in "x+1234|_"  # line markers: their edge is all there is
+    ax.plot(xs[ok], y[ok], marker, ls="none", color=color, ms=ms, alpha=0.75,
+            mec=color if hollow else "none", mew=1.2 if hollow else None, label=label,
+            zorder=zorder)
+    ylabel, _ = SECTION_LABELS[section]
+    ax.set_xlabel(SYMBOLS.get(param, param))
+    ax.set_ylabel(ylabel)
+    if len(values) > 1:
+        pad = 0.01 * (values[-1] - values[0])
+        ax.set_xlim(values[0] - pad, values[-1] + pad)
+    return int(ok.sum())
+
+
+def plot_bifurcation(ds: xr.Dataset, path: str, *, section: str = "both",
+                     title: str | None = None) -> None:
+    """Bifurcation diagram of a ``sweep`` dataset in one or both Poincaré sections.
+
+    Phase plane: stroboscopic x against the parameter; constraint plane: pre-impact
+    velocity against the parameter. Vertical lines only at the located bifurcations the
+    dataset lists (:func:`_located_marks`); the title says which, or that there are none.
+    """
+    which = ["phase", "constraint"] if section == "both" else [section]
+    fig, axes = plt.subplots(1, len(which), figsize=(5.5 * len(which) + 0.5, 4.2),
+                             squeeze=False, layout="constrained")
+    marks = _located_marks(ds)
+    for ax, kind in zip(axes[0], which):
+        n = diagram(ax, ds, kind)
+        ax.set_title(SECTION_LABELS[kind][1], fontsize=10)
+        if n == 0:
+            ax.text(0.5, 0.5, "no section points recorded", ha="center", va="center",
+                    transform=ax.transAxes)
+        draw_marks(ax, marks)
+        if marks:
+            ax.legend(fontsize=7, loc="best", framealpha=0.85)
+    head = title or _sweep_title(ds)
+    fig.suptitle(f"{head}\n{describe_marks(marks, ds.attrs['sweep_parameter'])}",
+                 fontsize=9)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _sweep_title(ds) -> str:
+    a = ds.attrs
+    name = {"dmr": "DMR", "opa": "EMR_0" if a["sigma"] == 0 else f"EMR (σ = {a['sigma']:g})",
+            "mc": f"MC mean ({a.get('samples', 0)} samples)"}[a["model"]]
+    return (f"{name} vs {a['sweep_parameter']}: {a['transient']} transient + {a['record']} "
+            f"recorded periods, impulse {a['impulse']}, F0 = {a['F0']:g}")
+
+
+# --------------------------------------------------------------------------- portraits
+
+
+def window(ds: xr.Dataset, last: int) -> np.ndarray:
+    """Mask of the outputs in the last ``last`` forcing periods of a run."""
+    t = ds.time.values
+    T = 2 * math.pi / ds.attrs["omega"]
+    return t >= t[-1] - last * T * (1 + 1e-9)
+
+
+def strobe_window(ds: xr.Dataset, last: int) -> np.ndarray:
+    """Mask of the stroboscopic outputs t = k 2π/ω in the last ``last`` periods."""
+    t = ds.time.values
+    T = 2 * math.pi / ds.attrs["omega"]
+    return stroboscopic_mask(t, T, start=t[-1] - last * T * (1 + 1e-9))
+
+
+def portrait(ax, ds: xr.Dataset, *, last: int = 30, color: str | None = None,
+             label: str | None = None, ls: str = "-", lw: float = 0.8,
+             marker: str | None = "*", marker_color: str = SECTION_COLOR,
+             marker_label: str | None = "Poincaré points t = k 2π/ω", ms: float | None = None,
+             alpha: float = 1.0, zorder: float = 2) -> None:
+    """Phase portrait of the last ``last`` periods with its Poincaré points (if marker)."""
+    x, v, name = mean_state(ds)
+    keep = window(ds, last)
+    ax.plot(x[keep], v[keep], ls, color=color or COLORS[name], lw=lw, label=label or name,
+            alpha=alpha, zorder=zorder)
+    if marker:
+        s = strobe_window(ds, last)
+        ax.plot(x[s], v[s], marker, ls="none", color=marker_color,
+                ms=ms or (7 if marker == "*" else 4), mec="black", mew=0.4, label=marker_label,
+                zorder=zorder + 3)
+    ax.axvline(ds.attrs["delta"], color="gray", lw=1.2)
+    ax.set_xlabel("x")
+    ax.set_ylabel("dx/dt")
+
+
+def section_bars(ax, ds: xr.Dataset, *, last: int, scale: float, spread: str, color: str,
+                 label: str, lw: float = 0.8, capsize: float = 0.0, zorder: float = 3
+                 ) -> None:
+    """Error bars at the Poincaré points of the last ``last`` periods.
+
+    ``spread``: "std" (square root of ``x_var``/``v_var``) or "sem" (``x_sem``/``v_sem``
+    of a Monte Carlo run); the bars reach ``scale`` times it in x and in dx/dt.
+    """
+    x, v, _ = mean_state(ds)
+    s = strobe_window(ds, last)
+    if spread == "std":
+        ex = np.sqrt(np.maximum(ds.x_var.values[s], 0.0))
+        ev = np.sqrt(np.maximum(ds.v_var.values[s], 0.0))
+    else:
+        ex, ev = ds.x_sem.values[s], ds.v_sem.values[s]
+    ax.errorbar(x[s], v[s], xerr=scale * ex, yerr=scale * ev, fmt="none", ecolor=color,
+                elinewidth=lw, capsize=capsize, label=label, zorder=zorder)
+
+
+def history(ax, runs, *, last: int = 10) -> None:
+    """Time histories of the last ``last`` periods of ``[(dataset, line style), ...]``."""
+    for ds, style in runs:
+        x, _, name = mean_state(ds)
+        keep = window(ds, last)
+        ax.plot(ds.time.values[keep], x[keep], style, color=COLORS[name],
+                lw=1.3 if name == "DMR" else 0.9, label=name)
+    ax.axhline(runs[0][0].attrs["delta"], color="gray", lw=1.2, label="wall x = Δ")
+    ax.set_xlabel("t")
+    ax.set_ylabel("x")
+    ax.legend(fontsize=7, loc="best", framealpha=0.85)
+
+
+__all__ = ["COLORS", "plot_bifurcation", "plot_run"]
