@@ -3,7 +3,11 @@
 ``sweep`` runs one trajectory per parameter value (DMR, OPA equivalent system or a
 Monte Carlo ensemble), drops a transient, records the phase-plane and constraint-plane
 sections and identifies the motion (``opa._poincare.identify_motion``): period, impacts
-per period, label ``z = n/p``, grazing; period doubling is read off neighbours.
+per period, label ``z = n/p``, grazing. These are observations of one trajectory: a
+period that is twice a neighbour's (``observed_doubling``) can be a slow transient or
+another attractor. The bifurcations themselves are located by continuing the observed
+periodic attractors (``opa._continuation.locate_bifurcations``: Floquet multipliers,
+root finding), one source for ``opa-mc bifurcation``, ``reproduce`` and ``stability``.
 
 Parallel over parameter values with local processes (default, 2 workers, each with one
 numba thread) or on a Dask distributed cluster (``scheduler``). Continuation sweeps
@@ -413,6 +417,7 @@ def sweep(
     workers: int = DEFAULT_WORKERS,
     executor=None,
     progress: bool | None = None,
+    locate: bool | None = None,
 ) -> xr.Dataset:
     """Bifurcation diagram: sections and motion labels over values of one parameter.
 
@@ -443,6 +448,13 @@ def sweep(
         ``scheduler`` or ``executor``, and for continuation sweeps (sequential).
     executor : a ``concurrent.futures`` executor to reuse (e.g. a warm process pool).
     progress : progress bar (default: when stderr is a terminal).
+    locate : locate the bifurcations of the observed periodic attractors
+        (``opa._continuation.locate_bifurcations``, seeded with the final states of the
+        values with a periodic motion, ``observed_seeds``). None (default): for "dmr" when the
+        parameter allows it (not x0, v0, nor one that changes the forcing's common
+        period), else not; True: required (ValueError before any point is computed if
+        it cannot be done); False: not. Not for "mc". Adds a few seconds to tens of
+        seconds (see ``locate_bifurcations``).
 
     Returns
     -------
@@ -450,9 +462,15 @@ def sweep(
     (param, point)`` (stroboscopic points of the record, NaN padded), ``impact_phase,
     impact_v (param, point)`` (constraint plane), ``period`` (0: none), ``impacts`` (per
     period, -1: none), ``label`` ("n/p"), ``residual``, ``impact_rate``,
-    ``min_impact_velocity``, ``min_gap``, ``grazing``, ``period_doubling``,
-    ``failed``; ``grazing_parameter(graze)``: grazing locations estimated between
-    neighbours; the attributes of SPEC section 5 (the swept parameter's is NaN).
+    ``min_impact_velocity``, ``min_gap``, ``grazing``, ``observed_doubling`` (the
+    observed period is twice a neighbour's: an observation, not a located bifurcation;
+    ``period_doubling`` is the same, its former name), ``failed``;
+    ``grazing_parameter(graze)``: grazing locations estimated between neighbours; over
+    ``bifurcation`` the located bifurcations (``bifurcation_parameter``,
+    ``bifurcation_kind`` with ``flag_values``/``flag_meanings``, ``bifurcation_period``,
+    ``bifurcation_multiplier_real/imag``, ``bifurcation_located``, ``bifurcation_x/v``,
+    ``bifurcation_note``; empty when not located, attribute ``bifurcation_method`` says
+    why); the attributes of SPEC section 5 (the swept parameter's is NaN).
 
     Performance: one trajectory of ``transient + record`` periods per value; about
     50 ms per value for the DMR at the default tolerances (600 periods, section 3.1),
@@ -511,6 +529,7 @@ def sweep(
             Uncertainty(task_kw["sigma"], uncertain, allow_negative).check(osc)
         tasks.append(PointTask(index=i, value=float(value), model=model, oscillator=osc,
                                options=options, **task_kw))
+    system, not_located = _locate_setup(locate, model, param, values, oscillator, options, kw)
     manifest = _settings(model, param, values, oscillator, options,
                          {**kw, "continuation": continuation})
     out = None if out is None else os.fspath(out)
@@ -537,14 +556,127 @@ def sweep(
             order_ = tasks if continuation == "forward" else tasks[::-1]
             _run_continuation(order_, done, finish, scheduler)
     computed = len(tasks) - len(done)
-    ds = assemble(model, param, values, [results[i] for i in range(len(tasks))], oscillator,
-                  options, kw, continuation)
+    ordered = [results[i] for i in range(len(tasks))]
+    ds = assemble(model, param, values, ordered, oscillator, options, kw, continuation)
     ds.attrs.update(points_resumed=len(done), points_computed=computed)
+    if system is None:
+        ds = add_located(ds, [], method=f"not located: {not_located}")
+    else:
+        from opa._continuation import locate_bifurcations
+
+        seeds = observed_seeds(param, values, ordered, oscillator, options, kw)
+        points = locate_bifurcations(system, param, float(values[0]), float(values[-1]),
+                                     seeds=seeds)
+        ds = add_located(ds, points, method=(
+            "continuation of the observed periodic attractors (locate_bifurcations, "
+            f"{len(seeds)} seeds)"))
     if out is not None:
         write_netcdf(ds, out)
         if not keep_parts:
             shutil.rmtree(parts, ignore_errors=True)
     return ds
+
+
+# --------------------------------------------------------------------------- located points
+
+
+def _locate_setup(locate, model, param, values, oscillator, options, kw):
+    """(ImpactSystem, None) when the sweep's bifurcations are to be located, else
+    (None, why not). ``locate=True`` turns a reason into a ValueError."""
+    from opa._continuation import check_locatable
+    from opa._stability import ImpactSystem
+
+    if locate is not None and not isinstance(locate, bool):
+        raise ValueError(f"locate must be True, False or None, got {locate!r}")
+    if locate is False or (locate is None and model != "dmr"):
+        return None, ("locate=False" if locate is False else
+                      f"not by default for model '{model}' (locate=True to ask)")
+    try:
+        if model == "mc":
+            raise ValueError("the Monte Carlo mean has no periodic orbits to continue")
+        if len(values) < 2:
+            raise ValueError("one value: no interval to locate bifurcations in")
+        if model == "dmr":
+            system = ImpactSystem(oscillator, options=options)
+        else:
+            system = ImpactSystem(oscillator, model="opa", sigma=kw["sigma"],
+                                  order=kw["order"], uncertain=kw["uncertain"],
+                                  truncation=kw["truncation"], impact_law=kw["impact_law"],
+                                  allow_negative=kw["allow_negative"], options=options)
+        check_locatable(system, param, float(values[0]), float(values[-1]))
+    except ValueError as err:
+        if locate:
+            raise ValueError(f"locate=True: {err}") from None
+        return None, str(err)
+    return system, None
+
+
+def observed_seeds(param, values, results, oscillator, options, kw) -> list:
+    """Seeds for ``locate_bifurcations`` from a sweep's points: ``(value, final state,
+    end time, stroboscopic points)`` of every value with a periodic motion. First the
+    middle value of every run of equal labels, shorter periods and longer runs first (a
+    branch of a short period, followed first, often holds the others); then every other
+    periodic value, which costs nothing when its points lie on a branch already
+    followed (a run of equal labels can hold several coexisting orbits)."""
+    runs = []
+    start = 0
+    for i in range(1, len(values) + 1):
+        if i == len(values) or results[i]["label"] != results[start]["label"]:
+            runs.append((int(results[start]["period"]), -(i - start), (start + i - 1) // 2))
+            start = i
+    middles = [m for _, _, m in sorted(runs)]
+    rest = sorted((int(r["period"]), i) for i, r in enumerate(results) if i not in middles)
+    seeds = []
+    for m in middles + [i for _, i in rest]:
+        r = results[m]
+        p = int(r["period"])
+        final = np.asarray(r["final"], dtype=float)
+        if p <= 0 or int(r["failed"]) or not np.all(np.isfinite(final)):
+            continue
+        points = np.stack([np.asarray(r["section_x"])[:p], np.asarray(r["section_v"])[:p]], 1)
+        osc = oscillator if param == "sigma" else oscillator.replace(**{param: float(values[m])})
+        end = sweep_times(osc, options, kw["transient"], kw["record"], kw["per_period"])[-1]
+        seeds.append((float(values[m]), final.ravel(), float(end), points))
+    return seeds
+
+
+def add_located(ds: xr.Dataset, points: list, *, method: str) -> xr.Dataset:
+    """``ds`` with the located bifurcations ``points`` (``Located``) over ``bifurcation``."""
+    from opa._continuation import BIFURCATION_KINDS
+
+    param = ds.attrs["sweep_parameter"]
+    one = {"units": "1"}
+    dim = "bifurcation"
+    mu = np.array([p.multiplier for p in points], dtype=complex)
+    data = {
+        "bifurcation_parameter": (dim, np.array([p.value for p in points], dtype=float),
+                                  {"long_name": f"{param} at the located bifurcation", **one}),
+        "bifurcation_kind": (dim, np.array([BIFURCATION_KINDS.index(p.kind) for p in points],
+                                           dtype=np.int8),
+                             {"long_name": "kind of the located bifurcation", **one,
+                              "flag_values": np.arange(len(BIFURCATION_KINDS), dtype=np.int8),
+                              "flag_meanings": " ".join(k.replace("-", "_")
+                                                        for k in BIFURCATION_KINDS)}),
+        "bifurcation_period": (dim, np.array([p.period for p in points], dtype=np.int32),
+                               {"long_name": "period of the orbit in forcing periods (before "
+                                             "a doubling)", **one}),
+        "bifurcation_multiplier_real": (dim, mu.real.copy(), {
+            "long_name": "critical Floquet multiplier, real part", **one}),
+        "bifurcation_multiplier_imag": (dim, mu.imag.copy(), {
+            "long_name": "critical Floquet multiplier, imaginary part", **one}),
+        "bifurcation_located": (dim, np.array([p.located for p in points], dtype=np.int8),
+                                {"long_name": "1 if located to xtol, 0 if interpolated", **one}),
+        "bifurcation_x": (dim, np.array([p.x for p in points], dtype=float),
+                          {"long_name": "x at t = 0 of the orbit at the bifurcation", **one}),
+        "bifurcation_v": (dim, np.array([p.v for p in points], dtype=float),
+                          {"long_name": "dx/dt at t = 0 of the orbit at the bifurcation",
+                           **one}),
+        "bifurcation_note": (dim, np.array([p.note for p in points], dtype=str),
+                             {"long_name": "what happens at the located bifurcation"}),
+    }
+    out = ds.assign(data)
+    out.attrs["bifurcation_method"] = method
+    return out
 
 
 def _run_parallel(tasks, finish, scheduler, executor, workers) -> None:
@@ -694,9 +826,13 @@ def assemble(model, param, values, results, oscillator, options, kw, continuatio
         data[name] = (dim, np.array([r[name] for r in results], dtype=dtype),
                       {"long_name": long_name, "units": "1"})
     periods = data["period"][1]
-    data["period_doubling"] = (dim, period_doubling(periods),
-                               {"long_name": "1 where the period is twice a neighbour's",
-                                "units": "1"})
+    doubled = period_doubling(periods)
+    data["observed_doubling"] = (dim, doubled,
+                                 {"long_name": "1 where the observed period is twice a "
+                                               "neighbour's (not a located bifurcation)",
+                                  "units": "1"})
+    data["period_doubling"] = (dim, doubled.copy(),
+                               {"long_name": "former name of observed_doubling", "units": "1"})
     graze_at = grazing_points(values, periods, data["impacts"][1],
                               data["min_impact_velocity"][1], data["min_gap"][1])
     data["grazing_parameter"] = ("graze", graze_at,
@@ -730,9 +866,11 @@ __all__ = [
     "MODELS",
     "SWEEPABLE",
     "PointTask",
+    "add_located",
     "assemble",
     "compute_point",
     "local_executor",
+    "observed_seeds",
     "sweep",
     "sweep_times",
 ]

@@ -74,11 +74,12 @@ def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
 
 
 def _summary(ds) -> list[str]:
-    """Runs of equal labels along the sweep, then grazing and period-doubling points."""
+    """The observed periods (runs of equal labels), impacts and grazing, the located
+    bifurcations, and where the two disagree."""
     param = ds.attrs["sweep_parameter"]
     values = ds[param].values
     labels = ds.label.values
-    lines = []
+    lines = ["  observed periods (one trajectory per value, after the transient):"]
     start = 0
     for i in range(1, len(values) + 1):
         if i == len(values) or labels[i] != labels[start]:
@@ -93,7 +94,7 @@ def _summary(ds) -> list[str]:
             else:
                 lab = f"{lab}  (period {ds.period.values[start]}, impacts "
                 lab += f"{ds.impacts.values[start]})"
-            lines.append(f"  {where}: {lab}")
+            lines.append(f"    {where}: {lab}")
             start = i
     rate = ds.impact_rate.values
     if np.isfinite(rate).any():
@@ -120,11 +121,68 @@ def _summary(ds) -> list[str]:
     if len(flagged):
         lines.append(f"  grazing flagged (slow impact or near-touching free flight) at "
                      f"{len(flagged)} values, first {param} = {flagged[0]:.6g}")
-    doubling = values[ds.period_doubling.values == 1]
-    if len(doubling):
-        lines.append(f"  period doubling at {param} = " + ", ".join(f"{v:.6g}" for v in doubling))
     if ds.failed.values.any():
         lines.append(f"  {int(ds.failed.sum())} values failed: {ds.attrs['failures']}")
+    return lines + _located_summary(ds)
+
+
+def _located_summary(ds) -> list[str]:
+    """The located bifurcations and their disagreements with the observed periods."""
+    from opa._continuation import BIFURCATION_KINDS
+
+    param = ds.attrs["sweep_parameter"]
+    values = ds[param].values
+    labels = ds.label.values
+    doubled = values[ds.observed_doubling.values == 1]
+    method = str(ds.attrs.get("bifurcation_method", "not located"))
+    if "bifurcation_parameter" not in ds or method.startswith("not located"):
+        lines = [f"  bifurcations {method}"]
+        if len(doubled):
+            lines.append(f"  observed period twice a neighbour's at {param} = "
+                         + ", ".join(f"{v:.6g}" for v in doubled)
+                         + " (an observation, not a located bifurcation)")
+        return lines
+    located = ds.bifurcation_parameter.values
+    kinds = [BIFURCATION_KINDS[int(k)] for k in ds.bifurcation_kind.values]
+    lines = [("  bifurcations located by continuation of the observed periodic orbits "
+              "(Floquet multipliers):")]
+    if not len(located):
+        lines.append(f"    none in [{values[0]:.6g}, {values[-1]:.6g}]")
+    for i, (value, kind) in enumerate(zip(located, kinds)):
+        mu = complex(float(ds.bifurcation_multiplier_real[i]),
+                     float(ds.bifurcation_multiplier_imag[i]))
+        mu_text = f"{mu.real:+.6f}" if mu.imag == 0 else f"|{abs(mu):.6f}|"
+        lines.append(f"    {kind:16s} {param} = {value:.10g}  period "
+                     f"{int(ds.bifurcation_period[i])}, multiplier {mu_text}: "
+                     f"{ds.bifurcation_note.values[i]}")
+    disagree = []
+    step = np.diff(values)
+    changes = [i for i in range(len(values) - 1) if labels[i] != labels[i + 1]
+               and not (ds.failed.values[i] or ds.failed.values[i + 1])]
+
+    def window(i):  # an observed change between values i and i+1, give or take a step
+        return values[i] - step[i], values[i + 1] + step[i]
+
+    for i in changes:
+        lo, hi = window(i)
+        if not np.any((located >= lo) & (located <= hi)):
+            text = (f"    observed {labels[i]} -> {labels[i + 1]} between {param} = "
+                    f"{values[i]:.6g} and {values[i + 1]:.6g}: no located bifurcation within "
+                    f"a sweep step")
+            if len(located):
+                j = int(np.argmin(np.abs(located - 0.5 * (values[i] + values[i + 1]))))
+                text += f" (nearest: {kinds[j]} at {param} = {located[j]:.7g})"
+            disagree.append(text + "; a slow transient, another attractor or non-periodic "
+                                   "motion, not a bifurcation of the continued orbits")
+    for value, kind in zip(located, kinds):
+        if not any(window(i)[0] <= value <= window(i)[1] for i in changes):
+            j = int(np.clip(np.searchsorted(values, value), 1, len(values) - 1))
+            disagree.append(f"    located {kind} at {param} = {value:.7g}: the observed "
+                            f"period does not change within a sweep step ({labels[j - 1]} "
+                            f"at {values[j - 1]:.6g}, {labels[j]} at {values[j]:.6g})")
+    if disagree:
+        lines.append("  where the observed periods and the located bifurcations disagree:")
+        lines += disagree
     return lines
 
 
@@ -165,7 +223,7 @@ def cmd_bifurcation(args) -> int:
         seed=getattr(args, "seed", 0), options=opts, period_tol=args.period_tol,
         graze_velocity=args.graze_velocity, graze_gap=args.graze_gap, out=args.out,
         keep_parts=args.keep_parts, scheduler=getattr(args, "scheduler", None),
-        workers=args.workers, progress=not args.quiet,
+        workers=args.workers, progress=not args.quiet, locate=args.locate,
     )
     elapsed = time.perf_counter() - start
     if args.plot:
@@ -225,9 +283,12 @@ def register(subparsers, model_flags, common_flags) -> None:
         description="Sweep one parameter; for each value drop a transient, record the "
         "phase-plane (stroboscopic, t = k 2 pi/omega) and constraint-plane (at impacts: "
         "forcing phase and velocity) sections and identify the motion: period p "
-        "(smallest stroboscopic repeat), impacts per period, label z = n/p, grazing, "
-        "period doubling. Parallel over values (local processes or --scheduler); with "
-        "--out, finished values are kept in OUT.parts/ and a rerun resumes.",
+        "(smallest stroboscopic repeat), impacts per period, label z = n/p, grazing. "
+        "The bifurcations (period doubling, fold, grazing, impulse-impact) are located "
+        "by continuing the observed periodic orbits (--locate, default for dmr); the "
+        "observed periods are reported as such. Parallel over values (local processes "
+        "or --scheduler); with --out, finished values are kept in OUT.parts/ and a rerun "
+        "resumes.",
     )
     b.add_argument("model", choices=MODELS,
                    help="dmr: deterministic system; opa: EMR of the OPA system (--sigma 0: "
@@ -268,6 +329,14 @@ def register(subparsers, model_flags, common_flags) -> None:
                         f"(default {GRAZE_GAP:g})")
     g.add_argument("--keep-parts", action="store_true",
                    help="keep OUT.parts/ (one file per finished value) after writing OUT")
+    g.add_argument("--locate", action=argparse.BooleanOptionalAction, default=None,
+                   help="locate the bifurcations of the observed periodic attractors by "
+                        "continuation (Floquet multipliers, to 1e-10 in the parameter); "
+                        "the summary lists them and where the observed periods disagree. "
+                        "Default: on for dmr (off where the parameter does not allow it: "
+                        "x0, v0, or a common period of forcing and impulses that changes), "
+                        "off for opa (slower); never for mc. A few seconds to tens of "
+                        "seconds")
     _set_help(b, "per_period",
               "outputs per forcing period in the record; >= 8 resolves free-flight maxima "
               "for grazing (default 16)", 16)

@@ -631,6 +631,9 @@ def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = No
     system : the DMR or the OPA system.
     guess : starting state (D,) or (2, N+1). Default: run ``transient`` forcing periods
         from the oscillator's x0, v0 (higher OPA coefficients 0) and start from there.
+        With ``periods`` as well, Newton starts from ``guess`` at once; without, the
+        transient and the period detection run from ``guess`` (taken as the state at
+        t = 0, or at any multiple of ``impulse_cycle`` forcing periods).
     periods : k, the period in forcing periods; default: the smallest stroboscopic
         repeat (up to ``max_period``) seen after the transient, else ``impulse_cycle``.
     t0 : section time (the orbit is sampled at t0 + j T). The transient runs from 0 to
@@ -655,10 +658,12 @@ def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = No
     T = system.forcing_period
     t0 = check_time("t0", t0, T)
     hint = ""
-    if guess is None:
+    if guess is None or periods is None:
         transient = check_count("transient", transient, 0)
         n_tr = int(math.ceil(transient / k0)) * k0
-        y0 = system.initial_state()
+        # a guess is a right-continuous state: a kick at t = 0 is already in it
+        kick = system.options.impulse_at_zero and guess is None
+        y0 = system.initial_state() if guess is None else _as_state(system, guess)
         # the phase of t0 in the forcing's period: the same motion, without integrating
         # from 0 up to a large t0
         phase = math.fmod(t0, k0 * T)
@@ -666,8 +671,7 @@ def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = No
             phase += k0 * T
         start = 0.0
         if phase != 0.0 or n_tr > 0:
-            tr = flow(system, y0, [0.0, phase + n_tr * T],
-                      include_start=system.options.impulse_at_zero)
+            tr = flow(system, y0, [0.0, phase + n_tr * T], include_start=kick)
             y0 = tr.states[-1]
             start = phase + n_tr * T
         if periods is None:

@@ -51,8 +51,15 @@ def test_dataset_contract(tmp_path):
     for name in ("section_x", "section_v", "impact_phase", "impact_v"):
         assert ds[name].dims == ("c", "point")
     for name in ("period", "impacts", "label", "residual", "impact_rate",
-                 "min_impact_velocity", "min_gap", "grazing", "period_doubling", "failed"):
+                 "min_impact_velocity", "min_gap", "grazing", "observed_doubling",
+                 "period_doubling", "failed"):
         assert ds[name].dims == ("c",)
+    np.testing.assert_array_equal(ds.period_doubling, ds.observed_doubling)  # former name
+    for name in ("bifurcation_parameter", "bifurcation_kind", "bifurcation_period",
+                 "bifurcation_multiplier_real", "bifurcation_multiplier_imag",
+                 "bifurcation_located", "bifurcation_x", "bifurcation_v", "bifurcation_note"):
+        assert ds[name].dims == ("bifurcation",)
+    assert ds.attrs["bifurcation_method"].startswith("continuation")  # dmr: on by default
     assert ds.period.dtype.kind == "i" and ds.impacts.dtype.kind == "i"
     np.testing.assert_array_equal(ds.c.values, values)
     # the record's stroboscopic points, NaN padded beyond them
@@ -62,7 +69,7 @@ def test_dataset_contract(tmp_path):
     # every variable labelled, every parameter in the attributes, no bools
     for name, var in ds.variables.items():
         assert "long_name" in var.attrs, name
-        if name != "label":
+        if var.dtype.kind not in "UO":  # strings have no units
             assert "units" in var.attrs, name
     for name in PARAMETER_NAMES + ("sigma", "N", "impulse", "truncation", "impact_law", "rtol",
                                    "atol", "seed", "sampler", "Conventions", "history",
@@ -82,11 +89,11 @@ def test_labels_and_period_doubling_on_known_sweeps():
                workers=1)
     assert ds.label.values.tolist() == ["4/4", "2/2"]
     assert ds.period.values.tolist() == [4, 2] and ds.impacts.values.tolist() == [4, 2]
-    assert ds.period_doubling.values.tolist() == [1, 0]  # 2 -> 4 going down in c
+    assert ds.observed_doubling.values.tolist() == [1, 0]  # 2 -> 4 going down in c
     ds = sweep("dmr", "omega", [4.9, 5.0], preset("3.3", F0=0.0), transient=200, record=40,
                workers=1)
     assert ds.label.values.tolist() == ["1/1", "2/2"]
-    assert ds.period_doubling.values.tolist() == [0, 1]
+    assert ds.observed_doubling.values.tolist() == [0, 1]
 
 
 def test_opa_sigma_sweep_and_emr0_equals_dmr():
