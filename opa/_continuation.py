@@ -1004,8 +1004,9 @@ def _note(bif: Bifurcation, branch: Branch, parameter: str) -> str:
             text += f", stable for {side(stable_at)}"
         text += ")"
     elif bif.kind == "fold":
-        pair = "a stable and an unstable" if (oa.stable or ob.stable) else "two unstable"
-        text = f"{pair} period-{k} orbits ({label}) meet; none for {side(2 * bif.value - la)}"
+        pair = ("a stable and an unstable period-{k} orbit" if (oa.stable or ob.stable)
+                else "two unstable period-{k} orbits").format(k=k)
+        text = f"{pair} ({label}) meet; none for {side(2 * bif.value - la)}"
     elif bif.kind == "grazing":
         if ia != ib:
             text = (f"an impact of the period-{k} orbit ({label}) grazes: {oa.impacts} -> "
