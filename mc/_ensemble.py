@@ -257,7 +257,7 @@ def simulate_mc(
 
     Returns
     -------
-    xarray.Dataset ``mc`` of SPEC section 5: ``x_mean, v_mean, x_var, v_var, x_sem,
+    xarray.Dataset ``mc`` of docs/datasets.md: ``x_mean, v_mean, x_var, v_var, x_sem,
     v_sem, x_var_sem (time)``, ``x_coef, x_coef_sem (order, time)``, ``n_impacts, xi,
     weight (sample)``. For ``gauss`` the weights are the quadrature weights, variances
     are weighted and the standard errors are NaN (a quadrature has no sampling error).

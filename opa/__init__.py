@@ -7,7 +7,7 @@ from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, trip
 from opa._dataset import write_netcdf
 from opa._model import Oscillator, SolverOptions, Uncertainty, preset, time_grid
 from opa._bifurcation import sweep
-from opa._continuation import continue_orbits, plot_branches
+from opa._continuation import Located, continue_orbits, locate_bifurcations, plot_branches
 from opa._poincare import Motion, constraint_section, detect_period, identify_motion, phase_section
 from opa._simulate import SimulationError, simulate_dmr, simulate_opa
 from opa._stability import (
@@ -56,6 +56,8 @@ __all__ = [
     "transverse_lyapunov_exponent",
     "impulse_cycle",
     "continue_orbits",
+    "locate_bifurcations",
+    "Located",
     "plot_branches",
     "chebyshev_u",
     "cubic_projection",

@@ -470,7 +470,7 @@ def sweep(
     ``bifurcation_kind`` with ``flag_values``/``flag_meanings``, ``bifurcation_period``,
     ``bifurcation_multiplier_real/imag``, ``bifurcation_located``, ``bifurcation_x/v``,
     ``bifurcation_note``; empty when not located, attribute ``bifurcation_method`` says
-    why); the attributes of SPEC section 5 (the swept parameter's is NaN).
+    why); the attributes listed in docs/datasets.md (the swept parameter's is NaN).
 
     Performance: one trajectory of ``transient + record`` periods per value; about
     50 ms per value for the DMR at the default tolerances (600 periods, section 3.1),
@@ -803,7 +803,7 @@ def _padded(rows, width):
 
 def assemble(model, param, values, results, oscillator, options, kw, continuation
              ) -> xr.Dataset:
-    """The sweep dataset (SPEC section 5) from per-point results in value order."""
+    """The sweep dataset (docs/datasets.md) from per-point results in value order."""
     width = max([kw["record"]] + [len(r["impact_v"]) for r in results])
     dim = param
     data = {

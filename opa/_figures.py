@@ -927,7 +927,7 @@ def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool 
     full : the paper's resolution for the bifurcation diagrams (200 values of the
         parameter, 500 transient + 100 recorded periods) and larger Monte Carlo
         ensembles (:data:`FULL_SIZES`) instead of :data:`DEFAULT_SIZES`.
-    impulse, pulse_width : impulse model for every figure (SPEC section 3).
+    impulse, pulse_width : impulse model for every figure (README, 'Choices the paper leaves open').
     order : OPA order N of EMR_0 and EMR.
     workers, scheduler : parallel sweeps (local processes or a Dask scheduler).
     log : callable for progress lines (e.g. ``print``), or None.

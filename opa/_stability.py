@@ -151,7 +151,7 @@ class ImpactSystem:
         return y
 
     def attrs(self) -> dict:
-        """Dataset attributes (SPEC section 5)."""
+        """Dataset attributes (docs/datasets.md)."""
         from opa._dataset import provenance_attrs
 
         return provenance_attrs(

@@ -1,6 +1,6 @@
 """Tests for the checkpoint of mc.simulate_mc (mc._checkpoint): nothing is lost, nothing
 is computed twice, nothing is left behind, and the resumed result is the uninterrupted
-one bit for bit (SPEC section 7)."""
+one bit for bit (README, 'Errors, limits and resuming')."""
 
 from __future__ import annotations
 

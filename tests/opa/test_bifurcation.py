@@ -1,6 +1,6 @@
 """Tests for ``opa._bifurcation`` (sweeps) and ``opa._bifurcation_cli``.
 
-The dataset contract of SPEC section 5, labels and period doubling on sweeps whose
+The dataset contract of docs/datasets.md, labels and period doubling on sweeps whose
 motions are known (section 3.1 without impulses: 4/4 at c = 0.035, 2/2 at c = 0.05;
 section 3.3 without impulses: 1/1 -> 2/2 between omega = 4.9 and 5.0), parallel ==
 serial, and crash safety: a sweep interrupted after k points and rerun computes only
