@@ -39,13 +39,14 @@ from mc._sampling import _check_sampler, sample_xi
 from opa import _solver as K
 from opa._basis import chebyshev_u, orthonormal
 from opa._dataset import check_memory, package_version, provenance_attrs, time_coord
-from opa._model import Oscillator, SolverOptions, Uncertainty, check_order
+from opa._model import Oscillator, SolverOptions, Uncertainty, check_instance, check_order
 from opa._simulate import SimulationError, _times, pack_parameters
 
 if TYPE_CHECKING:
     from distributed import Client
 
 CHUNK_BYTES = 32 * 2**20
+MAX_TIMEOUT = 86400.0  # a day: longer Dask timeouts are mistakes, not waits
 # Memory a sample takes outside the paths: xi, its weight, replicate index and impact
 # count and the sample coordinate (8 bytes each), the sampler's uniforms (up to 16 for a
 # Sobol' set rounded up to a power of two) and the quantile function's temporaries.
@@ -175,8 +176,10 @@ def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep
     n_impacts = np.zeros(len(xi), dtype=np.int64)
     n_rhs = np.zeros(len(xi), dtype=np.int64)
     status = np.zeros(len(xi), dtype=np.int64)
-    K.run_samples(y0, xi, times, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status)
-    bad = np.flatnonzero(status != K.OK)
+    K.run_samples(y0, xi, times, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status,
+                  np.zeros(1, dtype=np.int64))
+    # the first sample that failed (the others may have been skipped after it)
+    bad = np.flatnonzero((status != K.OK) & (status != K.SKIPPED))
     if len(bad):
         m = bad[0]
         return None, n_impacts, status, (m, xi[m], int(status[m]))
@@ -286,10 +289,17 @@ def simulate_mc(
         The Dask cluster lost all its workers (or never had any) for ``worker_timeout``
         seconds, a chunk killed the workers that ran it, or the scheduler went away.
     """
-    oscillator = oscillator or Oscillator()
-    options = options or SolverOptions()
+    oscillator = check_instance("oscillator", oscillator, Oscillator, Oscillator())
+    options = check_instance("options", options, SolverOptions, SolverOptions())
+    for name, flag in (("keep_paths", keep_paths), ("progress", progress)):
+        if flag not in (True, False, None) or isinstance(flag, str) or \
+                (name == "keep_paths" and flag is None):
+            raise ValueError(f"{name} must be True or False, got {flag!r}")
     _check_sampler(sampler, samples, seed)
     samples = int(samples)
+    if samples < 2 and sampler != "gauss":
+        raise ValueError(f"samples must be >= 2 for a variance and a standard error, got "
+                         f"{samples}")
     check_memory("sampling", samples * SAMPLE_BYTES,
                  f"samples {samples} x {SAMPLE_BYTES} bytes")
     order = check_order(order)
@@ -391,11 +401,12 @@ def _check_dask_timeouts(connect_timeout, worker_timeout) -> None:
             continue
         try:
             good = (not isinstance(value, (bool, str, bytes)) and math.isfinite(float(value))
-                    and float(value) > 0)
+                    and 0 < float(value) <= MAX_TIMEOUT)
         except (TypeError, ValueError, OverflowError):
             good = False
         if not good:
-            allowed = "a number of seconds > 0" + (" or None" if optional else "")
+            allowed = (f"a number of seconds in (0, {MAX_TIMEOUT:g}]"
+                       + (" or None" if optional else ""))
             raise ValueError(f"{name} must be {allowed}, got {value!r}")
 
 
@@ -596,15 +607,45 @@ def _connect(scheduler, connect_timeout: float):
     if not isinstance(scheduler, str):
         raise ValueError(f"scheduler must be an address such as 'tcp://host:8786' or a "
                          f"distributed.Client, got {scheduler!r:.60}")
+    silent = f"scheduler {scheduler!r} did not answer within {connect_timeout:g} s " \
+             f"(connect_timeout); check the address and that the scheduler is running"
+    _probe(scheduler, connect_timeout, silent)
     try:
         return Client(scheduler, timeout=connect_timeout), True
     except (OSError, TimeoutError):
-        raise ValueError(f"scheduler {scheduler!r} did not answer within "
-                         f"{connect_timeout:g} s (connect_timeout); check the address and "
-                         f"that the scheduler is running") from None
+        raise ValueError(silent) from None
     except (ValueError, TypeError) as err:
         raise ValueError(f"scheduler {scheduler!r} is not a Dask scheduler address "
                          f"({err})") from None
+    except (Exception, MemoryError) as err:  # noqa: BLE001 -- it answered, but not as Dask
+        raise ValueError(f"scheduler {scheduler!r} did not answer as a Dask scheduler "
+                         f"({type(err).__name__})") from None
+
+
+def _probe(address: str, timeout: float, silent: str) -> None:
+    """A Dask scheduler speaks first on a new TCP connection: refuse an endpoint that
+    accepts the connection and then says nothing within ``timeout`` (distributed's own
+    connect would wait for it much longer). Only plain ``tcp://`` addresses are probed."""
+    import socket
+    from urllib.parse import urlsplit
+
+    if not address.startswith("tcp://"):
+        return
+    try:
+        parts = urlsplit(address)
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        return  # distributed names what is wrong with the address
+    if host is None or port is None:
+        return
+    try:
+        with socket.create_connection((host, port), timeout=timeout) as probe:
+            probe.settimeout(timeout)
+            first = probe.recv(1)
+    except OSError:
+        raise ValueError(silent) from None
+    if not first:
+        raise ValueError(silent)
 
 
 def _result(future, bound, watchdog):

@@ -12,8 +12,11 @@ EXIT_USAGE = 2
 MAX_SWEEP_VALUES = 100_000
 
 # argparse reads "-1e-3" or "-inf" as an option unless told these are numbers
-_NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
+_NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
+_NEGATIVE_NUMBER = re.compile(rf"^-{_NUMBER}(,-?{_NUMBER})*$|^-(inf|infinity|nan)$",
                               re.IGNORECASE)
+# Whole numbers above 2^53 are not exact as floats, and no count or seed needs them.
+MAX_WHOLE = 2**53
 
 
 class Parser(argparse.ArgumentParser):
@@ -31,10 +34,11 @@ def positive_int(text: str) -> int:
     """An argparse type: a whole number >= 1, also written as 1e3."""
     try:
         value = float(text)
-        if not (math.isfinite(value) and value == int(value) and value >= 1):
+        if not (math.isfinite(value) and value == int(value) and 1 <= value <= MAX_WHOLE):
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a whole number in 1..2^53, got {text!r}") \
+            from None
     return int(value)
 
 
@@ -42,10 +46,11 @@ def whole_number(text: str) -> int:
     """An argparse type: a whole number >= 0, also written as 1e3."""
     try:
         value = float(text)
-        if not (math.isfinite(value) and value == int(value) and value >= 0):
+        if not (math.isfinite(value) and value == int(value) and 0 <= value <= MAX_WHOLE):
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a whole number in 0..2^53, got {text!r}") \
+            from None
     return int(value)
 
 

@@ -29,6 +29,7 @@ from opa._model import (
 from opa._argtypes import EXIT_USAGE, Parser, positive_int, whole_number
 
 EXIT_SIMULATION = 3
+MAX_WORKERS = 4 * (os.cpu_count() or 1)
 
 
 class CliError(Exception):
@@ -186,6 +187,11 @@ def check_outputs(args) -> None:
     check_output_file("--plot", getattr(args, "plot", None), suffixes=FIGURE_SUFFIXES)
     if getattr(args, "outdir", None) is not None:
         check_output_dir("--outdir", args.outdir)
+    if getattr(args, "plot", None):  # the figure writers do not create folders
+        os.makedirs(os.path.dirname(os.path.abspath(args.plot)), exist_ok=True)
+    workers = getattr(args, "workers", None)
+    if workers is not None and workers > MAX_WORKERS:
+        raise CliError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got {workers}")
 
 
 def cmd_simulate(args) -> int:
@@ -223,14 +229,24 @@ def cmd_simulate(args) -> int:
 
         # with --out, finished chunks are kept in OUT.parts/ so a killed run resumes
         parts = f"{args.out}.parts" if args.out else None
-        ds = simulate_mc(osc, sigma=args.sigma, samples=args.samples, sampler=args.sampler,
-                         seed=args.seed, order=args.order, uncertain=args.uncertain,
-                         allow_negative=args.allow_negative, periods=args.periods,
-                         per_period=args.per_period, options=opts, scheduler=args.scheduler,
-                         progress=not args.quiet, distribution=args.distribution,
-                         checkpoint=parts, connect_timeout=args.connect_timeout,
-                         log=None if args.quiet else
-                         (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
+        from opa._simulate import SimulationError
+
+        try:
+            ds = simulate_mc(osc, sigma=args.sigma, samples=args.samples,
+                             sampler=args.sampler, seed=args.seed, order=args.order,
+                             uncertain=args.uncertain, allow_negative=args.allow_negative,
+                             periods=args.periods, per_period=args.per_period, options=opts,
+                             scheduler=args.scheduler, progress=not args.quiet,
+                             distribution=args.distribution, checkpoint=parts,
+                             connect_timeout=args.connect_timeout,
+                             log=None if args.quiet else
+                             (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
+        except SimulationError:
+            if parts:  # these settings cannot finish: keep no checkpoint to trip over
+                from mc import remove_checkpoint
+
+                remove_checkpoint(parts)
+            raise
         sem = float(ds.x_sem[-1])
         final = (f"E[x] = {float(ds.x_mean[-1]):.8g} ± {sem:.2g} (SE), Var[x] = "
                  f"{float(ds.x_var[-1]):.4g}; impacts per sample "

@@ -260,8 +260,8 @@ def atomic_write(path: str | os.PathLike, write: Callable[[str], object], *,
     the ``0o600`` of ``tempfile.mkstemp``. With ``clean``, stale temporaries in the
     directory are removed first (:func:`clean_stale_temporaries`).
     """
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
+    path = os.path.realpath(os.fspath(path))  # through a symlink to its target
+    directory = os.path.dirname(path)
     os.makedirs(directory, exist_ok=True)
     if clean:
         clean_stale_temporaries(directory)

@@ -276,11 +276,11 @@ def collocation(oscillator, options, measure, edges, q, *, sigma, uncertain, tim
     paths = np.empty((M, len(times), 2))
     n_imp, n_rhs, status = (np.zeros(M, dtype=np.int64) for _ in range(3))
     K.run_samples(np.array([oscillator.x0, oscillator.v0]), xi, times, p, cfg, options.rtol,
-                  options.atol, paths, n_imp, n_rhs, status)
+                  options.atol, paths, n_imp, n_rhs, status, np.zeros(1, dtype=np.int64))
     if (status != K.OK).any():
         from opa._simulate import SimulationError
 
-        m = int(np.flatnonzero(status != K.OK)[0])
+        m = int(np.flatnonzero((status != K.OK) & (status != K.SKIPPED))[0])
         raise SimulationError(f"collocation node xi = {xi[m]:.6g} stopped: "
                               f"{K.STATUS_MESSAGES[int(status[m])]}")
     x = paths[:, :, 0]

@@ -53,7 +53,8 @@ MAX_IMPULSES = 10**7
 
 def _finite(name: str, value) -> float:
     """``value`` as a finite float; bools and strings are refused, not converted."""
-    if isinstance(value, (bool, str, bytes)) or type(value).__name__ == "bool_":
+    if isinstance(value, (bool, str, bytes)) or (type(value).__module__ == "numpy"
+                                                  and type(value).__name__ in ("bool_", "bool")):
         raise ValueError(f"{name} must be a real number, got {value!r}")
     try:
         value = float(value)
@@ -300,11 +301,16 @@ def time_grid(omega: float, periods: float, per_period: int):
     return np.arange(count + 1) * (2.0 * math.pi / omega / per_period)
 
 
-def check_span(oscillator: Oscillator, t_end: float, impulse: bool = True) -> None:
+def check_span(oscillator: Oscillator, t_end: float, impulse: bool = True,
+               t_start: float = 0.0) -> None:
     """Refuse runs the integrator cannot resolve or finish: a forcing or impulse period
     below MIN_PERIOD, a span beyond MAX_TIME, or more than MAX_IMPULSES impulses."""
+    t_start = _finite("the start time", t_start)
+    if abs(t_start) > MAX_TIME:
+        raise ValueError(f"the run starts at t = {t_start:.3g}, beyond the longest run of "
+                         f"{MAX_TIME:g} time units")
     t_end = _finite("the end time", t_end)
-    if abs(t_end) > MAX_TIME:
+    if abs(t_end) > MAX_TIME or abs(t_end - t_start) > MAX_TIME:
         raise ValueError(f"the run spans t = {t_end:.3g}, beyond the longest run of "
                          f"{MAX_TIME:g} time units")
     period = 2.0 * math.pi / oscillator.omega
@@ -316,7 +322,7 @@ def check_span(oscillator: Oscillator, t_end: float, impulse: bool = True) -> No
         if period1 < MIN_PERIOD:
             raise ValueError(f"omega1 = {oscillator.omega1:g} gives an impulse period 2 pi/"
                              f"omega1 = {period1:.3g}, below the resolvable {MIN_PERIOD:g}")
-        count = abs(t_end) / period1
+        count = abs(t_end - min(t_start, 0.0)) / period1
         if count > MAX_IMPULSES:
             raise ValueError(f"omega1 = {oscillator.omega1:g} puts {count:.3g} impulses in "
                              f"t in [0, {t_end:.3g}], more than {MAX_IMPULSES:g}")

@@ -11,8 +11,10 @@ import os
 import tempfile
 
 # What matplotlib's savefig writes (a name without a suffix is written as PNG).
+# (.pgf is left out: it needs a LaTeX installation, which only the write would find missing)
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".eps", ".ps", ".jpg", ".jpeg", ".tif",
-                   ".tiff", ".webp", ".pgf", ".raw", ".rgba")
+                   ".tiff", ".webp", ".raw", ".rgba")
+NAME_MAX = 200  # longest file name: the temporary beside it adds a prefix and a pid
 
 
 def _nearest_folder(path: str) -> str:
@@ -51,6 +53,9 @@ def check_output_file(flag: str, path, *, suffixes: tuple[str, ...] | None = Non
     path = _nonempty(flag, path)
     if path.endswith(os.sep) or os.path.isdir(path):
         raise ValueError(f"{flag} {path}: is a folder, expected a file name")
+    if len(os.path.basename(path)) > NAME_MAX:
+        raise ValueError(f"{flag} {path[:40]}...: the file name is longer than {NAME_MAX} "
+                         f"characters")
     suffix = os.path.splitext(path)[1].lower()
     if suffixes is not None and suffix and suffix not in suffixes:
         raise ValueError(f"{flag} {path}: cannot write {suffix} files; use one of "

@@ -140,7 +140,14 @@ def advice(status: int) -> str:
                 "signs of a and c, the sizes of f, F0 and mu).")
     if status == K.BAD_TIME:
         return "Check the output times: they must be finite, with impulse times resolvable."
-    return "Try smaller tolerances, a smaller --max-step, or check the parameters."
+    if status == K.MAX_STEPS:
+        return ("The run needs more steps than max_steps (SolverOptions.max_steps): ask for "
+                "fewer periods, looser tolerances or a larger --max-step, or check the "
+                "parameters.")
+    if status == K.STEP_COLLAPSE:
+        return ("Near this time no step can be taken: check the parameters, and that "
+                "--max-step and the tolerances are not below round-off.")
+    return "Check the parameters."
 
 
 def _times(oscillator, periods, per_period, times, dim: int = 2):
@@ -157,7 +164,7 @@ def _times(oscillator, periods, per_period, times, dim: int = 2):
             raise ValueError("times must be a non-empty 1-D array of finite values")
         if np.any(np.diff(times) <= 0):
             raise ValueError("times must be strictly increasing")
-    check_span(oscillator, float(times[-1]))
+    check_span(oscillator, float(times[-1]), t_start=float(times[0]))
     from opa._dataset import check_memory
 
     check_memory(f"{len(times)} outputs x {dim} states", len(times) * (dim + 1) * 8 * 2)

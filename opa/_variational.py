@@ -252,8 +252,11 @@ def escape_bound(y0, p):
             start = a
     w = p[V_OMEGA]
     drive = abs(p[V_F]) + abs(p[V_F0]) * (1.0 + abs(p[V_A1]))
+    stiffness = abs(p[V_A])
+    if stiffness == 0.0:
+        return np.inf  # no linear restoring force: no scale to escape from
     return ESCAPE_FACTOR * (1.0 + start + abs(p[V_DELTA])
-                            + drive * (1.0 + 1.0 / w + 1.0 / (w * w)))
+                            + drive * (1.0 + 1.0 / w + 1.0 / (w * w) + 1.0 / stiffness))
 
 
 @njit(cache=True)

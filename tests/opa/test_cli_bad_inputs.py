@@ -163,6 +163,13 @@ BAD_CLI = [
     (["validate", "--config", "/nonexistent/opa-mc.toml"], "/nonexistent/opa-mc.toml"),
     (["converge", "--budgets", "8:0"], "--budgets"),
     (["converge", "--sigma", "-1"], "sigma"),
+    (DMR + ["--per-period", "1e308"], "--per-period"),
+    (MC + ["--seed", "1e30"], "--seed"),
+    (MC + ["--samples", "1"], "samples"),
+    (MC + ["--connect-timeout", "1e308", "--scheduler", "tcp://127.0.0.1:1"], "connect_timeout"),
+    (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--workers", "1000000000"], "--workers"),
+    (["reproduce", "fig3", "--workers", "1e9"], "--workers"),
+    (["converge", "--reference", "1e308"], "--reference"),
     # flags
     (["simulate", "dmr", "--no-such-flag"], "--no-such-flag"),
     (["simulate", "fem"], "fem"),
@@ -230,6 +237,40 @@ def test_negative_numbers_in_exponent_notation_are_values(argv, capsys, tmp_path
         assert np.isfinite(ds.x.values).all()
 
 
+def test_a_silent_scheduler_fails_within_the_connect_timeout(capsys, tmp_path, monkeypatch):
+    """An endpoint that accepts the connection and never speaks Dask: one line, exit 2,
+    within the timeout (distributed alone waits far longer)."""
+    import socket
+
+    monkeypatch.chdir(tmp_path)
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+        argv = MC + ["--scheduler", address, "--connect-timeout", "2"]
+        status, out, err, seconds = run_cli(argv, capsys)
+    assert_one_line_error(status, err, address, argv)
+    assert seconds < 15
+
+
+def test_negative_lists_plot_folders_and_symlinks(capsys, tmp_path, monkeypatch):
+    """Negative comma lists are values; --plot may name a new folder; --out through a
+    symlink writes the link's target and keeps the link."""
+    monkeypatch.chdir(tmp_path)
+    from compare._cli import _float_list
+    from opa._cli import build_parser
+
+    args = build_parser().parse_args(["validate", "--values", "-0.2,-0.1"])
+    assert args.values == _float_list("-0.2,-0.1") == (-0.2, -0.1)
+    target = tmp_path / "target.nc"
+    target.write_bytes(b"")
+    (tmp_path / "link.nc").symlink_to(target)
+    status, out, err, _ = run_cli(DMR + ["--out", "link.nc", "--plot", "new/sub/p.png"], capsys)
+    assert status == 0, err
+    assert (tmp_path / "link.nc").is_symlink() and target.stat().st_size > 0
+    assert (tmp_path / "new" / "sub" / "p.png").exists()
+
+
 @pytest.mark.parametrize("argv", [
     DMR + ["--mu", "1e300"],
     DMR + ["--v0", "1e200"],
@@ -293,6 +334,10 @@ def _api_cases():
         (lambda: ValidateConfig(sigmas=(0.01, 0.01)), "sigmas"),
         (lambda: ValidateConfig(plots="no"), "plots"),
         (lambda: ValidateConfig(samples=True), "samples"),
+        (lambda: simulate_mc("x"), "oscillator"),
+        (lambda: simulate_mc(Oscillator(), keep_paths="no"), "keep_paths"),
+        (lambda: simulate_dmr(Oscillator(), times=[-1e9, 0.0]), "start"),
+        (lambda: Oscillator(n=np.True_), "n"),
     ]
 
 
