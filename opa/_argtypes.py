@@ -30,28 +30,26 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def positive_int(text: str) -> int:
-    """An argparse type: a whole number >= 1, also written as 1e3."""
+def _whole(text: str, minimum: int) -> int:
+    """``text`` as a whole number in [minimum, 2^53], also written as 1e3."""
     try:
         value = float(text)
-        if not (math.isfinite(value) and value == int(value) and 1 <= value <= MAX_WHOLE):
+        if not (math.isfinite(value) and value == int(value) and minimum <= value <= MAX_WHOLE):
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number in 1..2^53, got {text!r}") \
-            from None
+        raise argparse.ArgumentTypeError(f"expected a whole number in {minimum}..2^53, got "
+                                         f"{text!r}") from None
     return int(value)
+
+
+def positive_int(text: str) -> int:
+    """An argparse type: a whole number >= 1, also written as 1e3."""
+    return _whole(text, 1)
 
 
 def whole_number(text: str) -> int:
     """An argparse type: a whole number >= 0, also written as 1e3."""
-    try:
-        value = float(text)
-        if not (math.isfinite(value) and value == int(value) and 0 <= value <= MAX_WHOLE):
-            raise ValueError
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number in 0..2^53, got {text!r}") \
-            from None
-    return int(value)
+    return _whole(text, 0)
 
 
 __all__ = ["EXIT_USAGE", "MAX_SWEEP_VALUES", "Parser", "positive_int", "whole_number"]

@@ -254,19 +254,9 @@ def test_bad_requests_are_refused():
 
 # --------------------------------------------------------------------------- command line
 def _cli(argv):
-    import argparse
+    from tests.opa.test_bifurcation import cli
 
-    from opa._bifurcation_cli import register
-    from opa._cli import CliError, _common_flags, _model_flags
-
-    parser = argparse.ArgumentParser(prog="opa-mc")
-    register(parser.add_subparsers(dest="command", required=True), _model_flags,
-             _common_flags)
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except (ValueError, CliError) as err:
-        return str(err)
+    return cli(argv)
 
 
 def test_cli_locates_by_default_and_no_locate_skips(capsys):
