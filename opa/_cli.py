@@ -227,9 +227,10 @@ def cmd_simulate(args) -> int:
     else:
         from mc import simulate_mc
 
+        from opa._simulate import SimulationError
+
         # with --out, finished chunks are kept in OUT.parts/ so a killed run resumes
         parts = f"{args.out}.parts" if args.out else None
-        from opa._simulate import SimulationError
 
         try:
             ds = simulate_mc(osc, sigma=args.sigma, samples=args.samples,
@@ -241,10 +242,12 @@ def cmd_simulate(args) -> int:
                              connect_timeout=args.connect_timeout,
                              log=None if args.quiet else
                              (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
-        except SimulationError:
-            if parts:  # these settings cannot finish: keep no checkpoint to trip over
-                from mc import remove_checkpoint
+        except SimulationError as err:
+            from mc import DaskError, remove_checkpoint
 
+            # a sample that cannot be integrated fails every rerun of these settings: keep
+            # no checkpoint to trip over; a lost cluster keeps its finished chunks
+            if parts and not isinstance(err, DaskError):
                 remove_checkpoint(parts)
             raise
         sem = float(ds.x_sem[-1])
