@@ -134,15 +134,11 @@ def _check_outdir(path: str) -> None:
     """Fail before computing when the output folder cannot be written."""
     from opa._paths import check_output_dir
 
-    check_output_dir("--outdir", path)
+    check_output_dir("--outdir", path)  # probes a write in the folder or its nearest parent
     try:
         os.makedirs(os.path.join(path, "parts"), exist_ok=True)
-        probe = os.path.join(path, ".write-test")
-        with open(probe, "w"):
-            pass
-        os.remove(probe)
     except OSError as err:
-        raise ValueError(f"--outdir {path} cannot be written: {err.strerror}") from None
+        raise ValueError(f"--outdir {path} cannot be created: {err.strerror}") from None
 
 
 def cmd_validate(args) -> int:

@@ -488,6 +488,15 @@ def _guide_lines(ax, values, label):
         ax.axvline(v, color="tab:purple", lw=0.7, alpha=0.6, label=label if k == 0 else None)
 
 
+def _finish_section_panel(ax, title: str, points: int) -> None:
+    """Title and legend of a section panel; says so when no point was recorded."""
+    ax.set_title(title, fontsize=10)
+    if points == 0:
+        ax.text(0.5, 0.5, "no section points recorded", ha="center", va="center",
+                transform=ax.transAxes)
+    ax.legend(fontsize=7, loc="best", framealpha=0.85, markerscale=2)
+
+
 def fig3(ctx):
     s = ctx.sizes
     values = np.linspace(0.01, 0.1, s.count)
@@ -503,11 +512,7 @@ def fig3(ctx):
                 ms=2.2, zorder=3)
         _guide_lines(ax, guide, "c = 0.035, 0.05 (Fig. 4)")
         draw_marks(ax, marks)
-        ax.set_title(f"({tag}) {SECTION_LABELS[section][1]}", fontsize=10)
-        if n == 0:
-            ax.text(0.5, 0.5, "no section points recorded", ha="center",
-                    va="center", transform=ax.transAxes)
-        ax.legend(fontsize=7, loc="best", framealpha=0.85, markerscale=2)
+        _finish_section_panel(ax, f"({tag}) {SECTION_LABELS[section][1]}", n)
     caption = (f"Fig. 3: bifurcation diagrams vs c, set 3.1 (F0 = 0.1, {ctx.options.impulse} "
                f"impulses), {s.count} values of c, {s.record} recorded periods after "
                f"{s.transient}: (a) phase plane (x at t = k 2π/ω), (b) constraint plane "
@@ -650,11 +655,7 @@ def fig10(ctx):
             cnt = diagram(ax, emr0, section, color=COLORS["EMR_0"], label="EMR_0")
             _guide_lines(ax, (0.0356,), "c = 0.0356 (Fig. 11)")
             draw_marks(ax, marks)
-            ax.set_title(f"({tag}) n = {n}: {SECTION_LABELS[section][1]}", fontsize=10)
-            if cnt == 0:
-                ax.text(0.5, 0.5, "no section points recorded", ha="center",
-                        va="center", transform=ax.transAxes)
-            ax.legend(fontsize=7, loc="best", framealpha=0.85, markerscale=2)
+            _finish_section_panel(ax, f"({tag}) n = {n}: {SECTION_LABELS[section][1]}", cnt)
         diffs.append(f"n = {n}: periodic at {int(np.sum(emr0.period.values > 0))} of "
                      f"{s.count} values of c ({_label_counts(emr0)}) in a record of {record} "
                      f"periods; {_cycle_note(osc, record)}; {_marks_text(marks, 'c', emr0)}.")

@@ -68,16 +68,7 @@ def _finite(name: str, value) -> float:
 def check_order(order, maximum: int = MAX_ORDER) -> int:
     """The truncation order N as an int, refusing bools, non-integers, N < 0 and
     N > ``maximum``."""
-    try:
-        whole = (not isinstance(order, (bool, str, bytes))
-                 and math.isfinite(float(order)) and float(order) == int(order))
-    except (TypeError, ValueError, OverflowError):
-        whole = False
-    if not whole or int(order) < 0:
-        raise ValueError(f"order (N) must be an integer >= 0, got {order!r}")
-    if int(order) > maximum:
-        raise ValueError(f"order (N) must be at most {maximum}, got {order!r}")
-    return int(order)
+    return check_count("order (N)", order, minimum=0, maximum=maximum)
 
 
 def check_count(name: str, value, minimum: int = 1, maximum: int | None = None) -> int:

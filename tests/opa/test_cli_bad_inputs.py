@@ -131,6 +131,7 @@ BAD_CLI = [
     (DMR + ["--out", "/etc/hostname/x.nc"], "/etc/hostname"),
     (DMR + ["--plot", "/tmp"], "--plot"),
     (DMR + ["--plot", "run.xyz"], ".xyz"),
+    (DMR + ["--out", "x" * 230 + ".nc"], "longer than 200"),
     (DMR + ["--plot", "/proc/opa-mc-test.png"], "/proc"),
     (["validate", "--outdir", "/proc/opa-mc-test"], "/proc"),
     (["validate", "--outdir", "/etc/hostname"], "/etc/hostname"),
