@@ -3,7 +3,7 @@
 Run with ``pytest benchmarks/bench_opa.py -s`` (``--benchmark-disable`` for a quick smoke
 run: the long run shrinks from 1000 to 20 forcing periods).
 
-* ``test_rhs_cost``: one compiled evaluation of ``opa._solver.rhs`` for N = 2 .. 64,
+* ``test_rhs_cost``: one compiled evaluation of ``opa._kernel.vector_field`` for N = 2 .. 64,
   timed as 10^4 evaluations in a numba loop (no Python call overhead in the figure).
   The pseudo-spectral RHS evaluates the expansion at Q = 2N + 1 nodes and projects back,
   so its cost grows as O(N Q) = O(N^2); ``test_rhs_cost_exponent`` fits the exponent.
@@ -27,7 +27,7 @@ from numba import njit
 from scipy.integrate import solve_ivp
 
 import opa
-from opa import _solver
+from opa import _kernel
 from opa._simulate import kernel_quadrature, pack_parameters, quadrature, run_kernel
 
 RHS_ORDERS = [2, 4, 8, 16, 32, 64]
@@ -38,11 +38,11 @@ RHS_EVALUATIONS = 10_000
 
 
 @njit(cache=False)
-def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, xk, vk):
+def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, work):
     # the running sum keeps the calls observable, so none can be optimised away
     total = 0.0
     for j in range(count):
-        _solver.rhs(1e-3 * j, y, p, cfg, nodes, weights, basis, 0.0, False, out, xk, vk)
+        _kernel.vector_field(1e-3 * j, y, 0, p, cfg, nodes, weights, basis, 0.0, False, out, work)
         total += out[out.shape[0] - 1]
     return total
 
@@ -53,7 +53,7 @@ def _rhs_inputs(order):
     nodes, weights, basis = kernel_quadrature(quadrature(order))
     y = np.random.default_rng(order).normal(scale=0.3, size=2 * (order + 1))
     out = np.empty_like(y)
-    return (y, p, cfg, nodes, weights, basis, out, np.empty(len(nodes)), np.empty(len(nodes)))
+    return (y, p, cfg, nodes, weights, basis, out, np.empty((6, len(nodes))))
 
 
 def _seconds_per_rhs(order, repeats=7):

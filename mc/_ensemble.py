@@ -2,7 +2,7 @@
 
 Each sample is the deterministic impact oscillator (eq. (1)) with its own value of the
 uncertain parameter ``p = p_bar + sigma xi``: its own impacts, chatter and sticking,
-integrated by the same compiled kernel as the DMR (``opa._solver.run_samples``).
+integrated by the same compiled kernel as the DMR (``opa._kernel.run_samples``).
 
 Samples are processed in fixed chunks. A chunk's paths live only while its statistics
 are formed; chunk statistics (weight, mean, centred sum of squares, Chebyshev moments
@@ -36,7 +36,7 @@ import xarray as xr
 
 from mc._checkpoint import Checkpoint, digest, stats_arrays
 from mc._sampling import _check_sampler, sample_xi
-from opa import _solver as K
+from opa import _kernel as K
 from opa._basis import chebyshev_u, orthonormal
 from opa._dataset import check_memory, package_version, provenance_attrs, time_coord
 from opa._model import Oscillator, SolverOptions, Uncertainty, check_instance, check_order

@@ -121,7 +121,7 @@ class PointTask:
 def _trajectory(task: PointTask, times: np.ndarray) -> dict:
     """Integrate one point; arrays only (the compiled kernel directly for dmr and opa,
     which saves building a dataset per point, about a fifth of a point's time)."""
-    from opa import _solver as K
+    from opa import _kernel as K
     from opa._simulate import pack_parameters, quadrature, run_kernel
 
     osc = task.oscillator
@@ -152,7 +152,7 @@ def _trajectory(task: PointTask, times: np.ndarray) -> dict:
     out, log, _ = run_kernel(y0, times, p, cfg, quadrature(order), rtol=task.options.rtol,
                              atol=task.options.atol, label=f"{name} trajectory")
     kind = log[:, 2].astype(np.int64)
-    impact = (kind == K.EV_IMPACT) | (kind == K.EV_GRAZE)
+    impact = np.isin(kind, (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK))
     return {"x": out[:, 0], "v": out[:, ncoef], "impact_time": log[impact, 0],
             "impact_velocity": log[impact, 1], "stick_time": log[kind == K.EV_STICK, 0],
             "release_time": log[kind == K.EV_RELEASE, 0],

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opa import _solver as K
+from opa import _kernel as K
 from opa._basis import quadrature_order
 from opa._measure import Measure
 from opa._model import Oscillator, SolverOptions

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n", "x0", "v0")
 UNCERTAIN_PARAMETERS = ("mu", "a", "c")
+METHODS = ("dop853", "dp5")
 IMPULSE_MODELS = ("dirac", "pulse")
 TRUNCATIONS = ("galerkin", "paper")
 IMPACT_LAWS = ("mean", "ensemble", "saltation")
@@ -187,7 +188,10 @@ class SolverOptions:
         force of the same height and width ``pulse_width`` starting at t_j).
     pulse_width : width tau of the rectangular pulses, 0 < tau < 2 pi / omega1.
     impulse_at_zero : whether the train includes j = 0 (an impulse at t = 0).
-    rtol, atol : tolerances of the Dormand-Prince 5(4) error control.
+    rtol, atol : tolerances of the error control (max-norm over the components).
+    method : the Runge-Kutta pair: "dop853" (Dormand-Prince 8(5,3) with its seventh-order
+        dense output, the default: fewer steps at the tolerances of this project, 1e-8 to
+        1e-12) or "dp5" (Dormand-Prince 5(4) with Shampine's quartic dense output).
     max_steps : hard cap on steps (accepted and rejected) of one trajectory.
     chatter_velocity : an impact slower than this, with the net force pushing into the
         wall, ends a chatter sequence: the oscillator is put at rest on the wall at the
@@ -203,9 +207,11 @@ class SolverOptions:
     max_steps: int = 50_000_000
     chatter_velocity: float = 1e-6
     max_step: float = math.inf
+    method: str = "dop853"
 
     def __post_init__(self):
         _choice("impulse", self.impulse, IMPULSE_MODELS)
+        _choice("method", self.method, METHODS)
         if isinstance(self.impulse_at_zero, str) or self.impulse_at_zero not in (True, False, 0, 1):
             raise ValueError(f"impulse_at_zero must be True or False, got {self.impulse_at_zero!r}")
         for name in ("rtol", "atol"):

@@ -12,7 +12,7 @@ import math
 import numpy as np
 import xarray as xr
 
-from opa import _solver as K
+from opa import _kernel as K
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
 from opa._dataset import provenance_attrs, time_coord
 from opa._model import (
@@ -20,6 +20,7 @@ from opa._model import (
     check_order,
     check_span,
     IMPACT_LAWS,
+    METHODS,
     TRUNCATIONS,
     Oscillator,
     SolverOptions,
@@ -74,6 +75,7 @@ def pack_parameters(
     cfg[K.C_TRUNC] = TRUNCATIONS.index(truncation)
     cfg[K.C_LAW] = IMPACT_LAWS.index(impact_law)
     cfg[K.C_MAXSTEPS] = int(options.max_steps)
+    cfg[K.C_METHOD] = (K.METHOD_DOP853, K.METHOD_DP5)[METHODS.index(options.method)]
     return p, cfg
 
 
@@ -102,10 +104,13 @@ def kernel_quadrature(quad):
     return nodes, weights, np.ascontiguousarray(basis.T)
 
 
-def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", partial=False):
+def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", partial=False,
+               include_start=True):
     """Integrate and return (states (n_out, dim), event log (n, 3), counters dict).
 
-    ``quad`` is :func:`quadrature`'s (nodes, weights, basis (N+2, Q)). A trajectory that
+    ``quad`` is :func:`quadrature`'s (nodes, weights, basis (N+2, Q)). With
+    ``include_start`` an impulse at ``times[0]`` is applied (a run from the start of the
+    train); without, it belongs to the previous interval (a run resumed mid-way). A trajectory that
     cannot be completed raises :class:`SimulationError`, or with ``partial`` returns the
     outputs reached (NaN after) and the reason in ``counters["failure"]``."""
     nodes, weights, basis = kernel_quadrature(quad)
@@ -113,8 +118,10 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", parti
     while True:
         out = np.empty((len(times), len(y0)))
         log = np.empty((capacity, 3))
+        z = np.array(y0, dtype=float)
         status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
-            np.asarray(y0, dtype=float), times, p, cfg, nodes, weights, basis, rtol, atol, out, log
+            z, 0, np.asarray(times, dtype=float), include_start, False, p, cfg, nodes, weights,
+            basis, rtol, atol, out, np.empty((0, K.N_STATS)), np.empty(0), log
         )
         if n_events <= capacity:
             break
@@ -173,7 +180,7 @@ def _times(oscillator, periods, per_period, times, dim: int = 2):
 
 def _event_vars(log: np.ndarray) -> dict:
     kinds = log[:, 2].astype(np.int8) if len(log) else np.zeros(0, np.int8)
-    impact = (kinds == K.EV_IMPACT) | (kinds == K.EV_GRAZE)
+    impact = np.isin(kinds, (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK))
     return {
         "impact_time": (
             "impact",
@@ -428,7 +435,7 @@ def opa_variants(oscillator: Oscillator, *, sigma: float, order: int, uncertain:
         if counters[v, 0] != K.OK:
             out[v][~np.isfinite(out[v]).all(axis=1)] = np.nan
         n = min(int(counters[v, 1]), cap)
-        hits = np.flatnonzero(np.isin(logs[v, :n, 2], (K.EV_IMPACT, K.EV_GRAZE)))
+        hits = np.flatnonzero(np.isin(logs[v, :n, 2], (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK)))
         if len(hits):
             first[v] = logs[v, hits[0], 0]
     x = out[:, :, : order + 1]

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opa import _solver as K
+from opa import _kernel as K
 from opa._model import Oscillator, SolverOptions
 from opa._simulate import pack_parameters, quadrature, run_kernel
 
@@ -131,8 +131,8 @@ def event_sequences(oscillator: Oscillator, options: SolverOptions, parameter: s
 
 def _sequence_from_log(oscillator: Oscillator, log: np.ndarray) -> EventSequence:
     codes = log[:, 2].astype(int)
-    names = {K.EV_IMPACT: _IMPACT, K.EV_GRAZE: _IMPACT, K.EV_STICK: _STICK,
-             K.EV_RELEASE: _RELEASE}
+    names = {K.EV_IMPACT: _IMPACT, K.EV_GRAZE: _IMPACT, K.EV_KICK: _IMPACT,
+             K.EV_STICK: _STICK, K.EV_RELEASE: _RELEASE}
     if oscillator.F0 != 0.0:
         interval = np.floor(log[:, 0] / (2 * math.pi / oscillator.omega1)).astype(int)
     else:

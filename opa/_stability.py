@@ -5,9 +5,9 @@ The map is ``P: y(t0) -> y(t0 + k T)``, ``T = 2 pi / omega``, of the DMR (eq. (2
 of the OPA equivalent system of any order N (eqs. (24)-(28)); states are
 right-continuous (just after an impulse or impact at that instant). Its Jacobian comes
 from the variational equation carried through every impact with the saltation matrix
-of the impact law (``opa._variational``), so it is exact up to the integration
-tolerance; ``tests/opa/test_stability.py`` checks it against finite differences of the
-independent solver ``opa._solver``.
+of the impact law (the kernel ``opa._kernel`` with m tangent columns), so it is exact
+up to the integration tolerance; ``tests/opa/test_stability.py`` checks it against
+finite differences of plain trajectories and against an independent scipy reference.
 
 Impulses. With ``F0 = 0`` the system is T-periodic and every ``k >= 1`` gives an
 autonomous map. With Dirac or pulse impulses at ``t_j = j 2 pi/omega1`` of amplitude
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from opa import _variational as V
+from opa import _kernel as V
 from opa._model import (
     _finite,
     check_order,
@@ -42,8 +42,7 @@ from opa._model import (
     Uncertainty,
     _choice,
 )
-from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
-from opa._simulate import SimulationError, quadrature
+from opa._simulate import SimulationError, kernel_quadrature, pack_parameters, quadrature
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
 STABILITY_LAWS = IMPACT_LAWS[:2]
@@ -164,38 +163,13 @@ SWEEPABLE = tuple(n for n in PARAMETER_NAMES if n not in ("x0", "v0")) + ("sigma
 
 
 def _pack(system: ImpactSystem):
-    osc, opts = system.oscillator, system.options
-    T1 = 2.0 * math.pi / osc.omega1
-    if opts.impulse == "pulse" and opts.pulse_width >= T1:
-        raise ValueError(f"pulse_width must be shorter than 2 pi/omega1 = {T1:.6g}, "
-                         f"got {opts.pulse_width}")
-    p = np.zeros(V.N_PARAMS)
-    p[V.V_MU], p[V.V_A], p[V.V_C], p[V.V_F] = osc.mu, osc.a, osc.c, osc.f
-    p[V.V_OMEGA], p[V.V_ETA], p[V.V_DELTA] = osc.omega, osc.eta, osc.delta
-    p[V.V_F0], p[V.V_A1], p[V.V_OMEGA1], p[V.V_N] = osc.F0, osc.a1, osc.omega1, osc.n
-    p[V.V_TAU], p[V.V_SIGMA] = opts.pulse_width, system.sigma
-    p[V.V_CHATTER_V], p[V.V_HMAX] = opts.chatter_velocity, opts.max_step
-    cfg = np.zeros(V.N_CFG, dtype=np.int64)
-    cfg[V.G_NCOEF] = system.order + 1
-    cfg[V.G_UNCERTAIN] = UNCERTAIN_PARAMETERS.index(system.uncertain)
-    cfg[V.G_IMPULSE] = ("dirac", "pulse").index(opts.impulse)
-    cfg[V.G_AT_ZERO] = int(bool(opts.impulse_at_zero))
-    cfg[V.G_TRUNC] = TRUNCATIONS.index(system.truncation)
-    cfg[V.G_LAW] = IMPACT_LAWS.index(system.impact_law)
-    cfg[V.G_MAXSTEPS] = int(opts.max_steps)
-    nodes, weights, basis = _quadrature(system.order)
-    return p, cfg, nodes, weights, basis
-
-
-def _quadrature(order: int):
-    """Gauss rule of the semicircle density with Q = 2N + 1 nodes and the basis
-    U_0..U_{N+1} at the nodes, degree-major (N+2, Q), as ``opa._variational`` takes it.
-    N = 0: the one-node rule at xi = 0 exactly (the DMR)."""
-    if order == 0:
-        nodes, weights = np.zeros(1), np.ones(1)
-    else:
-        nodes, weights = gauss_nodes(quadrature_order(order))
-    return nodes, weights, np.ascontiguousarray(chebyshev_u(order + 1, nodes))
+    """The kernel's vectors and node-major rule for the system (the one packer,
+    ``opa._simulate.pack_parameters``)."""
+    p, cfg = pack_parameters(system.oscillator, system.options, sigma=system.sigma,
+                             order=system.order, uncertain=system.uncertain,
+                             truncation=system.truncation, impact_law=system.impact_law)
+    nodes, weights, U = kernel_quadrature(quadrature(system.order))
+    return p, cfg, nodes, weights, U
 
 
 def impulse_cycle(oscillator: Oscillator, *, max_cycle: int = MAX_CYCLE) -> int | None:
@@ -340,10 +314,10 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
         z = np.concatenate([y, W.ravel()])
         out = np.empty((len(times), D))
         stats = np.empty((len(times) - 1, V.N_STATS))
-        log = np.empty((capacity, 2))
-        status, n_log = V.flow_points(z, m, times, include_start, False, p, cfg, nodes, weights,
-                                      U, system.options.rtol, system.options.atol, out, stats,
-                                      np.empty(0), log)
+        log = np.empty((capacity, 3))
+        status, n_log, _, _, _ = V.integrate(z, m, times, include_start, False, p, cfg, nodes,
+                                             weights, U, system.options.rtol,
+                                             system.options.atol, out, stats, np.empty(0), log)
         if status != V.OK:
             raise SimulationError(
                 f"{system.model} variational flow stopped: {V.STATUS_MESSAGES[status]} "
@@ -355,12 +329,14 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
     else:
         raise SimulationError(f"{system.model} variational flow: the impact count changed "
                               f"between two identical runs ({n_log} impacts)")
+    log = log[:n_log]
+    impacts = np.isin(log[:, 2], (V.EV_IMPACT, V.EV_GRAZE))  # located impacts, not kicks
     return Flow(
         times=times,
         states=out,
         tangent=z[D:].reshape(D, m).copy() if m else None,
-        impact_time=log[:n_log, 0].copy(),
-        impact_velocity=log[:n_log, 1].copy(),
+        impact_time=log[impacts, 0].copy(),
+        impact_velocity=log[impacts, 1].copy(),
         min_gap=float(stats[:, V.S_GAP].min()),
         sticks=int(stats[:, V.S_STICKS].sum()),
         steps=int(stats[:, V.S_STEPS].sum()),
@@ -775,9 +751,9 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
     out = np.full((periods + 1, D), np.nan)
     stats = np.empty((periods, V.N_STATS))
     growth = np.empty(periods)
-    status, _ = V.flow_points(z, 1, times, start, True, p, cfg, nodes, weights, U,
-                              system.options.rtol, system.options.atol, out, stats, growth,
-                              np.empty((0, 2)))
+    status = V.integrate(z, 1, times, start, True, p, cfg, nodes, weights, U,
+                         system.options.rtol, system.options.atol, out, stats, growth,
+                         np.empty((0, 3)))[0]
     if status != V.OK:
         done = int(np.sum(np.isfinite(out[1:, 0])))
         raise SimulationError(f"Lyapunov run stopped after about {done} periods: "
@@ -845,12 +821,10 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
 
     Parameters
     ----------
-    engine : ``"solver"``: both trajectories by the project's event-driven solver
-        ``opa._solver`` (fully independent code; needs ``F0 = 0``, because
-        ``opa._solver.integrate`` restarts its impulse train at every call and so cannot
-        resume a trajectory mid-way under impulses); ``"plain"``: by this module's own
-        kernel without tangent vectors (shares the event code, not the saltation
-        matrices; works with impulses).
+    engine : ``"solver"``: both trajectories as plain runs of the kernel
+        (``opa._simulate.run_kernel``, the DMR/OPA path, resumed under the impulse train);
+        ``"plain"``: through :func:`flow` without tangent vectors. Both share the event
+        code, not the saltation matrices.
     """
     _choice("engine", engine, ("solver", "plain"))
     periods, transient = _periods(periods), check_count("transient", transient, 0)
@@ -861,9 +835,6 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
     if engine == "solver":
         from opa._simulate import pack_parameters, run_kernel
 
-        if system.oscillator.F0 != 0.0:
-            raise ValueError(f"lyapunov_benettin(engine='solver') needs F0 = 0, got F0 = "
-                             f"{system.oscillator.F0:g}; use engine='plain' with impulses")
         p, cfg = pack_parameters(system.oscillator, system.options, sigma=system.sigma,
                                  order=system.order, uncertain=system.uncertain,
                                  truncation=system.truncation, impact_law=system.impact_law)
@@ -872,8 +843,10 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
 
         def run(y, ta, tb, first=False):
             out, log, _ = run_kernel(y, np.array([ta, tb]), p, cfg, quad, rtol=opts.rtol,
-                                     atol=opts.atol, label="Benettin trajectory")
-            return out[-1], log[:, 1]
+                                     atol=opts.atol, label="Benettin trajectory",
+                                     include_start=first and at_zero)
+            located = np.isin(log[:, 2], (V.EV_IMPACT, V.EV_GRAZE))
+            return out[-1], log[located, 1]
     else:
         def run(y, ta, tb, first=False):
             res = flow(system, y, [ta, tb], include_start=first and at_zero)
@@ -899,7 +872,7 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
         impacts += len(v_imp)
         if len(v_imp):
             vmin = min(vmin, float(np.min(v_imp)))
-    where = "opa._solver" if engine == "solver" else "opa._variational without tangents"
+    where = "plain kernel runs" if engine == "solver" else "the flow without tangents"
     return LyapunovEstimate(
         exponent=float(np.mean(growth) / T), log_growth=growth, forcing_period=T,
         method=f"Benettin two-trajectory ({where}, d0 = {d0:g})", impacts=impacts,

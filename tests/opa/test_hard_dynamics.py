@@ -1,6 +1,6 @@
 """Hard dynamics: a trajectory that is not finite is a failure, and every loop ends.
 
-The kernels (``opa._solver.integrate``, ``opa._variational.advance``) check the state
+The kernel (``opa._kernel.integrate``, plain and variational runs) checks the state
 after every accepted step and every jump (impact, impulse kick, saltation jump, release):
 a NaN or inf component ends the run with ``DIVERGED``, a component beyond the escape
 bound with ``ESCAPED``. The Python layer turns these into ``SimulationError``; a run never
@@ -24,8 +24,7 @@ import numpy as np
 import pytest
 
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
-from opa import _solver as K
-from opa import _variational as V
+from opa import _kernel as K
 from opa._continuation import continue_orbits
 from opa._poincare import impulse_times, stroboscopic_mask
 from opa._simulate import SimulationError, kernel_quadrature, pack_parameters, quadrature
@@ -75,7 +74,7 @@ def run_dmr_kernel(osc: Oscillator, times, options: SolverOptions | None = None)
     """The kernel's own status and counters for one DMR trajectory."""
     p, cfg = pack_parameters(osc, options or SolverOptions())
     out, log = np.empty((len(times), 2)), np.empty((64, 3))
-    status, _, _, n_steps, _ = K.integrate(
+    status, _, _, n_steps, _ = K.run_one(
         np.array([osc.x0, osc.v0]), np.asarray(times, dtype=float), p, cfg,
         *kernel_quadrature(quadrature(0)), 1e-10, 1e-10, out, log)
     return status, n_steps, out
@@ -104,37 +103,36 @@ def test_status_codes_are_distinct_and_say_where_and_why():
     assert "escaped" in K.STATUS_MESSAGES[K.ESCAPED]
     assert "non-finite" in K.STATUS_MESSAGES[K.DIVERGED]
     assert "not finite" in K.STATUS_MESSAGES[K.BAD_TIME]
-    assert V.STATUS_MESSAGES is K.STATUS_MESSAGES and V.ESCAPED == K.ESCAPED
 
 
 def test_state_check_catches_nan_that_max_would_drop():
     bound = 10.0
-    assert K.state_status(np.array([1.0, -2.0]), bound) == K.OK
-    assert K.state_status(np.array([1.0, np.nan]), bound) == K.DIVERGED
-    assert K.state_status(np.array([np.nan, 1.0]), bound) == K.DIVERGED
-    assert K.state_status(np.array([-np.inf, 1.0]), bound) == K.DIVERGED
-    assert K.state_status(np.array([1.0, -10.0]), bound) == K.ESCAPED
-    assert K.state_status(np.array([11.0, np.nan]), bound) == K.DIVERGED
+    assert K.state_status(np.array([1.0, -2.0]), 2, bound) == K.OK
+    assert K.state_status(np.array([1.0, np.nan]), 2, bound) == K.DIVERGED
+    assert K.state_status(np.array([np.nan, 1.0]), 2, bound) == K.DIVERGED
+    assert K.state_status(np.array([-np.inf, 1.0]), 2, bound) == K.DIVERGED
+    assert K.state_status(np.array([1.0, -10.0]), 2, bound) == K.ESCAPED
+    assert K.state_status(np.array([11.0, np.nan]), 2, bound) == K.DIVERGED
     # the variational check: the state escapes; the tangent may be large but finite
     z = np.array([1.0, 2.0, 1e200, -1e200])
-    assert V.augmented_status(z, 2, bound) == K.OK
+    assert K.state_status(z, 2, bound) == K.OK
     z[3] = np.nan
-    assert V.augmented_status(z, 2, bound) == K.DIVERGED
-    assert V.augmented_status(np.array([1.0, 20.0, 0.0, 0.0]), 2, bound) == K.ESCAPED
+    assert K.state_status(z, 2, bound) == K.DIVERGED
+    assert K.state_status(np.array([1.0, 20.0, 0.0, 0.0]), 2, bound) == K.ESCAPED
 
 
+@pytest.mark.parametrize("method", [K.METHOD_DP5, K.METHOD_DOP853])
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
-def test_error_norm_rejects_a_non_finite_trial_step(bad):
+def test_error_norm_rejects_a_non_finite_trial_step(bad, method):
     y = np.array([0.5, -0.5])
-    stages = np.zeros((7, 2))
+    stages = np.zeros((K.K_ROWS, 2))
     y_new = np.array([0.5, bad])
-    assert K.error_norm(y, y_new, stages, 0.1, 1e-10, 1e-10) == np.inf
-    assert V.error_norm(y, y_new, stages, 0.1, 1e-10, 1e-10) == np.inf
-    stages[6, 0] = bad
-    assert K.error_norm(y, y, stages, 0.1, 1e-10, 1e-10) == np.inf
+    assert K.error_norm(method, y, y_new, stages, 0.1, 1e-10, 1e-10) == np.inf
+    stages[K.method_stages(method)[0], 0] = bad
+    assert K.error_norm(method, y, y, stages, 0.1, 1e-10, 1e-10) == np.inf
 
 
-def test_escape_bound_follows_the_documented_formula_in_both_kernels():
+def test_escape_bound_follows_the_documented_formula():
     osc = Oscillator(f=2.0, omega=2.8, F0=10.0, a1=0.5, delta=0.3, x0=-1.5, v0=0.7)
     p, _ = pack_parameters(osc, SolverOptions())
     y0 = np.array([osc.x0, osc.v0])
@@ -142,9 +140,8 @@ def test_escape_bound_follows_the_documented_formula_in_both_kernels():
     a = osc.a
     expected = 1e3 * (1.0 + 1.5 + 0.3 + force * (1.0 + 1.0 / 2.8 + 1.0 / 2.8**2 + 1.0 / a))
     assert K.escape_bound(y0, p) == pytest.approx(expected, rel=1e-14)
-    assert V.escape_bound(y0, p) == pytest.approx(expected, rel=1e-14)
     p[K.P_A] = 0.0  # no restoring force, no scale: nothing escapes
-    assert K.escape_bound(y0, p) == np.inf and V.escape_bound(y0, p) == np.inf
+    assert K.escape_bound(y0, p) == np.inf
 
 
 def test_a_weak_spring_is_not_an_escape():
@@ -333,10 +330,10 @@ def test_kernels_refuse_non_finite_times_at_once():
     p, cfg, nodes, weights, U = system._packed
     for times in (np.array([0.0, np.nan]), np.array([np.nan, 1.0]), np.array([0.0, np.inf])):
         z = np.array([-1.0, 0.0])
-        out, stats, log = np.empty((2, 2)), np.empty((1, V.N_STATS)), np.empty((4, 2))
+        out, stats, log = np.empty((2, 2)), np.empty((1, K.N_STATS)), np.empty((4, 3))
         with within(QUICK):
-            status, _ = V.flow_points(z, 0, times, False, False, p, cfg, nodes, weights, U,
-                                      1e-10, 1e-10, out, stats, np.empty(0), log)
+            status = K.integrate(z, 0, times, False, False, p, cfg, nodes, weights, U,
+                                 1e-10, 1e-10, out, stats, np.empty(0), log)[0]
         assert status == K.BAD_TIME
 
 

@@ -1,4 +1,4 @@
-"""Tests of the OPA equivalent system (``opa._solver.rhs``, ``opa.simulate_opa``).
+"""Tests of the OPA equivalent system (``opa._kernel.vector_field``, ``opa.simulate_opa``).
 
 Each check is pinned against a reference that shares no code with the library:
 
@@ -22,7 +22,7 @@ import pytest
 from scipy.special import eval_chebyu, roots_jacobi
 
 import opa
-from opa import _solver
+from opa import _kernel
 from opa._simulate import kernel_quadrature, pack_parameters, quadrature
 from tests.reference import reference_trajectory
 
@@ -94,15 +94,16 @@ def paper_rhs(t, y, model, sigma, uncertain, truncation, pulse=0.0):
 
 
 def kernel_rhs(t, y, oscillator, sigma, order, uncertain, truncation, pulse=0.0):
-    """``opa._solver.rhs`` at (t, y); returns (derivative, release value)."""
+    """``opa._kernel.vector_field`` at (t, y); returns (derivative, release value)."""
     p, cfg = pack_parameters(
         oscillator, opa.SolverOptions(), sigma=sigma, order=order, uncertain=uncertain,
         truncation=truncation,
     )  # fmt: skip
     nodes, weights, basis = kernel_quadrature(quadrature(order))
     out = np.empty_like(y)
-    xk, vk = np.empty(len(nodes)), np.empty(len(nodes))
-    release = _solver.rhs(t, y, p, cfg, nodes, weights, basis, pulse, False, out, xk, vk)
+    work = np.empty((6, len(nodes)))
+    release = _kernel.vector_field(t, y, 0, p, cfg, nodes, weights, basis, pulse, False, out,
+                                   work)
     return out, release
 
 

@@ -1,0 +1,1357 @@
+"""The one compiled kernel: every jitted function of the project lives in this module.
+
+It imports nothing from the package (numba's on-disk cache bakes imported globals into
+the compiled code and does not notice when another file changes, so a kernel that
+imports only numpy and numba is cache-safe by construction; ``tests/opa/test_kernel.py``
+enforces that no other module defines jitted code).
+
+One integrator serves every use:
+
+- the DMR (eq. (29)) and each Monte Carlo sample: the deterministic system, N = 0, with a
+  one-node rule at xi = 0 (a register-only step for this two-dimensional case);
+- the OPA equivalent system (eqs. (24)-(28)) of any order N;
+- the variational equation with m tangent columns (m = 0 is the plain run) for the
+  Jacobian of the flow map, Floquet multipliers and Lyapunov exponents.
+
+Augmented state, for ``n = N + 1`` coefficients, ``D = 2 n`` and ``m`` tangent columns::
+
+    z = [x_0 .. x_N, v_0 .. v_N,  W[0, 0..m-1], ..., W[D-1, 0..m-1]]
+    y' = f(t, y),   W' = J(t, y) W          (J = df/dy)
+
+Right-hand side (Galerkin projection on Q Gauss nodes, pseudo-spectral form)::
+
+    x_i' = v_i
+    v_i' = sum_k w_k U_i(xi_k) g(x_k, v_k; p_k) + [i = 0] (f cos(omega t) + force)
+    g(x, v; p) = mu (1 - v^2) v - a x - c x^3,    x_k = sum_j x_j U_j(xi_k)
+
+exact for Q >= 2N + 1 nodes of the semicircle density; the ``paper`` truncation (eq. (27))
+adds back ``sigma/2 * Y_{N+1}`` (``X_{N+1}`` for uncertain c) to the last equation.
+The basis is node-major: ``U[k, i] = U_i(xi_k)``, shape (Q, N + 2).
+
+Steppers: Dormand-Prince 5(4) with Shampine's quartic dense output (``METHOD_DP5``) and
+Dormand-Prince 8(5,3) with its seventh-order dense output (``METHOD_DOP853``, the
+default). Events: the wall x_0 = delta is found on the dense output and refined by
+re-stepping exactly to it (Newton on full Runge-Kutta steps); the impact law applies
+the reset to y and its saltation matrix to W; Dirac impulses and pulse switches are
+breakpoints at fixed times; chatter ends in sticking, which ends at release.
+
+Kernels are pure functions of arrays and floats and return status codes; the Python
+layer (``opa._simulate``, ``opa._stability``) validates input, packs the parameters and
+turns codes into messages.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+# ---------------------------------------------------------------------------
+# Layout of the float parameter vector ``p`` and the integer configuration ``cfg``.
+P_MU, P_A, P_C, P_F, P_OMEGA, P_ETA, P_DELTA = 0, 1, 2, 3, 4, 5, 6
+P_F0, P_A1, P_OMEGA1, P_N, P_TAU, P_SIGMA = 7, 8, 9, 10, 11, 12
+P_CHATTER_V, P_HMAX = 13, 14
+N_PARAMS = 15
+
+C_NCOEF, C_UNCERTAIN, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD = range(8)
+N_CFG = 8
+
+UNCERTAIN_MU, UNCERTAIN_A, UNCERTAIN_C = 0, 1, 2
+IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
+TRUNC_GALERKIN, TRUNC_PAPER = 0, 1
+LAW_MEAN, LAW_ENSEMBLE, LAW_SALTATION = 0, 1, 2
+METHOD_DP5, METHOD_DOP853 = 0, 1
+
+# Slots of the per-interval ``stats`` output of ``integrate``.
+S_IMPACTS, S_MIN_VELOCITY, S_STICKS, S_STEPS, S_STICKING, S_GAP = 0, 1, 2, 3, 4, 5
+N_STATS = 6
+
+# Kinds in the event log (rows: time, velocity, kind). EV_KICK is an impact made by a
+# Dirac kick into the wall while the mean rests on it (logged with the kicked velocity).
+EV_IMPACT, EV_GRAZE, EV_STICK, EV_RELEASE, EV_KICK = 0, 1, 2, 3, 4
+
+# An impact whose pre-impact velocity is below this is logged as a graze (EV_GRAZE), and
+# the saltation law, whose matrix divides by it, reflects every v_i instead.
+GRAZE_VELOCITY = 1e-6
+
+# Impulse and pulse times within this relative distance before an output time belong to
+# that output time (t_j = j T1 and t_k = k T are computed differently and may differ by
+# an ulp where they coincide in exact arithmetic).
+SNAP = 1e-10
+
+# Escape bound: a state component |x_i| or |v_i| at or beyond
+#
+#     ESCAPE_FACTOR * (1 + max_j |y_j(t0)| + |delta|
+#                      + (|f| + |F0| (1 + |a1|)) (1 + 1/omega + 1/omega^2 + 1/|a|))
+#
+# ends the run as escaped (``escape_bound``). The bracket is the problem's own scale: the
+# start, the wall, and the largest force (harmonic amplitude plus the largest impulse or
+# pulse height) together with the velocity (force / omega) and displacement
+# (force / omega^2) it drives over a forcing period, and the static deflection force / |a|
+# of a weak spring (a = 3e-5 holds |x| near 7e3 legitimately; with a = 0 there is no
+# scale and the bound is infinite: only a non-finite state ends the run). The paper's
+# motions stay more than 3000 times inside the bound (|x|, |v| < 11 over 300 periods of
+# every preset, against bounds of 4e3 to 3.5e4). The factor is 1e3, not larger, because
+# a runaway with the van der Pol term is stiff: with c < 0 the damping mu v^3 holds |v|
+# near (|c| x^3 / mu)^(1/3) ~ |x| and the stable step falls like 1/x^2, so the steps
+# needed to reach |x| = X grow like X^2 (about 6e6 steps to |x| = 3e3).
+ESCAPE_FACTOR = 1e3
+
+# Status codes.
+OK, MAX_STEPS, STEP_COLLAPSE, DIVERGED, ESCAPED, BAD_TIME, SKIPPED = 0, 1, 2, 3, 4, 5, 6
+STATUS_MESSAGES = {
+    OK: "ok",
+    MAX_STEPS: "the maximum number of steps was reached",
+    STEP_COLLAPSE: "the step size collapsed below round-off",
+    DIVERGED: ("the trajectory diverged: the state became non-finite (NaN or inf), the "
+               "vector field overflowing even at the smallest step or a jump (impact, "
+               "impulse, release) giving a non-finite state"),
+    ESCAPED: ("the trajectory diverged: the state escaped (|x| or |x'| beyond the escape "
+              "bound 1000 (1 + max|y(t0)| + |delta| + (|f| + |F0| (1 + |a1|)) (1 + 1/omega "
+              "+ 1/omega^2 + 1/|a|)))"),
+    SKIPPED: "not integrated: another sample of the ensemble failed first",
+    BAD_TIME: ("a time is not finite (NaN or inf), or too large for the impulse times to "
+               "be resolved"),
+}
+
+# ---------------------------------------------------------------------------
+# Dormand-Prince 5(4) (Dormand & Prince 1980) with Shampine's quartic continuous
+# extension: y(t + theta h) = y + h sum_s K_s sum_j DP_P[s, j] theta^(j+1).
+DP_C = np.array([0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0])
+DP_A = np.array(
+    [
+        [0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [1 / 5, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [3 / 40, 9 / 40, 0.0, 0.0, 0.0, 0.0],
+        [44 / 45, -56 / 15, 32 / 9, 0.0, 0.0, 0.0],
+        [19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0.0, 0.0],
+        [9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656, 0.0],
+    ]
+)
+DP_B = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0])
+# Error weights: 5th-order minus embedded 4th-order solution, per stage (7 with FSAL).
+DP_E = np.array(
+    [71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40]
+)
+DP_P = np.array(
+    [
+        [1.0, -8048581381 / 2820520608, 8663915743 / 2820520608, -12715105075 / 11282082432],
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0, 131558114200 / 32700410799, -68118460800 / 10900136933, 87487479700 / 32700410799],
+        [0.0, -1754552775 / 470086768, 14199869525 / 1410260304, -10690763975 / 1880347072],
+        [0.0, 127303824393 / 49829197408, -318862633887 / 49829197408, 701980252875 / 199316789632],
+        [0.0, -282668133 / 205662961, 2019193451 / 616988883, -1453857185 / 822651844],
+        [0.0, 40617522 / 29380423, -110615467 / 29380423, 69997945 / 29380423],
+    ]
+)
+
+# Dormand-Prince 8(5,3) (Hairer, Norsett & Wanner, Solving ODEs I, section II.10, code
+# DOP853): 12 stages, the 13th row of K is f(t + h, y_new) (first row of the next step),
+# error from the 5th- and 3rd-order embedded estimates, and a 7th-order dense output
+# from three more stages (rows 13-15 of D8_A). Published coefficients, to double
+# precision; ``tests/opa/test_kernel.py`` checks their order conditions.
+D8_C = np.array([
+    0.0,
+    0.05260015195876773,
+    0.0789002279381516,
+    0.1183503419072274,
+    0.2816496580927726,
+    0.3333333333333333,
+    0.25,
+    0.3076923076923077,
+    0.6512820512820513,
+    0.6,
+    0.8571428571428571,
+    1.0,
+    1.0,
+    0.1,
+    0.2,
+    0.7777777777777778,
+])
+D8_A = np.zeros((16, 16))
+D8_A[1, :1] = [0.05260015195876773]
+D8_A[2, :2] = [0.0197250569845379, 0.0591751709536137]
+D8_A[3, :3] = [0.02958758547680685, 0.0, 0.08876275643042054]
+D8_A[4, :4] = [0.2413651341592667, 0.0, -0.8845494793282861, 0.924834003261792]
+D8_A[5, :5] = [0.037037037037037035, 0.0, 0.0, 0.17082860872947386, 0.12546768756682242]
+D8_A[6, :6] = [0.037109375, 0.0, 0.0, 0.17025221101954405, 0.06021653898045596, -0.017578125]
+D8_A[7, :7] = [0.03709200011850479, 0.0, 0.0, 0.17038392571223998, 0.10726203044637328, -0.015319437748624402, 0.008273789163814023]
+D8_A[8, :8] = [0.6241109587160757, 0.0, 0.0, -3.3608926294469414, -0.868219346841726, 27.59209969944671, 20.154067550477894, -43.48988418106996]
+D8_A[9, :9] = [0.47766253643826434, 0.0, 0.0, -2.4881146199716677, -0.590290826836843, 21.230051448181193, 15.279233632882423, -33.28821096898486, -0.020331201708508627]
+D8_A[10, :10] = [-0.9371424300859873, 0.0, 0.0, 5.186372428844064, 1.0914373489967295, -8.149787010746927, -18.52006565999696, 22.739487099350505, 2.4936055526796523, -3.0467644718982196]
+D8_A[11, :11] = [2.273310147516538, 0.0, 0.0, -10.53449546673725, -2.0008720582248625, -17.9589318631188, 27.94888452941996, -2.8589982771350235, -8.87285693353063, 12.360567175794303, 0.6433927460157636]
+D8_A[12, :12] = [0.054293734116568765, 0.0, 0.0, 0.0, 0.0, 4.450312892752409, 1.8915178993145003, -5.801203960010585, 0.3111643669578199, -0.1521609496625161, 0.20136540080403034, 0.04471061572777259]
+D8_A[13, :13] = [0.056167502283047954, 0.0, 0.0, 0.0, 0.0, 0.0, 0.25350021021662483, -0.2462390374708025, -0.12419142326381637, 0.15329179827876568, 0.00820105229563469, 0.007567897660545699, -0.008298]
+D8_A[14, :14] = [0.03183464816350214, 0.0, 0.0, 0.0, 0.0, 0.028300909672366776, 0.053541988307438566, -0.05492374857139099, 0.0, 0.0, -0.00010834732869724932, 0.0003825710908356584, -0.00034046500868740456, 0.1413124436746325]
+D8_A[15, :15] = [-0.42889630158379194, 0.0, 0.0, 0.0, 0.0, -4.697621415361164, 7.683421196062599, 4.06898981839711, 0.3567271874552811, 0.0, 0.0, 0.0, -0.0013990241651590145, 2.9475147891527724, -9.15095847217987]
+D8_B = np.array([
+    0.054293734116568765,
+    0.0,
+    0.0,
+    0.0,
+    0.0,
+    4.450312892752409,
+    1.8915178993145003,
+    -5.801203960010585,
+    0.3111643669578199,
+    -0.1521609496625161,
+    0.20136540080403034,
+    0.04471061572777259,
+])
+D8_E3 = np.array([
+    -0.18980075407240762,
+    0.0,
+    0.0,
+    0.0,
+    0.0,
+    4.450312892752409,
+    1.8915178993145003,
+    -5.801203960010585,
+    -0.4226823213237919,
+    -0.1521609496625161,
+    0.20136540080403034,
+    0.02265179219836082,
+    0.0,
+])
+D8_E5 = np.array([
+    0.01312004499419488,
+    0.0,
+    0.0,
+    0.0,
+    0.0,
+    -1.2251564463762044,
+    -0.4957589496572502,
+    1.6643771824549864,
+    -0.35032884874997366,
+    0.3341791187130175,
+    0.08192320648511571,
+    -0.022355307863886294,
+    0.0,
+])
+D8_D = np.zeros((4, 16))
+D8_D[0, :16] = [-8.428938276109013, 0.0, 0.0, 0.0, 0.0, 0.5667149535193777, -3.0689499459498917, 2.38466765651207, 2.117034582445028, -0.871391583777973, 2.2404374302607883, 0.6315787787694688, -0.08899033645133331, 18.148505520854727, -9.194632392478356, -4.436036387594894]
+D8_D[1, :16] = [10.427508642579134, 0.0, 0.0, 0.0, 0.0, 242.28349177525817, 165.20045171727028, -374.5467547226902, -22.113666853125306, 7.733432668472264, -30.674084731089398, -9.332130526430229, 15.697238121770845, -31.139403219565178, -9.35292435884448, 35.81684148639408]
+D8_D[2, :16] = [19.985053242002433, 0.0, 0.0, 0.0, 0.0, -387.0373087493518, -189.17813819516758, 527.8081592054236, -11.57390253995963, 6.8812326946963, -1.0006050966910838, 0.7777137798053443, -2.778205752353508, -60.19669523126412, 84.32040550667716, 11.99229113618279]
+D8_D[3, :16] = [-25.69393346270375, 0.0, 0.0, 0.0, 0.0, -154.18974869023643, -231.5293791760455, 357.6391179106141, 93.40532418362432, -37.45832313645163, 104.0996495089623, 29.8402934266605, -43.53345659001114, 96.32455395918828, -39.17726167561544, -149.72683625798564]
+
+# Stages of each method: rows of K filled by one step, including the closing
+# f(t + h, y_new) (the first row of the next step), and its error exponent.
+K_ROWS = 16
+N_SCAN = 8
+SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
+
+
+@njit(cache=True)
+def method_stages(method):
+    """(row of f(t + h, y_new) in K, error exponent) of a method."""
+    if method == METHOD_DP5:
+        return 6, -1.0 / 5.0
+    return 12, -1.0 / 8.0
+
+
+# ---------------------------------------------------------------------------
+# Model
+@njit(cache=True)
+def impulse_strength(t, p):
+    """Impulse magnitude F0 (1 + a1 sin(omega1 t / n)) at an impulse time t (eq. (1))."""
+    return p[P_F0] * (1.0 + p[P_A1] * np.sin(p[P_OMEGA1] * t / p[P_N]))
+
+
+@njit(cache=True, inline="always")
+def _f2(t, x, v, p, force, sticking):
+    """Deterministic right-hand side on scalars: (x', v'), eq. (29)."""
+    if sticking:
+        return 0.0, 0.0
+    return v, (p[P_MU] * (1.0 - v * v) * v - p[P_A] * x - p[P_C] * x * x * x
+               + p[P_F] * np.cos(p[P_OMEGA] * t) + force)
+
+
+@njit(cache=True)
+def is_deterministic(m, cfg, nodes):
+    """The plain two-dimensional system (the DMR or one sample): N = 0, no tangents and
+    the one-node rule at xi = 0."""
+    return m == 0 and cfg[C_NCOEF] == 1 and nodes.shape[0] == 1 and nodes[0] == 0.0
+
+
+@njit(cache=True)
+def vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, out, work):
+    """Write f(t, y) and, for m > 0, J(t, y) W into ``out`` (layout of ``z``).
+
+    ``force`` is the current rectangular-pulse force (0 for Dirac impulses or between
+    pulses). With ``sticking`` the mean coordinate is held at rest at the wall (and its
+    rows of W). ``work`` is a (6, Q) scratch array. Returns the unconstrained
+    acceleration of x_0 (the release function of sticking).
+    """
+    n = cfg[C_NCOEF]
+    if m == 0 and n == 1 and nodes.shape[0] == 1 and nodes[0] == 0.0:
+        dx, dv = _f2(t, z[0], z[1], p, force, False)
+        out[0] = 0.0 if sticking else dx
+        out[1] = 0.0 if sticking else dv
+        return dv
+    dim = 2 * n
+    q = nodes.shape[0]
+    unc = cfg[C_UNCERTAIN]
+    sigma = p[P_SIGMA]
+    xk = work[0]
+    vk = work[1]
+    gx = work[2]
+    gv = work[3]
+    dxk = work[4]
+    dvk = work[5]
+    for k in range(q):
+        xs = 0.0
+        vs = 0.0
+        for i in range(n):
+            xs += z[i] * U[k, i]
+            vs += z[n + i] * U[k, i]
+        xk[k] = xs
+        vk[k] = vs
+    # Project the deviation g_k - g_0 from the force at the mean state; the constant g_0
+    # goes to U_0 alone. Mathematically the same projection (sum_k w_k U_i(xi_k) = [i = 0]),
+    # but with sigma = 0 and zero higher coefficients every g_k equals g_0 bit for bit, so
+    # the higher modes stay exactly zero and EMR_0 is the DMR (the ~1e-17 round-off of
+    # that sum would otherwise be amplified by the transverse instability).
+    x0 = z[0]
+    v0 = z[n]
+    g0 = p[P_MU] * (1.0 - v0 * v0) * v0 - p[P_A] * x0 - p[P_C] * x0 * x0 * x0
+    for i in range(n):
+        out[i] = z[n + i]
+        out[n + i] = 0.0
+    out[n] = g0
+    for k in range(q):
+        mu_k = p[P_MU]
+        a_k = p[P_A]
+        c_k = p[P_C]
+        if unc == UNCERTAIN_MU:
+            mu_k = mu_k + sigma * nodes[k]
+        elif unc == UNCERTAIN_A:
+            a_k = a_k + sigma * nodes[k]
+        else:
+            c_k = c_k + sigma * nodes[k]
+        x = xk[k]
+        v = vk[k]
+        w = weights[k]
+        g = w * (mu_k * (1.0 - v * v) * v - a_k * x - c_k * x * x * x - g0)
+        if m > 0:
+            gx[k] = w * (-a_k - 3.0 * c_k * x * x)
+            gv[k] = w * mu_k * (1.0 - 3.0 * v * v)
+        if g != 0.0:
+            for i in range(n):
+                out[n + i] += g * U[k, i]
+    paper = cfg[C_TRUNC] == TRUNC_PAPER and sigma != 0.0 and unc != UNCERTAIN_A
+    if paper:
+        # eq. (27) drops the projection of the xi * cubic term on U_{N+1}: add it back
+        extra = 0.0
+        for k in range(q):
+            if unc == UNCERTAIN_MU:
+                extra += weights[k] * U[k, n] * vk[k] ** 3
+            else:
+                extra += weights[k] * U[k, n] * xk[k] ** 3
+        out[dim - 1] += 0.5 * sigma * extra
+    out[n] += p[P_F] * np.cos(p[P_OMEGA] * t) + force
+    release = out[n]
+    if sticking:
+        out[0] = 0.0
+        out[n] = 0.0
+    for c in range(m):
+        for k in range(q):
+            dx = 0.0
+            dv = 0.0
+            for j in range(n):
+                dx += U[k, j] * z[dim + j * m + c]
+                dv += U[k, j] * z[dim + (n + j) * m + c]
+            dxk[k] = dx
+            dvk[k] = dv
+        for i in range(n):
+            out[dim + i * m + c] = z[dim + (n + i) * m + c]
+            acc = 0.0
+            for k in range(q):
+                acc += U[k, i] * (gx[k] * dxk[k] + gv[k] * dvk[k])
+            out[dim + (n + i) * m + c] = acc
+        if paper:
+            extra = 0.0
+            for k in range(q):
+                if unc == UNCERTAIN_MU:
+                    extra += weights[k] * U[k, n] * 3.0 * vk[k] ** 2 * dvk[k]
+                else:
+                    extra += weights[k] * U[k, n] * 3.0 * xk[k] ** 2 * dxk[k]
+            out[dim + (dim - 1) * m + c] += 0.5 * sigma * extra
+        if sticking:
+            out[dim + c] = 0.0
+            out[dim + n * m + c] = 0.0
+    return release
+
+
+# ---------------------------------------------------------------------------
+# Runge-Kutta steps
+@njit(cache=True)
+def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force, sticking,
+            work):
+    """One step of size h from (t, z); K[0] must hold f(t, z).
+
+    Fills the stage rows of K (the last, ``method_stages(method)[0]``, with
+    f(t + h, z_new)) and ``z_new``. Returns the number of vector-field evaluations.
+    """
+    size = z.shape[0]
+    last = 6 if method == METHOD_DP5 else 12
+    A = DP_A if method == METHOD_DP5 else D8_A
+    C = DP_C if method == METHOD_DP5 else D8_C
+    B = DP_B if method == METHOD_DP5 else D8_B
+    if size == 2 and is_deterministic(m, cfg, nodes):
+        # the two-dimensional system with its stages in registers: the same arithmetic
+        # in the same order as the general loop below, so EMR_0 stays the DMR bit for bit
+        x = z[0]
+        v = z[1]
+        for s in range(1, last):
+            ax = 0.0
+            av = 0.0
+            for r in range(s):
+                a = A[s, r]
+                ax += a * K[r, 0]
+                av += a * K[r, 1]
+            dx, dv = _f2(t + C[s] * h, x + h * ax, v + h * av, p, force, sticking)
+            K[s, 0] = dx
+            K[s, 1] = dv
+        bx = 0.0
+        bv = 0.0
+        for r in range(last):
+            bx += B[r] * K[r, 0]
+            bv += B[r] * K[r, 1]
+        xn = x + h * bx
+        vn = v + h * bv
+        dx, dv = _f2(t + h, xn, vn, p, force, sticking)
+        z_new[0] = xn
+        z_new[1] = vn
+        K[last, 0] = dx
+        K[last, 1] = dv
+        return last
+    for s in range(1, last):
+        for j in range(size):
+            acc = 0.0
+            for r in range(s):
+                acc += A[s, r] * K[r, j]
+            ztmp[j] = z[j] + h * acc
+        vector_field(t + C[s] * h, ztmp, m, p, cfg, nodes, weights, U, force, sticking, K[s],
+                     work)
+    for j in range(size):
+        acc = 0.0
+        for r in range(last):
+            acc += B[r] * K[r, j]
+        z_new[j] = z[j] + h * acc
+    vector_field(t + h, z_new, m, p, cfg, nodes, weights, U, force, sticking, K[last], work)
+    return last
+
+
+@njit(cache=True)
+def error_norm(method, z, z_new, K, h, rtol, atol):
+    """Scaled local error estimate in the max-norm over all components.
+
+    The max-norm (rather than RMS) makes the step sequence independent of components
+    that stay at zero, so EMR_0 (sigma = 0, N > 0) takes the DMR's steps exactly. For
+    DOP853 the 5th- and 3rd-order estimates combine as in Hairer's code,
+    |h| E5^2 / sqrt(E5^2 + 0.01 E3^2), with max-norms in place of RMS norms. A
+    non-finite trial state or stage is an infinite error (written with comparisons
+    that fail for NaN: numba's max drops a NaN argument).
+    """
+    worst = 0.0
+    worst3 = 0.0
+    for j in range(z.shape[0]):
+        size = abs(z_new[j])
+        scale = atol + rtol * max(abs(z[j]), size)
+        if method == METHOD_DP5:
+            e = 0.0
+            for r in range(7):
+                e += DP_E[r] * K[r, j]
+            r5 = abs(h * e) / scale
+            r3 = 0.0
+        else:
+            e5 = 0.0
+            e3 = 0.0
+            for r in range(13):
+                e5 += D8_E5[r] * K[r, j]
+                e3 += D8_E3[r] * K[r, j]
+            r5 = abs(e5) / scale
+            r3 = abs(e3) / scale
+        if not (r5 < np.inf and r3 < np.inf and size < np.inf):
+            return np.inf
+        if r5 > worst:
+            worst = r5
+        if r3 > worst3:
+            worst3 = r3
+    if method == METHOD_DP5 or worst == 0.0:
+        return worst
+    return abs(h) * worst * worst / np.sqrt(worst * worst + 0.01 * worst3 * worst3)
+
+
+# ---------------------------------------------------------------------------
+# Dense output
+@njit(cache=True)
+def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U, force,
+                  sticking, work):
+    """Fill F with the dense-output coefficients of the step (t, z) -> (t + h, z_new).
+
+    DP5: the quartic in power form, y(theta) = y + theta (F0 + theta (F1 + ...)). DOP853:
+    three more stages (rows 13-15 of K), then Hairer's form
+    y(theta) = y + theta (F0 + (1 - theta) (F1 + theta (F2 + (1 - theta) (F3 + ...)))).
+    Returns the number of vector-field evaluations (0 or 3).
+    """
+    size = z.shape[0]
+    if method == METHOD_DP5:
+        for j in range(size):
+            for d in range(4):
+                acc = 0.0
+                for s in range(7):
+                    acc += K[s, j] * DP_P[s, d]
+                F[d, j] = h * acc
+        return 0
+    for s in range(13, 16):
+        for j in range(size):
+            acc = 0.0
+            for r in range(s):
+                acc += D8_A[s, r] * K[r, j]
+            ztmp[j] = z[j] + h * acc
+        vector_field(t + D8_C[s] * h, ztmp, m, p, cfg, nodes, weights, U, force, sticking, K[s],
+                     work)
+    for j in range(size):
+        dy = z_new[j] - z[j]
+        F[0, j] = dy
+        F[1, j] = h * K[0, j] - dy
+        F[2, j] = 2.0 * dy - h * (K[12, j] + K[0, j])
+        for i in range(4):
+            acc = 0.0
+            for s in range(16):
+                acc += D8_D[i, s] * K[s, j]
+            F[3 + i, j] = h * acc
+    return 3
+
+
+@njit(cache=True)
+def dense_value(method, theta, z_old, F, j):
+    """Dense output of component j at t_old + theta h."""
+    if method == METHOD_DP5:
+        return z_old[j] + theta * (F[0, j] + theta * (F[1, j] + theta * (
+            F[2, j] + theta * F[3, j])))
+    u = 1.0 - theta
+    q5 = F[5, j] + theta * F[6, j]
+    q4 = F[4, j] + u * q5
+    q3 = F[3, j] + theta * q4
+    q2 = F[2, j] + u * q3
+    q1 = F[1, j] + theta * q2
+    q0 = F[0, j] + u * q1
+    return z_old[j] + theta * q0
+
+
+@njit(cache=True)
+def dense_slope(method, theta, F, j):
+    """d/dtheta of the dense output of component j."""
+    if method == METHOD_DP5:
+        return F[0, j] + theta * (2.0 * F[1, j] + theta * (3.0 * F[2, j] + theta * 4.0 * F[3, j]))
+    u = 1.0 - theta
+    q5 = F[5, j] + theta * F[6, j]
+    q4 = F[4, j] + u * q5
+    q3 = F[3, j] + theta * q4
+    q2 = F[2, j] + u * q3
+    q1 = F[1, j] + theta * q2
+    d5 = F[6, j]
+    d4 = -q5 + u * d5
+    d3 = q4 + theta * d4
+    d2 = -q3 + u * d3
+    d1 = q2 + theta * d2
+    d0 = -q1 + u * d1
+    return F[0, j] + u * q1 + theta * d0
+
+
+@njit(cache=True)
+def dense_state(method, theta, z_old, F, out):
+    for j in range(z_old.shape[0]):
+        out[j] = dense_value(method, theta, z_old, F, j)
+
+
+# ---------------------------------------------------------------------------
+# The wall x_0 = delta on the dense output
+@njit(cache=True)
+def may_reach_wall(z, z_new, K, last, h, delta):
+    """Cheap exclusion before the scan: the interpolant of x_0 cannot rise more than
+    |h| max|stage slope| above the higher endpoint (x2 for interpolant overshoot)."""
+    vmax = 0.0
+    for s in range(last + 1):
+        a = abs(K[s, 0])
+        if a > vmax:
+            vmax = a
+    return max(z[0], z_new[0]) + 2.0 * abs(h) * vmax >= delta
+
+
+@njit(cache=True)
+def _bisect_wall(method, lo, hi, z_old, F, h, delta):
+    """Root of x_0(theta) = delta in [lo, hi] with g(lo) <= 0 < g(hi)."""
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        if dense_value(method, mid, z_old, F, 0) - delta > 0.0:
+            hi = mid
+        else:
+            lo = mid
+        if (hi - lo) * abs(h) < 1e-15:
+            break
+    return hi
+
+
+@njit(cache=True)
+def _bisect_maximum(method, lo, hi, F):
+    """Location of a maximum of x_0(theta) in [lo, hi] where the slope goes + to -."""
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if dense_slope(method, mid, F, 0) > 0.0:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-13:
+            break
+    return 0.5 * (lo + hi)
+
+
+@njit(cache=True)
+def wall_crossing(method, z_old, F, h, delta):
+    """First theta in (0, 1] where the dense x_0 reaches delta, or -1.
+
+    The interpolant is scanned on N_SCAN sub-intervals and every interior maximum is
+    inspected, so a step whose interpolant touches the wall and comes back is caught.
+    """
+    prev_t = 0.0
+    prev_g = dense_value(method, 0.0, z_old, F, 0) - delta
+    prev_s = dense_slope(method, 0.0, F, 0)
+    for i in range(1, N_SCAN + 1):
+        th = i / N_SCAN
+        g = dense_value(method, th, z_old, F, 0) - delta
+        s = dense_slope(method, th, F, 0)
+        hit = g > 0.0
+        hi_t = th
+        if not hit and prev_s > 0.0 and s < 0.0:
+            tm = _bisect_maximum(method, prev_t, th, F)
+            if dense_value(method, tm, z_old, F, 0) - delta > 0.0:
+                hit = True
+                hi_t = tm
+        if hit:
+            lo_t = prev_t
+            if prev_g >= 0.0:
+                # leaving the wall just after an impact: find a point strictly inside
+                found = False
+                tt = hi_t
+                for _ in range(60):
+                    tt *= 0.5
+                    if tt <= lo_t:
+                        break
+                    if dense_value(method, tt, z_old, F, 0) - delta < 0.0:
+                        found = True
+                        break
+                if not found:
+                    return -1.0
+                lo_t = tt
+            return _bisect_wall(method, lo_t, hi_t, z_old, F, h, delta)
+        prev_t = th
+        prev_g = g
+        prev_s = s
+    return -1.0
+
+
+@njit(cache=True)
+def free_flight_maximum(method, z_old, F, delta):
+    """The highest interior maximum of the dense x_0 in a step (the signature of a
+    grazing bifurcation when it approaches the wall): (gap delta - x_0, theta), or
+    (inf, -1) when x_0 has no interior maximum."""
+    gap = np.inf
+    where = -1.0
+    prev_t = 0.0
+    prev_s = dense_slope(method, 0.0, F, 0)
+    for i in range(1, N_SCAN + 1):
+        th = i / N_SCAN
+        s = dense_slope(method, th, F, 0)
+        if prev_s > 0.0 and s <= 0.0:
+            tm = _bisect_maximum(method, prev_t, th, F)
+            g = delta - dense_value(method, tm, z_old, F, 0)
+            if g < gap:
+                gap = g
+                where = tm
+        prev_t = th
+        prev_s = s
+    return gap, where
+
+
+@njit(cache=True)
+def refine_maximum(method, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, weights, U,
+                   force, work):
+    """The free-flight maximum of x_0 found on the dense output, refined by re-stepping:
+    Newton on v_0(t + hh) = 0 with full Runge-Kutta steps from (t, z), so the gap is a
+    full-order result that varies smoothly with the parameters (the interpolant's error
+    changes with the step sequence). Returns (x_0 at the maximum, evaluations)."""
+    n = cfg[C_NCOEF]
+    last, _ = method_stages(method)
+    for j in range(z.shape[0]):
+        K2[0, j] = K[0, j]
+    hh = theta * h
+    evals = 0
+    for _ in range(4):
+        evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
+                         False, work)
+        v = z_new[n]
+        a = K2[last, n]
+        if a >= 0.0 or abs(v) <= 1e-15 * (1.0 + abs(z_new[n])):
+            break
+        dh = -v / a
+        if hh + dh <= 0.0 or hh + dh > h:
+            break
+        hh += dh
+    return z_new[0], evals
+
+
+@njit(cache=True)
+def locate_impact(method, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, weights, U,
+                  force, work):
+    """Refine the impact time found on the dense output by re-stepping exactly to it.
+
+    Newton iterations on x_0(t + hh) = delta, each a fresh Runge-Kutta step from (t, z),
+    so the impact state is a full-order step result, not an interpolant. Leaves the
+    state at the wall in ``z_new``; returns (t_hit, evaluations).
+    """
+    n = cfg[C_NCOEF]
+    delta = p[P_DELTA]
+    for j in range(z.shape[0]):
+        K2[0, j] = K[0, j]
+    hh = theta * h
+    evals = 0
+    for _ in range(4):
+        evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
+                         False, work)
+        g = z_new[0] - delta
+        v = z_new[n]
+        if v <= 0.0 or abs(g) <= 1e-14 * (1.0 + abs(delta)):
+            break
+        dh = -g / v
+        if hh + dh <= 0.0 or hh + dh > h:
+            break
+        hh += dh
+    return t + hh, evals
+
+
+# ---------------------------------------------------------------------------
+# Jumps
+@njit(cache=True)
+def _reflect(z, m, n, eta, all_velocities):
+    """The impact law on y (v_0, or every v_i, times -eta) and its constant Jacobian
+    diag(1, -eta) on the velocity rows of W (the whole of a kick into the wall, which
+    happens at a fixed time and so has no time-shift term)."""
+    dim = 2 * n
+    top = n if all_velocities else 1
+    for i in range(top):
+        z[n + i] = -eta * z[n + i]
+        for c in range(m):
+            z[dim + (n + i) * m + c] *= -eta
+
+
+@njit(cache=True)
+def _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work):
+    """Apply the impact law at x_0 = delta to y and its saltation matrix to W.
+
+    Laws: ``mean`` reflects v_0 (eq. (28)); ``ensemble`` every v_i; ``saltation`` applies
+    to the deviation coefficients the saltation matrix of the sampled systems' impact
+    (x_i -> -eta x_i, v_i -> -eta v_i + (a+ + eta a-) / v- x_i for i >= 1, a-, a+ the
+    mean's accelerations before and after, v- its impact speed), and reflects every v_i
+    at a graze, where that matrix does not exist.
+
+    For W the event surface is h(y) = x_0 - delta with normal e_0, and the jump is
+    ``S = dR + (f(t*, R y-) - dR f(t*, y-)) e_0^T / v_0-`` (Aizerman-Gantmacher), with
+    dR the Jacobian of the reset (mean and ensemble laws only: the Python layer refuses
+    tangents with the saltation law). Returns (v_minus, evaluations).
+    """
+    n = cfg[C_NCOEF]
+    dim = 2 * n
+    eta = p[P_ETA]
+    law = cfg[C_LAW]
+    z[0] = p[P_DELTA]
+    v_minus = z[n]
+    evals = 0
+    if law == LAW_SALTATION and v_minus > GRAZE_VELOCITY:
+        a_minus = vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_minus, work)
+        z[n] = -eta * z[n]
+        a_plus = vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_plus, work)
+        evals += 2
+        k = (a_plus + eta * a_minus) / v_minus
+        for i in range(1, n):
+            xi_ = z[i]
+            z[i] = -eta * xi_
+            z[n + i] = -eta * z[n + i] + k * xi_
+        return v_minus, evals
+    ensemble = law != LAW_MEAN
+    if m > 0:
+        vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_minus, work)
+        evals += 1
+    top = n if ensemble else 1
+    for i in range(top):
+        z[n + i] = -eta * z[n + i]
+    if m > 0:
+        vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_plus, work)
+        evals += 1
+        for c in range(m):
+            w0 = z[dim + c] / v_minus  # e_0^T W / (e_0^T f-)
+            for r in range(dim):
+                d = -eta if (r >= n and r < n + top) else 1.0
+                z[dim + r * m + c] = d * z[dim + r * m + c] + (f_plus[r] - d * f_minus[r]) * w0
+    return v_minus, evals
+
+
+@njit(cache=True)
+def _hold(z, m, n, law):
+    """Start sticking: the mean at rest on the wall (the ``ensemble`` and ``saltation``
+    laws stop every velocity coefficient), and the held rows of W zeroed."""
+    dim = 2 * n
+    z[n] = 0.0
+    if law != LAW_MEAN:
+        for i in range(n):
+            z[n + i] = 0.0
+    for c in range(m):
+        z[dim + c] = 0.0
+        z[dim + n * m + c] = 0.0
+        if law != LAW_MEAN:
+            for i in range(1, n):
+                z[dim + (n + i) * m + c] = 0.0
+
+
+@njit(cache=True)
+def escape_bound(y0, p):
+    """The |x_i|, |v_i| beyond which the state counts as escaped (see ESCAPE_FACTOR)."""
+    start = 0.0
+    for j in range(y0.shape[0]):
+        a = abs(y0[j])
+        if not (a <= start):  # NaN propagates
+            start = a
+    w = p[P_OMEGA]
+    drive = abs(p[P_F]) + abs(p[P_F0]) * (1.0 + abs(p[P_A1]))
+    stiffness = abs(p[P_A])
+    if stiffness == 0.0:
+        return np.inf  # no linear restoring force: no scale to escape from
+    return ESCAPE_FACTOR * (1.0 + start + abs(p[P_DELTA])
+                            + drive * (1.0 + 1.0 / w + 1.0 / (w * w) + 1.0 / stiffness))
+
+
+@njit(cache=True)
+def state_status(z, dim, escape):
+    """OK; ESCAPED when a state component |y_j| (j < dim) >= escape; DIVERGED when any
+    component (state or tangent) is NaN or inf. Every comparison is false for NaN, so a
+    NaN cannot pass. The tangent W may grow large (only renormalised by the caller), so
+    only its finiteness is checked."""
+    status = OK
+    for j in range(z.shape[0]):
+        a = abs(z[j])
+        if not (a < np.inf):
+            return DIVERGED
+        if j < dim and not (a < escape):
+            status = ESCAPED
+    return status
+
+
+@njit(cache=True)
+def _log_event(log, count, t, v, kind):
+    if count < log.shape[0]:
+        log[count, 0] = t
+        log[count, 1] = v
+        log[count, 2] = kind
+    return count + 1
+
+
+@njit(cache=True)
+def first_impulse(t0, include_start, T1, at_zero):
+    """Index j of the first impulse t_j = j T1 at or after t0 (after t0 without
+    ``include_start``), or -1 when t0 / T1 is beyond exact integers (impulse times not
+    resolvable). Impulses within SNAP of t0 count as at t0."""
+    snap = SNAP * max(1.0, abs(t0))
+    jf = np.floor(t0 / T1) - 1.0
+    if not (abs(jf) < 2.0**53):
+        return -1
+    j = int(jf)
+    for _ in range(8):
+        if j * T1 >= t0 - snap:
+            break
+        j += 1
+    if not include_start:
+        for _ in range(8):
+            if j * T1 > t0 + snap:
+                break
+            j += 1
+    if j < 0:
+        j = 0
+    if j == 0 and not at_zero:
+        j = 1
+    return j
+
+
+# ---------------------------------------------------------------------------
+# The driver
+@njit(cache=True)
+def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U, rtol, atol,
+              out, stats, log_growth, log):
+    """Integrate the augmented state ``z`` in place through the output times ``t_out``.
+
+    Parameters
+    ----------
+    z : (D + D m,) state at ``t_out[0]`` and the row-major tangent matrix W (D, m);
+        it ends as the augmented state at the last time reached.
+    m : number of tangent columns (0: the plain trajectory).
+    t_out : (n_out,) increasing output times, hit exactly as breakpoints.
+    include_start : apply an impulse that falls on ``t_out[0]`` (otherwise it belongs to
+        the previous interval). States are right-continuous: impulses at an output time
+        are applied before the state is stored.
+    renormalise : scale W to unit Frobenius norm at every output time and write the log
+        of its growth over interval i to ``log_growth[i]`` (``-inf`` when sticking
+        collapsed it; W then restarts from equal entries): Benettin's loop with the
+        exact tangent map.
+    p, cfg : parameter and configuration vectors (the ``P_*`` and ``C_*`` indices).
+    nodes, weights : (Q,) Gauss rule; U : (Q, N + 2) node-major basis values.
+    out : (n_out, D) the states at ``t_out`` (W is not stored); rows not reached are NaN.
+    stats : (n_out - 1, N_STATS) per-interval statistics (impacts, smallest pre-impact
+        velocity, sticking episodes, steps, sticking at the end, smallest free-flight
+        gap delta - x_0 at maxima), or an empty (0, N_STATS) array to skip them.
+    log : (cap, 3) event rows (time, velocity, kind EV_*); impacts record the
+        pre-impact velocity of x_0; rows beyond cap are counted, not written.
+
+    Returns
+    -------
+    status, n_events, n_impacts, n_steps, n_rhs
+
+    The state is checked after every accepted step and every jump (impact, impulse
+    kick, sticking, release): a NaN or inf component ends the run with DIVERGED, a state
+    component beyond ``escape_bound`` (of the start state) with ESCAPED.
+    """
+    n = cfg[C_NCOEF]
+    dim = 2 * n
+    size = z.shape[0]
+    q = nodes.shape[0]
+    method = cfg[C_METHOD]
+    last, exponent = method_stages(method)
+    delta = p[P_DELTA]
+    eta = p[P_ETA]
+    law = cfg[C_LAW]
+    max_steps = cfg[C_MAXSTEPS]
+    chatter_v = p[P_CHATTER_V]
+    hmax = p[P_HMAX]
+    pulse_model = cfg[C_IMPULSE] == IMPULSE_PULSE
+    tau = p[P_TAU]
+    use_impulses = p[P_F0] != 0.0
+    T1 = 2.0 * np.pi / p[P_OMEGA1]
+    stick_hmax = 2.0 * np.pi / p[P_OMEGA] / 32.0
+    want_stats = stats.shape[0] > 0
+    n_out = t_out.shape[0]
+
+    K = np.empty((K_ROWS, size))
+    K2 = np.empty((K_ROWS, size))
+    F = np.empty((7, size))
+    z_new = np.empty(size)
+    ztmp = np.empty(size)
+    z_top = np.empty(size)
+    f_minus = np.empty(dim)
+    f_plus = np.empty(dim)
+    work = np.empty((6, q))
+
+    for i in range(stats.shape[0]):
+        stats[i, S_IMPACTS] = 0.0
+        stats[i, S_MIN_VELOCITY] = np.inf
+        stats[i, S_STICKS] = 0.0
+        stats[i, S_STEPS] = 0.0
+        stats[i, S_STICKING] = 0.0
+        stats[i, S_GAP] = np.inf
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[i, j] = np.nan
+
+    t = t_out[0]
+    t_end = t_out[n_out - 1]
+    escape = escape_bound(z[:dim], p)
+    snap = SNAP * max(1.0, abs(t_end))
+    at_zero = cfg[C_AT_ZERO] != 0
+    status = OK
+    j_imp = 0
+    if not (abs(t) < np.inf and abs(t_end) < np.inf):
+        status = BAD_TIME  # a NaN end time would never be reached
+    elif use_impulses:
+        j_imp = first_impulse(t, include_start, T1, at_zero)
+        if j_imp < 0:
+            status = BAD_TIME  # impulse index beyond exact integers
+    if status == OK and state_status(z, dim, escape) != OK:
+        status = DIVERGED
+    if status != OK:
+        return status, 0, 0, 0, 0
+    t_imp = j_imp * T1 if use_impulses else np.inf
+    force = 0.0
+    force_end = np.inf
+    if use_impulses and pulse_model and j_imp >= 1:
+        # a pulse that started before t0 may still be on
+        j_prev = j_imp - 1
+        if j_prev >= (0 if at_zero else 1) and t < j_prev * T1 + tau - snap:
+            force = impulse_strength(j_prev * T1, p)
+            force_end = j_prev * T1 + tau
+    sticking = False
+    n_events = 0
+    n_impacts = 0
+    n_steps = 0
+    n_rhs = 0
+    h = 0.0
+    k_out = 0
+    seg = 0  # the output interval being integrated (stats row)
+    # Every pass of the outer loop takes a step or passes a breakpoint (output, impulse,
+    # pulse end) closer than round-off; the cap only matters for the latter, e.g. impulse
+    # times denser than the resolution of t, which would otherwise loop without a step.
+    n_passes = 0
+    while True:
+        n_passes += 1
+        if n_passes > 2 * (max_steps + n_out):
+            status = MAX_STEPS
+            break
+        # ---- breakpoints at time t: pulse end, impulses, outputs
+        if use_impulses:
+            if pulse_model and t >= force_end - snap:
+                force = 0.0
+                force_end = np.inf
+            while t_imp <= t + snap:
+                strength = impulse_strength(t_imp, p)
+                if pulse_model:
+                    force = strength
+                    force_end = t_imp + tau
+                else:
+                    z[n] += strength
+                    if z[0] >= delta and z[n] > 0.0:
+                        # kicked into the wall while on it: the impact law at once (a
+                        # fixed-time jump: W takes only the reset's Jacobian)
+                        v_kick = z[n]
+                        _reflect(z, m, n, eta, law != LAW_MEAN)
+                        n_events = _log_event(log, n_events, t, v_kick, EV_KICK)
+                        n_impacts += 1
+                        if want_stats and seg < stats.shape[0]:
+                            stats[seg, S_IMPACTS] += 1.0
+                    if sticking and z[n] != 0.0:
+                        sticking = False
+                        n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+                    status = state_status(z, dim, escape)
+                    if status != OK:
+                        break
+                j_imp += 1
+                t_imp = j_imp * T1
+            if status != OK:
+                break
+        while k_out < n_out and t_out[k_out] <= t:
+            for j in range(dim):
+                out[k_out, j] = z[j]
+            if k_out >= 1:
+                if want_stats:
+                    stats[k_out - 1, S_STICKING] = 1.0 if sticking else 0.0
+                if renormalise and m > 0:
+                    norm = 0.0
+                    for j in range(dim, size):
+                        norm += z[j] * z[j]
+                    norm = np.sqrt(norm)
+                    if norm > 0.0 and norm < np.inf:
+                        log_growth[k_out - 1] = np.log(norm)
+                        for j in range(dim, size):
+                            z[j] /= norm
+                    else:
+                        log_growth[k_out - 1] = -np.inf
+                        for j in range(dim, size):
+                            z[j] = 1.0 / np.sqrt(size - dim)
+            k_out += 1
+            seg = k_out - 1
+        if k_out >= n_out:
+            break
+        t_break = t_out[k_out]
+        if t_imp < t_break:
+            t_break = t_imp
+        if force_end < t_break:
+            t_break = force_end
+        if t_out[k_out] - t_break <= snap:
+            t_break = t_out[k_out]
+
+        release = vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
+        n_rhs += 1
+        if sticking and release < 0.0:
+            sticking = False
+            n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+            vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
+            n_rhs += 1
+        elif not sticking and z[0] >= delta and z[n] == 0.0 and release > 0.0:
+            # at rest on the wall with the net force into it (e.g. x0 = delta, v0 = 0):
+            # no impact will be detected from here, so start sticking now
+            z[0] = delta
+            _hold(z, m, n, law)
+            sticking = True
+            n_events = _log_event(log, n_events, t, 0.0, EV_STICK)
+            if want_stats:
+                stats[seg, S_STICKS] += 1.0
+            vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
+            n_rhs += 1
+        if h == 0.0:
+            # Initial step: a fraction of the interval, then let the controller adapt.
+            h = min(1e-3, 0.01 * (t_break - t) + 1e-12)
+
+        # ---- integrate up to t_break
+        while t < t_break:
+            if n_steps >= max_steps:
+                status = MAX_STEPS
+                break
+            h_lim = min(h, hmax)
+            if sticking:
+                h_lim = min(h_lim, stick_hmax)
+            is_last = False
+            if t + h_lim >= t_break:
+                h_try = t_break - t
+                is_last = True
+            else:
+                h_try = h_lim
+            if h_try <= 1e-14 * max(1.0, abs(t)):
+                if is_last:
+                    t = t_break
+                    break
+                status = STEP_COLLAPSE
+                break
+            n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, nodes, weights, U,
+                             force, sticking, work)
+            n_steps += 1
+            if want_stats:
+                stats[seg, S_STEPS] += 1.0
+            err = error_norm(method, z, z_new, K, h_try, rtol, atol)
+            if not (err < np.inf):
+                h = 0.25 * h_try
+                if h < 1e-14 * max(1.0, abs(t)):
+                    status = DIVERGED
+                    break
+                continue
+            if err > 1.0:
+                h = h_try * max(MIN_FACTOR, SAFETY * err**exponent)
+                continue
+            # accepted
+            if err == 0.0:
+                factor = MAX_FACTOR
+            else:
+                factor = min(MAX_FACTOR, SAFETY * err**exponent)
+            h_next = max(h_try * factor, h if is_last else 0.0)
+
+            prepared = False
+            if not sticking and may_reach_wall(z, z_new, K, last, h_try, delta):
+                n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg, nodes,
+                                       weights, U, force, sticking, work)
+                prepared = True
+                theta = wall_crossing(method, z, F, h_try, delta)
+                if theta > 0.0:
+                    t_hit, evals = locate_impact(method, t, z, h_try, theta, K, K2, z_new, ztmp,
+                                                 m, p, cfg, nodes, weights, U, force, work)
+                    n_rhs += evals
+                    # z_new holds the state at the wall
+                    t = t_hit
+                    for j in range(size):
+                        z[j] = z_new[j]
+                    v_minus, evals = _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus,
+                                             f_plus, work)
+                    n_rhs += evals
+                    n_impacts += 1
+                    kind = EV_GRAZE if v_minus < GRAZE_VELOCITY else EV_IMPACT
+                    n_events = _log_event(log, n_events, t, v_minus, kind)
+                    if want_stats:
+                        stats[seg, S_IMPACTS] += 1.0
+                        if v_minus < stats[seg, S_MIN_VELOCITY]:
+                            stats[seg, S_MIN_VELOCITY] = v_minus
+                    # chatter: impacts too slow to resolve with a net force into the wall
+                    if eta < 1.0 and v_minus < chatter_v:
+                        z[n] = 0.0
+                        acc = vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False,
+                                           f_minus, work)
+                        n_rhs += 1
+                        if acc > 0.0:
+                            t_acc = t + 2.0 * eta * v_minus / (acc * (1.0 - eta))
+                            _hold(z, m, n, law)
+                            sticking = True
+                            n_events = _log_event(log, n_events, t_acc, 0.0, EV_STICK)
+                            if want_stats:
+                                stats[seg, S_STICKS] += 1.0
+                        else:
+                            z[n] = -eta * v_minus
+                    # the saltation matrix divides by v_0-: near grazing W can overflow
+                    status = state_status(z, dim, escape)
+                    if status != OK:
+                        break
+                    vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
+                    n_rhs += 1
+                    h = max(h_next * 0.5, 1e-10)
+                    if t >= t_break:
+                        t = t_break
+                        break
+                    continue
+            elif sticking:
+                # sticking: release when the unconstrained acceleration turns away from the wall
+                rel_end = vector_field(t + h_try, z_new, 0, p, cfg, nodes, weights, U, force,
+                                       False, f_plus, work)
+                n_rhs += 1
+                if rel_end < 0.0:
+                    n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg,
+                                           nodes, weights, U, force, sticking, work)
+                    lo = 0.0
+                    hi = 1.0
+                    for _ in range(60):
+                        mid = 0.5 * (lo + hi)
+                        dense_state(method, mid, z, F, ztmp)
+                        ztmp[0] = delta
+                        ztmp[n] = 0.0
+                        r = vector_field(t + mid * h_try, ztmp, 0, p, cfg, nodes, weights, U,
+                                         force, False, f_plus, work)
+                        n_rhs += 1
+                        if r < 0.0:
+                            hi = mid
+                        else:
+                            lo = mid
+                        if (hi - lo) * h_try < 1e-13:
+                            break
+                    dense_state(method, hi, z, F, ztmp)
+                    t = t + hi * h_try
+                    for j in range(size):
+                        z[j] = ztmp[j]
+                    z[0] = delta
+                    z[n] = 0.0
+                    sticking = False
+                    n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+                    status = state_status(z, dim, escape)
+                    if status != OK:
+                        break
+                    vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
+                    n_rhs += 1
+                    h = h_next
+                    if t >= t_break:
+                        t = t_break
+                        break
+                    continue
+
+            if want_stats and not sticking and K[0, 0] > 0.0:
+                # a maximum of x_0 inside the step: the free-flight gap (only where it can
+                # come closer to the wall than the smallest gap so far)
+                if may_reach_wall(z, z_new, K, last, h_try, delta - stats[seg, S_GAP]):
+                    if not prepared:
+                        n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p,
+                                               cfg, nodes, weights, U, force, sticking, work)
+                    gap, theta = free_flight_maximum(method, z, F, delta)
+                    if gap < stats[seg, S_GAP]:
+                        x_top, evals = refine_maximum(method, t, z, h_try, theta, K, K2, z_top,
+                                                      ztmp, m, p, cfg, nodes, weights, U,
+                                                      force, work)
+                        n_rhs += evals
+                        stats[seg, S_GAP] = delta - x_top
+            t = t_break if is_last else t + h_try
+            for j in range(size):
+                z[j] = z_new[j]
+                K[0, j] = K[last, j]
+            if sticking:
+                z[0] = delta
+                z[n] = 0.0
+            h = h_next
+            status = state_status(z, dim, escape)
+            if status != OK:
+                break
+        if status != OK:
+            break
+    return status, n_events, n_impacts, n_steps, n_rhs
+
+
+# ---------------------------------------------------------------------------
+# Parallel drivers: many independent runs of the one integrator
+@njit(cache=True)
+def sampled_system(cfg):
+    """The one-point rule of a sampled deterministic system (N = 0), its configuration
+    and the index in ``p`` of its uncertain parameter."""
+    nodes = np.zeros(1)
+    weights = np.ones(1)
+    U = np.zeros((1, 2))
+    U[0, 0] = 1.0
+    unc = cfg[C_UNCERTAIN]
+    idx = P_MU
+    if unc == UNCERTAIN_A:
+        idx = P_A
+    elif unc == UNCERTAIN_C:
+        idx = P_C
+    cm = cfg.copy()
+    cm[C_NCOEF] = 1
+    cm[C_TRUNC] = TRUNC_GALERKIN
+    cm[C_LAW] = LAW_MEAN
+    return nodes, weights, U, idx, cm
+
+
+@njit(cache=True)
+def run_one(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out, log):
+    """One plain trajectory from y0 (not modified) with the impulse at t_out[0] applied:
+    the DMR, one Monte Carlo sample or one OPA system. Returns what ``integrate`` does."""
+    z = y0.copy()
+    return integrate(z, 0, t_out, True, False, p, cfg, nodes, weights, U, rtol, atol, out,
+                     np.empty((0, N_STATS)), np.empty(0), log)
+
+
+@njit(cache=True, parallel=True)
+def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status, abort):
+    """Integrate the true impact system for each sample value ``xi[m]``.
+
+    The uncertain parameter of sample m is ``p[uncertain] + p[P_SIGMA] * xi[m]``; each
+    sample is the deterministic system (N = 0), so its results do not depend on the
+    thread that ran it. paths: (M, n_out, 2); n_impacts, n_rhs, status: (M,).
+    ``abort`` (int64 array of one element) is set to 1 by the first sample that fails;
+    the samples not yet started are then marked ``SKIPPED`` (their paths are not filled).
+    """
+    M = xi.shape[0]
+    nodes, weights, U, idx, cm = sampled_system(cfg)
+    for s in prange(M):
+        if abort[0] != 0:  # another sample failed: the chunk fails, do not integrate on
+            status[s] = SKIPPED
+            continue
+        pm = p.copy()
+        pm[idx] = p[idx] + p[P_SIGMA] * xi[s]
+        pm[P_SIGMA] = 0.0
+        res = run_one(y0, t_out, pm, cm, nodes, weights, U, rtol, atol, paths[s],
+                      np.empty((0, 3)))
+        status[s] = res[0]
+        n_impacts[s] = res[2]
+        n_rhs[s] = res[4]
+        if res[0] != OK:
+            abort[0] = 1
+
+
+@njit(cache=True, parallel=True)
+def run_elements(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out, counters):
+    """Integrate E independent OPA systems (the elements of a multi-element system) in
+    parallel: element e has its own rule ``nodes[e], weights[e]`` and basis ``U[e]``
+    (node-major, (Q, N+2)). out: (E, n_out, dim); counters: (E, 5) with the status,
+    events, impacts, steps and right-hand sides of each."""
+    E = nodes.shape[0]
+    for e in prange(E):
+        res = run_one(y0, t_out, p, cfg, nodes[e], weights[e], U[e], rtol, atol, out[e],
+                      np.empty((0, 3)))
+        for j in range(5):
+            counters[e, j] = res[j]
+
+
+@njit(cache=True, parallel=True)
+def run_event_logs(y0, values, t_out, p, cfg, rtol, atol, logs, n_events, status):
+    """The event logs of M sampled deterministic systems, in parallel: sample m has the
+    uncertain parameter ``values[m]`` (absolute, not p_bar + sigma xi). logs: (M, cap, 3);
+    n_events (M,) may exceed cap, in which case the log was cut and must be rerun."""
+    M = values.shape[0]
+    nodes, weights, U, idx, cm = sampled_system(cfg)
+    for s in prange(M):
+        pm = p.copy()
+        pm[idx] = values[s]
+        pm[P_SIGMA] = 0.0
+        out = np.empty((t_out.shape[0], 2))
+        res = run_one(y0, t_out, pm, cm, nodes, weights, U, rtol, atol, out, logs[s])
+        status[s] = res[0]
+        n_events[s] = res[1]
+
+
+@njit(cache=True, parallel=True)
+def run_configs(y0, t_out, p, cfgs, nodes, weights, U, rtol, atol, out, logs, counters):
+    """Integrate one OPA system of one order under B configurations (impact law,
+    truncation: rows of ``cfgs``) in parallel. out: (B, n_out, dim); logs: (B, cap, 3);
+    counters: (B, 5) with the status, events, impacts, steps and right-hand sides."""
+    B = cfgs.shape[0]
+    for b in prange(B):
+        res = run_one(y0, t_out, p, cfgs[b], nodes, weights, U, rtol, atol, out[b], logs[b])
+        for j in range(5):
+            counters[b, j] = res[j]
