@@ -2,7 +2,7 @@
 
 Each sample is the deterministic impact oscillator (eq. (1)) with its own value of the
 uncertain parameter ``p = p_bar + sigma xi``: its own impacts, chatter and sticking,
-integrated by the same compiled kernel as the DMR (``opa._kernel.run_samples``).
+integrated by the same compiled kernel as the DMR (``opa._kernel.run_batch``).
 
 Samples are processed in fixed chunks. A chunk's paths live only while its statistics
 are formed; chunk statistics (weight, mean, centred sum of squares, Chebyshev moments
@@ -40,7 +40,7 @@ from opa import _kernel as K
 from opa._basis import chebyshev_u, orthonormal
 from opa._dataset import check_memory, package_version, provenance_attrs, time_coord
 from opa._model import Oscillator, SolverOptions, Uncertainty, check_instance, check_order
-from opa._simulate import SimulationError, _times, pack_parameters
+from opa._simulate import SimulationError, _times, pack_parameters, run_batch, sampled_batch
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -172,12 +172,10 @@ def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep
         import numba
 
         numba.set_num_threads(1)
-    paths = np.empty((len(xi), len(times), 2))
-    n_impacts = np.zeros(len(xi), dtype=np.int64)
-    n_rhs = np.zeros(len(xi), dtype=np.int64)
-    status = np.zeros(len(xi), dtype=np.int64)
-    K.run_samples(y0, xi, times, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status,
-                  np.zeros(1, dtype=np.int64))
+    P, cfgs, rule = sampled_batch(p, cfg, xi=xi)
+    paths, _, counters = run_batch(y0, times, P, cfgs, rule, rtol=rtol, atol=atol,
+                                   stop_on_failure=True)
+    status, n_impacts, n_rhs = counters[:, 0], counters[:, 2], counters[:, 4]
     # the first sample that failed (the others may have been skipped after it)
     bad = np.flatnonzero((status != K.OK) & (status != K.SKIPPED))
     if len(bad):

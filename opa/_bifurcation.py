@@ -35,9 +35,9 @@ import warnings
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-import xarray as xr
 
 from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
+from opa._lazy import lazy
 from opa._model import (
     check_order,
     PARAMETER_NAMES,
@@ -57,6 +57,8 @@ from opa._poincare import (
     sticking_mask,
     stroboscopic_mask,
 )
+
+xr = lazy("xarray")
 
 MODELS = ("dmr", "opa", "mc")
 CONTINUATIONS = ("fixed", "forward", "backward")

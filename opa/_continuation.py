@@ -36,9 +36,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import xarray as xr
-from scipy.optimize import brentq
 
+from opa._lazy import lazy
 from opa._model import Oscillator, SolverOptions
 from opa._simulate import SimulationError
 from opa._stability import (
@@ -58,6 +57,8 @@ from opa._stability import (
     poincare_map,
     shoot,
 )
+
+xr = lazy("xarray")
 
 BIFURCATION_KINDS = ("period-doubling", "fold", "neimark-sacker", "grazing", "impulse-impact")
 PD, FOLD, NS, GRAZING, IMPULSE_IMPACT = range(5)
@@ -364,6 +365,8 @@ def locate_period_doubling(system: ImpactSystem, parameter: str, a: tuple, b: tu
     fa, fb = _pd_test(oa), _pd_test(ob)
     if np.sign(fa) == np.sign(fb):
         raise ValueError("the two orbits do not bracket a period doubling")
+    from scipy.optimize import brentq
+
     root = brentq(lambda lam: _pd_test(solve(lam)), la, lb, xtol=xtol, rtol=4 * np.finfo(float).eps,
                   maxiter=200)
     return solve(root)
@@ -407,6 +410,8 @@ def locate_fold(system: ImpactSystem, parameter: str, a: tuple, b: tuple, *, sca
 
     if np.sign(test(0.0)) == np.sign(test(1.0)):
         raise ValueError("the two orbits do not bracket a fold")
+    from scipy.optimize import brentq
+
     root = brentq(test, 0.0, 1.0, xtol=xtol, maxiter=200)
     y, lam, J, iters = point(root) if 0.0 < root < 1.0 else (
         (oa.state, la, oa.jacobian, 0) if root == 0.0 else (ob.state, lb, ob.jacobian, 0))

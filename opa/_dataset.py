@@ -13,9 +13,11 @@ from collections.abc import Callable
 from importlib import metadata
 
 import numpy as np
-import xarray as xr
 
+from opa._lazy import lazy
 from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions
+
+xr = lazy("xarray")
 
 
 def package_version() -> str:

@@ -34,7 +34,7 @@ from opa import _kernel as K
 from opa._basis import quadrature_order
 from opa._measure import Measure
 from opa._model import Oscillator, SolverOptions
-from opa._simulate import pack_parameters, quadrature, run_kernel
+from opa._simulate import pack_parameters, quadrature, run_batch, run_kernel, sampled_batch
 
 MAX_ELEMENTS = 256
 # Splits located before the edges are chosen (all of them in the cases measured: 192 at
@@ -100,10 +100,10 @@ def run_elements(oscillator: Oscillator, options: SolverOptions, measures: list[
     nodes = np.stack([r[0] for r in rules])
     weights = np.stack([r[1] for r in rules])
     basis = np.ascontiguousarray(np.stack([r[2].T for r in rules]))  # (E, Q, N+2)
-    out = np.empty((len(measures), len(times), dim))
-    counters = np.zeros((len(measures), 5), dtype=np.int64)
-    K.run_elements(y0, np.asarray(times, float), p, cfg, nodes, weights, basis, options.rtol,
-                   options.atol, out, counters)
+    E = len(measures)
+    out, _, counters = run_batch(y0, times, np.repeat(p[None, :], E, axis=0),
+                                 np.repeat(cfg[None, :], E, axis=0), (nodes, weights, basis),
+                                 rtol=options.rtol, atol=options.atol)
     # a run the kernel calls complete but whose state is not finite (a jump that produced
     # NaN, which the kernel does not check yet) is a failure too
     reasons = [K.STATUS_MESSAGES[int(counters[e, 0])] if counters[e, 0] != K.OK else
@@ -272,11 +272,11 @@ def collocation(oscillator, options, measure, edges, q, *, sigma, uncertain, tim
     w = np.concatenate(ws)
     w = w / w.sum()
     p, cfg = pack_parameters(oscillator, options, sigma=sigma, uncertain=uncertain)
-    M = len(xi)
-    paths = np.empty((M, len(times), 2))
-    n_imp, n_rhs, status = (np.zeros(M, dtype=np.int64) for _ in range(3))
-    K.run_samples(np.array([oscillator.x0, oscillator.v0]), xi, times, p, cfg, options.rtol,
-                  options.atol, paths, n_imp, n_rhs, status, np.zeros(1, dtype=np.int64))
+    P, cfgs, rule = sampled_batch(p, cfg, xi=xi)
+    paths, _, counters = run_batch(np.array([oscillator.x0, oscillator.v0]), times, P, cfgs,
+                                   rule, rtol=options.rtol, atol=options.atol,
+                                   stop_on_failure=True)
+    status, n_rhs = counters[:, 0], counters[:, 4]
     if (status != K.OK).any():
         from opa._simulate import SimulationError
 

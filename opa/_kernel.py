@@ -686,13 +686,14 @@ def refine_maximum(method, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes,
     changes with the step sequence). Returns (x_0 at the maximum, evaluations)."""
     n = cfg[C_NCOEF]
     last, _ = method_stages(method)
+    off = np.bool_(False)
     for j in range(z.shape[0]):
         K2[0, j] = K[0, j]
     hh = theta * h
     evals = 0
     for _ in range(4):
         evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
-                         False, work)
+                         off, work)
         v = z_new[n]
         a = K2[last, n]
         if a >= 0.0 or abs(v) <= 1e-15 * (1.0 + abs(z_new[n])):
@@ -715,13 +716,14 @@ def locate_impact(method, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, 
     """
     n = cfg[C_NCOEF]
     delta = p[P_DELTA]
+    off = np.bool_(False)
     for j in range(z.shape[0]):
         K2[0, j] = K[0, j]
     hh = theta * h
     evals = 0
     for _ in range(4):
         evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
-                         False, work)
+                         off, work)
         g = z_new[0] - delta
         v = z_new[n]
         if v <= 0.0 or abs(g) <= 1e-14 * (1.0 + abs(delta)):
@@ -767,13 +769,15 @@ def _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work):
     dim = 2 * n
     eta = p[P_ETA]
     law = cfg[C_LAW]
+    m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
+    off = np.bool_(False)
     z[0] = p[P_DELTA]
     v_minus = z[n]
     evals = 0
     if law == LAW_SALTATION and v_minus > GRAZE_VELOCITY:
-        a_minus = vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_minus, work)
+        a_minus = vector_field(t, z, m0, p, cfg, nodes, weights, U, force, off, f_minus, work)
         z[n] = -eta * z[n]
-        a_plus = vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_plus, work)
+        a_plus = vector_field(t, z, m0, p, cfg, nodes, weights, U, force, off, f_plus, work)
         evals += 2
         k = (a_plus + eta * a_minus) / v_minus
         for i in range(1, n):
@@ -783,13 +787,13 @@ def _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work):
         return v_minus, evals
     ensemble = law != LAW_MEAN
     if m > 0:
-        vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_minus, work)
+        vector_field(t, z, m0, p, cfg, nodes, weights, U, force, off, f_minus, work)
         evals += 1
     top = n if ensemble else 1
     for i in range(top):
         z[n + i] = -eta * z[n + i]
     if m > 0:
-        vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False, f_plus, work)
+        vector_field(t, z, m0, p, cfg, nodes, weights, U, force, off, f_plus, work)
         evals += 1
         for c in range(m):
             w0 = z[dim + c] / v_minus  # e_0^T W / (e_0^T f-)
@@ -940,6 +944,11 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     stick_hmax = 2.0 * np.pi / p[P_OMEGA] / 32.0
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
+    # typed, not literal, constants: numba compiles a callee once per argument type, and
+    # a literal 0 or False is a type of its own
+    m0 = np.int64(0)
+    off = np.bool_(False)
+    on = np.bool_(True)
 
     K = np.empty((K_ROWS, size))
     K2 = np.empty((K_ROWS, size))
@@ -988,7 +997,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
         if j_prev >= (0 if at_zero else 1) and t < j_prev * T1 + tau - snap:
             force = impulse_strength(j_prev * T1, p)
             force_end = j_prev * T1 + tau
-    sticking = False
+    sticking = off
     n_events = 0
     n_impacts = 0
     n_steps = 0
@@ -1022,13 +1031,13 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                         # fixed-time jump: W takes only the reset's Jacobian)
                         v_kick = z[n]
                         _reflect(z, m, n, eta, law != LAW_MEAN)
-                        n_events = _log_event(log, n_events, t, v_kick, EV_KICK)
+                        n_events = _log_event(log, n_events, t, v_kick, np.int64(EV_KICK))
                         n_impacts += 1
                         if want_stats and seg < stats.shape[0]:
                             stats[seg, S_IMPACTS] += 1.0
                     if sticking and z[n] != 0.0:
-                        sticking = False
-                        n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+                        sticking = off
+                        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
                     status = state_status(z, dim, escape)
                     if status != OK:
                         break
@@ -1070,8 +1079,8 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
         release = vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
         n_rhs += 1
         if sticking and release < 0.0:
-            sticking = False
-            n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+            sticking = off
+            n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
             vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
             n_rhs += 1
         elif not sticking and z[0] >= delta and z[n] == 0.0 and release > 0.0:
@@ -1079,8 +1088,8 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
             # no impact will be detected from here, so start sticking now
             z[0] = delta
             _hold(z, m, n, law)
-            sticking = True
-            n_events = _log_event(log, n_events, t, 0.0, EV_STICK)
+            sticking = on
+            n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK))
             if want_stats:
                 stats[seg, S_STICKS] += 1.0
             vector_field(t, z, m, p, cfg, nodes, weights, U, force, sticking, K[0], work)
@@ -1097,10 +1106,10 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
             h_lim = min(h, hmax)
             if sticking:
                 h_lim = min(h_lim, stick_hmax)
-            is_last = False
+            is_last = off
             if t + h_lim >= t_break:
                 h_try = t_break - t
-                is_last = True
+                is_last = on
             else:
                 h_try = h_lim
             if h_try <= 1e-14 * max(1.0, abs(t)):
@@ -1131,11 +1140,11 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 factor = min(MAX_FACTOR, SAFETY * err**exponent)
             h_next = max(h_try * factor, h if is_last else 0.0)
 
-            prepared = False
+            prepared = off
             if not sticking and may_reach_wall(z, z_new, K, last, h_try, delta):
                 n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg, nodes,
                                        weights, U, force, sticking, work)
-                prepared = True
+                prepared = on
                 theta = wall_crossing(method, z, F, h_try, delta)
                 if theta > 0.0:
                     t_hit, evals = locate_impact(method, t, z, h_try, theta, K, K2, z_new, ztmp,
@@ -1149,7 +1158,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                                              f_plus, work)
                     n_rhs += evals
                     n_impacts += 1
-                    kind = EV_GRAZE if v_minus < GRAZE_VELOCITY else EV_IMPACT
+                    kind = np.int64(EV_GRAZE if v_minus < GRAZE_VELOCITY else EV_IMPACT)
                     n_events = _log_event(log, n_events, t, v_minus, kind)
                     if want_stats:
                         stats[seg, S_IMPACTS] += 1.0
@@ -1158,14 +1167,14 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                     # chatter: impacts too slow to resolve with a net force into the wall
                     if eta < 1.0 and v_minus < chatter_v:
                         z[n] = 0.0
-                        acc = vector_field(t, z, 0, p, cfg, nodes, weights, U, force, False,
+                        acc = vector_field(t, z, m0, p, cfg, nodes, weights, U, force, off,
                                            f_minus, work)
                         n_rhs += 1
                         if acc > 0.0:
                             t_acc = t + 2.0 * eta * v_minus / (acc * (1.0 - eta))
                             _hold(z, m, n, law)
-                            sticking = True
-                            n_events = _log_event(log, n_events, t_acc, 0.0, EV_STICK)
+                            sticking = on
+                            n_events = _log_event(log, n_events, t_acc, 0.0, np.int64(EV_STICK))
                             if want_stats:
                                 stats[seg, S_STICKS] += 1.0
                         else:
@@ -1183,8 +1192,8 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                     continue
             elif sticking:
                 # sticking: release when the unconstrained acceleration turns away from the wall
-                rel_end = vector_field(t + h_try, z_new, 0, p, cfg, nodes, weights, U, force,
-                                       False, f_plus, work)
+                rel_end = vector_field(t + h_try, z_new, m0, p, cfg, nodes, weights, U, force,
+                                       off, f_plus, work)
                 n_rhs += 1
                 if rel_end < 0.0:
                     n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg,
@@ -1196,8 +1205,8 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                         dense_state(method, mid, z, F, ztmp)
                         ztmp[0] = delta
                         ztmp[n] = 0.0
-                        r = vector_field(t + mid * h_try, ztmp, 0, p, cfg, nodes, weights, U,
-                                         force, False, f_plus, work)
+                        r = vector_field(t + mid * h_try, ztmp, m0, p, cfg, nodes, weights, U,
+                                         force, off, f_plus, work)
                         n_rhs += 1
                         if r < 0.0:
                             hi = mid
@@ -1211,8 +1220,8 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                         z[j] = ztmp[j]
                     z[0] = delta
                     z[n] = 0.0
-                    sticking = False
-                    n_events = _log_event(log, n_events, t, 0.0, EV_RELEASE)
+                    sticking = off
+                    n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
                     status = state_status(z, dim, escape)
                     if status != OK:
                         break
@@ -1255,103 +1264,39 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
 
 
 # ---------------------------------------------------------------------------
-# Parallel drivers: many independent runs of the one integrator
-@njit(cache=True)
-def sampled_system(cfg):
-    """The one-point rule of a sampled deterministic system (N = 0), its configuration
-    and the index in ``p`` of its uncertain parameter."""
-    nodes = np.zeros(1)
-    weights = np.ones(1)
-    U = np.zeros((1, 2))
-    U[0, 0] = 1.0
-    unc = cfg[C_UNCERTAIN]
-    idx = P_MU
-    if unc == UNCERTAIN_A:
-        idx = P_A
-    elif unc == UNCERTAIN_C:
-        idx = P_C
-    cm = cfg.copy()
-    cm[C_NCOEF] = 1
-    cm[C_TRUNC] = TRUNC_GALERKIN
-    cm[C_LAW] = LAW_MEAN
-    return nodes, weights, U, idx, cm
-
-
+# Many independent runs of the one integrator: one parallel driver for every batch (the
+# samples of an ensemble, the elements of a multi-element system, the configurations of
+# one OPA system, the event logs of sampled systems), so that it is compiled once.
 @njit(cache=True)
 def run_one(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out, log):
     """One plain trajectory from y0 (not modified) with the impulse at t_out[0] applied:
     the DMR, one Monte Carlo sample or one OPA system. Returns what ``integrate`` does."""
     z = y0.copy()
-    return integrate(z, 0, t_out, True, False, p, cfg, nodes, weights, U, rtol, atol, out,
-                     np.empty((0, N_STATS)), np.empty(0), log)
+    # typed arguments: the signature of a call from Python, so integrate compiles once
+    return integrate(z, np.int64(0), t_out, np.bool_(True), np.bool_(False), p, cfg, nodes,
+                     weights, U, rtol, atol, out, np.empty((0, N_STATS)), np.empty(0), log)
 
 
 @njit(cache=True, parallel=True)
-def run_samples(y0, xi, t_out, p, cfg, rtol, atol, paths, n_impacts, n_rhs, status, abort):
-    """Integrate the true impact system for each sample value ``xi[m]``.
+def run_batch(y0, t_out, P, cfgs, nodes, weights, U, rtol, atol, out, logs, counters, abort):
+    """B plain runs in parallel: run b starts from y0 with parameters ``P[b]``,
+    configuration ``cfgs[b]`` and rule ``nodes[b], weights[b], U[b]`` (node-major).
 
-    The uncertain parameter of sample m is ``p[uncertain] + p[P_SIGMA] * xi[m]``; each
-    sample is the deterministic system (N = 0), so its results do not depend on the
-    thread that ran it. paths: (M, n_out, 2); n_impacts, n_rhs, status: (M,).
-    ``abort`` (int64 array of one element) is set to 1 by the first sample that fails;
-    the samples not yet started are then marked ``SKIPPED`` (their paths are not filled).
+    out : (B, n_out, dim); logs : (B, cap, 3) (cap may be 0); counters : (B, 5) with the
+    status, events, impacts, steps and right-hand sides of each run.
+    abort : (1,) int64. With ``abort[0] == 0`` the first run that fails sets it to 1 and
+    the runs not yet started are marked ``SKIPPED`` (an ensemble stops at its first
+    failed sample); with ``abort[0] < 0`` every run is made whatever happens. Each run
+    depends on nothing but its own inputs, so the results do not depend on the threads.
     """
-    M = xi.shape[0]
-    nodes, weights, U, idx, cm = sampled_system(cfg)
-    for s in prange(M):
-        if abort[0] != 0:  # another sample failed: the chunk fails, do not integrate on
-            status[s] = SKIPPED
-            continue
-        pm = p.copy()
-        pm[idx] = p[idx] + p[P_SIGMA] * xi[s]
-        pm[P_SIGMA] = 0.0
-        res = run_one(y0, t_out, pm, cm, nodes, weights, U, rtol, atol, paths[s],
-                      np.empty((0, 3)))
-        status[s] = res[0]
-        n_impacts[s] = res[2]
-        n_rhs[s] = res[4]
-        if res[0] != OK:
-            abort[0] = 1
-
-
-@njit(cache=True, parallel=True)
-def run_elements(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out, counters):
-    """Integrate E independent OPA systems (the elements of a multi-element system) in
-    parallel: element e has its own rule ``nodes[e], weights[e]`` and basis ``U[e]``
-    (node-major, (Q, N+2)). out: (E, n_out, dim); counters: (E, 5) with the status,
-    events, impacts, steps and right-hand sides of each."""
-    E = nodes.shape[0]
-    for e in prange(E):
-        res = run_one(y0, t_out, p, cfg, nodes[e], weights[e], U[e], rtol, atol, out[e],
-                      np.empty((0, 3)))
-        for j in range(5):
-            counters[e, j] = res[j]
-
-
-@njit(cache=True, parallel=True)
-def run_event_logs(y0, values, t_out, p, cfg, rtol, atol, logs, n_events, status):
-    """The event logs of M sampled deterministic systems, in parallel: sample m has the
-    uncertain parameter ``values[m]`` (absolute, not p_bar + sigma xi). logs: (M, cap, 3);
-    n_events (M,) may exceed cap, in which case the log was cut and must be rerun."""
-    M = values.shape[0]
-    nodes, weights, U, idx, cm = sampled_system(cfg)
-    for s in prange(M):
-        pm = p.copy()
-        pm[idx] = values[s]
-        pm[P_SIGMA] = 0.0
-        out = np.empty((t_out.shape[0], 2))
-        res = run_one(y0, t_out, pm, cm, nodes, weights, U, rtol, atol, out, logs[s])
-        status[s] = res[0]
-        n_events[s] = res[1]
-
-
-@njit(cache=True, parallel=True)
-def run_configs(y0, t_out, p, cfgs, nodes, weights, U, rtol, atol, out, logs, counters):
-    """Integrate one OPA system of one order under B configurations (impact law,
-    truncation: rows of ``cfgs``) in parallel. out: (B, n_out, dim); logs: (B, cap, 3);
-    counters: (B, 5) with the status, events, impacts, steps and right-hand sides."""
-    B = cfgs.shape[0]
+    B = P.shape[0]
     for b in prange(B):
-        res = run_one(y0, t_out, p, cfgs[b], nodes, weights, U, rtol, atol, out[b], logs[b])
+        if abort[0] > 0:
+            counters[b, 0] = SKIPPED
+            continue
+        res = run_one(y0, t_out, P[b], cfgs[b], nodes[b], weights[b], U[b], rtol, atol, out[b],
+                      logs[b])
         for j in range(5):
             counters[b, j] = res[j]
+        if res[0] != OK and abort[0] == 0:
+            abort[0] = 1

@@ -26,9 +26,11 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import xarray as xr
 
+from opa._lazy import lazy
 from opa._model import _finite
+
+xr = lazy("xarray")
 
 #: default relative tolerance of the stroboscopic repeat, see ``detect_period``
 PERIOD_TOL = 1e-4

@@ -8,13 +8,14 @@ datasets of docs/datasets.md.
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
-import xarray as xr
 
 from opa import _kernel as K
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
 from opa._dataset import provenance_attrs, time_coord
+from opa._lazy import lazy
 from opa._model import (
     check_instance,
     check_order,
@@ -28,6 +29,8 @@ from opa._model import (
     _choice,
     time_grid,
 )
+
+xr = lazy("xarray")
 
 
 class SimulationError(RuntimeError):
@@ -104,6 +107,71 @@ def kernel_quadrature(quad):
     return nodes, weights, np.ascontiguousarray(basis.T)
 
 
+_ANNOUNCED = []
+
+
+def announce_compilation(dispatcher) -> None:
+    """Print "compiling kernels (first run only)..." once per process, to stderr, before
+    a kernel entry point that is neither compiled in this process nor in numba's on-disk
+    cache (a first run sits for several seconds compiling)."""
+    if _ANNOUNCED or dispatcher.signatures:
+        return
+    try:  # numba's index of cached overloads, empty when the source changed
+        cached = bool(dispatcher._cache._cache_file._load_index())
+    except Exception:  # a numba without this layout: say nothing rather than guess
+        cached = True
+    if not cached:
+        _ANNOUNCED.append(True)
+        print("compiling kernels (first run only)...", file=sys.stderr, flush=True)
+
+
+def sampled_batch(p: np.ndarray, cfg: np.ndarray, *, xi=None, values=None):
+    """Kernel inputs of M sampled deterministic systems (N = 0) for :func:`run_batch`.
+
+    System m has the uncertain parameter (``cfg``'s) at ``values[m]`` (absolute) or at
+    ``p_bar + sigma xi[m]`` (computed as the kernel always has, so the results are the
+    same bit for bit). Returns (P (M, N_PARAMS), cfgs (M, N_CFG), rule) with the one-node
+    rule at xi = 0 for every system."""
+    idx = (K.P_MU, K.P_A, K.P_C)[int(cfg[K.C_UNCERTAIN])]
+    if values is None:
+        values = p[idx] + p[K.P_SIGMA] * np.asarray(xi, dtype=float)
+    values = np.asarray(values, dtype=float)
+    M = len(values)
+    P = np.repeat(p[None, :], M, axis=0)
+    P[:, idx] = values
+    P[:, K.P_SIGMA] = 0.0
+    one = cfg.copy()
+    one[K.C_NCOEF] = 1
+    one[K.C_TRUNC] = K.TRUNC_GALERKIN
+    one[K.C_LAW] = K.LAW_MEAN
+    cfgs = np.repeat(one[None, :], M, axis=0)
+    U = np.zeros((M, 1, 2))
+    U[:, 0, 0] = 1.0
+    return P, cfgs, (np.zeros((M, 1)), np.ones((M, 1)), U)
+
+
+def run_batch(y0, times, P, cfgs, rule, *, rtol, atol, capacity=0, stop_on_failure=False):
+    """B independent plain runs in parallel (``opa._kernel.run_batch``).
+
+    Run b starts from ``y0`` with parameters ``P[b]``, configuration ``cfgs[b]`` and
+    the node-major rule ``(nodes[b], weights[b], U[b])`` of ``rule``. Returns (out
+    (B, n_out, dim), logs (B, capacity, 3), counters (B, 5): status, events, impacts,
+    steps, right-hand sides). With ``stop_on_failure`` the runs not started after the
+    first failure are marked ``SKIPPED``."""
+    nodes, weights, U = (np.ascontiguousarray(a, dtype=float) for a in rule)
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    B = len(P)
+    out = np.empty((B, len(times), len(y0)))
+    logs = np.empty((B, capacity, 3))
+    counters = np.zeros((B, 5), dtype=np.int64)
+    abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
+    announce_compilation(K.run_batch)
+    K.run_batch(y0, np.ascontiguousarray(times, dtype=float), np.ascontiguousarray(P),
+                np.ascontiguousarray(cfgs, dtype=np.int64), nodes, weights, U, rtol, atol, out,
+                logs, counters, abort)
+    return out, logs, counters
+
+
 def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", partial=False,
                include_start=True):
     """Integrate and return (states (n_out, dim), event log (n, 3), counters dict).
@@ -119,6 +187,7 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", parti
         out = np.empty((len(times), len(y0)))
         log = np.empty((capacity, 3))
         z = np.array(y0, dtype=float)
+        announce_compilation(K.integrate)
         status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
             z, 0, np.asarray(times, dtype=float), include_start, False, p, cfg, nodes, weights,
             basis, rtol, atol, out, np.empty((0, K.N_STATS)), np.empty(0), log
@@ -425,11 +494,10 @@ def opa_variants(oscillator: Oscillator, *, sigma: float, order: int, uncertain:
     y0[order + 1] = oscillator.v0
     V = len(cfgs)
     cap = max(64, 4 * len(times))
-    out = np.full((V, len(times), dim), np.nan)
-    logs = np.empty((V, cap, 3))
-    counters = np.zeros((V, 5), dtype=np.int64)
-    K.run_configs(y0, np.asarray(times, float), p, np.stack(cfgs), nodes, weights, basis,
-                  options.rtol, options.atol, out, logs, counters)
+    rule = tuple(np.repeat(a[None], V, axis=0) for a in (nodes, weights, basis))
+    out, logs, counters = run_batch(y0, times, np.repeat(p[None, :], V, axis=0),
+                                    np.stack(cfgs), rule, rtol=options.rtol, atol=options.atol,
+                                    capacity=cap)
     first = np.full(V, np.inf)
     for v in range(V):
         if counters[v, 0] != K.OK:

@@ -37,7 +37,7 @@ import numpy as np
 
 from opa import _kernel as K
 from opa._model import Oscillator, SolverOptions
-from opa._simulate import pack_parameters, quadrature, run_kernel
+from opa._simulate import pack_parameters, quadrature, run_batch, run_kernel, sampled_batch
 
 SPLIT_KINDS = ("grazing", "extra impact", "chatter", "impulse order", "horizon")
 # A new impact slower than this at the located split is a grazing (its velocity vanishes
@@ -113,12 +113,11 @@ def event_sequences(oscillator: Oscillator, options: SolverOptions, parameter: s
                 for v in values]
     p, cfg = pack_parameters(oscillator, options, uncertain=parameter)
     cap = 256
-    logs = np.empty((len(values), cap, 3))
-    n_events = np.zeros(len(values), dtype=np.int64)
-    status = np.zeros(len(values), dtype=np.int64)
-    K.run_event_logs(np.array([oscillator.x0, oscillator.v0]), values,
-                     np.array([0.0, t_end]), p, cfg, options.rtol, options.atol, logs,
-                     n_events, status)
+    P, cfgs, rule = sampled_batch(p, cfg, values=values)
+    _, logs, counters = run_batch(np.array([oscillator.x0, oscillator.v0]),
+                                  np.array([0.0, t_end]), P, cfgs, rule, rtol=options.rtol,
+                                  atol=options.atol, capacity=cap)
+    status, n_events = counters[:, 0], counters[:, 1]
     out = []
     for m, value in enumerate(values):
         osc = oscillator.replace(**{parameter: float(value)})

@@ -42,7 +42,13 @@ from opa._model import (
     Uncertainty,
     _choice,
 )
-from opa._simulate import SimulationError, kernel_quadrature, pack_parameters, quadrature
+from opa._simulate import (
+    SimulationError,
+    announce_compilation,
+    kernel_quadrature,
+    pack_parameters,
+    quadrature,
+)
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
 STABILITY_LAWS = IMPACT_LAWS[:2]
@@ -315,6 +321,7 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
         out = np.empty((len(times), D))
         stats = np.empty((len(times) - 1, V.N_STATS))
         log = np.empty((capacity, 3))
+        announce_compilation(V.integrate)
         status, n_log, _, _, _ = V.integrate(z, m, times, include_start, False, p, cfg, nodes,
                                              weights, U, system.options.rtol,
                                              system.options.atol, out, stats, np.empty(0), log)
@@ -751,6 +758,7 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
     out = np.full((periods + 1, D), np.nan)
     stats = np.empty((periods, V.N_STATS))
     growth = np.empty(periods)
+    announce_compilation(V.integrate)
     status = V.integrate(z, 1, times, start, True, p, cfg, nodes, weights, U,
                          system.options.rtol, system.options.atol, out, stats, growth,
                          np.empty((0, 3)))[0]

@@ -1,0 +1,186 @@
+"""The one kernel (``opa._kernel``): where jitted code may live, the parameter layout,
+the two steppers agreeing on one problem, EMR_0 = DMR bit for bit, and trajectories
+resumed under an impulse train.
+
+Independent references: the closed-form flight of ``tests/reference.py`` lives in the
+solver tests; here the references are the model's own fields (the packer round trip),
+a run in one piece (the resumed run) and the other Runge-Kutta pair.
+"""
+
+from __future__ import annotations
+
+import ast
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import opa
+from opa import _kernel as K
+from opa._simulate import kernel_quadrature, pack_parameters, quadrature, run_kernel
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("opa", "mc", "compare")
+NUMBA_DECORATORS = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "stencil",
+                    "generated_jit", "jitclass"}
+
+
+def package_modules():
+    for package in PACKAGES:
+        yield from sorted((ROOT / package).rglob("*.py"))
+
+
+def numba_uses(tree: ast.AST) -> list[str]:
+    """Names of numba's compiling decorators a module imports or calls."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("numba"):
+            found += [a.name for a in node.names if a.name in NUMBA_DECORATORS]
+        if isinstance(node, ast.Attribute) and node.attr in NUMBA_DECORATORS:
+            if isinstance(node.value, ast.Name) and node.value.id in ("numba", "nb"):
+                found.append(node.attr)
+    return found
+
+
+def test_jitted_code_lives_only_in_the_kernel_module():
+    offenders = {}
+    for path in package_modules():
+        uses = numba_uses(ast.parse(path.read_text(), filename=str(path)))
+        if uses and path != ROOT / "opa" / "_kernel.py":
+            offenders[str(path.relative_to(ROOT))] = uses
+    assert not offenders, f"jitted code outside opa/_kernel.py: {offenders}"
+    assert numba_uses(ast.parse((ROOT / "opa" / "_kernel.py").read_text()))
+
+
+def test_the_kernel_imports_nothing_from_the_package():
+    """numba's cache bakes imported globals into compiled code without tracking the
+    file they came from: the kernel may import only numpy and numba."""
+    tree = ast.parse((ROOT / "opa" / "_kernel.py").read_text())
+    imported = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            imported |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            assert node.level == 0, "relative import in the kernel"
+            imported.add(node.module.split(".")[0])
+    assert imported <= {"__future__", "numpy", "numba"}, imported
+
+
+def test_the_layout_indices_are_a_permutation():
+    params = [getattr(K, n) for n in dir(K) if n.startswith("P_")]
+    cfg = [getattr(K, n) for n in dir(K) if n.startswith("C_")]
+    stats = [getattr(K, n) for n in dir(K) if n.startswith("S_")]
+    assert sorted(params) == list(range(K.N_PARAMS))
+    assert sorted(cfg) == list(range(K.N_CFG))
+    assert sorted(stats) == list(range(K.N_STATS))
+
+
+def test_the_packer_puts_every_model_field_in_its_slot():
+    """Distinct values for every field of the model and the options: each lands in its
+    own slot of ``p`` or ``cfg`` (a swap of two slots would show)."""
+    osc = opa.Oscillator(mu=0.11, a=1.13, c=0.17, f=0.19, omega=2.3, eta=0.29, delta=0.31,
+                         F0=0.37, a1=0.41, omega1=4.3, n=3, x0=-0.5, v0=0.25)
+    opts = opa.SolverOptions(impulse="pulse", pulse_width=0.53, impulse_at_zero=False,
+                             rtol=1e-9, atol=1e-11, max_steps=12345, chatter_velocity=3e-6,
+                             max_step=0.59, method="dp5")
+    p, cfg = pack_parameters(osc, opts, sigma=0.061, order=7, uncertain="c",
+                             truncation="paper", impact_law="saltation")
+    want = {K.P_MU: 0.11, K.P_A: 1.13, K.P_C: 0.17, K.P_F: 0.19, K.P_OMEGA: 2.3,
+            K.P_ETA: 0.29, K.P_DELTA: 0.31, K.P_F0: 0.37, K.P_A1: 0.41, K.P_OMEGA1: 4.3,
+            K.P_N: 3.0, K.P_TAU: 0.53, K.P_SIGMA: 0.061, K.P_CHATTER_V: 3e-6,
+            K.P_HMAX: 0.59}
+    assert len(want) == K.N_PARAMS
+    for slot, value in want.items():
+        assert p[slot] == value, slot
+    want_cfg = {K.C_NCOEF: 8, K.C_UNCERTAIN: K.UNCERTAIN_C, K.C_IMPULSE: K.IMPULSE_PULSE,
+                K.C_AT_ZERO: 0, K.C_TRUNC: K.TRUNC_PAPER, K.C_LAW: K.LAW_SALTATION,
+                K.C_MAXSTEPS: 12345, K.C_METHOD: K.METHOD_DP5}
+    assert len(want_cfg) == K.N_CFG
+    for slot, value in want_cfg.items():
+        assert cfg[slot] == value, slot
+    # the other choices of each switch
+    p, cfg = pack_parameters(osc, dataclasses.replace(opts, impulse="dirac", method="dop853",
+                                                      impulse_at_zero=True),
+                             uncertain="a", truncation="galerkin", impact_law="ensemble")
+    assert (cfg[K.C_IMPULSE], cfg[K.C_METHOD], cfg[K.C_AT_ZERO]) == (
+        K.IMPULSE_DIRAC, K.METHOD_DOP853, 1)
+    assert (cfg[K.C_UNCERTAIN], cfg[K.C_TRUNC], cfg[K.C_LAW]) == (
+        K.UNCERTAIN_A, K.TRUNC_GALERKIN, K.LAW_ENSEMBLE)
+    # the x0, v0 fields are the initial state, not parameters
+    assert osc.x0 not in p and osc.v0 not in p
+
+
+@pytest.mark.parametrize("method", ["dop853", "dp5"])
+@pytest.mark.parametrize("section", ["3.1", "3.2"])
+def test_emr0_with_n_zero_is_the_dmr_bit_for_bit(section, method):
+    """With N = 0 the OPA system has the one-node rule at xi = 0: whatever sigma, it is the
+    DMR, and the kernel computes it with the same arithmetic (every array equal)."""
+    osc = opa.preset(section)
+    options = opa.SolverOptions(method=method)
+    dmr = opa.simulate_dmr(osc, periods=30, per_period=4, options=options)
+    emr = opa.simulate_opa(osc, sigma=0.02, order=0, periods=30, per_period=4,
+                           options=options)
+    assert dmr.sizes["impact"] >= 3
+    np.testing.assert_array_equal(emr.x_mean.values, dmr.x.values)
+    np.testing.assert_array_equal(emr.v_mean.values, dmr.v.values)
+    np.testing.assert_array_equal(emr.impact_time.values, dmr.impact_time.values)
+    np.testing.assert_array_equal(emr.impact_velocity.values, dmr.impact_velocity.values)
+    assert emr.attrs["steps"] == dmr.attrs["steps"]
+
+
+@pytest.mark.parametrize("section", ["3.1", "3.2"])
+def test_both_pairs_agree_on_the_paper_presets(section):
+    """DOP853 and DP5 at rtol = atol = 1e-12 agree over 20 forcing periods with impacts
+    and impulses to the 1e-9 level (the motion amplifies differences ~10-fold there)."""
+    osc = opa.preset(section)
+    runs = [opa.simulate_dmr(osc, periods=20, per_period=4,
+                             options=opa.SolverOptions(rtol=1e-12, atol=1e-12, method=m))
+            for m in ("dop853", "dp5")]
+    assert runs[0].sizes["impact"] == runs[1].sizes["impact"] >= 3
+    np.testing.assert_allclose(runs[0].x, runs[1].x, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(runs[0].v, runs[1].v, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(runs[0].impact_time, runs[1].impact_time, rtol=0, atol=1e-9)
+    # the higher-order pair takes fewer steps at this tolerance
+    assert runs[0].attrs["steps"] < 0.5 * runs[1].attrs["steps"]
+
+
+@pytest.mark.parametrize("impulse", ["dirac", "pulse"])
+@pytest.mark.parametrize("split", [10, 14])
+def test_a_trajectory_resumes_under_the_impulse_train(split, impulse):
+    """Section 3.1 (impulses every 2.8 forcing periods; 14 periods is one impulse time):
+    a run in two pieces, the second resumed without re-applying the impulse at its start,
+    equals the run in one piece to the tolerance level."""
+    osc = opa.preset("3.1")
+    opts = opa.SolverOptions(impulse=impulse, pulse_width=0.3, rtol=1e-12, atol=1e-12)
+    T = osc.forcing_period
+    p, cfg = pack_parameters(osc, opts)
+    quad = quadrature(0)
+    y0 = np.array([osc.x0, osc.v0])
+    whole, log, _ = run_kernel(y0, np.array([0.0, split * T, 28 * T]), p, cfg, quad,
+                               rtol=opts.rtol, atol=opts.atol)
+    first, _, _ = run_kernel(y0, np.array([0.0, split * T]), p, cfg, quad, rtol=opts.rtol,
+                             atol=opts.atol)
+    second, _, _ = run_kernel(first[-1], np.array([split * T, 28 * T]), p, cfg, quad,
+                              rtol=opts.rtol, atol=opts.atol, include_start=False)
+    assert len(log) >= 3
+    np.testing.assert_allclose(first[-1], whole[1], rtol=0, atol=0)
+    np.testing.assert_allclose(second[-1], whole[-1], rtol=0, atol=1e-8)
+    # re-applying the start impulse (include_start) is a different trajectory when an
+    # impulse falls on the split
+    if split == 14 and impulse == "dirac":
+        again, _, _ = run_kernel(first[-1], np.array([split * T, 28 * T]), p, cfg, quad,
+                                 rtol=opts.rtol, atol=opts.atol, include_start=True)
+        assert np.abs(again[-1] - whole[-1]).max() > 1e-3
+
+
+def test_benettin_by_plain_kernel_runs_works_under_impulses():
+    """The plain-run Benettin engine resumes every forcing period under the impulse
+    train (it used to need F0 = 0) and agrees with the flow engine."""
+    system = opa.ImpactSystem(opa.preset("3.1", c=0.05))
+    a = opa.lyapunov_benettin(system, periods=60, transient=20, engine="solver")
+    b = opa.lyapunov_benettin(system, periods=60, transient=20, engine="plain")
+    assert a.impacts == b.impacts > 0
+    assert a.exponent == pytest.approx(b.exponent, abs=1e-6)
+    assert math.isfinite(a.exponent)
