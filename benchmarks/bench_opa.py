@@ -42,7 +42,8 @@ def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, work):
     # the running sum keeps the calls observable, so none can be optimised away
     total = 0.0
     for j in range(count):
-        _kernel.vector_field(1e-3 * j, y, 0, p, cfg, nodes, weights, basis, 0.0, False, out, work)
+        drive = _kernel.forcing(1e-3 * j, p, 0.0)
+        _kernel.vector_field(y, 0, p, cfg, nodes, weights, basis, drive, False, out, work)
         total += out[out.shape[0] - 1]
     return total
 

@@ -151,7 +151,8 @@ def cmd_validate(args) -> int:
     if args.preset:
         model["preset"] = args.preset
     solver = {k: getattr(args, k) for k in ("rtol", "atol", "impulse", "pulse_width",
-                                            "impulse_at_zero", "max_step", "chatter_velocity")
+                                            "impulse_at_zero", "max_step", "chatter_velocity",
+                                            "method")
               if getattr(args, k, None) is not None}
     parameter, values = (args.sweep if args.sweep else (None, None))
     if args.values is not None:

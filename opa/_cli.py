@@ -17,6 +17,7 @@ import time
 from opa._model import (
     IMPACT_LAWS,
     IMPULSE_MODELS,
+    METHODS,
     PARAMETER_DOCS,
     PARAMETER_NAMES,
     PRESETS,
@@ -127,6 +128,9 @@ def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,
                    help=f"relative tolerance (default {tolerance:g})")
     s.add_argument("--atol", type=float, default=d(tolerance),
                    help=f"absolute tolerance (default {tolerance:g})")
+    s.add_argument("--method", choices=METHODS, default=d("dop853"),
+                   help="Runge-Kutta pair: dop853 (Dormand-Prince 8(5,3), 7th-order dense "
+                        "output) or dp5 (Dormand-Prince 5(4)) (default dop853)")
     s.add_argument("--max-step", type=float, default=d(math.inf), metavar="H",
                    help="largest step size (default unlimited)")
     s.add_argument("--chatter-velocity", type=float, default=d(1e-6), metavar="V",
@@ -162,6 +166,7 @@ def options_from(args) -> SolverOptions:
         atol=args.atol,
         max_step=args.max_step,
         chatter_velocity=args.chatter_velocity,
+        method=args.method,
     )
 
 

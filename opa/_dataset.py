@@ -58,6 +58,7 @@ def provenance_attrs(
         impact_law=impact_law,
         rtol=float(options.rtol),
         atol=float(options.atol),
+        method=options.method,
         chatter_velocity=float(options.chatter_velocity),
         seed=int(seed),
         sampler=sampler,

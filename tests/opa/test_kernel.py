@@ -184,3 +184,85 @@ def test_benettin_by_plain_kernel_runs_works_under_impulses():
     assert a.impacts == b.impacts > 0
     assert a.exponent == pytest.approx(b.exponent, abs=1e-6)
     assert math.isfinite(a.exponent)
+
+
+# --------------------------------------------------------------------------- the 2-D step
+
+
+def _wrapped_sum(terms, indent):
+    """' + '.join(terms) broken into lines of at most 100 characters, the first line
+    starting at column ``indent`` and the others aligned under it."""
+    lines, line = [], ""
+    for term in terms:
+        piece = term if not line else " + " + term
+        if indent + len(line + piece) > 97 and line:
+            lines.append(line + " +")
+            line = term
+        else:
+            line += piece
+    lines.append(line)
+    return ("\n" + " " * indent).join(lines)
+
+
+def unrolled_step(name, A, C, B, last):
+    """Source of the kernel's unrolled step of the two-dimensional system for a tableau:
+    every stage a scalar, the sums in the order of the general loops (zero coefficients,
+    which add exact zeros there, skipped)."""
+    lines = ["@njit(cache=True)",
+             f"def {name}(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, sticking):",
+             '    """One step of the 2-D system, generated from the tableau (see ``step2``)."""']
+    for s in range(1, last):
+        for comp, state in (("x", "x"), ("v", "v")):
+            terms = [f"{float(A[s, r])!r} * k{r}{comp}" for r in range(s) if A[s, r] != 0.0]
+            head = f"    {state}{s} = {state} + h * ("
+            lines.append(head + _wrapped_sum(terms, len(head)) + ")")
+        lines.append(f"    drive = stage_forcing(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
+        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, mu, a, c, drive, sticking)")
+    for comp in ("x", "v"):
+        terms = [f"{float(B[r])!r} * k{r}{comp}" for r in range(last) if B[r] != 0.0]
+        head = f"    {comp}n = {comp} + h * ("
+        lines.append(head + _wrapped_sum(terms, len(head)) + ")")
+    lines.append("    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)")
+    lines.append(f"    k{last}x, k{last}v = _f2(xn, vn, mu, a, c, drive, sticking)")
+    for comp in ("x", "v"):
+        names = [f"k{s}{comp}" for s in range(1, last + 1)]
+        lines.append(f"    k{comp} = ({_wrapped_sum(names, 10).replace(' +', ',')})")
+    lines.append("    return xn, vn, kx, kv")
+    return "\n".join(lines) + "\n"
+
+
+def kernel_steps_source() -> str:
+    return (unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12) + "\n\n"
+            + unrolled_step("_stages2_dp5", K.DP_A, K.DP_C, K.DP_B, 6))
+
+
+def test_the_unrolled_steps_are_generated_from_the_tableaux():
+    """The kernel's unrolled 2-D steps are exactly what the tableaux generate (print
+    ``kernel_steps_source()`` to regenerate them after a tableau change)."""
+    source = (ROOT / "opa" / "_kernel.py").read_text()
+    assert kernel_steps_source() in source
+
+
+@pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
+def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method):
+    """The same step by the unrolled 2-D path and by the general loop (forced by a
+    one-node rule at a node that is not exactly 0, with sigma = 0): every stage equal."""
+    osc = opa.preset("3.2")
+    p, cfg = pack_parameters(osc, opa.SolverOptions())
+    nodes, weights, U = kernel_quadrature(quadrature(0))
+    general_nodes = np.array([1e-300])
+    z = np.array([-0.37, 0.81])
+    stages, results = [], []
+    for rule_nodes in (nodes, general_nodes):
+        Ks = np.zeros((K.K_ROWS, 2))
+        work = np.empty((6, 1))
+        drive = K.forcing(2.3, p, 0.0)
+        K.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, False, Ks[0], work)
+        z_new = np.empty(2)
+        K.rk_step(method, 2.3, z, 0.07, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
+                  U, 0.0, False, work)
+        stages.append(Ks)
+        results.append(z_new)
+    assert K.is_deterministic(0, cfg, nodes) and not K.is_deterministic(0, cfg, general_nodes)
+    np.testing.assert_array_equal(stages[0], stages[1])
+    np.testing.assert_array_equal(results[0], results[1])

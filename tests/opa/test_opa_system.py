@@ -102,8 +102,8 @@ def kernel_rhs(t, y, oscillator, sigma, order, uncertain, truncation, pulse=0.0)
     nodes, weights, basis = kernel_quadrature(quadrature(order))
     out = np.empty_like(y)
     work = np.empty((6, len(nodes)))
-    release = _kernel.vector_field(t, y, 0, p, cfg, nodes, weights, basis, pulse, False, out,
-                                   work)
+    release = _kernel.vector_field(y, 0, p, cfg, nodes, weights, basis,
+                                   _kernel.forcing(t, p, pulse), False, out, work)
     return out, release
 
 
