@@ -20,6 +20,7 @@ import pytest
 import opa
 from opa import _kernel as K
 from opa._simulate import kernel_quadrature, pack_parameters, quadrature, run_kernel
+from tests.opa.test_solver import HARMONIC, kernel_step
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("opa", "mc", "compare")
@@ -184,6 +185,129 @@ def test_benettin_by_plain_kernel_runs_works_under_impulses():
     assert a.impacts == b.impacts > 0
     assert a.exponent == pytest.approx(b.exponent, abs=1e-6)
     assert math.isfinite(a.exponent)
+
+
+# --------------------------------------------------------------------------- the 2-D step
+
+
+def _wrapped_sum(terms, indent):
+    """' + '.join(terms) broken into lines of at most 100 characters, the first line
+    starting at column ``indent`` and the others aligned under it."""
+    lines, line = [], ""
+    for term in terms:
+        piece = term if not line else " + " + term
+        if indent + len(line + piece) > 97 and line:
+            lines.append(line + " +")
+            line = term
+        else:
+            line += piece
+    lines.append(line)
+    return ("\n" + " " * indent).join(lines)
+
+
+def unrolled_step(name, A, C, B, last):
+    """Source of the kernel's unrolled step of the two-dimensional system for a tableau:
+    every stage a scalar, the sums in the order of the general loops (zero coefficients,
+    which add exact zeros there, skipped)."""
+    lines = ["@njit(cache=True)",
+             f"def {name}(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, sticking):",
+             '    """One step of the 2-D system, generated from the tableau (see ``step2``)."""']
+    for s in range(1, last):
+        for comp, state in (("x", "x"), ("v", "v")):
+            terms = [f"{float(A[s, r])!r} * k{r}{comp}" for r in range(s) if A[s, r] != 0.0]
+            head = f"    {state}{s} = {state} + h * ("
+            lines.append(head + _wrapped_sum(terms, len(head)) + ")")
+        lines.append(f"    drive = stage_forcing(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
+        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, mu, a, c, drive, sticking)")
+    for comp in ("x", "v"):
+        terms = [f"{float(B[r])!r} * k{r}{comp}" for r in range(last) if B[r] != 0.0]
+        head = f"    {comp}n = {comp} + h * ("
+        lines.append(head + _wrapped_sum(terms, len(head)) + ")")
+    lines.append("    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)")
+    lines.append(f"    k{last}x, k{last}v = _f2(xn, vn, mu, a, c, drive, sticking)")
+    for comp in ("x", "v"):
+        names = [f"k{s}{comp}" for s in range(1, last + 1)]
+        lines.append(f"    k{comp} = ({_wrapped_sum(names, 10).replace(' +', ',')})")
+    lines.append("    return xn, vn, kx, kv")
+    return "\n".join(lines) + "\n"
+
+
+def kernel_steps_source() -> str:
+    return (unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12) + "\n\n"
+            + unrolled_step("_stages2_dp5", K.DP_A, K.DP_C, K.DP_B, 6))
+
+
+def test_the_unrolled_steps_are_generated_from_the_tableaux():
+    """The kernel's unrolled 2-D steps are exactly what the tableaux generate (print
+    ``kernel_steps_source()`` to regenerate them after a tableau change)."""
+    source = (ROOT / "opa" / "_kernel.py").read_text()
+    assert kernel_steps_source() in source
+
+
+@pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
+def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method):
+    """The same step by the unrolled 2-D path and by the general loop (forced by a
+    one-node rule at a node that is not exactly 0, with sigma = 0): every stage equal."""
+    osc = opa.preset("3.2")
+    p, cfg = pack_parameters(osc, opa.SolverOptions())
+    nodes, weights, U = kernel_quadrature(quadrature(0))
+    general_nodes = np.array([1e-300])
+    z = np.array([-0.37, 0.81])
+    stages, results = [], []
+    for rule_nodes in (nodes, general_nodes):
+        Ks = np.zeros((K.K_ROWS, 2))
+        work = np.empty((6, 1))
+        drive = K.forcing(2.3, p, 0.0)
+        K.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, False, Ks[0], work)
+        z_new = np.empty(2)
+        K.rk_step(method, 2.3, z, 0.07, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
+                  U, 0.0, False, work)
+        stages.append(Ks)
+        results.append(z_new)
+    assert K.is_deterministic(0, cfg, nodes) and not K.is_deterministic(0, cfg, general_nodes)
+    np.testing.assert_array_equal(stages[0], stages[1])
+    np.testing.assert_array_equal(results[0], results[1])
+
+
+@pytest.mark.parametrize("method", ["dop853", "dp5"])
+@pytest.mark.parametrize("depth, tol", [(1e-6, 1e-8), (1e-6, 1e-10), (1e-6, 1e-12),
+                                        (1e-9, 1e-10), (1e-9, 1e-12)])
+def test_a_shallow_impact_is_found_whatever_the_step_length(depth, tol, method):
+    """x'' = -x, x = -cos t peaks at 1 at t = pi; the wall at 1 - depth is reached at
+    t = pi - arccos(1 - depth) with speed sqrt(1 - (1 - depth)^2) (4.5e-5 for depth 1e-9).
+    Steps are long at loose tolerances (about a radian at 1e-8): the cheap exclusion
+    (``wall_margin``) must let the step through to the dense-output scan. The tolerance
+    must be below the depth (a global error of the size of the depth can lower the
+    computed apex below the wall); the impact time is then sensitive as 1/speed
+    (measured errors 2e-11 to 7e-6)."""
+    delta = 1.0 - depth
+    osc = opa.Oscillator(mu=0.0, a=1.0, c=0.0, f=0.0, omega=1.0, F0=0.0, delta=delta,
+                         eta=1.0, x0=-1.0, v0=0.0)
+    ds = opa.simulate_dmr(osc, times=np.array([0.0, 4.0]),
+                          options=opa.SolverOptions(rtol=tol, atol=tol, method=method))
+    assert ds.impact_time.size == 1
+    assert ds.impact_time.item() == pytest.approx(math.pi - math.acos(delta), abs=1e-5)
+    # the speed near the apex is pi - t: a time error of 2e-6 is 5% of 4.5e-5
+    assert ds.impact_velocity.item() == pytest.approx(math.sqrt(1 - delta**2), rel=0.1)
+
+
+@pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
+@pytest.mark.parametrize("h", [0.05, 0.3, 1.0, 1.5])
+def test_the_wall_margin_bounds_the_rise_inside_a_step(h, method):
+    """On x = -cos t the true excess of x over the higher end value inside a step (the
+    apex 1 at t = pi where the step contains it) and the dense output's excess stay below
+    ``wall_margin``, for steps placed anywhere around the apex."""
+    last = K.method_stages(method)[0]
+    for start in np.linspace(math.pi - 1.2 * h, math.pi + 0.2 * h, 15):
+        y0 = np.array([-math.cos(start), math.sin(start)])
+        stages, y_new, F = kernel_step(HARMONIC, start, y0, h, method)
+        margin = K.wall_margin(stages, last, 1, h)
+        theta = np.linspace(0.0, 1.0, 401)
+        true_top = np.max(-np.cos(start + theta * h))
+        dense_top = max(K.dense_value(method, th, y0, F, 0) for th in theta)
+        ends = max(y0[0], y_new[0])
+        assert true_top - ends <= margin
+        assert dense_top - ends <= margin
 
 
 # --------------------------------------------------------------------------- the 2-D step
