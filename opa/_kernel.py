@@ -291,7 +291,7 @@ def forcing(t, p, force):
     return p[P_F] * np.cos(p[P_OMEGA] * t) + force
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _cos_sin_small(d):
     """cos d and sin d for |d| <= 0.5 by their Taylor series to d^16 and d^17 (remainders
     below 6e-22 there): multiplications instead of a libm call."""
@@ -305,7 +305,7 @@ def _cos_sin_small(d):
     return c, s
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def stage_forcing(t, theta, h, f, w, cw, sw, force):
     """``forcing`` at t + theta h within a step from t: with cw = cos(omega t),
     sw = sin(omega t) computed once per step, cos(omega t + d) = cw cos d - sw sin d with
@@ -539,63 +539,59 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, stickin
 
 
 @njit(cache=True)
-def _stages2_dp5(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, sticking):
-    """One step of the 2-D system, generated from the tableau (see ``step2``)."""
-    x1 = x + h * (0.2 * k0x)
-    v1 = v + h * (0.2 * k0v)
-    drive = stage_forcing(t, 0.2, h, f, w, cw, sw, force)
-    k1x, k1v = _f2(x1, v1, mu, a, c, drive, sticking)
-    x2 = x + h * (0.075 * k0x + 0.225 * k1x)
-    v2 = v + h * (0.075 * k0v + 0.225 * k1v)
-    drive = stage_forcing(t, 0.3, h, f, w, cw, sw, force)
-    k2x, k2v = _f2(x2, v2, mu, a, c, drive, sticking)
-    x3 = x + h * (0.9777777777777777 * k0x + -3.7333333333333334 * k1x + 3.5555555555555554 * k2x)
-    v3 = v + h * (0.9777777777777777 * k0v + -3.7333333333333334 * k1v + 3.5555555555555554 * k2v)
-    drive = stage_forcing(t, 0.8, h, f, w, cw, sw, force)
-    k3x, k3v = _f2(x3, v3, mu, a, c, drive, sticking)
-    x4 = x + h * (2.9525986892242035 * k0x + -11.595793324188385 * k1x + 9.822892851699436 * k2x +
-                  -0.2908093278463649 * k3x)
-    v4 = v + h * (2.9525986892242035 * k0v + -11.595793324188385 * k1v + 9.822892851699436 * k2v +
-                  -0.2908093278463649 * k3v)
-    drive = stage_forcing(t, 0.8888888888888888, h, f, w, cw, sw, force)
-    k4x, k4v = _f2(x4, v4, mu, a, c, drive, sticking)
-    x5 = x + h * (2.8462752525252526 * k0x + -10.757575757575758 * k1x + 8.906422717743473 * k2x +
-                  0.2784090909090909 * k3x + -0.2735313036020583 * k4x)
-    v5 = v + h * (2.8462752525252526 * k0v + -10.757575757575758 * k1v + 8.906422717743473 * k2v +
-                  0.2784090909090909 * k3v + -0.2735313036020583 * k4v)
-    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)
-    k5x, k5v = _f2(x5, v5, mu, a, c, drive, sticking)
-    xn = x + h * (0.09114583333333333 * k0x + 0.44923629829290207 * k2x +
-                  0.6510416666666666 * k3x + -0.322376179245283 * k4x + 0.13095238095238096 * k5x)
-    vn = v + h * (0.09114583333333333 * k0v + 0.44923629829290207 * k2v +
-                  0.6510416666666666 * k3v + -0.322376179245283 * k4v + 0.13095238095238096 * k5v)
-    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)
-    k6x, k6v = _f2(xn, vn, mu, a, c, drive, sticking)
-    kx = (k1x, k2x, k3x, k4x, k5x, k6x)
-    kv = (k1v, k2v, k3v, k4v, k5v, k6v)
-    return xn, vn, kx, kv
+def _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol):
+    """``error_norm`` and ``wall_margin`` of a DOP853 step of the 2-D system, from its
+    scalar stages (no array argument)."""
+    e5x = D8_E5[0] * k0x
+    e3x = D8_E3[0] * k0x
+    e5v = D8_E5[0] * k0v
+    e3v = D8_E3[0] * k0v
+    vmax = abs(k0x)
+    amax = abs(k0v)
+    for r in range(12):
+        e5x += D8_E5[r + 1] * kx[r]
+        e3x += D8_E3[r + 1] * kx[r]
+        e5v += D8_E5[r + 1] * kv[r]
+        e3v += D8_E3[r + 1] * kv[r]
+        vmax = max(vmax, abs(kx[r]))
+        amax = max(amax, abs(kv[r]))
+    sx = atol + rtol * max(abs(x), abs(xn))
+    sv = atol + rtol * max(abs(v), abs(vn))
+    r5 = max(abs(e5x) / sx, abs(e5v) / sv)
+    r3 = max(abs(e3x) / sx, abs(e3v) / sv)
+    if not (abs(e5x) / sx < np.inf and abs(e5v) / sv < np.inf and abs(e3x) / sx < np.inf
+            and abs(e3v) / sv < np.inf and abs(xn) < np.inf and abs(vn) < np.inf):
+        err = np.inf
+    else:
+        err = _combine_errors(METHOD_DOP853, h, r5, r3)
+    return err, min(2.0 * abs(h) * vmax, 0.25 * h * h * amax)
 
 
 @njit(cache=True, inline="always")
-def step2(method, t, z, h, K, z_new, p, force, sticking):
-    """``rk_step`` for the two-dimensional system: fills the stage rows of K and z_new."""
+def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
+    """DOP853's ``rk_step`` for the two-dimensional system: fills the stage rows of K and
+    z_new and returns (error, wall margin) as ``error_norm`` and ``wall_margin`` would
+    (DP5, the slower choice, keeps the general loop: one unrolled step compiles in about
+    2 s)."""
     w = p[P_OMEGA]
     cw = np.cos(w * t)
     sw = np.sin(w * t)
-    if method == METHOD_DP5:
-        xn, vn, kx, kv = _stages2_dp5(t, z[0], z[1], h, K[0, 0], K[0, 1], p[P_MU], p[P_A],
-                                      p[P_C], p[P_F], w, cw, sw, force, sticking)
-        for r in range(6):
-            K[r + 1, 0] = kx[r]
-            K[r + 1, 1] = kv[r]
-    else:
-        xn, vn, kx8, kv8 = _stages2_dop853(t, z[0], z[1], h, K[0, 0], K[0, 1], p[P_MU],
-                                           p[P_A], p[P_C], p[P_F], w, cw, sw, force, sticking)
-        for r in range(12):
-            K[r + 1, 0] = kx8[r]
-            K[r + 1, 1] = kv8[r]
+    x = z[0]
+    v = z[1]
+    k0x = K[0, 0]
+    k0v = K[0, 1]
+    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, p[P_MU], p[P_A], p[P_C], p[P_F], w,
+                                     cw, sw, force, sticking)
+    # tuple items by constant index: a runtime index compiles to a 12-way switch
+    K[1, 0], K[2, 0], K[3, 0], K[4, 0], K[5, 0], K[6, 0] = kx[0], kx[1], kx[2], kx[3], kx[4], kx[5]
+    K[7, 0], K[8, 0], K[9, 0], K[10, 0], K[11, 0], K[12, 0] = (kx[6], kx[7], kx[8], kx[9],
+                                                                kx[10], kx[11])
+    K[1, 1], K[2, 1], K[3, 1], K[4, 1], K[5, 1], K[6, 1] = kv[0], kv[1], kv[2], kv[3], kv[4], kv[5]
+    K[7, 1], K[8, 1], K[9, 1], K[10, 1], K[11, 1], K[12, 1] = (kv[6], kv[7], kv[8], kv[9],
+                                                                kv[10], kv[11])
     z_new[0] = xn
     z_new[1] = vn
+    return _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
 
 
 @njit(cache=True)
@@ -611,8 +607,8 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force
     A = DP_A if method == METHOD_DP5 else D8_A
     C = DP_C if method == METHOD_DP5 else D8_C
     B = DP_B if method == METHOD_DP5 else D8_B
-    if size == 2 and is_deterministic(m, cfg, nodes):
-        step2(method, t, z, h, K, z_new, p, force, sticking)
+    if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes):
+        step2(t, z, h, K, z_new, p, force, sticking, 1.0, 1.0)
         return last
     cw = np.cos(p[P_OMEGA] * t)
     sw = np.sin(p[P_OMEGA] * t)
@@ -668,7 +664,7 @@ def _combine_errors(method, h, worst, worst3):
     return abs(h) * worst * worst / np.sqrt(worst * worst + 0.01 * worst3 * worst3)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def error_norm(method, z, z_new, K, h, rtol, atol):
     """Scaled local error estimate in the max-norm over all components.
 
@@ -780,7 +776,7 @@ def dense_state(method, theta, z_old, F, out):
 
 # ---------------------------------------------------------------------------
 # The wall x_0 = delta on the dense output
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def wall_margin(K, last, n, h):
     """How far x_0 may rise inside a step above the higher of its end values: the
     smaller of 2 |h| max|x_0'| and 2 h^2 max|x_0''| / 8 over the stages. A function with
@@ -1173,7 +1169,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     stick_hmax = 2.0 * np.pi / p[P_OMEGA] / 32.0
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
-    two_d = size == 2 and is_deterministic(m, cfg, nodes)
+    two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes)
     # typed, not literal, constants: numba compiles a callee once per argument type, and
     # a literal 0 or False is a type of its own
     m0 = np.int64(0)
@@ -1352,13 +1348,13 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 status = STEP_COLLAPSE
                 break
             if two_d:
-                step2(method, t, z, h_try, K, z_new, p, force, sticking)
+                err, margin = step2(t, z, h_try, K, z_new, p, force, sticking, rtol, atol)
                 n_rhs += last
             else:
                 n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, nodes, weights,
                                  U, force, sticking, work)
-            err = error_norm(method, z, z_new, K, h_try, rtol, atol)
-            margin = wall_margin(K, last, n, h_try)
+                err = error_norm(method, z, z_new, K, h_try, rtol, atol)
+                margin = wall_margin(K, last, n, h_try)
             n_steps += 1
             if want_stats:
                 stats[seg, S_STEPS] += 1.0

@@ -233,12 +233,11 @@ def unrolled_step(name, A, C, B, last):
 
 
 def kernel_steps_source() -> str:
-    return (unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12) + "\n\n"
-            + unrolled_step("_stages2_dp5", K.DP_A, K.DP_C, K.DP_B, 6))
+    return unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12)
 
 
 def test_the_unrolled_steps_are_generated_from_the_tableaux():
-    """The kernel's unrolled 2-D steps are exactly what the tableaux generate (print
+    """The kernel's unrolled 2-D step is exactly what the tableau generates (print
     ``kernel_steps_source()`` to regenerate them after a tableau change)."""
     source = (ROOT / "opa" / "_kernel.py").read_text()
     assert kernel_steps_source() in source
@@ -356,12 +355,11 @@ def unrolled_step(name, A, C, B, last):
 
 
 def kernel_steps_source() -> str:
-    return (unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12) + "\n\n"
-            + unrolled_step("_stages2_dp5", K.DP_A, K.DP_C, K.DP_B, 6))
+    return unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12)
 
 
 def test_the_unrolled_steps_are_generated_from_the_tableaux():
-    """The kernel's unrolled 2-D steps are exactly what the tableaux generate (print
+    """The kernel's unrolled 2-D step is exactly what the tableau generates (print
     ``kernel_steps_source()`` to regenerate them after a tableau change)."""
     source = (ROOT / "opa" / "_kernel.py").read_text()
     assert kernel_steps_source() in source
