@@ -595,6 +595,25 @@ def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
 
 
 @njit(cache=True)
+def _stage_rows(t, z, h, K, ztmp, A, C, first, stop, m, p, cfg, nodes, weights, U, force,
+                sticking, work):
+    """Rows first..stop-1 of K: the stages z + h sum_r A[s, r] K[r] at t + C[s] h.
+    Returns (cos(omega t), sin(omega t)) for ``stage_forcing`` at the step's end."""
+    size = z.shape[0]
+    cw = np.cos(p[P_OMEGA] * t)
+    sw = np.sin(p[P_OMEGA] * t)
+    for s in range(first, stop):
+        for j in range(size):
+            acc = 0.0
+            for r in range(s):
+                acc += A[s, r] * K[r, j]
+            ztmp[j] = z[j] + h * acc
+        drive = stage_forcing(t, C[s], h, p[P_F], p[P_OMEGA], cw, sw, force)
+        vector_field(ztmp, m, p, cfg, nodes, weights, U, drive, sticking, K[s], work)
+    return cw, sw
+
+
+@njit(cache=True)
 def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force, sticking,
             work):
     """One step of size h from (t, z); K[0] must hold f(t, z).
@@ -610,16 +629,8 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force
     if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes):
         step2(t, z, h, K, z_new, p, force, sticking, 1.0, 1.0)
         return last
-    cw = np.cos(p[P_OMEGA] * t)
-    sw = np.sin(p[P_OMEGA] * t)
-    for s in range(1, last):
-        for j in range(size):
-            acc = 0.0
-            for r in range(s):
-                acc += A[s, r] * K[r, j]
-            ztmp[j] = z[j] + h * acc
-        drive = stage_forcing(t, C[s], h, p[P_F], p[P_OMEGA], cw, sw, force)
-        vector_field(ztmp, m, p, cfg, nodes, weights, U, drive, sticking, K[s], work)
+    cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, 1, last, m, p, cfg, nodes, weights, U, force,
+                         sticking, work)
     for j in range(size):
         acc = 0.0
         for r in range(last):
@@ -709,16 +720,8 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights,
                     acc += K[s, j] * DP_P[s, d]
                 F[d, j] = h * acc
         return 0
-    cw = np.cos(p[P_OMEGA] * t)
-    sw = np.sin(p[P_OMEGA] * t)
-    for s in range(13, 16):
-        for j in range(size):
-            acc = 0.0
-            for r in range(s):
-                acc += D8_A[s, r] * K[r, j]
-            ztmp[j] = z[j] + h * acc
-        drive = stage_forcing(t, D8_C[s], h, p[P_F], p[P_OMEGA], cw, sw, force)
-        vector_field(ztmp, m, p, cfg, nodes, weights, U, drive, sticking, K[s], work)
+    _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, 13, 16, m, p, cfg, nodes, weights, U, force,
+                sticking, work)
     for j in range(size):
         dy = z_new[j] - z[j]
         F[0, j] = dy
@@ -900,44 +903,23 @@ def free_flight_maximum(method, z_old, F, delta):
     return gap, where
 
 
-@njit(cache=True)
-def refine_maximum(method, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, weights, U,
-                   force, work):
-    """The free-flight maximum of x_0 found on the dense output, refined by re-stepping:
-    Newton on v_0(t + hh) = 0 with full Runge-Kutta steps from (t, z), so the gap is a
-    full-order result that varies smoothly with the parameters (the interpolant's error
-    changes with the step sequence). Returns (x_0 at the maximum, evaluations)."""
-    n = cfg[C_NCOEF]
-    last, _ = method_stages(method)
-    off = np.bool_(False)
-    for j in range(z.shape[0]):
-        K2[0, j] = K[0, j]
-    hh = theta * h
-    evals = 0
-    for _ in range(4):
-        evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
-                         off, work)
-        v = z_new[n]
-        a = K2[last, n]
-        if a >= 0.0 or abs(v) <= 1e-15 * (1.0 + abs(z_new[n])):
-            break
-        dh = -v / a
-        if hh + dh <= 0.0 or hh + dh > h:
-            break
-        hh += dh
-    return z_new[0], evals
+IMPACT_ROOT, MAXIMUM_ROOT = 0, 1
 
 
 @njit(cache=True)
-def locate_impact(method, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, weights, U,
-                  force, work):
-    """Refine the impact time found on the dense output by re-stepping exactly to it.
+def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, weights, U,
+              force, work):
+    """Refine an event found on the dense output by re-stepping exactly to it: Newton on
+    g(t + hh) = 0 from hh = theta h, each iterate a fresh Runge-Kutta step from (t, z), so
+    the state there is a full-order step result, not an interpolant.
 
-    Newton iterations on x_0(t + hh) = delta, each a fresh Runge-Kutta step from (t, z),
-    so the impact state is a full-order step result, not an interpolant. Leaves the
-    state at the wall in ``z_new``; returns (t_hit, evaluations).
+    kind IMPACT_ROOT: g = x_0 - delta, g' = v_0 > 0 (the impact time). MAXIMUM_ROOT:
+    g = v_0, g' = v_0' < 0 (a free-flight maximum of x_0, whose gap to the wall then
+    varies smoothly with the parameters; the interpolant's error changes with the step
+    sequence). Leaves the state at t + hh in ``z_new``; returns (hh, evaluations).
     """
     n = cfg[C_NCOEF]
+    last, _ = method_stages(method)
     delta = p[P_DELTA]
     off = np.bool_(False)
     for j in range(z.shape[0]):
@@ -947,15 +929,21 @@ def locate_impact(method, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, 
     for _ in range(4):
         evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
                          off, work)
-        g = z_new[0] - delta
-        v = z_new[n]
-        if v <= 0.0 or abs(g) <= 1e-14 * (1.0 + abs(delta)):
+        if kind == IMPACT_ROOT:
+            g = z_new[0] - delta
+            slope = z_new[n]
+            done = slope <= 0.0 or abs(g) <= 1e-14 * (1.0 + abs(delta))
+        else:
+            g = z_new[n]
+            slope = K2[last, n]
+            done = slope >= 0.0 or abs(g) <= 1e-15 * (1.0 + abs(g))
+        if done:
             break
-        dh = -g / v
+        dh = -g / slope
         if hh + dh <= 0.0 or hh + dh > h:
             break
         hh += dh
-    return t + hh, evals
+    return hh, evals
 
 
 # ---------------------------------------------------------------------------
@@ -1381,11 +1369,11 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 prepared = on
                 theta = wall_crossing(method, z, F, h_try, delta)
                 if theta > 0.0:
-                    t_hit, evals = locate_impact(method, t, z, h_try, theta, K, K2, z_new, ztmp,
-                                                 m, p, cfg, nodes, weights, U, force, work)
+                    hh, evals = restep_to(method, IMPACT_ROOT, t, z, h_try, theta, K, K2, z_new,
+                                          ztmp, m, p, cfg, nodes, weights, U, force, work)
                     n_rhs += evals
                     # z_new holds the state at the wall
-                    t = t_hit
+                    t = t + hh
                     for j in range(size):
                         z[j] = z_new[j]
                     v_minus, evals = _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus,
@@ -1482,11 +1470,11 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                                                cfg, nodes, weights, U, force, sticking, work)
                     gap, theta = free_flight_maximum(method, z, F, delta)
                     if gap < stats[seg, S_GAP]:
-                        x_top, evals = refine_maximum(method, t, z, h_try, theta, K, K2, z_top,
-                                                      ztmp, m, p, cfg, nodes, weights, U,
-                                                      force, work)
+                        _, evals = restep_to(method, MAXIMUM_ROOT, t, z, h_try, theta, K, K2,
+                                             z_top, ztmp, m, p, cfg, nodes, weights, U, force,
+                                             work)
                         n_rhs += evals
-                        stats[seg, S_GAP] = delta - x_top
+                        stats[seg, S_GAP] = delta - z_top[0]
             t = t_break if is_last else t + h_try
             for j in range(size):
                 z[j] = z_new[j]
