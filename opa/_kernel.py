@@ -1369,8 +1369,9 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 prepared = on
                 theta = wall_crossing(method, z, F, h_try, delta)
                 if theta > 0.0:
-                    hh, evals = restep_to(method, IMPACT_ROOT, t, z, h_try, theta, K, K2, z_new,
-                                          ztmp, m, p, cfg, nodes, weights, U, force, work)
+                    hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h_try, theta, K,
+                                          K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
+                                          work)
                     n_rhs += evals
                     # z_new holds the state at the wall
                     t = t + hh
@@ -1470,9 +1471,9 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                                                cfg, nodes, weights, U, force, sticking, work)
                     gap, theta = free_flight_maximum(method, z, F, delta)
                     if gap < stats[seg, S_GAP]:
-                        _, evals = restep_to(method, MAXIMUM_ROOT, t, z, h_try, theta, K, K2,
-                                             z_top, ztmp, m, p, cfg, nodes, weights, U, force,
-                                             work)
+                        _, evals = restep_to(method, np.int64(MAXIMUM_ROOT), t, z, h_try,
+                                             theta, K, K2, z_top, ztmp, m, p, cfg, nodes,
+                                             weights, U, force, work)
                         n_rhs += evals
                         stats[seg, S_GAP] = delta - z_top[0]
             t = t_break if is_last else t + h_try
