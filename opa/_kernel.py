@@ -1390,10 +1390,9 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                     # chatter: impacts too slow to resolve with a net force into the wall
                     if eta < 1.0 and v_minus < chatter_v:
                         z[n] = 0.0
-                        acc = vector_field(z, m0, p, cfg, nodes, weights, U, forcing(t, p,
-                                                                                     force), off,
-                                                                                         f_minus,
-                                                                                             work)
+                        drive = forcing(t, p, force)
+                        acc = vector_field(z, m0, p, cfg, nodes, weights, U, drive, off, f_minus,
+                                           work)
                         n_rhs += 1
                         if acc > 0.0:
                             t_acc = t + 2.0 * eta * v_minus / (acc * (1.0 - eta))
