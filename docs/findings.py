@@ -1,0 +1,118 @@
+"""Check the numbers of docs/findings.md (sections 1-6) against a run of the default job.
+
+    opa-mc validate --outdir results                         # writes results/validate.nc
+    python docs/findings.py results                          # the numbers a run gives
+    python docs/findings.py results --check docs/findings.md # exit 1 on a stale number
+
+Every number of sections 1-6 of the document must be one the run gives, to the digits the
+document prints: the lines of ``results/summary.md`` (written by ``opa-mc validate`` from
+the dataset) and a few values the document reads off the dataset directly (the impact-count
+shares ``count_prob``, the relative errors ``err_mean_rel`` and ``err_var_rel``). Numbers
+that describe the method rather than the run (the grid, tolerances, the paper's values) are
+in ``METHOD_NUMBERS``, and wall times (a number followed by "s") measure the machine, not
+the method, so they are not compared; anything else that does not match is printed with
+its line and the check fails, so a rerun with another kernel or other defaults cannot
+leave a stale number.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+
+# Numbers of the text that are not results of the run: section numbers, the model and the
+# grid of the default job, the criterion, the paper's values and plain arithmetic.
+METHOD_NUMBERS = {
+    1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 12, 16, 20, 24, 25, 50, 64, 100, 1024, 8192, 32768,
+    0.1, 0.25, 0.8, 1e-9, 1e-6, 1e-3, 1e-4, 0.005, 0.01, 0.014, 0.02, 0.025, 0.03, 0.04,
+    0.05, 3.98, 4.035, 4.09, 4.145, 4.2, 0.000625, 1.25, 1.6, 0.0,
+}
+NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+SECONDS = re.compile(r"\s?s\b")
+
+
+def numbers(text: str) -> list[tuple[str, float]]:
+    """The numbers of a text as (token, value), wall times ("72 s") left out."""
+    text = text.replace("−", "-").replace(",", "")
+    out = []
+    for match in NUMBER.finditer(text):
+        if SECONDS.match(text, match.end()):
+            continue
+        out.append((match.group(), float(match.group())))
+    return out
+
+
+def digits(token: str) -> int:
+    mantissa = token.lstrip("-").split("e")[0].replace(".", "").lstrip("0")
+    return max(len(mantissa), 1)
+
+
+def same(token: str, value: float, candidate: float) -> bool:
+    """Does ``candidate`` print as ``token`` (same value to the token's digits)?"""
+    if value == candidate:
+        return True
+    if candidate == 0.0 or value == 0.0 or not math.isfinite(candidate):
+        return False
+    scale = 10.0 ** (math.floor(math.log10(abs(value))) - digits(token) + 1)
+    return abs(candidate - value) <= 0.5 * scale * (1 + 1e-9)
+
+
+def run_numbers(results: Path) -> list[float]:
+    """The numbers a run gives: its summary and the dataset values the document quotes."""
+    import xarray as xr
+
+    found = [v for _, v in numbers((results / "summary.md").read_text())]
+    with xr.open_dataset(results / "validate.nc") as ds:
+        for name in ("count_prob", "err_mean_rel", "err_var_rel", "split_value",
+                     "split_speed", "first_impact"):
+            if name in ds:
+                values = np.asarray(ds[name].values, dtype=float).ravel()
+                values = values[np.isfinite(values)]
+                found += values.tolist()
+                if name == "count_prob":
+                    found += (100 * values).tolist()
+                    found += [1.0 - v for v in values]
+    return found
+
+
+def stale(document: Path, results: Path) -> list[str]:
+    """Lines of sections 1-6 of ``document`` with a number the run does not give."""
+    text = document.read_text()
+    body = text.split("## 7.")[0]
+    found = np.array(sorted(set(run_numbers(results))))
+    bad = []
+    for line in body.splitlines():
+        if line.startswith("    ") or "`" in line and line.strip().startswith("`"):
+            continue  # commands
+        for token, value in numbers(line):
+            if abs(value) in METHOD_NUMBERS or value in METHOD_NUMBERS:
+                continue
+            near = found[np.abs(found - value) <= abs(value) * 0.06 + 1e-300]
+            if not any(same(token, value, float(c)) for c in near):
+                bad.append(f"{token}: {line.strip()}")
+    return bad
+
+
+def main(argv: list[str]) -> int:
+    if not argv or argv[0] in ("-h", "--help"):
+        print(__doc__)
+        return 0 if argv else 2
+    results = Path(argv[0])
+    if "--check" in argv:
+        document = Path(argv[argv.index("--check") + 1])
+        bad = stale(document, results)
+        for line in bad:
+            print(f"not in the run: {line}")
+        print(f"{document}: {'stale numbers' if bad else 'every number matches the run'}"
+              f" ({len(bad)} mismatches)")
+        return 1 if bad else 0
+    print((results / "summary.md").read_text())
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
