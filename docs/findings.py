@@ -4,6 +4,13 @@
     python docs/findings.py results                          # the numbers a run gives
     python docs/findings.py results --check docs/findings.md # exit 1 on a stale number
 
+The same check for the convergence study of docs/elements.md (its section "Convergence
+against Monte Carlo", against ``convergence.md`` of ``opa-mc converge``):
+
+    opa-mc converge --outdir results-elements
+    python docs/findings.py results-elements --check docs/elements.md \
+        --summary convergence.md --from "## Convergence against Monte Carlo" --to "## σ = 0.03"
+
 Every number of sections 1-6 of the document must be one the run gives, to the digits the
 document prints: the lines of ``results/summary.md`` (written by ``opa-mc validate`` from
 the dataset) and a few values the document reads off the dataset directly (the impact-count
@@ -61,11 +68,13 @@ def same(token: str, value: float, candidate: float) -> bool:
     return abs(candidate - value) <= 0.5 * scale * (1 + 1e-9)
 
 
-def run_numbers(results: Path) -> list[float]:
+def run_numbers(results: Path, summary: str = "summary.md") -> list[float]:
     """The numbers a run gives: its summary and the dataset values the document quotes."""
     import xarray as xr
 
-    found = [v for _, v in numbers((results / "summary.md").read_text())]
+    found = [v for _, v in numbers((results / summary).read_text())]
+    if not (results / "validate.nc").exists():
+        return found
     with xr.open_dataset(results / "validate.nc") as ds:
         for name in ("count_prob", "err_mean_rel", "err_var_rel", "split_value",
                      "split_speed", "first_impact"):
@@ -79,11 +88,14 @@ def run_numbers(results: Path) -> list[float]:
     return found
 
 
-def stale(document: Path, results: Path) -> list[str]:
-    """Lines of sections 1-6 of ``document`` with a number the run does not give."""
+def stale(document: Path, results: Path, *, summary: str = "summary.md", start: str = "",
+          stop: str = "## 7.") -> list[str]:
+    """Lines of ``document`` between ``start`` and ``stop`` (sections 1-6 of findings.md by
+    default) with a number the run does not give."""
     text = document.read_text()
-    body = text.split("## 7.")[0]
-    found = np.array(sorted(set(run_numbers(results))))
+    body = text[text.index(start):] if start else text
+    body = body.split(stop)[0]
+    found = np.array(sorted(set(run_numbers(results, summary))))
     bad = []
     for line in body.splitlines():
         if line.startswith("    ") or "`" in line and line.strip().startswith("`"):
@@ -102,15 +114,19 @@ def main(argv: list[str]) -> int:
         print(__doc__)
         return 0 if argv else 2
     results = Path(argv[0])
+    def option(name, default):
+        return argv[argv.index(name) + 1] if name in argv else default
+
     if "--check" in argv:
-        document = Path(argv[argv.index("--check") + 1])
-        bad = stale(document, results)
+        document = Path(option("--check", ""))
+        bad = stale(document, results, summary=option("--summary", "summary.md"),
+                    start=option("--from", ""), stop=option("--to", "## 7."))
         for line in bad:
             print(f"not in the run: {line}")
         print(f"{document}: {'stale numbers' if bad else 'every number matches the run'}"
               f" ({len(bad)} mismatches)")
         return 1 if bad else 0
-    print((results / "summary.md").read_text())
+    print((results / option("--summary", "summary.md")).read_text())
     return 0
 
 
