@@ -69,3 +69,20 @@ def test_the_findings_page_holds_for_a_fresh_run_of_the_default_job(tmp_path):
                     "sys.exit(main())", "validate", "--quiet", "--outdir", str(tmp_path)],
                    check=True, timeout=1800)
     assert _load("findings").stale(Path(DOCS) / "findings.md", tmp_path) == []
+
+
+@pytest.mark.slow
+def test_the_elements_page_holds_for_a_fresh_convergence_study(tmp_path):
+    """docs/elements.md, section "Convergence against Monte Carlo": every number is one a
+    fresh ``opa-mc converge`` gives (about 20 s on 2 cores with a warm numba cache)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    subprocess.run([sys.executable, "-c", "import sys; from opa._cli import main; "
+                    "sys.exit(main())", "converge", "--quiet", "--outdir", str(tmp_path)],
+                   check=True, timeout=1800)
+    assert _load("findings").stale(Path(DOCS) / "elements.md", tmp_path,
+                                   summary="convergence.md",
+                                   start="## Convergence against Monte Carlo",
+                                   stop="## σ = 0.03") == []
