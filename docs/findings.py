@@ -11,6 +11,11 @@ against Monte Carlo", against ``convergence.md`` of ``opa-mc converge``):
     python docs/findings.py results-elements --check docs/elements.md \
         --summary convergence.md --from "## Convergence against Monte Carlo" --to "## σ = 0.03"
 
+and for docs/figures.md against the captions of ``opa-mc reproduce all`` (all of it):
+
+    opa-mc reproduce all --outdir figures && cat figures/fig*.txt > figures/captions.md
+    python docs/findings.py figures --check docs/figures.md --summary captions.md --to ""
+
 Every number of sections 1-6 of the document must be one the run gives, to the digits the
 document prints: the lines of ``results/summary.md`` (written by ``opa-mc validate`` from
 the dataset) and a few values the document reads off the dataset directly (the impact-count
@@ -37,8 +42,10 @@ METHOD_NUMBERS = {
     1, 2, 3, 4, 5, 6, 7, 8, 10, 25, 50, 100, 1024, 8192, 32768,
     0.1, 0.25, 0.8, 1e-9, 1e-6, 1e-3, 1e-4, 0.005, 0.01, 0.014, 0.02, 0.025, 0.03, 0.04,
     0.05, 3.98, 4.035, 4.09, 4.145, 4.2, 0.000625, 1.25, 1.6, 0.0,
+    2.8, 3.9, 5.9, 4.00495, 1000,  # the figures' parameters and impulse_cycle's search
 }
-NUMBER = re.compile(r"(?<![\w.])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
+# a number not glued to a word or another number ("x43", a count in a run's text, counts)
+NUMBER = re.compile(r"(?<![A-Za-wyz_.\d])-?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 SECONDS = re.compile(r"\s?s\b")
 
 
@@ -94,7 +101,7 @@ def stale(document: Path, results: Path, *, summary: str = "summary.md", start: 
     default) with a number the run does not give."""
     text = document.read_text()
     body = text[text.index(start):] if start else text
-    body = body.split(stop)[0]
+    body = body.split(stop)[0] if stop else body
     found = np.array(sorted(set(run_numbers(results, summary))))
     bad = []
     for line in body.splitlines():
