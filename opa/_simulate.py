@@ -189,8 +189,8 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", parti
         z = np.array(y0, dtype=float)
         announce_compilation(K.integrate)
         status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
-            z, 0, np.asarray(times, dtype=float), include_start, False, p, cfg, nodes, weights,
-            basis, rtol, atol, out, np.empty((0, K.N_STATS)), np.empty(0), log
+            z, 0, np.ascontiguousarray(times, dtype=float), include_start, False, p, cfg, nodes,
+            weights, basis, rtol, atol, out, np.empty((0, K.N_STATS)), np.empty(0), log
         )
         if n_events <= capacity:
             break
