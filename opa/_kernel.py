@@ -260,19 +260,16 @@ D8_D[3, :16] = [-25.69393346270375, 0.0, 0.0, 0.0, 0.0, -154.18974869023643, -23
         29.8402934266605, -43.53345659001114, 96.32455395918828, -39.17726167561544,
             -149.72683625798564]
 
-# Stages of each method: rows of K filled by one step, including the closing
-# f(t + h, y_new) (the first row of the next step), and its error exponent.
+# Rows of the stage array K: DOP853's 12 stages, f(t + h, y_new) and its 3 dense stages.
 K_ROWS = 16
 N_SCAN = 8
 SAFETY, MIN_FACTOR, MAX_FACTOR = 0.9, 0.2, 10.0
 
 
 @njit(cache=True)
-def method_stages(method):
-    """(row of f(t + h, y_new) in K, error exponent) of a method."""
-    if method == METHOD_DP5:
-        return 6, -1.0 / 5.0
-    return 12, -1.0 / 8.0
+def last_stage(method):
+    """The row of K that holds f(t + h, y_new) (the first row of the next step)."""
+    return 6 if method == METHOD_DP5 else 12
 
 
 # ---------------------------------------------------------------------------
@@ -349,6 +346,7 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
     (the release function of sticking).
     """
     n = cfg[C_NCOEF]
+    # is_deterministic written out: a call would count references of three arrays
     if m == 0 and n == 1 and nodes.shape[0] == 1 and nodes[0] == 0.0:
         dx, dv = _f2(z[0], z[1], p[P_MU], p[P_A], p[P_C], drive, False)
         out[0] = 0.0 if sticking else dx
@@ -618,11 +616,11 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force
             work):
     """One step of size h from (t, z); K[0] must hold f(t, z).
 
-    Fills the stage rows of K (the last, ``method_stages(method)[0]``, with
+    Fills the stage rows of K (the last, ``last_stage(method)``, with
     f(t + h, z_new)) and ``z_new``. Returns the number of vector-field evaluations.
     """
     size = z.shape[0]
-    last = 6 if method == METHOD_DP5 else 12
+    last = last_stage(method)
     A = DP_A if method == METHOD_DP5 else D8_A
     C = DP_C if method == METHOD_DP5 else D8_C
     B = DP_B if method == METHOD_DP5 else D8_B
@@ -786,8 +784,8 @@ def wall_margin(K, last, n, h):
     |x''| <= A on a step of length h exceeds the chord between its end values by at most
     A h^2 / 8; the stages sample x_0' = K[., 0] and x_0'' = K[., n] across the step, and
     the factor 2 covers what they miss and the interpolant's overshoot. The second bound
-    is the tighter one for large steps (4 to 14 times at rtol 1e-8 to 1e-10 on the
-    paper's cases), so fewer steps need the dense output."""
+    is the tighter one for long steps, so fewer steps need the dense output (a DMR run
+    1.24 times faster in this session's measurement)."""
     vmax = 0.0
     amax = 0.0
     for s in range(last + 1):
@@ -919,7 +917,7 @@ def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes
     sequence). Leaves the state at t + hh in ``z_new``; returns (hh, evaluations).
     """
     n = cfg[C_NCOEF]
-    last, _ = method_stages(method)
+    last = last_stage(method)
     delta = p[P_DELTA]
     off = np.bool_(False)
     for j in range(z.shape[0]):
@@ -1143,7 +1141,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     size = z.shape[0]
     q = nodes.shape[0]
     method = cfg[C_METHOD]
-    last, _ = method_stages(method)
+    last = last_stage(method)
     delta = p[P_DELTA]
     eta = p[P_ETA]
     law = cfg[C_LAW]

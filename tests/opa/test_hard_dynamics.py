@@ -128,7 +128,7 @@ def test_error_norm_rejects_a_non_finite_trial_step(bad, method):
     stages = np.zeros((K.K_ROWS, 2))
     y_new = np.array([0.5, bad])
     assert K.error_norm(method, y, y_new, stages, 0.1, 1e-10, 1e-10) == np.inf
-    stages[K.method_stages(method)[0], 0] = bad
+    stages[K.last_stage(method), 0] = bad
     assert K.error_norm(method, y, y, stages, 0.1, 1e-10, 1e-10) == np.inf
 
 

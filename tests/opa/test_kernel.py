@@ -296,7 +296,7 @@ def test_the_wall_margin_bounds_the_rise_inside_a_step(h, method):
     """On x = -cos t the true excess of x over the higher end value inside a step (the
     apex 1 at t = pi where the step contains it) and the dense output's excess stay below
     ``wall_margin``, for steps placed anywhere around the apex."""
-    last = K.method_stages(method)[0]
+    last = K.last_stage(method)
     for start in np.linspace(math.pi - 1.2 * h, math.pi + 0.2 * h, 15):
         y0 = np.array([-math.cos(start), math.sin(start)])
         stages, y_new, F = kernel_step(HARMONIC, start, y0, h, method)
