@@ -37,8 +37,9 @@ import pytest
 import opa
 from benchmarks.bench_dmr import scipy_dmr
 from benchmarks.conftest import smoke_mode
-from opa._bifurcation import local_executor, sweep
-from opa._poincare import detect_period
+from opa import sweep
+from opa.dynamics._sweep import local_executor
+from opa.dynamics._sections import detect_period
 
 OSCILLATOR = opa.preset("3.1")
 RTOL = ATOL = 1e-10
@@ -94,7 +95,7 @@ import json, sys, time
 start = time.perf_counter()
 import numpy as np
 import opa
-from opa._bifurcation import sweep
+from opa import sweep
 imported = time.perf_counter()
 size = json.loads(sys.argv[1])
 ds = sweep("dmr", "c", np.linspace(0.01, 0.1, size["values"]), opa.preset("3.1"),

@@ -28,7 +28,8 @@ from scipy.integrate import solve_ivp
 
 import opa
 from opa import _kernel
-from opa._simulate import kernel_quadrature, pack_parameters, quadrature, run_kernel
+from opa._run import kernel_quadrature, quadrature, run_kernel
+from opa._system import pack_parameters
 
 RHS_ORDERS = [2, 4, 8, 16, 32, 64]
 RHS_EVALUATIONS = 10_000

@@ -30,7 +30,7 @@ TINY = ["--values", "3.98", "--sigmas", "0.01,0.03", "--orders", "0:2", "--horiz
 def _validate(args, cache, outdir):
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), MPLBACKEND="Agg")
     proc = subprocess.run(
-        [sys.executable, "-m", "opa._cli", "validate", "--quiet", "--outdir", str(outdir),
+        [sys.executable, "-m", "opa.cli", "validate", "--quiet", "--outdir", str(outdir),
          *args],
         env=env, capture_output=True, text=True,
     )

@@ -4,7 +4,21 @@ from compare._metrics import compare_runs, error_metrics
 from compare._report import boundary_table, findings, verdict_grid, write_report
 from compare._trustmap import ValidateConfig, count_distribution, load_config, run_validation
 
+
+
+def __getattr__(name: str):
+    """``compare.reproduce`` (the paper's figures) without importing matplotlib with
+    ``compare``."""
+    if name in ("reproduce", "FIGURES"):
+        from compare import _figures
+
+        return getattr(_figures, name)
+    raise AttributeError(f"module 'compare' has no attribute {name!r}")
+
+
 __all__ = [
+    "FIGURES",
+    "reproduce",
     "ValidateConfig",
     "boundary_table",
     "compare_runs",

@@ -34,7 +34,8 @@ from opa._dataset import provenance_attrs, write_netcdf
 from opa._elements import collocation, uniform_edges
 from opa._measure import parse
 from opa._model import Oscillator, SolverOptions, preset, time_grid
-from opa._simulate import SimulationError, simulate_opa
+from opa._simulate import simulate_opa
+from opa._run import SimulationError
 
 LAWS = ("mean", "saltation")
 

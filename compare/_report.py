@@ -9,12 +9,8 @@ from __future__ import annotations
 
 import os
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import xarray as xr  # noqa: E402
+import numpy as np
+import xarray as xr
 
 # Variant shown where one must be picked: the paper's OPA (mean impact law) with the
 # exact Galerkin truncation.
@@ -26,6 +22,16 @@ LAWS = (0, 1, 4)
 KIND_COLOURS = {"grazing": "tab:red", "extra impact": "tab:orange", "chatter": "tab:purple",
                 "impulse order": "tab:brown", "horizon": "0.6"}
 
+
+
+def _pyplot():
+    """matplotlib.pyplot on the Agg backend, imported only when a figure is drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
 
 def _kinds(ds) -> list[str]:
     return [k.replace("_", " ") for k in ds.split_kind.attrs["flag_meanings"].split()]
@@ -358,6 +364,7 @@ def findings(ds: xr.Dataset) -> list[str]:
 def plot_map(ds, path):
     """Per horizon: log10 of the relative error of x_0 at every grid point, the verdicts,
     sigma* (mean and ensemble law), every sigma probed, and the splits."""
+    plt = _pyplot()
     H = len(ds.horizon)
     fig, axes = plt.subplots(1, H, figsize=(5.6 * H, 4.6), squeeze=False, sharey=True)
     x = _vals(ds).values
@@ -441,6 +448,7 @@ def _pick_sigmas(ds, q=0, h=0):
 def plot_error_vs_order(ds, path, q=0):
     """RMS error of x_0 against N, before OPA's first impact and over each horizon, for
     every variant (distinct markers, offset in N), with the MC noise floor."""
+    plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     H = len(ds.horizon)
     fig, axes = plt.subplots(len(picks), 1 + H, figsize=(4.2 * (1 + H), 3.4 * len(picks)),
@@ -476,6 +484,7 @@ def plot_error_vs_order(ds, path, q=0):
 def plot_mean(ds, path, q=0):
     """x_0 for several N beside the MC mean with its 2-SE band, and the error, at a sigma
     that agrees and one that does not, over the first horizon."""
+    plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     orders = [int(n) for n in ds.N.values]
     show = [k for k, n in enumerate(orders) if n in (0, 1, 2, 4, 8) or k == len(orders) - 1]
@@ -508,6 +517,7 @@ def plot_mean(ds, path, q=0):
 
 
 def plot_variance(ds, path, q=0):
+    plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     n = int(round(float(ds.horizon[0]) * ds.attrs["per_period"])) + 1
     t = ds.periods.values[:n]
@@ -537,6 +547,7 @@ def plot_variance(ds, path, q=0):
 
 def plot_phase(ds, path):
     """Dense-output phase portraits: OPA (both laws) against the MC mean and samples."""
+    plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
     ax = axes[0]
     for j in range(ds.sizes["phase_sample"]):

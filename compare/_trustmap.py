@@ -52,8 +52,8 @@ import xarray as xr
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
 from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
-from opa._dataset import (atomic_write, check_memory, clean_stale_temporaries, provenance_attrs,
-                          write_netcdf)
+from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
+from opa._memory import check_memory
 from opa._model import (PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
                         preset, time_grid)
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa

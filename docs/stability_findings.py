@@ -18,8 +18,8 @@ import time
 import numpy as np
 
 from opa import SolverOptions, preset
-from opa._continuation import BIFURCATION_KINDS, continue_orbits, locate_period_doubling
-from opa._stability import (
+from opa.dynamics._continuation import BIFURCATION_KINDS, continue_orbits, locate_period_doubling
+from opa.dynamics._orbits import (
     ImpactSystem,
     lyapunov_benettin,
     lyapunov_exponent,
@@ -60,7 +60,7 @@ def _relocate(system, ds, kind="period-doubling"):
         pairs = [q for q in range(len(sel) - 1) if test[q] != test[q + 1]]
         q = min(pairs, key=lambda q: abs(ds.c.values[sel[q]] - c_pd))
         j = sel[[q, q + 1]]  # the two branch points around it, re-solved at the new tolerance
-        from opa._stability import shoot
+        from opa.dynamics._orbits import shoot
 
         k = int(ds.period.values[j[0]])
         pts = []

@@ -2,6 +2,7 @@
 
 from mc._checkpoint import remove_checkpoint
 from mc._ensemble import DaskError, simulate_mc
+from mc._source import sweep_source
 from mc._sampling import SAMPLERS, sample_xi, semicircle_cdf, semicircle_ppf
 
 __all__ = [
@@ -12,4 +13,5 @@ __all__ = [
     "semicircle_cdf",
     "semicircle_ppf",
     "SAMPLERS",
+    "sweep_source",
 ]

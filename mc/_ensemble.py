@@ -38,9 +38,11 @@ from mc._checkpoint import Checkpoint, digest, stats_arrays
 from mc._sampling import _check_sampler, sample_xi
 from opa import _kernel as K
 from opa._basis import chebyshev_u, orthonormal
-from opa._dataset import check_memory, package_version, provenance_attrs, time_coord
+from opa._dataset import package_version, provenance_attrs, time_coord
+from opa._memory import check_memory
 from opa._model import Oscillator, SolverOptions, Uncertainty, check_instance, check_order
-from opa._simulate import SimulationError, _times, pack_parameters, run_batch, sampled_batch
+from opa._run import SimulationError, output_times, run_batch, sampled_batch
+from opa._system import pack_parameters
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -308,7 +310,7 @@ def simulate_mc(
         _connect(scheduler, connect_timeout)  # only checks that it is a Client
     unc = Uncertainty(sigma, uncertain, allow_negative)
     unc.check(oscillator)
-    times = _times(oscillator, periods, per_period, times)
+    times = output_times(oscillator, periods, per_period, times)
     T = len(times)
     if sampler != "sobol":
         replicates = 1
@@ -327,7 +329,7 @@ def simulate_mc(
     measure = None
     if distribution is not None:
         from opa._measure import parse
-        from opa._simulate import check_support
+        from opa._run import check_support
 
         measure = parse(distribution)
         check_support(oscillator, unc, measure)

@@ -6,11 +6,12 @@ Public names are re-exported here; every other module is private.
 from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, triple_product
 from opa._dataset import write_netcdf
 from opa._model import Oscillator, SolverOptions, Uncertainty, preset, time_grid
-from opa._bifurcation import sweep
-from opa._continuation import Located, continue_orbits, locate_bifurcations, plot_branches
-from opa._poincare import Motion, constraint_section, detect_period, identify_motion, phase_section
-from opa._simulate import SimulationError, simulate_dmr, simulate_opa
-from opa._stability import (
+from opa._shims import reproduce, sweep
+from opa.dynamics._continuation import Located, continue_orbits, locate_bifurcations
+from opa.dynamics._sections import Motion, constraint_section, detect_period, identify_motion, phase_section
+from opa._simulate import simulate_dmr, simulate_opa
+from opa._run import SimulationError
+from opa.dynamics._orbits import (
     ImpactSystem,
     PeriodicOrbit,
     impulse_cycle,
@@ -22,12 +23,13 @@ from opa._stability import (
 )
 
 
-def reproduce(figure: str, outdir: str = "figures", **kwargs):
-    """Regenerate a figure of the paper (``fig2`` .. ``fig11`` or ``all``); see
-    :func:`opa._figures.reproduce`. Imported lazily: it pulls in matplotlib."""
-    from opa._figures import reproduce as _reproduce
+def __getattr__(name: str):
+    """``opa.plot_branches`` without importing matplotlib with ``opa``."""
+    if name == "plot_branches":
+        from opa.plots import plot_branches
 
-    return _reproduce(figure, outdir, **kwargs)
+        return plot_branches
+    raise AttributeError(f"module 'opa' has no attribute {name!r}")
 
 
 __all__ = [

@@ -34,7 +34,8 @@ from opa import _kernel as K
 from opa._basis import quadrature_order
 from opa._measure import Measure
 from opa._model import Oscillator, SolverOptions
-from opa._simulate import pack_parameters, quadrature, run_batch, run_kernel, sampled_batch
+from opa._run import quadrature, run_batch, sampled_batch
+from opa._system import pack_parameters
 
 MAX_ELEMENTS = 256
 # Splits located before the edges are chosen (all of them in the cases measured: 192 at
@@ -112,7 +113,7 @@ def run_elements(oscillator: Oscillator, options: SolverOptions, measures: list[
     failures = [f"element [{m.a:.6g}, {m.b:.6g}] of the OPA (N={order}) system stopped: "
                 f"{why}" if why else "" for m, why in zip(measures, reasons)]
     if not partial and any(failures):
-        from opa._simulate import SimulationError
+        from opa._run import SimulationError
 
         raise SimulationError(next(f for f in failures if f))
     for e, failure in enumerate(failures):
@@ -251,7 +252,7 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
                 f"{share.max():.2e}); {len(runs)} elements")
     failed = [r.failure for r in runs if r.failure]
     if failed:
-        from opa._simulate import SimulationError
+        from opa._run import SimulationError
 
         raise SimulationError(f"{failed[0]} (and {len(failed) - 1} more elements), still "
                               f"after refinement to {len(runs)} elements; raise "
@@ -278,7 +279,7 @@ def collocation(oscillator, options, measure, edges, q, *, sigma, uncertain, tim
                                    stop_on_failure=True)
     status, n_rhs = counters[:, 0], counters[:, 4]
     if (status != K.OK).any():
-        from opa._simulate import SimulationError
+        from opa._run import SimulationError
 
         m = int(np.flatnonzero((status != K.OK) & (status != K.SKIPPED))[0])
         raise SimulationError(f"collocation node xi = {xi[m]:.6g} stopped: "

@@ -36,7 +36,7 @@ the reset to y and its saltation matrix to W; Dirac impulses and pulse switches 
 breakpoints at fixed times; chatter ends in sticking, which ends at release.
 
 Kernels are pure functions of arrays and floats and return status codes; the Python
-layer (``opa._simulate``, ``opa._stability``) validates input, packs the parameters and
+layer (``opa._simulate``, ``opa.dynamics._orbits``) validates input, packs the parameters and
 turns codes into messages.
 """
 

@@ -291,7 +291,7 @@ def time_grid(omega: float, periods: float, per_period: int):
         raise ValueError(f"periods = {periods:g} forcing periods of 2 pi/omega = "
                          f"{2 * math.pi / omega:.3g} span t = {span:.3g}, beyond the longest "
                          f"run of {MAX_TIME:g} time units")
-    from opa._dataset import check_memory
+    from opa._memory import check_memory
 
     check_memory(f"{count + 1} output times (periods {periods:g} x per_period "
                  f"{per_period})", (count + 1) * 8 * 4)

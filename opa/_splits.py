@@ -37,7 +37,8 @@ import numpy as np
 
 from opa import _kernel as K
 from opa._model import Oscillator, SolverOptions
-from opa._simulate import pack_parameters, quadrature, run_batch, run_kernel, sampled_batch
+from opa._run import quadrature, run_batch, run_kernel, sampled_batch
+from opa._system import pack_parameters
 
 SPLIT_KINDS = ("grazing", "extra impact", "chatter", "impulse order", "horizon")
 # A new impact slower than this at the located split is a grazing (its velocity vanishes

@@ -65,7 +65,7 @@ def test_the_findings_page_holds_for_a_fresh_run_of_the_default_job(tmp_path):
     import sys
     from pathlib import Path
 
-    subprocess.run([sys.executable, "-c", "import sys; from opa._cli import main; "
+    subprocess.run([sys.executable, "-c", "import sys; from opa.cli._main import main; "
                     "sys.exit(main())", "validate", "--quiet", "--outdir", str(tmp_path)],
                    check=True, timeout=1800)
     assert _load("findings").stale(Path(DOCS) / "findings.md", tmp_path) == []
@@ -79,7 +79,7 @@ def test_the_elements_page_holds_for_a_fresh_convergence_study(tmp_path):
     import sys
     from pathlib import Path
 
-    subprocess.run([sys.executable, "-c", "import sys; from opa._cli import main; "
+    subprocess.run([sys.executable, "-c", "import sys; from opa.cli._main import main; "
                     "sys.exit(main())", "converge", "--quiet", "--outdir", str(tmp_path)],
                    check=True, timeout=1800)
     assert _load("findings").stale(Path(DOCS) / "elements.md", tmp_path,

@@ -14,8 +14,8 @@ from compare._convergence import (
     write_report,
 )
 from mc import simulate_mc
-from opa import Oscillator, SolverOptions, simulate_opa
-from opa._cli import main
+from opa import simulate_opa
+from opa.cli._main import main
 from opa._model import time_grid
 
 TINY = dict(sigma=0.02, periods=2, per_period=4, orders=(0, 1), uniform=(1, 2),

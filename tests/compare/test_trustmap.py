@@ -12,7 +12,7 @@ from compare import load_config, run_validation, write_report
 from compare._trustmap import VARIANTS
 from mc import simulate_mc
 from opa import simulate_opa
-from opa._cli import main
+from opa.cli._main import main
 from opa._model import time_grid
 from tests.compare.test_parts import _forbid_integration, _same
 

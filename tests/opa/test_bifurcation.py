@@ -1,4 +1,4 @@
-"""Tests for ``opa._bifurcation`` (sweeps) and ``opa._bifurcation_cli``.
+"""Tests for ``opa.dynamics._sweep`` (sweeps) and ``opa.cli._bifurcation``.
 
 The dataset contract of docs/datasets.md, labels and period doubling on sweeps whose
 motions are known (section 3.1 without impulses: 4/4 at c = 0.035, 2/2 at c = 0.05;
@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-import opa._bifurcation as B
+import opa.dynamics._sweep as B
 from opa import preset
-from opa._bifurcation import sweep
-from opa._bifurcation_cli import parse_sweep, register
+from opa import sweep
+from opa.cli._bifurcation import parse_sweep, register
 from opa._model import PARAMETER_NAMES
 
 QUICK = {"transient": 20, "record": 10, "per_period": 8, "workers": 1}
@@ -266,9 +266,9 @@ def test_killed_sweep_process_resumes(tmp_path, monkeypatch):
     script = (
         "import time\n"
         "import numpy as np\n"
-        "import opa._bifurcation as B\n"
+        "import opa.dynamics._sweep as B\n"
         "from opa import preset\n"
-        "from opa._bifurcation import sweep\n"
+        "from opa.dynamics._sweep import sweep\n"
         "write = B._write_part\n"
         "B._write_part = lambda *a: (write(*a), time.sleep(0.2))\n"
         f"sweep('dmr', 'c', np.linspace(0.02, 0.08, 12), preset('3.1'), transient=100, "
@@ -325,7 +325,7 @@ def test_bad_input_is_refused_with_the_value(args, kwargs, match):
 
 
 def cli(argv):
-    from opa._cli import CliError, _common_flags, _model_flags
+    from opa.cli._flags import CliError, _common_flags, _model_flags
 
     parser = argparse.ArgumentParser(prog="opa-mc")
     register(parser.add_subparsers(dest="command", required=True), _model_flags,

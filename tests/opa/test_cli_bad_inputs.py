@@ -1,6 +1,6 @@
 """The hostile-user corpus: every bad input gets one line naming the culprit, exit 2.
 
-Each case runs ``opa-mc`` in process (``opa._cli.main``) under a time bound and checks
+Each case runs ``opa-mc`` in process (``opa.cli._main.main``) under a time bound and checks
 the exit status, that stderr is one line, that it names the parameter, path or value,
 and that no traceback was printed. Valid input that argparse used to refuse (negative
 numbers in exponent notation) must be accepted. The Python API raises ``ValueError``
@@ -17,7 +17,7 @@ import time
 import numpy as np
 import pytest
 
-from opa._cli import main
+from opa.cli._main import main
 
 TIME_LIMIT = 60  # seconds per case: a bad input is refused before any long computing
 
@@ -258,8 +258,8 @@ def test_negative_lists_plot_folders_and_symlinks(capsys, tmp_path, monkeypatch)
     """Negative comma lists are values; --plot may name a new folder; --out through a
     symlink writes the link's target and keeps the link."""
     monkeypatch.chdir(tmp_path)
-    from compare._cli import _float_list
-    from opa._cli import build_parser
+    from opa.cli._validate import _float_list
+    from opa.cli._main import build_parser
 
     args = build_parser().parse_args(["validate", "--values", "-0.2,-0.1"])
     assert args.values == _float_list("-0.2,-0.1") == (-0.2, -0.1)
@@ -360,7 +360,7 @@ def test_api_bad_arguments_raise_value_error_naming_them():
 
 def test_api_divergence_raises_and_returns_no_nan():
     from opa import Oscillator, simulate_dmr, simulate_opa
-    from opa._simulate import SimulationError
+    from opa._run import SimulationError
 
     for call in (lambda: simulate_dmr(Oscillator(mu=1e300), periods=2),
                  lambda: simulate_opa(Oscillator(mu=1e300), sigma=0.01, periods=2)):
@@ -370,7 +370,7 @@ def test_api_divergence_raises_and_returns_no_nan():
 
 def test_unknown_errors_are_one_line_too(capsys, monkeypatch):
     """A bug is reported in one line with exit 1 (the traceback on request)."""
-    import opa._cli as cli
+    import opa.cli._main as cli
 
     def boom(args):
         raise RuntimeError("an unforeseen failure\nwith two lines")
@@ -393,7 +393,7 @@ def _run_process(argv, cwd, timeout=TIME_LIMIT):
     import sys
 
     start = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-c", "import sys; from opa._cli import main; "
+    proc = subprocess.run([sys.executable, "-c", "import sys; from opa.cli._main import main; "
                            "sys.exit(main())", *argv], cwd=cwd, capture_output=True,
                           text=True, timeout=timeout)
     return proc.returncode, proc.stdout, proc.stderr, time.perf_counter() - start

@@ -13,17 +13,9 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from opa import _dataset
-from opa._dataset import (
-    atomic_write,
-    check_memory,
-    clean_stale_temporaries,
-    current_umask,
-    format_bytes,
-    memory_budget,
-    parse_bytes,
-    write_netcdf,
-)
+from opa import _memory
+from opa._dataset import atomic_write, clean_stale_temporaries, current_umask, write_netcdf
+from opa._memory import check_memory, format_bytes, memory_budget, parse_bytes
 
 
 @pytest.fixture
@@ -173,8 +165,8 @@ def test_check_memory_message_names_the_size_the_budget_and_the_variable(monkeyp
 def test_memory_budget_defaults_to_half_the_physical_memory(monkeypatch):
     monkeypatch.delenv("OPA_MC_MEMORY_BUDGET", raising=False)
     half = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") // 2
-    assert _dataset._half_physical_memory() == half
-    monkeypatch.setattr(_dataset, "MEMORY_BUDGET_BYTES", 1000)
+    assert _memory._half_physical_memory() == half
+    monkeypatch.setattr(_memory, "MEMORY_BUDGET_BYTES", 1000)
     assert memory_budget() == 1000
     with pytest.raises(ValueError, match=r"needs 1001 B, more than the memory budget of "
                                          r"1000 B"):  # fmt: skip

@@ -1,4 +1,4 @@
-"""Tests for ``opa._figures`` (the paper's Figs. 2-11) and the drawing blocks of ``opa._plot``.
+"""Tests for ``compare._figures`` (the paper's Figs. 2-11) and the drawing blocks of ``opa.plots._diagrams``.
 
 Every figure is drawn once at tiny sizes (a few sweep values, 20 + 10 periods, 16 Monte
 Carlo samples) and then inspected: the paper's panel count, the Monte Carlo mean line and
@@ -19,8 +19,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 import xarray as xr  # noqa: E402
 
-import opa._figures as F  # noqa: E402
-import opa._plot as P  # noqa: E402
+import compare._figures as F  # noqa: E402
+import opa.plots._diagrams as P  # noqa: E402
 
 TINY = F.Sizes(count=4, transient=10, record=6, portrait_transient=20, portrait_record=10,
                last=5, mc_samples=16, sweep_mc_samples=16, sweep_mc_stride=2)
@@ -213,7 +213,7 @@ def test_located_marks_adapter():
 
 def test_plot_bifurcation_draws_only_located_marks(tmp_path, monkeypatch):
     from opa import preset
-    from opa._bifurcation import sweep
+    from opa import sweep
 
     ds = sweep("dmr", "c", [0.03, 0.05, 0.07], preset("3.1"), transient=10, record=6,
                workers=1, progress=False)

@@ -25,10 +25,11 @@ import pytest
 
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
 from opa import _kernel as K
-from opa._continuation import continue_orbits
-from opa._poincare import impulse_times, stroboscopic_mask
-from opa._simulate import SimulationError, kernel_quadrature, pack_parameters, quadrature
-from opa._stability import (
+from opa.dynamics._continuation import continue_orbits
+from opa.dynamics._sections import impulse_times, stroboscopic_mask
+from opa._run import SimulationError, kernel_quadrature, quadrature
+from opa._system import pack_parameters
+from opa.dynamics._orbits import (
     ImpactSystem,
     flow,
     lyapunov_exponent,
@@ -156,7 +157,7 @@ def test_an_ensemble_stops_at_its_first_failed_sample():
     """c < 0: the first escaping sample fails the chunk; the rest are skipped, so the
     ensemble fails in about the time of one sample, not of all of them."""
     from mc import simulate_mc
-    from opa._simulate import SimulationError
+    from opa._run import SimulationError
 
     start = time.perf_counter()
     with pytest.raises(SimulationError, match="escaped"):

@@ -19,7 +19,8 @@ import pytest
 
 import opa
 from opa import _kernel as K
-from opa._simulate import kernel_quadrature, pack_parameters, quadrature, run_kernel
+from opa._run import kernel_quadrature, quadrature, run_kernel
+from opa._system import pack_parameters
 from tests.opa.test_solver import HARMONIC, kernel_step
 
 ROOT = Path(__file__).resolve().parents[2]

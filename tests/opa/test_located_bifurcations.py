@@ -1,5 +1,5 @@
-"""Tests for ``opa._continuation.locate_bifurcations`` and the located bifurcations of
-``opa._bifurcation.sweep`` / ``opa-mc bifurcation`` (one source of truth, issue 15).
+"""Tests for ``opa.dynamics._continuation.locate_bifurcations`` and the located bifurcations of
+``opa.dynamics._sweep.sweep`` / ``opa-mc bifurcation`` (one source of truth, issue 15).
 
 References: the continuation values of docs/stability.md (finding A: section 3.1 with
 F0 = 0; finding B: the default impulses), checked independently by the Floquet
@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 
 from opa import SolverOptions, preset, simulate_dmr
-from opa._bifurcation import add_located, sweep
-from opa._bifurcation_cli import _summary
-from opa._continuation import BIFURCATION_KINDS, Located, locate_bifurcations
-from opa._stability import ConvergenceError, ImpactSystem, periodic_orbit
+from opa import sweep
+from opa.dynamics._sweep import add_located
+from opa.dynamics._sweep import summary_lines
+from opa.dynamics._continuation import BIFURCATION_KINDS, Located, locate_bifurcations
+from opa.dynamics._orbits import ConvergenceError, ImpactSystem, periodic_orbit
 
 # docs/stability.md, finding A (rtol = atol = 1e-10): 1/1 -> 2/2, 2/2 -> 4/4, 4/4 -> 8/8
 F0_ZERO_DOUBLINGS = {1: 0.0891223469, 2: 0.0396996668, 4: 0.0316812257}
@@ -87,7 +88,7 @@ def test_sweep_reports_located_doublings_and_observed_periods(tmp_path):
     assert np.all(ds.bifurcation_located.values == 1)
     with xr.open_dataset(tmp_path / "s.nc") as disk:  # strings and flags survive netCDF
         assert disk.bifurcation_note.values.tolist() == ds.bifurcation_note.values.tolist()
-    text = "\n".join(_summary(ds))
+    text = "\n".join(summary_lines(ds))
     assert "observed periods" in text and "bifurcations located" in text
     assert "period-doubling  c = 0.08912234" in text
     assert "period doubling at" not in text  # the old brute-force wording
@@ -214,14 +215,14 @@ def _small_sweep():
 def test_summary_reports_disagreements_in_words():
     ds = _small_sweep()
     assert ds.attrs["bifurcation_method"] == "not located: locate=False"
-    assert "bifurcations not located: locate=False" in "\n".join(_summary(ds))
+    assert "bifurcations not located: locate=False" in "\n".join(summary_lines(ds))
     points = [Located("period-doubling", 0.0891223, 1, -1.0 + 0j, True, "1 -> 2"),
               Located("fold", 0.0951, 2, 1.0 + 0j, True, "a fold")]
     ds = add_located(ds, points, method="continuation (test)")
     # observed: 4/4 at 0.06 (a change between 0.06 and 0.07 that nothing explains), then
     # 2/2 up to 0.1 (no change where the doubling and the fold were located)
     ds["label"] = ("c", np.array(["4/4"] + ["2/2"] * 4), ds.label.attrs)
-    text = "\n".join(_summary(ds))
+    text = "\n".join(summary_lines(ds))
     assert "observed 4/4 -> 2/2 between c = 0.06 and 0.07: no located bifurcation" in text
     assert "nearest: period-doubling at c = 0.0891223" in text
     assert "located fold at c = 0.0951: the observed period does not change" in text

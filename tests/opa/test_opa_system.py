@@ -23,7 +23,8 @@ from scipy.special import eval_chebyu, roots_jacobi
 
 import opa
 from opa import _kernel
-from opa._simulate import kernel_quadrature, pack_parameters, quadrature
+from opa._run import kernel_quadrature, quadrature
+from opa._system import pack_parameters
 from tests.reference import reference_trajectory
 
 RNG_SEED = 20240612

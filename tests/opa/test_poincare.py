@@ -1,4 +1,4 @@
-"""Tests for ``opa._poincare``: period detection, impacts per period, grazing, doubling.
+"""Tests for ``opa.dynamics._sections``: period detection, impacts per period, grazing, doubling.
 
 References: constructed section sequences with a known repeat (rotations by 2 pi/p, an
 irrational rotation that never repeats), closed-form free flights whose maximum and gap
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from opa import preset, simulate_dmr
-from opa._poincare import (
+from opa.dynamics._sections import (
     constraint_section,
     detect_period,
     free_flight_maxima,

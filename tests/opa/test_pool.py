@@ -16,7 +16,7 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"),
 # parent is killed.
 SWEEP = """
 import numpy as np
-from opa._bifurcation import sweep
+from opa import sweep
 sweep("dmr", "c", np.linspace(0.01, 0.1, 400), transient=20000, record=2000, workers=2,
       progress=False)
 """
@@ -86,7 +86,7 @@ def test_sigkill_of_the_parent_takes_the_pool_with_it():
 
 WATCHER = """
 import sys, time
-from opa._bifurcation import exit_with_parent
+from opa.dynamics._sweep import exit_with_parent
 exit_with_parent(int(sys.argv[1]), interval=0.1)
 print("watching", flush=True)
 time.sleep(60)

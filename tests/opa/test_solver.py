@@ -27,7 +27,8 @@ import pytest
 import opa
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
 from opa import _kernel as K
-from opa._simulate import kernel_quadrature, pack_parameters, quadrature
+from opa._run import kernel_quadrature, quadrature
+from opa._system import pack_parameters
 from tests.reference import reference_trajectory
 
 TIGHT = SolverOptions(rtol=1e-12, atol=1e-12)

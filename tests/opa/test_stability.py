@@ -1,5 +1,5 @@
-"""Tests for the stability tools (``opa._stability``, ``opa._continuation``,
-``opa._variational``, ``opa._stability_cli``).
+"""Tests for the stability tools (``opa.dynamics._orbits``, ``opa.dynamics._continuation``,
+``opa._variational``, ``opa.cli._stability``).
 
 Independent references:
 
@@ -26,13 +26,13 @@ import numpy as np
 import pytest
 
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
-from opa._continuation import (
+from opa.dynamics._continuation import (
     BIFURCATION_KINDS,
     continue_orbits,
     locate_period_doubling,
-    plot_branches,
 )
-from opa._stability import (
+from opa.plots import plot_branches
+from opa.dynamics._orbits import (
     ImpactSystem,
     impulse_cycle,
     lyapunov_benettin,
@@ -106,7 +106,7 @@ def test_map_jacobian_matches_finite_differences_opa(law, truncation, uncertain)
 
 @pytest.mark.parametrize("impulse", ["dirac", "pulse"])
 def test_flow_jacobian_through_impulses(impulse):
-    from opa._stability import flow
+    from opa.dynamics._orbits import flow
 
     options = SolverOptions(rtol=1e-12, atol=1e-12, impulse=impulse, impulse_at_zero=False)
     system = ImpactSystem(preset("3.1", c=0.05, F0=0.3), options=options)
@@ -372,8 +372,8 @@ def test_bad_input_is_reported():
 
 
 def test_cli_orbit_and_sweep(tmp_path, capsys):
-    from opa._cli import _model_flags, _solver_flags
-    from opa._stability_cli import register_stability
+    from opa.cli._flags import _model_flags, _solver_flags
+    from opa.cli._stability import register_stability
 
     parser = argparse.ArgumentParser()
     register_stability(parser.add_subparsers(), _model_flags, _solver_flags)

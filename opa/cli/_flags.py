@@ -1,18 +1,15 @@
-"""The ``opa-mc`` command line (``opa-mc COMMAND --help`` explains every flag).
+"""Flags declared once for every subcommand, and the objects built from them.
 
-Every model parameter is a flag of its own name (``--omega 3.98 --F0 0``); the common
-flags are shared by every subcommand. User mistakes get one line on stderr naming the
-parameter and the value, and exit status 2; a trajectory that cannot be completed exits
-with status 3. No tracebacks for either.
-"""
+Each group (model parameters, run, elements, solver, output) is one function that adds
+its flags to a subcommand's parser; ``oscillator_from`` and ``options_from`` turn the
+parsed flags back into the model's objects; ``check_outputs`` refuses unwritable paths
+before any work starts."""
 
 from __future__ import annotations
 
 import argparse
 import math
 import os
-import sys
-import time
 
 from opa._model import (
     IMPACT_LAWS,
@@ -27,7 +24,7 @@ from opa._model import (
     SolverOptions,
 )
 
-from opa._argtypes import EXIT_USAGE, Parser, positive_int, whole_number
+from opa.cli._args import positive_int, whole_number
 
 EXIT_SIMULATION = 3
 MAX_WORKERS = 4 * (os.cpu_count() or 1)
@@ -186,7 +183,7 @@ def _summary_events(ds) -> str:
 
 def check_outputs(args) -> None:
     """Refuse --out, --plot and --outdir that could not be written, before computing."""
-    from opa._paths import FIGURE_SUFFIXES, check_output_dir, check_output_file
+    from opa.cli._paths import FIGURE_SUFFIXES, check_output_dir, check_output_file
 
     check_output_file("--out", getattr(args, "out", None))
     check_output_file("--plot", getattr(args, "plot", None), suffixes=FIGURE_SUFFIXES)
@@ -197,164 +194,3 @@ def check_outputs(args) -> None:
     workers = getattr(args, "workers", None)
     if workers is not None and workers > MAX_WORKERS:
         raise CliError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got {workers}")
-
-
-def cmd_simulate(args) -> int:
-    from opa._dataset import write_netcdf
-    from opa._plot import plot_run
-
-    check_outputs(args)
-    osc = oscillator_from(args)
-    opts = options_from(args)
-    if args.model != "opa" and args.elements is not None:
-        raise CliError(f"--elements applies to simulate opa, not simulate {args.model}")
-    if args.model == "dmr" and args.distribution is not None:
-        raise CliError("--distribution applies to simulate opa and mc, not simulate dmr")
-    start = time.perf_counter()
-    if args.model == "dmr":
-        from opa._simulate import simulate_dmr
-
-        ds = simulate_dmr(osc, periods=args.periods, per_period=args.per_period, options=opts)
-        final = f"x = {float(ds.x[-1]):.10g}, v = {float(ds.v[-1]):.10g}"
-    elif args.model == "opa":
-        from opa._simulate import simulate_opa
-
-        ds = simulate_opa(osc, sigma=args.sigma, order=args.order, uncertain=args.uncertain,
-                          truncation=args.truncation, impact_law=args.impact_law,
-                          allow_negative=args.allow_negative, periods=args.periods,
-                          per_period=args.per_period, options=opts,
-                          distribution=args.distribution, elements=args.elements,
-                          tolerance=args.tolerance, max_elements=args.max_elements)
-        final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = "
-                 f"{float(ds.x_var[-1]):.4g}")
-        if "element" in ds.dims:
-            final += f" ({ds.sizes['element']} elements)"
-    else:
-        from mc import simulate_mc
-
-        from opa._simulate import SimulationError
-
-        # with --out, finished chunks are kept in OUT.parts/ so a killed run resumes
-        parts = f"{args.out}.parts" if args.out else None
-
-        try:
-            ds = simulate_mc(osc, sigma=args.sigma, samples=args.samples,
-                             sampler=args.sampler, seed=args.seed, order=args.order,
-                             uncertain=args.uncertain, allow_negative=args.allow_negative,
-                             periods=args.periods, per_period=args.per_period, options=opts,
-                             scheduler=args.scheduler, progress=not args.quiet,
-                             distribution=args.distribution, checkpoint=parts,
-                             connect_timeout=args.connect_timeout,
-                             log=None if args.quiet else
-                             (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
-        except SimulationError as err:
-            from mc import DaskError, remove_checkpoint
-
-            # a sample that cannot be integrated fails every rerun of these settings: keep
-            # no checkpoint to trip over; a lost cluster keeps its finished chunks
-            if parts and not isinstance(err, DaskError):
-                remove_checkpoint(parts)
-            raise
-        sem = float(ds.x_sem[-1])
-        final = (f"E[x] = {float(ds.x_mean[-1]):.8g} ± {sem:.2g} (SE), Var[x] = "
-                 f"{float(ds.x_var[-1]):.4g}; impacts per sample "
-                 f"{int(ds.n_impacts.min())}..{int(ds.n_impacts.max())}")
-    elapsed = time.perf_counter() - start
-    if args.out:
-        write_netcdf(ds, args.out)
-        if args.model == "mc" and not args.keep_parts:
-            from mc import remove_checkpoint
-
-            remove_checkpoint(f"{args.out}.parts")
-    if args.plot:
-        plot_run(ds, args.plot, per_period=args.per_period)
-    if not args.quiet:
-        print(f"opa-mc simulate {args.model}: t in [0, {float(ds.time[-1]):.6g}] "
-              f"({args.periods:g} forcing periods, {ds.sizes['time']} outputs) in {elapsed:.2f} s")
-        if "impact" in ds.dims:
-            print(f"  {_summary_events(ds)}")
-        print(f"  final state: {final}")
-        if args.out:
-            print(f"  wrote {args.out}")
-        if args.plot:
-            print(f"  wrote {args.plot}")
-    return 0
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = Parser(
-        prog="opa-mc",
-        description="Orthogonal polynomial approximation (OPA) of a vibro-impact oscillator "
-        "with an uncertain parameter, checked against Monte Carlo ensembles of the true "
-        "sampled impact systems.",
-    )
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    sim = sub.add_parser("simulate", help="one run: dmr (deterministic), opa (EMR), mc (ensemble)",
-                         description="One run of the deterministic system (dmr), the OPA "
-                         "equivalent system (opa) or a Monte Carlo ensemble (mc).")
-    sim.add_argument("model", choices=("dmr", "opa", "mc"))
-    _model_flags(sim)
-    _common_flags(sim)
-    sim.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
-                     help="simulate mc: seconds to wait for the Dask scheduler to answer "
-                          "(default 5)")
-    _element_flags(sim)
-    _output_flags(sim)
-    sim.set_defaults(func=cmd_simulate)
-
-    from compare._cli import register_converge, register_validate
-    from opa._bifurcation_cli import register as register_bifurcation
-
-    from opa._stability_cli import register_stability
-
-    register_validate(sub, _model_flags, _solver_flags)
-    register_converge(sub, _model_flags, _solver_flags)
-    register_bifurcation(sub, _model_flags, _common_flags)
-    register_stability(sub, _model_flags, _solver_flags)
-
-    return parser
-
-
-def _one_line(err: BaseException) -> str:
-    return " ".join(str(err).split()) or type(err).__name__
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Run one command. Mistakes print one line and return 2; a run that cannot be
-    completed returns 3; anything unforeseen prints one line naming the error (set
-    OPA_MC_TRACEBACK=1 for the traceback) and returns 1."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    args.argv = list(sys.argv[1:] if argv is None else argv)
-    from opa._simulate import SimulationError
-
-    try:
-        return args.func(args)
-    except (ValueError, CliError) as err:
-        print(f"opa-mc: error: {_one_line(err)}", file=sys.stderr)
-        return EXIT_USAGE
-    except SimulationError as err:
-        print(f"opa-mc: simulation failed: {_one_line(err)}", file=sys.stderr)
-        return EXIT_SIMULATION
-    except MemoryError:
-        print("opa-mc: error: out of memory; ask for fewer outputs, samples or sweep values",
-              file=sys.stderr)
-        return EXIT_USAGE
-    except OSError as err:
-        where = f"{err.filename}: " if err.filename else ""
-        print(f"opa-mc: error: {where}{err.strerror or _one_line(err)}", file=sys.stderr)
-        return EXIT_USAGE
-    except KeyboardInterrupt:
-        print("opa-mc: interrupted", file=sys.stderr)
-        return 130
-    except Exception as err:  # noqa: BLE001 -- one line, never a traceback, unless asked
-        if os.environ.get("OPA_MC_TRACEBACK"):
-            raise
-        print(f"opa-mc: internal error: {type(err).__name__}: {_one_line(err)} (please "
-              f"report it; OPA_MC_TRACEBACK=1 shows the traceback)", file=sys.stderr)
-        return 1
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -2,11 +2,11 @@
 
 ``sweep`` runs one trajectory per parameter value (DMR, OPA equivalent system or a
 Monte Carlo ensemble), drops a transient, records the phase-plane and constraint-plane
-sections and identifies the motion (``opa._poincare.identify_motion``): period, impacts
+sections and identifies the motion (``opa.dynamics._sections.identify_motion``): period, impacts
 per period, label ``z = n/p``, grazing. These are observations of one trajectory: a
 period that is twice a neighbour's (``observed_doubling``) can be a slow transient or
 another attractor. The bifurcations themselves are located by continuing the observed
-periodic attractors (``opa._continuation.locate_bifurcations``: Floquet multipliers,
+periodic attractors (``opa.dynamics._continuation.locate_bifurcations``: Floquet multipliers,
 root finding), one source for ``opa-mc bifurcation``, ``reproduce`` and ``stability``.
 
 Parallel over parameter values with local processes (default, 2 workers, each with one
@@ -32,6 +32,7 @@ import os
 import shutil
 import sys
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -46,7 +47,7 @@ from opa._model import (
     Uncertainty,
     _choice,
 )
-from opa._poincare import (
+from opa.dynamics._sections import (
     GRAZE_GAP,
     GRAZE_VELOCITY,
     PERIOD_TOL,
@@ -118,26 +119,19 @@ class PointTask:
     graze_gap: float
     initial: np.ndarray | None = field(default=None, compare=False)
     single_thread: bool = False
+    source: Callable[[PointTask, np.ndarray], dict] | None = None
 
 
 def _trajectory(task: PointTask, times: np.ndarray) -> dict:
     """Integrate one point; arrays only (the compiled kernel directly for dmr and opa,
     which saves building a dataset per point, about a fifth of a point's time)."""
     from opa import _kernel as K
-    from opa._simulate import pack_parameters, quadrature, run_kernel
+    from opa._run import quadrature, run_kernel
+    from opa._system import pack_parameters
 
     osc = task.oscillator
-    if task.model == "mc":
-        from mc import simulate_mc
-
-        ds = simulate_mc(osc, sigma=task.sigma, samples=task.samples, sampler=task.sampler,
-                         seed=task.seed, order=0, uncertain=task.uncertain,
-                         allow_negative=task.allow_negative, times=times,
-                         options=task.options, progress=False)
-        x, v = ds.x_mean.values, ds.v_mean.values
-        return {"x": x, "v": v, "impact_time": None, "impact_velocity": None,
-                "stick_time": np.zeros(0), "release_time": np.zeros(0),
-                "final": np.array([[x[-1]], [v[-1]]])}
+    if task.source is not None:
+        return task.source(task, times)
     order = task.order if task.model == "opa" else 0
     ncoef = order + 1
     sigma = task.sigma if task.model == "opa" else 0.0
@@ -167,7 +161,7 @@ def compute_point(task: PointTask) -> dict:
     A trajectory that cannot be completed (``SimulationError``) gives a failed point
     (NaN sections, ``failed = 1`` and the message) instead of stopping the sweep.
     """
-    from opa._simulate import SimulationError
+    from opa._run import SimulationError
 
     if task.single_thread:
         import numba
@@ -223,7 +217,7 @@ def _init_worker(owner: int | None = None) -> None:
 
     The worker's parent is the fork server, not ``owner`` (the process that made the
     pool); the fork server ends when ``owner`` does (:func:`exit_with_parent`, started by
-    the preload ``opa._warm_worker``) and takes the worker with it through the kernel's
+    the preload ``opa.dynamics._warm_worker``) and takes the worker with it through the kernel's
     parent-death signal. The watcher on ``owner`` is the fallback where that signal is not
     available; it can only act between two kernel calls, which hold the GIL.
     """
@@ -420,13 +414,18 @@ def sweep(
     executor=None,
     progress: bool | None = None,
     locate: bool | None = None,
+    source: Callable | None = None,
 ) -> xr.Dataset:
     """Bifurcation diagram: sections and motion labels over values of one parameter.
 
     Parameters
     ----------
     model : "dmr" (eq. (29)), "opa" (the EMR; ``sigma = 0`` gives EMR_0) or "mc" (the
-        Monte Carlo mean of ``samples`` sampled systems).
+        Monte Carlo mean of ``samples`` sampled systems; needs ``source``).
+    source : the trajectory source of one point, ``source(task, times) -> dict`` of
+        arrays (a module-level function, so that workers can unpickle it), for models
+        this layer does not integrate itself: ``mc.sweep_source`` for "mc". ``opa.sweep``
+        passes it for "mc"; this module never imports ``mc``.
     param : the swept parameter, any of ``mu a c f omega eta delta F0 a1 omega1 n x0 v0``
         or ``sigma`` (opa, mc).
     values : (P,) distinct parameter values (stored in increasing order).
@@ -451,7 +450,7 @@ def sweep(
     executor : a ``concurrent.futures`` executor to reuse (e.g. a warm process pool).
     progress : progress bar (default: when stderr is a terminal).
     locate : locate the bifurcations of the observed periodic attractors
-        (``opa._continuation.locate_bifurcations``, seeded with the final states of the
+        (``opa.dynamics._continuation.locate_bifurcations``, seeded with the final states of the
         values with a periodic motion, ``observed_seeds``). None (default): for "dmr" when the
         parameter allows it (not x0, v0, nor one that changes the forcing's common
         period), else not; True: required (ValueError before any point is computed if
@@ -489,6 +488,11 @@ def sweep(
     _choice("model", model, MODELS)
     _choice("continuation", continuation, CONTINUATIONS)
     _choice("parameter", param, SWEEPABLE)
+    if model == "mc" and source is None:
+        raise ValueError("model 'mc' needs its trajectory source: pass source=mc.sweep_source "
+                         "(opa.sweep and the CLI do)")
+    if source is not None and not callable(source):
+        raise ValueError(f"source must be a function (task, times) -> arrays, got {source!r}")
     oscillator = oscillator or Oscillator()
     options = options or SolverOptions()
     if param == "sigma" and model == "dmr":
@@ -530,7 +534,7 @@ def sweep(
         if model != "dmr":
             Uncertainty(task_kw["sigma"], uncertain, allow_negative).check(osc)
         tasks.append(PointTask(index=i, value=float(value), model=model, oscillator=osc,
-                               options=options, **task_kw))
+                               options=options, source=source, **task_kw))
     system, not_located = _locate_setup(locate, model, param, values, oscillator, options, kw)
     manifest = _settings(model, param, values, oscillator, options,
                          {**kw, "continuation": continuation})
@@ -564,7 +568,7 @@ def sweep(
     if system is None:
         ds = add_located(ds, [], method=f"not located: {not_located}")
     else:
-        from opa._continuation import locate_bifurcations
+        from opa.dynamics._continuation import locate_bifurcations
 
         seeds = observed_seeds(param, values, ordered, oscillator, options, kw)
         points = locate_bifurcations(system, param, float(values[0]), float(values[-1]),
@@ -585,8 +589,8 @@ def sweep(
 def _locate_setup(locate, model, param, values, oscillator, options, kw):
     """(ImpactSystem, None) when the sweep's bifurcations are to be located, else
     (None, why not). ``locate=True`` turns a reason into a ValueError."""
-    from opa._continuation import check_locatable
-    from opa._stability import ImpactSystem
+    from opa.dynamics._continuation import check_locatable
+    from opa.dynamics._orbits import ImpactSystem
 
     if locate is not None and not isinstance(locate, bool):
         raise ValueError(f"locate must be True, False or None, got {locate!r}")
@@ -644,7 +648,7 @@ def observed_seeds(param, values, results, oscillator, options, kw) -> list:
 
 def add_located(ds: xr.Dataset, points: list, *, method: str) -> xr.Dataset:
     """``ds`` with the located bifurcations ``points`` (``Located``) over ``bifurcation``."""
-    from opa._continuation import BIFURCATION_KINDS
+    from opa.dynamics._continuation import BIFURCATION_KINDS
 
     param = ds.attrs["sweep_parameter"]
     one = {"units": "1"}
@@ -725,9 +729,9 @@ def local_executor(workers: int = DEFAULT_WORKERS):
     from concurrent.futures import ProcessPoolExecutor
 
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["opa._bifurcation", "opa._warm_worker"])
+    ctx.set_forkserver_preload(["opa.dynamics._sweep", "opa.dynamics._warm_worker"])
     # the workers must not outlive this process, even when it is killed (SIGKILL leaves
-    # no chance to shut the pool down): see _init_worker and opa._warm_worker
+    # no chance to shut the pool down): see _init_worker and opa.dynamics._warm_worker
     return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx,
                                initializer=_init_worker, initargs=(os.getpid(),))
 
@@ -861,6 +865,120 @@ def assemble(model, param, values, results, oscillator, options, kw, continuatio
                                              "the record (time order)", "units": "1"}),
     }
     return xr.Dataset(data, coords=coords, attrs=attrs)
+
+
+
+def summary_lines(ds) -> list[str]:
+    """The observed periods (runs of equal labels), impacts and grazing, the located
+    bifurcations, and where the two disagree."""
+    param = ds.attrs["sweep_parameter"]
+    values = ds[param].values
+    labels = ds.label.values
+    lines = ["  observed periods (one trajectory per value, after the transient):"]
+    start = 0
+    for i in range(1, len(values) + 1):
+        if i == len(values) or labels[i] != labels[start]:
+            lo, hi = values[start], values[i - 1]
+            where = f"{param} = {lo:.6g}" if i - 1 == start else f"{param} in [{lo:.6g}, {hi:.6g}]"
+            lab = str(labels[start])
+            if lab == "none":
+                near = ds.nearest_period.values[start:i]
+                res = ds.residual.values[start:i]
+                lab = (f"no period within tol (nearest repeat {int(near[np.argmin(res)])}, "
+                       f"residual >= {np.nanmin(res):.2g})")
+            else:
+                lab = f"{lab}  (period {ds.period.values[start]}, impacts "
+                lab += f"{ds.impacts.values[start]})"
+            lines.append(f"    {where}: {lab}")
+            start = i
+    rate = ds.impact_rate.values
+    if np.isfinite(rate).any():
+        first = np.flatnonzero(np.abs(rate - rate[0]) > 0.01)
+        if len(first):
+            i = first[0]
+            lines.append(f"  impacts per forcing period {rate[0]:.3g} from {param} = "
+                         f"{values[0]:.6g}, first different at {param} = {values[i]:.6g} "
+                         f"({rate[i]:.3g})")
+        vmin = ds.min_impact_velocity.values
+        if np.isfinite(vmin).any():
+            j = int(np.nanargmin(vmin))
+            lines.append(f"  slowest impact velocity {vmin[j]:.3g} at {param} = {values[j]:.6g}")
+    gap = ds.min_gap.values
+    if np.isfinite(gap).any():
+        j = int(np.nanargmin(gap))
+        lines.append(f"  closest free flight to the wall: gap {gap[j]:.3g} at {param} = "
+                     f"{values[j]:.6g}")
+    graze = ds.grazing_parameter.values
+    if len(graze):
+        lines.append(f"  grazing between periodic branches near {param} = "
+                     + ", ".join(f"{g:.6g}" for g in graze))
+    flagged = values[ds.grazing.values == 1]
+    if len(flagged):
+        lines.append(f"  grazing flagged (slow impact or near-touching free flight) at "
+                     f"{len(flagged)} values, first {param} = {flagged[0]:.6g}")
+    if ds.failed.values.any():
+        lines.append(f"  {int(ds.failed.sum())} values failed: {ds.attrs['failures']}")
+    return lines + _located_lines(ds)
+
+
+def _located_lines(ds) -> list[str]:
+    """The located bifurcations and their disagreements with the observed periods."""
+    from opa.dynamics._continuation import BIFURCATION_KINDS
+
+    param = ds.attrs["sweep_parameter"]
+    values = ds[param].values
+    labels = ds.label.values
+    doubled = values[ds.observed_doubling.values == 1]
+    method = str(ds.attrs.get("bifurcation_method", "not located"))
+    if "bifurcation_parameter" not in ds or method.startswith("not located"):
+        lines = [f"  bifurcations {method}"]
+        if len(doubled):
+            lines.append(f"  observed period twice a neighbour's at {param} = "
+                         + ", ".join(f"{v:.6g}" for v in doubled)
+                         + " (an observation, not a located bifurcation)")
+        return lines
+    located = ds.bifurcation_parameter.values
+    kinds = [BIFURCATION_KINDS[int(k)] for k in ds.bifurcation_kind.values]
+    lines = [("  bifurcations located by continuation of the observed periodic orbits "
+              "(Floquet multipliers):")]
+    if not len(located):
+        lines.append(f"    none in [{values[0]:.6g}, {values[-1]:.6g}]")
+    for i, (value, kind) in enumerate(zip(located, kinds)):
+        mu = complex(float(ds.bifurcation_multiplier_real[i]),
+                     float(ds.bifurcation_multiplier_imag[i]))
+        mu_text = f"{mu.real:+.6f}" if mu.imag == 0 else f"|{abs(mu):.6f}|"
+        lines.append(f"    {kind:16s} {param} = {value:.10g}  period "
+                     f"{int(ds.bifurcation_period[i])}, multiplier {mu_text}: "
+                     f"{ds.bifurcation_note.values[i]}")
+    disagree = []
+    step = np.diff(values)
+    changes = [i for i in range(len(values) - 1) if labels[i] != labels[i + 1]
+               and not (ds.failed.values[i] or ds.failed.values[i + 1])]
+
+    def window(i):  # an observed change between values i and i+1, give or take a step
+        return values[i] - step[i], values[i + 1] + step[i]
+
+    for i in changes:
+        lo, hi = window(i)
+        if not np.any((located >= lo) & (located <= hi)):
+            text = (f"    observed {labels[i]} -> {labels[i + 1]} between {param} = "
+                    f"{values[i]:.6g} and {values[i + 1]:.6g}: no located bifurcation within "
+                    f"a sweep step")
+            if len(located):
+                j = int(np.argmin(np.abs(located - 0.5 * (values[i] + values[i + 1]))))
+                text += f" (nearest: {kinds[j]} at {param} = {located[j]:.7g})"
+            disagree.append(text + "; a slow transient, another attractor or non-periodic "
+                                   "motion, not a bifurcation of the continued orbits")
+    for value, kind in zip(located, kinds):
+        if not any(window(i)[0] <= value <= window(i)[1] for i in changes):
+            j = int(np.clip(np.searchsorted(values, value), 1, len(values) - 1))
+            disagree.append(f"    located {kind} at {param} = {value:.7g}: the observed "
+                            f"period does not change within a sweep step ({labels[j - 1]} "
+                            f"at {values[j - 1]:.6g}, {labels[j]} at {values[j]:.6g})")
+    if disagree:
+        lines.append("  where the observed periods and the located bifurcations disagree:")
+        lines += disagree
+    return lines
 
 
 __all__ = [

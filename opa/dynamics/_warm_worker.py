@@ -1,4 +1,4 @@
-"""Fork-server preload of the sweep process pools (``opa._bifurcation.local_executor``).
+"""Fork-server preload of the sweep process pools (``opa.dynamics._sweep.local_executor``).
 
 Importing this module loads the compiled integrator from numba's on-disk cache (1-2 s),
 once, in the fork server; every worker forked from it then starts warm instead of
@@ -10,10 +10,10 @@ It also ties the fork server's life to the process that started it. Left alone, 
 server lives as long as any of its workers, and the workers, blocked on the pool's queue,
 live forever once that process is killed. Here the fork server ends when its parent does,
 and the workers, who ask for SIGKILL at their parent's death
-(``opa._bifurcation._init_worker``), end with it.
+(``opa.dynamics._sweep._init_worker``), end with it.
 """
 
-from opa._bifurcation import exit_with_parent
+from opa.dynamics._sweep import exit_with_parent
 from opa._model import Oscillator
 from opa._simulate import simulate_dmr
 

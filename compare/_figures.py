@@ -25,7 +25,7 @@ the stochastic oscillator's. Each figure writes beside ``figN.png``:
   the caption and the differences as attributes.
 
 Bifurcation lines are drawn only at located bifurcations listed in the sweep dataset
-(``opa._plot._located_marks``); brute-force period labels are reported in the text,
+(``opa.plots._diagrams._located_marks``); brute-force period labels are reported in the text,
 never drawn as bifurcations. Panel titles carry the labels z = n/p measured on that run.
 
 Default sizes: 61 sweep values, 300 + 60 periods; portraits 500 + 100 periods; Monte
@@ -53,7 +53,7 @@ import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
 from opa._model import SolverOptions, check_order, preset  # noqa: E402
-from opa._plot import (  # noqa: E402
+from opa.plots._diagrams import (  # noqa: E402
     COLORS,
     SECTION_LABELS,
     _located_marks,
@@ -66,7 +66,7 @@ from opa._plot import (  # noqa: E402
     section_bars,
     window,
 )
-from opa._poincare import identify_motion, mean_state, phase_section  # noqa: E402
+from opa.dynamics._sections import identify_motion, mean_state, phase_section  # noqa: E402
 
 FIGURES = ("fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fig11")
 
@@ -142,28 +142,31 @@ class _Context:
         self.executor = None
 
     def sweep(self, name, model, param, values, osc, **kw):
-        from opa._bifurcation import local_executor, sweep
+        from opa.dynamics._sweep import local_executor, sweep
 
         if self.executor is None and self.scheduler is None and self.workers > 1:
             self.executor = local_executor(self.workers)
         s = self.sizes
         out = os.path.join(self.outdir, f"{name}.nc")
         if model == "mc":
-            kw = {"samples": s.sweep_mc_samples, "sampler": "sobol", **kw}
+            from mc import sweep_source
+
+            kw = {"samples": s.sweep_mc_samples, "sampler": "sobol", "source": sweep_source,
+                  **kw}
         kw = {"transient": s.transient, "record": s.record, **kw}
         ds = sweep(model, param, values, osc, options=self.options, order=self.order,
                    out=out, scheduler=self.scheduler, executor=self.executor,
                    workers=self.workers, progress=self.progress, **kw)
         if self.log:
-            from opa._bifurcation_cli import _summary
+            from opa.dynamics._sweep import summary_lines
 
             self.log(f"  {name}:")
-            for line in _summary(ds):
+            for line in summary_lines(ds):
                 self.log("  " + line)
         return ds, out
 
     def times(self, osc, record=None):
-        from opa._bifurcation import sweep_times
+        from opa.dynamics._sweep import sweep_times
 
         # strong impulses (F0 = 10) kick the velocity far up, and the cubic damping brings
         # it back within a fraction of a period: resolve that in the drawn trajectory
@@ -333,14 +336,14 @@ def _observed_period_changes(ds) -> int:
 
 
 def _cycle(osc) -> int | None:
-    from opa._stability import impulse_cycle
+    from opa.dynamics._orbits import impulse_cycle
 
     return impulse_cycle(osc)
 
 
 def _cycle_note(osc, record: int) -> str:
     """Why a label can or cannot come out: the forcing's own repeat (impulse train)."""
-    from opa._stability import MAX_CYCLE
+    from opa.dynamics._orbits import MAX_CYCLE
 
     k = _cycle(osc)
     if k is None:

@@ -10,7 +10,7 @@ import time
 
 import numpy as np
 
-from opa._argtypes import positive_int, whole_number
+from opa.cli._args import positive_int, whole_number
 
 from opa._model import PARAMETER_NAMES
 
@@ -132,7 +132,7 @@ def register_validate(sub, model_flags, solver_flags) -> None:
 
 def _check_outdir(path: str) -> None:
     """Fail before computing when the output folder cannot be written."""
-    from opa._paths import check_output_dir
+    from opa.cli._paths import check_output_dir
 
     check_output_dir("--outdir", path)  # probes a write in the folder or its nearest parent
     try:
@@ -229,7 +229,7 @@ def register_converge(sub, model_flags, solver_flags) -> None:
 def cmd_converge(args) -> int:
     from compare._convergence import ConvergenceConfig, run_convergence, summary_lines, \
         write_report
-    from opa._cli import oscillator_from, options_from
+    from opa.cli._flags import oscillator_from, options_from
 
     _check_outdir(args.outdir)
     kw = {k: v for k, v in (("budgets", args.budgets), ("uniform", args.uniform))

@@ -42,13 +42,8 @@ from opa._model import (
     Uncertainty,
     _choice,
 )
-from opa._simulate import (
-    SimulationError,
-    announce_compilation,
-    kernel_quadrature,
-    pack_parameters,
-    quadrature,
-)
+from opa._run import SimulationError, announce_compilation, kernel_quadrature, quadrature
+from opa._system import pack_parameters
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
 STABILITY_LAWS = IMPACT_LAWS[:2]
@@ -170,7 +165,7 @@ SWEEPABLE = tuple(n for n in PARAMETER_NAMES if n not in ("x0", "v0")) + ("sigma
 
 def _pack(system: ImpactSystem):
     """The kernel's vectors and node-major rule for the system (the one packer,
-    ``opa._simulate.pack_parameters``)."""
+    ``opa._system.pack_parameters``)."""
     p, cfg = pack_parameters(system.oscillator, system.options, sigma=system.sigma,
                              order=system.order, uncertain=system.uncertain,
                              truncation=system.truncation, impact_law=system.impact_law)
@@ -830,7 +825,7 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
     Parameters
     ----------
     engine : ``"solver"``: both trajectories as plain runs of the kernel
-        (``opa._simulate.run_kernel``, the DMR/OPA path, resumed under the impulse train);
+        (``opa._run.run_kernel``, the DMR/OPA path, resumed under the impulse train);
         ``"plain"``: through :func:`flow` without tangent vectors. Both share the event
         code, not the saltation matrices.
     """
@@ -841,7 +836,8 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
     impacts, vmin = 0, math.inf
     at_zero = bool(system.options.impulse_at_zero)
     if engine == "solver":
-        from opa._simulate import pack_parameters, run_kernel
+        from opa._run import run_kernel
+        from opa._system import pack_parameters
 
         p, cfg = pack_parameters(system.oscillator, system.options, sigma=system.sigma,
                                  order=system.order, uncertain=system.uncertain,

@@ -1,8 +1,8 @@
 """``opa-mc stability``: periodic orbits, Floquet multipliers, branches, Lyapunov exponents.
 
-Wired into ``opa._cli.build_parser`` by
+Wired into ``opa.cli._main.build_parser`` by
 ``register_stability(sub, _model_flags, _solver_flags)``. User mistakes raise
-``ValueError`` (reported by ``opa._cli.main`` as one line, exit 2).
+``ValueError`` (reported by ``opa.cli._main.main`` as one line, exit 2).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from opa._argtypes import MAX_SWEEP_VALUES, positive_int, whole_number
+from opa.cli._args import MAX_SWEEP_VALUES, positive_int, whole_number
 
 from opa._model import IMPACT_LAWS, TRUNCATIONS, UNCERTAIN_PARAMETERS
 
@@ -23,7 +23,7 @@ def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
     >>> parse_branch_sweep("c=0.1:0.02:40")
     ('c', 0.1, 0.02, 40)
     """
-    from opa._stability import SWEEPABLE
+    from opa.dynamics._orbits import SWEEPABLE
 
     usage = "expected NAME=START:STOP[:COUNT] (e.g. c=0.1:0.02:40)"
     name, sep, rhs = spec.partition("=")
@@ -47,8 +47,8 @@ def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
 
 
 def _system(args):
-    from opa._cli import options_from, oscillator_from
-    from opa._stability import ImpactSystem
+    from opa.cli._flags import options_from, oscillator_from
+    from opa.dynamics._orbits import ImpactSystem
 
     osc = oscillator_from(args)
     if args.model == "dmr":
@@ -71,18 +71,18 @@ def _format_multipliers(mu: np.ndarray, count: int = 4) -> str:
 
 
 def cmd_stability(args) -> int:
-    from opa._cli import check_outputs
+    from opa.cli._flags import check_outputs
 
     check_outputs(args)
-    from opa._continuation import (  # noqa: E402 -- the paths are checked first, cheaply
+    from opa.dynamics._continuation import (  # noqa: E402 -- the paths are checked first, cheaply
         BIFURCATION_KINDS,
         Branch,
         branch_dataset,
         continue_orbits,
-        plot_branches,
     )
+    from opa.plots import plot_branches
     from opa._dataset import write_netcdf
-    from opa._stability import impulse_cycle, lyapunov_benettin, lyapunov_exponent, periodic_orbit
+    from opa.dynamics._orbits import impulse_cycle, lyapunov_benettin, lyapunov_exponent, periodic_orbit
 
     system = _system(args)
     start = time.perf_counter()
@@ -151,7 +151,7 @@ def cmd_stability(args) -> int:
 def register_stability(subparsers, model_flags, solver_flags) -> None:
     """Add ``stability`` to the ``opa-mc`` subcommands.
 
-    ``model_flags(parser)`` and ``solver_flags(parser)`` are ``opa._cli``'s
+    ``model_flags(parser)`` and ``solver_flags(parser)`` are ``opa.cli._main``'s
     ``_model_flags`` and ``_solver_flags``.
     """
     p = subparsers.add_parser(

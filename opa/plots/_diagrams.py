@@ -1,5 +1,5 @@
 """Drawing blocks: single runs (``plot_run``), bifurcation diagrams (``plot_bifurcation``)
-and the panels of the paper's figures (``opa._figures``).
+and the panels of the paper's figures (``compare._figures``).
 
 Colours name the model the same way in every figure: DMR black, EMR_0 orange, EMR blue,
 Monte Carlo mean green; Poincaré points are red.
@@ -20,7 +20,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from opa._poincare import mean_state, stroboscopic_mask  # noqa: E402
+from opa.dynamics._sections import mean_state, stroboscopic_mask  # noqa: E402
 
 COLORS = {"DMR": "black", "EMR_0": "tab:orange", "EMR": "tab:blue", "MC mean": "tab:green"}
 SECTION_COLOR = "tab:red"
@@ -79,7 +79,7 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
 # --------------------------------------------------------------------------- located marks
 
 
-#: names the bifurcation variables may carry (the sweep's, ``opa._continuation``'s)
+#: names the bifurcation variables may carry (the sweep's, ``opa.dynamics._continuation``'s)
 _VALUE_VARS = ("bifurcation_parameter", "bifurcation_value", "bifurcation_values",
                "located_parameter")
 _KIND_VARS = ("bifurcation_kind", "bifurcation_type", "located_kind")
@@ -116,7 +116,7 @@ def _kinds(ds: xr.Dataset, size: int) -> list[str]:
     meanings = str(var.attrs.get("flag_meanings", "")).split()
     if not meanings:
         try:
-            from opa._continuation import BIFURCATION_KINDS as meanings
+            from opa.dynamics._continuation import BIFURCATION_KINDS as meanings
         except ImportError:  # the continuation module is optional here
             meanings = ()
     flags = var.attrs.get("flag_values")

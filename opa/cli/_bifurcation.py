@@ -1,7 +1,7 @@
 """``opa-mc bifurcation`` and ``opa-mc reproduce``: sweeps and the paper's figures.
 
-Wired into ``opa._cli.build_parser`` by ``register(sub, _model_flags, _common_flags)``.
-User mistakes raise ``ValueError`` (reported by ``opa._cli.main`` as one line, exit 2).
+Wired into ``opa.cli._main.build_parser`` by ``register(sub, _model_flags, _common_flags)``.
+User mistakes raise ``ValueError`` (reported by ``opa.cli._main.main`` as one line, exit 2).
 """
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ import time
 
 import numpy as np
 
-from opa._argtypes import MAX_SWEEP_VALUES, positive_int, whole_number
+from opa.cli._args import MAX_SWEEP_VALUES, positive_int, whole_number
 
-from opa._bifurcation import CONTINUATIONS, DEFAULT_WORKERS, MODELS, SWEEPABLE
+from opa.dynamics._sweep import CONTINUATIONS, DEFAULT_WORKERS, MODELS, SWEEPABLE, summary_lines
 from opa._model import IMPULSE_MODELS
-from opa._poincare import GRAZE_GAP, GRAZE_VELOCITY, PERIOD_TOL
+from opa.dynamics._sections import GRAZE_GAP, GRAZE_VELOCITY, PERIOD_TOL
 
 SECTIONS = ("phase", "constraint", "both")
 
@@ -73,122 +73,11 @@ def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
     return name, values
 
 
-def _summary(ds) -> list[str]:
-    """The observed periods (runs of equal labels), impacts and grazing, the located
-    bifurcations, and where the two disagree."""
-    param = ds.attrs["sweep_parameter"]
-    values = ds[param].values
-    labels = ds.label.values
-    lines = ["  observed periods (one trajectory per value, after the transient):"]
-    start = 0
-    for i in range(1, len(values) + 1):
-        if i == len(values) or labels[i] != labels[start]:
-            lo, hi = values[start], values[i - 1]
-            where = f"{param} = {lo:.6g}" if i - 1 == start else f"{param} in [{lo:.6g}, {hi:.6g}]"
-            lab = str(labels[start])
-            if lab == "none":
-                near = ds.nearest_period.values[start:i]
-                res = ds.residual.values[start:i]
-                lab = (f"no period within tol (nearest repeat {int(near[np.argmin(res)])}, "
-                       f"residual >= {np.nanmin(res):.2g})")
-            else:
-                lab = f"{lab}  (period {ds.period.values[start]}, impacts "
-                lab += f"{ds.impacts.values[start]})"
-            lines.append(f"    {where}: {lab}")
-            start = i
-    rate = ds.impact_rate.values
-    if np.isfinite(rate).any():
-        first = np.flatnonzero(np.abs(rate - rate[0]) > 0.01)
-        if len(first):
-            i = first[0]
-            lines.append(f"  impacts per forcing period {rate[0]:.3g} from {param} = "
-                         f"{values[0]:.6g}, first different at {param} = {values[i]:.6g} "
-                         f"({rate[i]:.3g})")
-        vmin = ds.min_impact_velocity.values
-        if np.isfinite(vmin).any():
-            j = int(np.nanargmin(vmin))
-            lines.append(f"  slowest impact velocity {vmin[j]:.3g} at {param} = {values[j]:.6g}")
-    gap = ds.min_gap.values
-    if np.isfinite(gap).any():
-        j = int(np.nanargmin(gap))
-        lines.append(f"  closest free flight to the wall: gap {gap[j]:.3g} at {param} = "
-                     f"{values[j]:.6g}")
-    graze = ds.grazing_parameter.values
-    if len(graze):
-        lines.append(f"  grazing between periodic branches near {param} = "
-                     + ", ".join(f"{g:.6g}" for g in graze))
-    flagged = values[ds.grazing.values == 1]
-    if len(flagged):
-        lines.append(f"  grazing flagged (slow impact or near-touching free flight) at "
-                     f"{len(flagged)} values, first {param} = {flagged[0]:.6g}")
-    if ds.failed.values.any():
-        lines.append(f"  {int(ds.failed.sum())} values failed: {ds.attrs['failures']}")
-    return lines + _located_summary(ds)
-
-
-def _located_summary(ds) -> list[str]:
-    """The located bifurcations and their disagreements with the observed periods."""
-    from opa._continuation import BIFURCATION_KINDS
-
-    param = ds.attrs["sweep_parameter"]
-    values = ds[param].values
-    labels = ds.label.values
-    doubled = values[ds.observed_doubling.values == 1]
-    method = str(ds.attrs.get("bifurcation_method", "not located"))
-    if "bifurcation_parameter" not in ds or method.startswith("not located"):
-        lines = [f"  bifurcations {method}"]
-        if len(doubled):
-            lines.append(f"  observed period twice a neighbour's at {param} = "
-                         + ", ".join(f"{v:.6g}" for v in doubled)
-                         + " (an observation, not a located bifurcation)")
-        return lines
-    located = ds.bifurcation_parameter.values
-    kinds = [BIFURCATION_KINDS[int(k)] for k in ds.bifurcation_kind.values]
-    lines = [("  bifurcations located by continuation of the observed periodic orbits "
-              "(Floquet multipliers):")]
-    if not len(located):
-        lines.append(f"    none in [{values[0]:.6g}, {values[-1]:.6g}]")
-    for i, (value, kind) in enumerate(zip(located, kinds)):
-        mu = complex(float(ds.bifurcation_multiplier_real[i]),
-                     float(ds.bifurcation_multiplier_imag[i]))
-        mu_text = f"{mu.real:+.6f}" if mu.imag == 0 else f"|{abs(mu):.6f}|"
-        lines.append(f"    {kind:16s} {param} = {value:.10g}  period "
-                     f"{int(ds.bifurcation_period[i])}, multiplier {mu_text}: "
-                     f"{ds.bifurcation_note.values[i]}")
-    disagree = []
-    step = np.diff(values)
-    changes = [i for i in range(len(values) - 1) if labels[i] != labels[i + 1]
-               and not (ds.failed.values[i] or ds.failed.values[i + 1])]
-
-    def window(i):  # an observed change between values i and i+1, give or take a step
-        return values[i] - step[i], values[i + 1] + step[i]
-
-    for i in changes:
-        lo, hi = window(i)
-        if not np.any((located >= lo) & (located <= hi)):
-            text = (f"    observed {labels[i]} -> {labels[i + 1]} between {param} = "
-                    f"{values[i]:.6g} and {values[i + 1]:.6g}: no located bifurcation within "
-                    f"a sweep step")
-            if len(located):
-                j = int(np.argmin(np.abs(located - 0.5 * (values[i] + values[i + 1]))))
-                text += f" (nearest: {kinds[j]} at {param} = {located[j]:.7g})"
-            disagree.append(text + "; a slow transient, another attractor or non-periodic "
-                                   "motion, not a bifurcation of the continued orbits")
-    for value, kind in zip(located, kinds):
-        if not any(window(i)[0] <= value <= window(i)[1] for i in changes):
-            j = int(np.clip(np.searchsorted(values, value), 1, len(values) - 1))
-            disagree.append(f"    located {kind} at {param} = {value:.7g}: the observed "
-                            f"period does not change within a sweep step ({labels[j - 1]} "
-                            f"at {values[j - 1]:.6g}, {labels[j]} at {values[j]:.6g})")
-    if disagree:
-        lines.append("  where the observed periods and the located bifurcations disagree:")
-        lines += disagree
-    return lines
 
 
 def _check_sizes(osc, param, values, args) -> None:
     """Refuse sweeps that cannot finish or fit: the span of each run and the sections."""
-    from opa._dataset import check_memory
+    from opa._memory import check_memory
     from opa._model import check_span
 
     span = args.transient + args.record
@@ -202,8 +91,9 @@ def _check_sizes(osc, param, values, args) -> None:
 
 
 def cmd_bifurcation(args) -> int:
-    from opa._bifurcation import sweep
-    from opa._cli import check_outputs, options_from, oscillator_from
+    from mc import sweep_source
+    from opa.dynamics._sweep import sweep
+    from opa.cli._flags import check_outputs, options_from, oscillator_from
 
     check_outputs(args)
     if args.periods is not None:
@@ -224,10 +114,11 @@ def cmd_bifurcation(args) -> int:
         graze_velocity=args.graze_velocity, graze_gap=args.graze_gap, out=args.out,
         keep_parts=args.keep_parts, scheduler=getattr(args, "scheduler", None),
         workers=args.workers, progress=not args.quiet, locate=args.locate,
+        source=sweep_source if args.model == "mc" else None,
     )
     elapsed = time.perf_counter() - start
     if args.plot:
-        from opa._figures import plot_bifurcation
+        from opa.plots import plot_bifurcation
 
         plot_bifurcation(ds, args.plot, section=args.section)
     if not args.quiet:
@@ -236,7 +127,7 @@ def cmd_bifurcation(args) -> int:
               f"[{values.min():.6g}, {values.max():.6g}], {args.transient} + {args.record} periods"
               f" each, in {elapsed:.2f} s" + (f" ({resumed} resumed from disk)" if resumed
                                                 else ""))
-        print("\n".join(_summary(ds)))
+        print("\n".join(summary_lines(ds)))
         if args.out:
             print(f"  wrote {args.out}")
         if args.plot:
@@ -245,8 +136,8 @@ def cmd_bifurcation(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from opa._cli import check_outputs
-    from opa._figures import FIGURES, reproduce
+    from opa.cli._flags import check_outputs
+    from compare._figures import FIGURES, reproduce
 
     check_outputs(args)
     names = list(FIGURES) if args.figure == "all" else [args.figure]
@@ -272,10 +163,10 @@ def _set_help(parser: argparse.ArgumentParser, dest: str, text: str, default) ->
 def register(subparsers, model_flags, common_flags) -> None:
     """Add ``bifurcation`` and ``reproduce`` to the ``opa-mc`` subcommands.
 
-    ``model_flags(parser)`` and ``common_flags(parser)`` are ``opa._cli``'s
+    ``model_flags(parser)`` and ``common_flags(parser)`` are ``opa.cli._main``'s
     ``_model_flags`` and ``_common_flags``.
     """
-    from opa._figures import FIGURES
+    from compare._figures import FIGURES
 
     b = subparsers.add_parser(
         "bifurcation",

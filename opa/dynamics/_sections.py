@@ -520,7 +520,7 @@ def identify_motion(
     -----
     When a stroboscopic time coincides with an impulse (omega/omega1 rational), the
     sample lies just after the velocity jump only if the output time equals the impulse
-    time to the last bit; ``opa._bifurcation.sweep_times`` builds such grids.
+    time to the last bit; ``opa.dynamics._sweep.sweep_times`` builds such grids.
 
     Examples
     --------

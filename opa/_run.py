@@ -1,0 +1,226 @@
+"""The only caller of the compiled kernel (``opa._kernel``): Gauss rules in the kernel's
+layout, single and batched runs, status codes turned into :class:`SimulationError` with
+advice, event-log decoding, and the checks on output times every run shares."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+
+from opa import _kernel as K
+from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
+from opa._memory import check_memory
+from opa._model import Oscillator, Uncertainty, check_span, time_grid
+
+
+class SimulationError(RuntimeError):
+    """A trajectory could not be completed (divergence, step collapse, step limit)."""
+
+
+def quadrature(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Nodes, weights and basis values U_0..U_{N+1} at the nodes for an order-N system.
+
+    The basis is degree-major, shape (N+2, Q): ``basis[i, k] = U_i(xi_k)``; the kernel
+    takes it node-major (:func:`kernel_quadrature`).
+
+    N = 0 uses the one-point rule at xi = 0, which makes EMR_0 the DMR exactly.
+    """
+    if order == 0:
+        # exactly xi = 0 (cos(pi/2) is 6e-17 in floating point), so the kernel takes the
+        # deterministic fast path
+        nodes, weights = np.zeros(1), np.ones(1)
+    else:
+        nodes, weights = gauss_nodes(quadrature_order(order))
+    basis = chebyshev_u(order + 1, nodes)  # (N+2, Q)
+    return nodes, weights, np.ascontiguousarray(basis)
+
+
+def kernel_quadrature(quad):
+    """The kernel's layout of :func:`quadrature`'s rule: basis node-major (Q, N+2), so
+    the kernel's inner loops over the degree run over contiguous memory."""
+    nodes, weights, basis = quad
+    return nodes, weights, np.ascontiguousarray(basis.T)
+
+
+_ANNOUNCED = []
+
+
+def announce_compilation(dispatcher) -> None:
+    """Print "compiling kernels (first run only)..." once per process, to stderr, before
+    a kernel entry point that is neither compiled in this process nor in numba's on-disk
+    cache (a first run sits for several seconds compiling)."""
+    if _ANNOUNCED or dispatcher.signatures:
+        return
+    try:  # numba's index of cached overloads, empty when the source changed
+        cached = bool(dispatcher._cache._cache_file._load_index())
+    except Exception:  # a numba without this layout: say nothing rather than guess
+        cached = True
+    if not cached:
+        _ANNOUNCED.append(True)
+        print("compiling kernels (first run only)...", file=sys.stderr, flush=True)
+
+
+def sampled_batch(p: np.ndarray, cfg: np.ndarray, *, xi=None, values=None):
+    """Kernel inputs of M sampled deterministic systems (N = 0) for :func:`run_batch`.
+
+    System m has the uncertain parameter (``cfg``'s) at ``values[m]`` (absolute) or at
+    ``p_bar + sigma xi[m]`` (computed as the kernel always has, so the results are the
+    same bit for bit). Returns (P (M, N_PARAMS), cfgs (M, N_CFG), rule) with the one-node
+    rule at xi = 0 for every system."""
+    idx = (K.P_MU, K.P_A, K.P_C)[int(cfg[K.C_UNCERTAIN])]
+    if values is None:
+        values = p[idx] + p[K.P_SIGMA] * np.asarray(xi, dtype=float)
+    values = np.asarray(values, dtype=float)
+    M = len(values)
+    P = np.repeat(p[None, :], M, axis=0)
+    P[:, idx] = values
+    P[:, K.P_SIGMA] = 0.0
+    one = cfg.copy()
+    one[K.C_NCOEF] = 1
+    one[K.C_TRUNC] = K.TRUNC_GALERKIN
+    one[K.C_LAW] = K.LAW_MEAN
+    cfgs = np.repeat(one[None, :], M, axis=0)
+    U = np.zeros((M, 1, 2))
+    U[:, 0, 0] = 1.0
+    return P, cfgs, (np.zeros((M, 1)), np.ones((M, 1)), U)
+
+
+def run_batch(y0, times, P, cfgs, rule, *, rtol, atol, capacity=0, stop_on_failure=False):
+    """B independent plain runs in parallel (``opa._kernel.run_batch``).
+
+    Run b starts from ``y0`` with parameters ``P[b]``, configuration ``cfgs[b]`` and
+    the node-major rule ``(nodes[b], weights[b], U[b])`` of ``rule``. Returns (out
+    (B, n_out, dim), logs (B, capacity, 3), counters (B, 5): status, events, impacts,
+    steps, right-hand sides). With ``stop_on_failure`` the runs not started after the
+    first failure are marked ``SKIPPED``."""
+    nodes, weights, U = (np.ascontiguousarray(a, dtype=float) for a in rule)
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    B = len(P)
+    out = np.empty((B, len(times), len(y0)))
+    logs = np.empty((B, capacity, 3))
+    counters = np.zeros((B, 5), dtype=np.int64)
+    abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
+    announce_compilation(K.run_batch)
+    K.run_batch(y0, np.ascontiguousarray(times, dtype=float), np.ascontiguousarray(P),
+                np.ascontiguousarray(cfgs, dtype=np.int64), nodes, weights, U, rtol, atol, out,
+                logs, counters, abort)
+    return out, logs, counters
+
+
+def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", partial=False,
+               include_start=True):
+    """Integrate and return (states (n_out, dim), event log (n, 3), counters dict).
+
+    ``quad`` is :func:`quadrature`'s (nodes, weights, basis (N+2, Q)). With
+    ``include_start`` an impulse at ``times[0]`` is applied (a run from the start of the
+    train); without, it belongs to the previous interval (a run resumed mid-way). A trajectory that
+    cannot be completed raises :class:`SimulationError`, or with ``partial`` returns the
+    outputs reached (NaN after) and the reason in ``counters["failure"]``."""
+    nodes, weights, basis = kernel_quadrature(quad)
+    capacity = max(64, 4 * len(times))
+    while True:
+        out = np.empty((len(times), len(y0)))
+        log = np.empty((capacity, 3))
+        z = np.array(y0, dtype=float)
+        announce_compilation(K.integrate)
+        status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
+            z, 0, np.ascontiguousarray(times, dtype=float), include_start, False, p, cfg, nodes,
+            weights, basis, rtol, atol, out, np.empty((0, K.N_STATS)), np.empty(0), log
+        )
+        if n_events <= capacity:
+            break
+        capacity = int(n_events * 1.2) + 16
+    counters = {"steps": n_steps, "rhs_evaluations": n_rhs, "impacts": n_impacts}
+    if status != K.OK:
+        reached = np.isfinite(out[:, 0])
+        t_last = times[reached][-1] if reached.any() else times[0]
+        message = (f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
+                   f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} "
+                   f"impacts)")
+        if not partial:
+            raise SimulationError(f"{message}. {advice(status)}")
+        out[~np.isfinite(out).all(axis=1)] = np.nan
+        counters["failure"] = message
+    return out, log[:min(n_events, len(log))], counters
+
+
+def advice(status: int) -> str:
+    """What to try after a kernel status: tolerances help a collapsed step, not an escape."""
+    if status in (K.ESCAPED, K.DIVERGED):
+        return ("The parameters drive the state out of every bound: check them (e.g. the "
+                "signs of a and c, the sizes of f, F0 and mu).")
+    if status == K.BAD_TIME:
+        return "Check the output times: they must be finite, with impulse times resolvable."
+    if status == K.MAX_STEPS:
+        return ("The run needs more steps than max_steps (SolverOptions.max_steps): ask for "
+                "fewer periods, looser tolerances or a larger --max-step, or check the "
+                "parameters.")
+    if status == K.STEP_COLLAPSE:
+        return ("Near this time no step can be taken: check the parameters, and that "
+                "--max-step and the tolerances are not below round-off.")
+    return "Check the parameters."
+
+
+def output_times(oscillator, periods, per_period, times, dim: int = 2):
+    """The output times (the grid of ``periods`` and ``per_period`` unless ``times`` is
+    given), refusing runs that cannot be resolved, finished or held in memory."""
+    if times is None:
+        times = time_grid(oscillator.omega, periods, per_period)
+    else:
+        try:
+            times = np.asarray(times, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError("times must be a 1-D array of numbers") from None
+        if times.ndim != 1 or len(times) < 1 or not np.all(np.isfinite(times)):
+            raise ValueError("times must be a non-empty 1-D array of finite values")
+        if np.any(np.diff(times) <= 0):
+            raise ValueError("times must be strictly increasing")
+    check_span(oscillator, float(times[-1]), t_start=float(times[0]))
+
+    check_memory(f"{len(times)} outputs x {dim} states", len(times) * (dim + 1) * 8 * 2)
+    return times
+
+
+def check_support(oscillator: Oscillator, unc: Uncertainty, measure) -> None:
+    """Refuse samples p_bar + sigma xi < 0 over xi's support unless allowed."""
+    mean = getattr(oscillator, unc.parameter)
+    lowest = mean + unc.sigma * measure.lo
+    if not unc.allow_negative and lowest < 0.0 <= mean:
+        raise ValueError(
+            f"sigma = {unc.sigma} with xi down to {measure.lo:g} makes {unc.parameter} = "
+            f"{lowest:.6g} negative for some samples; pass allow_negative=True "
+            f"(--allow-negative) if that is intended")
+
+
+def event_vars(log: np.ndarray) -> dict:
+    kinds = log[:, 2].astype(np.int8) if len(log) else np.zeros(0, np.int8)
+    impact = np.isin(kinds, (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK))
+    return {
+        "impact_time": (
+            "impact",
+            log[impact, 0],
+            {"long_name": "time of impact with the wall", "units": "1"},
+        ),
+        "impact_velocity": (
+            "impact",
+            log[impact, 1],
+            {"long_name": "pre-impact velocity of the (mean) coordinate", "units": "1"},
+        ),
+        "impact_graze": (
+            "impact",
+            (kinds[impact] == K.EV_GRAZE).astype(np.int8),
+            {"long_name": f"1 where the impact velocity is below {K.GRAZE_VELOCITY} (graze)",
+             "units": "1"},
+        ),
+        "stick_time": (
+            "stick",
+            log[kinds == K.EV_STICK, 0],
+            {"long_name": "chatter accumulation time, start of sticking", "units": "1"},
+        ),
+        "release_time": (
+            "release",
+            log[kinds == K.EV_RELEASE, 0],
+            {"long_name": "time of release from the wall after sticking", "units": "1"},
+        ),
+    }

@@ -1,0 +1,7 @@
+"""``python -m opa.cli``: the ``opa-mc`` command."""
+
+import sys
+
+from opa.cli._main import main
+
+sys.exit(main())

@@ -1,0 +1,190 @@
+"""The layer rule of the README's map, checked by parsing every import of the packages.
+
+Layers, bottom to top; a module may import its own layer and those below, never above,
+not even inside a function:
+
+    0  opa core      opa._model, opa._system, opa._kernel, opa._run, opa._simulate, ...
+    1  dynamics      opa.dynamics (sections, sweeps, orbits, Lyapunov, continuation)
+    2  plots         opa.plots (matplotlib only)
+    3  facade        opa (the package's public names) and opa._shims
+    4  mc            Monte Carlo ensembles, the MC trajectory source
+    5  compare       metrics, validation, trust map, reports, the paper's figures
+    6  cli           opa.cli (argparse; the only place that imports all three packages)
+
+The one exception is ``opa._shims``, whose functions keep ``opa.sweep`` (model "mc") and
+``opa.reproduce`` working by importing ``mc`` and ``compare`` when called.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGES = ("opa", "mc", "compare")
+LAYERS = ("opa core", "dynamics", "plots", "facade", "mc", "compare", "cli")
+# (importer, imported) pairs allowed to go upward, only inside a function body
+SHIMS = {("opa._shims", "mc"), ("opa._shims", "compare._figures")}
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules() -> dict[str, Path]:
+    found = {}
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            found[module_name(path)] = path
+    return found
+
+
+MODULES = modules()
+
+
+def layer(module: str) -> int:
+    if module.startswith("opa.cli"):
+        return LAYERS.index("cli")
+    if module.startswith("compare"):
+        return LAYERS.index("compare")
+    if module.startswith("mc"):
+        return LAYERS.index("mc")
+    if module in ("opa", "opa._shims"):
+        return LAYERS.index("facade")
+    if module.startswith("opa.plots"):
+        return LAYERS.index("plots")
+    if module.startswith("opa.dynamics"):
+        return LAYERS.index("dynamics")
+    assert module.startswith("opa._"), module
+    return LAYERS.index("opa core")
+
+
+def _resolve(importer: str, is_package: bool, node: ast.ImportFrom) -> list[str]:
+    if node.level:
+        base = importer.split(".") if is_package else importer.split(".")[:-1]
+        base = base[: len(base) - (node.level - 1)]
+        source = ".".join(base + ([node.module] if node.module else []))
+    else:
+        source = node.module or ""
+    if source.split(".")[0] not in PACKAGES:
+        return []
+    targets = []
+    for alias in node.names:  # `from opa import _kernel` imports the module opa._kernel
+        sub = f"{source}.{alias.name}"
+        targets.append(sub if sub in MODULES else source)
+    return targets
+
+
+def imports(module: str) -> list[tuple[str, bool]]:
+    """(imported module of our packages, whether the import is inside a function)."""
+    path = MODULES[module]
+    tree = ast.parse(path.read_text(), filename=str(path))
+    found = []
+
+    def visit(node, nested):
+        for child in ast.iter_child_nodes(node):
+            inner = nested or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef,
+                                                 ast.Lambda))
+            if isinstance(child, ast.Import):
+                found.extend((a.name, inner) for a in child.names
+                             if a.name.split(".")[0] in PACKAGES)
+            elif isinstance(child, ast.ImportFrom):
+                found.extend((t, inner) for t in
+                             _resolve(module, path.name == "__init__.py", child))
+            visit(child, inner)
+
+    visit(tree, False)
+    return found
+
+
+def test_every_module_has_a_layer():
+    assert len(MODULES) > 40
+    for module in MODULES:
+        assert 0 <= layer(module) < len(LAYERS)
+
+
+def test_no_module_imports_upward():
+    upward = []
+    for module in MODULES:
+        for target, nested in imports(module):
+            if layer(target) > layer(module) and not (nested and (module, target) in SHIMS):
+                upward.append(f"{module} ({LAYERS[layer(module)]}) imports {target} "
+                              f"({LAYERS[layer(target)]})")
+    assert upward == []
+
+
+def test_the_shims_are_the_only_exception_and_import_only_when_called():
+    for module, target in SHIMS:
+        found = imports(module)
+        assert (target, True) in found
+        assert (target, False) not in found
+
+
+def strongly_connected(graph: dict[str, list[str]]) -> list[list[str]]:
+    """Tarjan's strongly connected components of more than one node (the cycles)."""
+    index, low, stack, on, cycles = {}, {}, [], set(), []
+
+    def connect(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in graph[v]:
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for v in graph:
+        if v not in index:
+            connect(v)
+    return cycles
+
+
+def test_no_import_cycles():
+    """Every import counts, lazy ones included."""
+    graph = {m: sorted({t for t, _ in imports(m) if t in MODULES and t != m}) for m in MODULES}
+    assert strongly_connected(graph) == []
+
+
+def test_the_checks_see_a_planted_cycle_and_a_planted_upward_import():
+    graph = {"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}
+    assert strongly_connected(graph) == [["a", "b", "c"]]
+    tree = ast.parse("from compare import _figures\n")
+    targets = _resolve("opa._kernel", False, tree.body[0])
+    assert targets == ["compare._figures"]
+    assert layer(targets[0]) > layer("opa._kernel")
+
+
+def test_matplotlib_is_imported_only_by_figure_modules():
+    drawing = {"opa.plots._diagrams", "opa.plots._branches", "compare._figures"}
+    for module, path in MODULES.items():
+        tree = ast.parse(path.read_text())
+        top = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
+        names = [a.name for n in top if isinstance(n, ast.Import) for a in n.names]
+        names += [n.module for n in top if isinstance(n, ast.ImportFrom) and n.module]
+        if any(name.split(".")[0] == "matplotlib" for name in names):
+            assert module in drawing, f"{module} imports matplotlib at module level"
+
+
+@pytest.mark.parametrize("package", ["opa", "mc", "compare", "opa.dynamics", "opa.cli"])
+def test_importing_a_package_does_not_import_matplotlib(package):
+    code = f"import sys, {package}; print('matplotlib' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT).stdout.strip()
+    assert out == "False"
