@@ -1,5 +1,7 @@
-"""Tests for the stability tools (``opa.dynamics._orbits``, ``opa.dynamics._continuation``,
-``opa._variational``, ``opa.cli._stability``).
+"""Tests for the periodic orbits, Poincare maps and Lyapunov exponents of
+``opa.dynamics._orbits`` (their continuation is tested in ``test_continuation.py``, the
+branch plot in ``tests/opa/plots/test_branches.py``, ``opa-mc stability`` in
+``tests/opa/cli/test_stability.py``).
 
 Independent references:
 
@@ -13,25 +15,17 @@ Independent references:
   matrix (whose determinant is eta^2);
 - two Lyapunov estimates: tangent vector with saltation matrices vs two trajectories
   of ``opa._solver`` (Benettin), in a chaotic impacting regime;
-- a period-doubling point located at rtol 1e-9 and 1e-11;
-- the doubled branch against a long brute-force simulation.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 
 import numpy as np
 import pytest
 
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
-from opa.dynamics._continuation import (
-    BIFURCATION_KINDS,
-    continue_orbits,
-    locate_period_doubling,
-)
-from opa.plots import plot_branches
+from opa.dynamics._continuation import continue_orbits
 from opa.dynamics._orbits import (
     ImpactSystem,
     impulse_cycle,
@@ -253,79 +247,6 @@ def test_lyapunov_two_estimates_agree_opa():
     assert abs(var.exponent - ben.exponent) < 0.05 * abs(ben.exponent)
 
 
-# --------------------------------------------------------------------------- branches
-def test_period_doubling_located_independently_of_tolerance():
-    values = []
-    for tol in (1e-9, 1e-11):
-        system = ImpactSystem(preset("3.1", F0=0.0), options=SolverOptions(rtol=tol, atol=tol))
-        ds = continue_orbits(system, "c", 0.095, 0.085, depth=0)
-        pd = ds.bifurcation_kind.values == BIFURCATION_KINDS.index("period-doubling")
-        assert pd.sum() == 1 and ds.bifurcation_located.values[pd][0] == 1
-        values.append(float(ds.bifurcation_c.values[pd][0]))
-    assert abs(values[0] - values[1]) < 1e-6
-    assert 0.0891 < values[1] < 0.0892
-
-
-def test_period_doubling_point_has_multiplier_minus_one_and_emr0_agrees():
-    system = ImpactSystem(preset("3.1", F0=0.0))
-    a = periodic_orbit(system.with_parameter("c", 0.092))
-    b = shoot(system.with_parameter("c", 0.087), a.state, periods=1)
-    orbit = locate_period_doubling(system, "c", (0.092, a), (0.087, b))
-    assert np.min(np.abs(orbit.multipliers + 1.0)) < 1e-7
-    assert "period-doubling" in orbit.classify()
-    c_pd = orbit.system.oscillator.c
-    emr0 = ImpactSystem(preset("3.1", F0=0.0), model="opa", order=3, sigma=0.0)
-    y = np.zeros(8)
-    y[0], y[4] = a.state
-    ea = shoot(emr0.with_parameter("c", 0.092), y, periods=1)
-    eb = shoot(emr0.with_parameter("c", 0.087), y, periods=1)
-    e_pd = locate_period_doubling(emr0, "c", (0.092, ea), (0.087, eb))
-    assert abs(e_pd.system.oscillator.c - c_pd) < 1e-8
-
-
-def test_branch_switching_matches_brute_force():
-    system = ImpactSystem(preset("3.1", F0=0.0))
-    ds = continue_orbits(system, "c", 0.095, 0.08, depth=1)
-    assert set(ds.branch_period.values) == {1, 2}
-    pd = int(np.flatnonzero(ds.bifurcation_child.values >= 0)[0])
-    c_pd = float(ds.bifurcation_c[pd])
-    child = int(ds.bifurcation_child[pd])
-    doubled = ds.where(ds.branch == child, drop=True)
-    primary = ds.where(ds.branch == 0, drop=True)
-    # supercritical: the doubled orbits lie below c_pd, stable; the period-1 orbit is
-    # stable above c_pd and unstable below
-    assert np.all(doubled.c.values <= c_pd + 1e-9)
-    assert doubled.stable.values[-1] == 1
-    assert np.all(primary.stable.values[primary.c.values > c_pd + 1e-6] == 1)
-    assert np.all(primary.stable.values[primary.c.values < c_pd - 1e-6] == 0)
-    # the doubled orbit at the end of the interval is the attractor of a long simulation
-    end = int(np.argmin(doubled.c.values))
-    osc = system.oscillator.replace(c=float(doubled.c.values[end]))
-    sim = simulate_dmr(osc, periods=800, options=SolverOptions(rtol=1e-10, atol=1e-10))
-    last = np.sort(sim.x.values[-2:])
-    np.testing.assert_allclose(np.sort(doubled.section_x.values[end, :2]), last, atol=1e-6)
-
-
-def test_dataset_netcdf_and_plot(tmp_path):
-    import xarray as xr
-
-    from opa._dataset import write_netcdf
-
-    system = ImpactSystem(preset("3.1", F0=0.0))
-    ds = continue_orbits(system, "c", 0.095, 0.085, depth=1, max_points=30)
-    for name in ("section_x", "section_v", "multiplier_real", "multiplier_imag", "stable",
-                 "bifurcation_kind", "bifurcation_c", "state", "period", "impacts"):
-        assert name in ds
-    assert ds.attrs["parameter"] == "c" and ds.attrs["model"] == "dmr"
-    path = tmp_path / "branches.nc"
-    write_netcdf(ds, path)
-    with xr.open_dataset(path) as back:
-        np.testing.assert_array_equal(back.stable.values, ds.stable.values)
-    png = tmp_path / "branches.png"
-    plot_branches(ds, str(png))
-    assert png.stat().st_size > 1000
-
-
 # --------------------------------------------------------------------------- impulses
 def test_impulse_cycle():
     assert impulse_cycle(preset("3.1", F0=0.0)) == 1
@@ -343,21 +264,7 @@ def test_map_with_impulses_needs_the_common_period():
         poincare_map(ImpactSystem(preset("3.1", omega=math.sqrt(8.0))), [-1.0, 0.0])
 
 
-@pytest.mark.slow
-def test_impulses_turn_the_first_period_doubling_into_a_fold():
-    # with the default impulses the period-1-like orbit (a fixed point of P^14) meets an
-    # impulse with an impact and ends; the period-2-like orbit folds instead of doubling
-    system = ImpactSystem(preset("3.1"), options=SolverOptions(rtol=1e-10, atol=1e-10))
-    ds = continue_orbits(system, "c", 0.1, 0.06, depth=0)
-    kinds = [BIFURCATION_KINDS[k] for k in ds.bifurcation_kind.values]
-    assert "impulse-impact" in kinds and "period-doubling" not in kinds
-    ds2 = continue_orbits(system, "c", 0.06, 0.08, depth=0)
-    folds = ds2.bifurcation_c.values[ds2.bifurcation_kind.values == BIFURCATION_KINDS.index(
-        "fold")]
-    assert len(folds) == 1 and 0.0735 < folds[0] < 0.0737
-
-
-# --------------------------------------------------------------------------- validation, CLI
+# --------------------------------------------------------------------------- validation
 def test_bad_input_is_reported():
     with pytest.raises(ValueError, match="model"):
         ImpactSystem(model="mc")
@@ -369,20 +276,3 @@ def test_bad_input_is_reported():
         poincare_map(ImpactSystem(preset("3.1", F0=0.0)), [0.5, 0.0])
     with pytest.raises(ValueError, match="parameter"):
         continue_orbits(ImpactSystem(preset("3.1", F0=0.0)), "x0", 0.0, 1.0)
-
-
-def test_cli_orbit_and_sweep(tmp_path, capsys):
-    from opa.cli._flags import _model_flags, _solver_flags
-    from opa.cli._stability import register_stability
-
-    parser = argparse.ArgumentParser()
-    register_stability(parser.add_subparsers(), _model_flags, _solver_flags)
-    args = parser.parse_args(["stability", "dmr", "--preset", "3.1", "--F0", "0", "--c", "0.05"])
-    assert args.func(args) == 0
-    out = capsys.readouterr().out
-    assert "period-2 orbit" in out and "-0.3996" in out
-    nc = tmp_path / "b.nc"
-    args = parser.parse_args(["stability", "dmr", "--preset", "3.1", "--F0", "0", "--sweep",
-                              "c=0.095:0.085:10", "--depth", "0", "--out", str(nc)])
-    assert args.func(args) == 0
-    assert "period-doubling  c = 0.0891" in capsys.readouterr().out and nc.exists()

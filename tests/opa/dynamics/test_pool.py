@@ -1,5 +1,7 @@
 """The sweep's process pool cannot outlive the process that made it, even when that
-process is killed outright (SIGKILL: no handler, no shutdown, no atexit)."""
+process is killed outright (SIGKILL: no handler, no shutdown, no atexit): the workers of
+``opa.dynamics._sweep.local_executor`` and its fork server, which preloads
+``opa.dynamics._warm_worker``."""
 
 import os
 import signal

@@ -1,11 +1,14 @@
-"""Tests for ``opa.dynamics._continuation.locate_bifurcations`` and the located bifurcations of
-``opa.dynamics._sweep.sweep`` / ``opa-mc bifurcation`` (one source of truth, issue 15).
+"""Tests for ``opa.dynamics._continuation``: branches of periodic orbits
+(``continue_orbits``, ``locate_period_doubling``) and ``locate_bifurcations``, with the
+located bifurcations of ``opa.dynamics._sweep.sweep`` (one source of truth, issue 15;
+``opa-mc bifurcation`` is tested in ``tests/opa/cli/test_bifurcation.py``).
 
 References: the continuation values of docs/stability.md (finding A: section 3.1 with
 F0 = 0; finding B: the default impulses), checked independently by the Floquet
 multipliers of ``periodic_orbit`` just before and after each located point (a period
 doubling is a multiplier through -1; a fold, where an orbit stops existing), and for
-grazing by the free-flight maximum of the impact-free orbit.
+grazing by the free-flight maximum of the impact-free orbit; a period-doubling point
+located at rtol 1e-9 and 1e-11; the doubled branch against a long brute-force simulation.
 """
 
 from __future__ import annotations
@@ -13,12 +16,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from opa import SolverOptions, preset, simulate_dmr
-from opa import sweep
-from opa.dynamics._sweep import add_located
-from opa.dynamics._sweep import summary_lines
-from opa.dynamics._continuation import BIFURCATION_KINDS, Located, locate_bifurcations
-from opa.dynamics._orbits import ConvergenceError, ImpactSystem, periodic_orbit
+from opa import SolverOptions, preset, simulate_dmr, sweep
+from opa.dynamics._continuation import (
+    BIFURCATION_KINDS,
+    Located,
+    continue_orbits,
+    locate_bifurcations,
+    locate_period_doubling,
+)
+from opa.dynamics._orbits import ConvergenceError, ImpactSystem, periodic_orbit, shoot
+from opa.dynamics._sweep import add_located, summary_lines
 
 # docs/stability.md, finding A (rtol = atol = 1e-10): 1/1 -> 2/2, 2/2 -> 4/4, 4/4 -> 8/8
 F0_ZERO_DOUBLINGS = {1: 0.0891223469, 2: 0.0396996668, 4: 0.0316812257}
@@ -253,21 +260,68 @@ def test_bad_requests_are_refused():
     assert ds.sizes["bifurcation"] == 0
 
 
-# --------------------------------------------------------------------------- command line
-def _cli(argv):
-    from tests.opa.test_bifurcation import cli
+# --------------------------------------------------------------------------- branches
+def test_period_doubling_located_independently_of_tolerance():
+    values = []
+    for tol in (1e-9, 1e-11):
+        system = ImpactSystem(preset("3.1", F0=0.0), options=SolverOptions(rtol=tol, atol=tol))
+        ds = continue_orbits(system, "c", 0.095, 0.085, depth=0)
+        pd = ds.bifurcation_kind.values == BIFURCATION_KINDS.index("period-doubling")
+        assert pd.sum() == 1 and ds.bifurcation_located.values[pd][0] == 1
+        values.append(float(ds.bifurcation_c.values[pd][0]))
+    assert abs(values[0] - values[1]) < 1e-6
+    assert 0.0891 < values[1] < 0.0892
 
-    return cli(argv)
+
+def test_period_doubling_point_has_multiplier_minus_one_and_emr0_agrees():
+    system = ImpactSystem(preset("3.1", F0=0.0))
+    a = periodic_orbit(system.with_parameter("c", 0.092))
+    b = shoot(system.with_parameter("c", 0.087), a.state, periods=1)
+    orbit = locate_period_doubling(system, "c", (0.092, a), (0.087, b))
+    assert np.min(np.abs(orbit.multipliers + 1.0)) < 1e-7
+    assert "period-doubling" in orbit.classify()
+    c_pd = orbit.system.oscillator.c
+    emr0 = ImpactSystem(preset("3.1", F0=0.0), model="opa", order=3, sigma=0.0)
+    y = np.zeros(8)
+    y[0], y[4] = a.state
+    ea = shoot(emr0.with_parameter("c", 0.092), y, periods=1)
+    eb = shoot(emr0.with_parameter("c", 0.087), y, periods=1)
+    e_pd = locate_period_doubling(emr0, "c", (0.092, ea), (0.087, eb))
+    assert abs(e_pd.system.oscillator.c - c_pd) < 1e-8
 
 
-def test_cli_locates_by_default_and_no_locate_skips(capsys):
-    base = ["bifurcation", "dmr", "--preset", "3.1", "--F0", "0", "--sweep", "c=0.08:0.1:5",
-            "--transient", "200", "--record", "40", "--workers", "1"]
-    assert _cli(base) == 0
-    text = capsys.readouterr().out
-    assert "observed periods" in text
-    assert "period-doubling  c = 0.08912234" in text
-    assert _cli(base + ["--no-locate"]) == 0
-    assert "bifurcations not located: locate=False" in capsys.readouterr().out
-    assert "locate=True: the Monte Carlo mean" in _cli(
-        ["bifurcation", "mc", "--sweep", "c=0.05,0.06", "--locate", "--samples", "4"])
+def test_branch_switching_matches_brute_force():
+    system = ImpactSystem(preset("3.1", F0=0.0))
+    ds = continue_orbits(system, "c", 0.095, 0.08, depth=1)
+    assert set(ds.branch_period.values) == {1, 2}
+    pd = int(np.flatnonzero(ds.bifurcation_child.values >= 0)[0])
+    c_pd = float(ds.bifurcation_c[pd])
+    child = int(ds.bifurcation_child[pd])
+    doubled = ds.where(ds.branch == child, drop=True)
+    primary = ds.where(ds.branch == 0, drop=True)
+    # supercritical: the doubled orbits lie below c_pd, stable; the period-1 orbit is
+    # stable above c_pd and unstable below
+    assert np.all(doubled.c.values <= c_pd + 1e-9)
+    assert doubled.stable.values[-1] == 1
+    assert np.all(primary.stable.values[primary.c.values > c_pd + 1e-6] == 1)
+    assert np.all(primary.stable.values[primary.c.values < c_pd - 1e-6] == 0)
+    # the doubled orbit at the end of the interval is the attractor of a long simulation
+    end = int(np.argmin(doubled.c.values))
+    osc = system.oscillator.replace(c=float(doubled.c.values[end]))
+    sim = simulate_dmr(osc, periods=800, options=SolverOptions(rtol=1e-10, atol=1e-10))
+    last = np.sort(sim.x.values[-2:])
+    np.testing.assert_allclose(np.sort(doubled.section_x.values[end, :2]), last, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_impulses_turn_the_first_period_doubling_into_a_fold():
+    # with the default impulses the period-1-like orbit (a fixed point of P^14) meets an
+    # impulse with an impact and ends; the period-2-like orbit folds instead of doubling
+    system = ImpactSystem(preset("3.1"), options=SolverOptions(rtol=1e-10, atol=1e-10))
+    ds = continue_orbits(system, "c", 0.1, 0.06, depth=0)
+    kinds = [BIFURCATION_KINDS[k] for k in ds.bifurcation_kind.values]
+    assert "impulse-impact" in kinds and "period-doubling" not in kinds
+    ds2 = continue_orbits(system, "c", 0.06, 0.08, depth=0)
+    folds = ds2.bifurcation_c.values[ds2.bifurcation_kind.values == BIFURCATION_KINDS.index(
+        "fold")]
+    assert len(folds) == 1 and 0.0735 < folds[0] < 0.0737
