@@ -29,7 +29,7 @@ from scipy.integrate import solve_ivp
 import opa
 from opa import _kernel
 from opa._run import kernel_quadrature, quadrature, run_kernel
-from opa._system import pack_parameters
+from opa._system import System
 
 RHS_ORDERS = [2, 4, 8, 16, 32, 64]
 RHS_EVALUATIONS = 10_000
@@ -51,7 +51,7 @@ def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, work):
 
 def _rhs_inputs(order):
     oscillator = opa.preset("3.2")
-    p, cfg = pack_parameters(oscillator, opa.SolverOptions(), sigma=0.01, order=order)
+    p, cfg = System(oscillator, sigma=0.01, order=order).pack(opa.SolverOptions())
     nodes, weights, basis = kernel_quadrature(quadrature(order))
     y = np.random.default_rng(order).normal(scale=0.3, size=2 * (order + 1))
     out = np.empty_like(y)
@@ -202,7 +202,7 @@ def test_long_run_vs_scipy(benchmark):
     periods = 20 if benchmark.disabled else 1000
     options = opa.SolverOptions(rtol=LONG_TOL, atol=LONG_TOL)
     t_out = np.arange(periods + 1) * (2.0 * math.pi / oscillator.omega)
-    p, cfg = pack_parameters(oscillator, options, sigma=LONG_SIGMA, order=LONG_ORDER)
+    p, cfg = System(oscillator, sigma=LONG_SIGMA, order=LONG_ORDER).pack(options)
     quad = quadrature(LONG_ORDER)
     y0 = np.zeros(2 * (LONG_ORDER + 1))
     y0[0], y0[LONG_ORDER + 1] = oscillator.x0, oscillator.v0

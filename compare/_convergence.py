@@ -34,6 +34,7 @@ from opa._dataset import provenance_attrs, write_netcdf
 from opa._elements import collocation, uniform_edges
 from opa._measure import parse
 from opa._model import Oscillator, SolverOptions, preset, time_grid
+from opa._system import System
 from opa._simulate import simulate_opa
 from opa._run import SimulationError
 
@@ -63,10 +64,22 @@ class ConvergenceConfig:
     seed: int = 1
     outdir: str = "results-elements"
     allow_negative: bool = False
+    impulse: str = "dirac"  # the impulse model: opa.System's fields of the same names
+    pulse_width: float = 0.1
+    impulse_at_zero: bool = True
+
+    @property
+    def system(self) -> System:
+        """The :class:`opa.System` of the study (N = ``order``)."""
+        return System(self.oscillator, sigma=self.sigma, uncertain=self.uncertain,
+                      distribution=self.distribution, allow_negative=self.allow_negative,
+                      order=self.order, impulse=self.impulse, pulse_width=self.pulse_width,
+                      impulse_at_zero=self.impulse_at_zero)
 
     def __post_init__(self):
         if not (self.sigma > 0):
             raise ValueError(f"sigma must be > 0, got {self.sigma}")
+        self.system  # noqa: B018 -- validates the system's fields
         for name in ("uniform", "budgets", "mc_samples", "orders", "single_nodes"):
             seq = getattr(self, name)
             if any(int(v) != v or v < 0 for v in seq):
@@ -96,15 +109,17 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     """
     osc, opts = cfg.oscillator, cfg.options
     measure = parse(cfg.distribution)
+    base = cfg.system.replace(distribution=measure)
     times = time_grid(osc.omega, cfg.periods, cfg.per_period)
-    common = dict(sigma=cfg.sigma, uncertain=cfg.uncertain, times=times, options=opts,
-                  distribution=measure, allow_negative=cfg.allow_negative)
+    common = dict(times=times, options=opts)
     # what every run depends on; the errors also depend on the reference (samples, seed)
     settings = {"oscillator": osc.as_dict(), "options": asdict(opts), "sigma": cfg.sigma,
                 "uncertain": cfg.uncertain, "distribution": cfg.distribution,
                 "periods": cfg.periods, "per_period": cfg.per_period,
                 "allow_negative": cfg.allow_negative, "reference": cfg.reference,
                 "seed": cfg.seed}
+    if (cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero) != ("dirac", 0.1, True):
+        settings["impulse"] = [cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero]
 
     def run(name, spec, compute):
         spec = {**settings, "run": name, **spec}
@@ -112,8 +127,8 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
 
     def reference():
         t0 = time.perf_counter()
-        ref = simulate_mc(osc, samples=cfg.reference, sampler="sobol", seed=cfg.seed,
-                          order=0, progress=False, **common)
+        ref = simulate_mc(base.replace(order=0), samples=cfg.reference, sampler="sobol",
+                          seed=cfg.seed, progress=False, **common)
         return {"x_mean": ref.x_mean.values, "x_var": ref.x_var.values,
                 "x_sem": ref.x_sem.values, "rhs": int(ref.attrs["rhs_evaluations"]),
                 "seconds": time.perf_counter() - t0}
@@ -133,7 +148,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
         def compute():
             t = time.perf_counter()
             try:
-                ds = simulate_opa(osc, order=order, impact_law=law, **common, **kw)
+                ds = simulate_opa(base.replace(order=order, impact_law=law), **common, **kw)
             except SimulationError as err:  # a diverged OPA system: no error to report
                 return {"failure": str(err), "seconds": time.perf_counter() - t}
             sec = time.perf_counter() - t
@@ -180,8 +195,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     def collocation_row(method, edges, nodes):
         def compute():
             t = time.perf_counter()
-            mean, var, rhs = collocation(osc, opts, measure, edges, nodes, sigma=cfg.sigma,
-                                         uncertain=cfg.uncertain, times=times)
+            mean, var, rhs = collocation(base, opts, measure, edges, nodes, times=times)
             sec = time.perf_counter() - t
             e, s = errors(mean, var)
             return {"error": e, "sd_error": s, "rhs": int(rhs), "seconds": sec}
@@ -212,8 +226,8 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
         for m in cfg.mc_samples:
             def compute(sampler=sampler, m=m):
                 t = time.perf_counter()
-                ds = simulate_mc(osc, samples=int(m), sampler=sampler, seed=cfg.seed + 1,
-                                 order=0, progress=False, **common)
+                ds = simulate_mc(base.replace(order=0), samples=int(m), sampler=sampler,
+                                 seed=cfg.seed + 1, progress=False, **common)
                 e, s = errors(ds.x_mean.values, ds.x_var.values)
                 return {"error": e, "sd_error": s, "rhs": int(ds.attrs["rhs_evaluations"]),
                         "seconds": time.perf_counter() - t}
@@ -246,8 +260,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
             "seconds": ("run", np.array(cols[8]), {"long_name": "wall time", "units": "s"}),
         },
         coords={"run": np.arange(len(rows))},
-        attrs=provenance_attrs("convergence", osc, opts, sigma=cfg.sigma, order=cfg.order,
-                               uncertain=cfg.uncertain, seed=cfg.seed, sampler="sobol"),
+        attrs=provenance_attrs("convergence", base, opts, seed=cfg.seed, sampler="sobol"),
     )
     ds.attrs.update(
         periods=float(cfg.periods), per_period=int(cfg.per_period),

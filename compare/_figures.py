@@ -53,6 +53,7 @@ import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
 from opa._model import SolverOptions, check_order, preset  # noqa: E402
+from opa._system import System  # noqa: E402
 from opa.plots._diagrams import (  # noqa: E402
     COLORS,
     SECTION_LABELS,
@@ -130,10 +131,14 @@ class _Context:
     """Sizes and shared resources of one ``reproduce`` call."""
 
     def __init__(self, outdir, sizes: Sizes = DEFAULT_SIZES, *, options=None, order=4,
-                 workers=1, scheduler=None, progress=False, log=None):
+                 impulse="dirac", pulse_width=0.1, workers=1, scheduler=None,
+                 progress=False, log=None):
         self.outdir = os.fspath(outdir)
         self.sizes = sizes
         self.options = options or SolverOptions()
+        # the impulse model of every figure (the System's fields)
+        self.impulse_model = {"impulse": impulse, "pulse_width": pulse_width}
+        self.impulse, self.pulse_width = impulse, pulse_width
         self.order = order
         self.workers = workers
         self.scheduler = scheduler
@@ -156,7 +161,7 @@ class _Context:
         kw = {"transient": s.transient, "record": s.record, **kw}
         ds = sweep(model, param, values, osc, options=self.options, order=self.order,
                    out=out, scheduler=self.scheduler, executor=self.executor,
-                   workers=self.workers, progress=self.progress, **kw)
+                   workers=self.workers, progress=self.progress, **self.impulse_model, **kw)
         if self.log:
             from opa.dynamics._sweep import summary_lines
 
@@ -172,7 +177,7 @@ class _Context:
         # it back within a fraction of a period: resolve that in the drawn trajectory
         per_period = 512 if osc.F0 >= 1.0 else 64
         s = self.sizes
-        return sweep_times(osc, self.options, s.portrait_transient,
+        return sweep_times(System(osc, **self.impulse_model), s.portrait_transient,
                            record or s.portrait_record, per_period)
 
     def run(self, model, osc, *, sigma=0.0, record=None):
@@ -181,10 +186,10 @@ class _Context:
 
         times = self.times(osc, record)
         if model == "dmr":
-            ds = simulate_dmr(osc, times=times, options=self.options)
+            ds = simulate_dmr(osc, times=times, options=self.options, **self.impulse_model)
         else:
             ds = simulate_opa(osc, sigma=sigma, order=self.order, times=times,
-                              options=self.options)
+                              options=self.options, **self.impulse_model)
         ds.attrs["transient"] = self.sizes.portrait_transient
         return ds
 
@@ -195,7 +200,7 @@ class _Context:
         ds = simulate_mc(osc, sigma=sigma, samples=self.sizes.mc_samples, sampler="sobol",
                          seed=0, order=self.order, times=self.times(osc),
                          options=self.options, scheduler=self.scheduler,
-                         progress=self.progress)
+                         progress=self.progress, **self.impulse_model)
         ds.attrs["transient"] = self.sizes.portrait_transient
         return ds
 
@@ -260,7 +265,7 @@ def _write(ctx, drawn: Drawn) -> list[str]:
 def _text(ctx, drawn: Drawn) -> str:
     number = drawn.name[3:]
     s = ctx.sizes
-    lines = [f"Fig. {number}: opa-mc reproduce {drawn.name} (impulse {ctx.options.impulse}, "
+    lines = [f"Fig. {number}: opa-mc reproduce {drawn.name} (impulse {ctx.impulse}, "
              f"OPA order N = {ctx.order}; sweeps {s.count} values, {s.transient} + "
              f"{s.record} periods; portraits {s.portrait_transient} + {s.portrait_record} "
              f"periods; Monte Carlo {s.mc_samples} Sobol samples per portrait, "
@@ -444,18 +449,19 @@ def fig2(ctx):
     heights = {}
     for ax, n, tag in zip(axes, (2, 4), "ab"):
         osc = preset("3.1", n=float(n))
-        T1 = 2 * math.pi / osc.omega1
-        tj = np.arange(0 if ctx.options.impulse_at_zero else 1, int(t_end / T1) + 1) * T1
-        height = osc.F0 * (1 + osc.a1 * np.sin(osc.omega1 * tj / osc.n))
+        system = System(osc, **ctx.impulse_model)
+        T1 = system.impulse_period
+        tj = system.impulse_times(t_end)
+        height = system.impulse_heights(tj)
         heights[n] = height
         tt = np.linspace(0, t_end, 2000)
-        ax.plot(tt, osc.F0 * (1 + osc.a1 * np.sin(osc.omega1 * tt / osc.n)), ":",
+        ax.plot(tt, system.impulse_heights(tt), ":",
                 color="gray", lw=1, label="F0 (1 + a1 sin(ω1 t / n)) (switched signal)")
-        if ctx.options.impulse == "dirac":
+        if ctx.impulse == "dirac":
             ax.vlines(tj, 0, height, color="black", lw=1.5)
             ax.plot(tj, height, "o", color="black", ms=4, label="impulse strength (Dirac)")
         else:
-            tau = ctx.options.pulse_width
+            tau = ctx.pulse_width
             for tk, hk in zip(tj, height):
                 ax.fill_between([tk, tk + tau], 0, hk, color="black", step="pre")
             ax.plot([], [], "s", color="black", label=f"rectangular pulse, width {tau:g}")
@@ -465,11 +471,11 @@ def fig2(ctx):
         ax.set_ylim(-0.005, 2.8 * osc.F0)
         ax.legend(fontsize=7, loc="upper center", ncol=2)
     axes[-1].set_xlabel("t")
-    shape = ("stems: the strengths of the Dirac impulses" if ctx.options.impulse == "dirac"
-             else f"black: rectangular pulses of width {ctx.options.pulse_width:g}")
+    shape = ("stems: the strengths of the Dirac impulses" if ctx.impulse == "dirac"
+             else f"black: rectangular pulses of width {ctx.pulse_width:g}")
     caption = (f"Fig. 2: the impulse force F(t) for F0 = 0.1, a1 = 1, ω1 = 1, 0 ≤ t ≤ "
                f"{t_end:g}: (a) n = 2, (b) n = 4; {shape} at t_j = j 2π/ω1 (j from "
-               f"{0 if ctx.options.impulse_at_zero else 1}); dotted: the switched signal "
+               "0); dotted: the switched signal "
                f"F0 (1 + a1 sin(ω1 t/n)).")
 
     def cycle(h):
@@ -516,7 +522,7 @@ def fig3(ctx):
         _guide_lines(ax, guide, "c = 0.035, 0.05 (Fig. 4)")
         draw_marks(ax, marks)
         _finish_section_panel(ax, f"({tag}) {SECTION_LABELS[section][1]}", n)
-    caption = (f"Fig. 3: bifurcation diagrams vs c, set 3.1 (F0 = 0.1, {ctx.options.impulse} "
+    caption = (f"Fig. 3: bifurcation diagrams vs c, set 3.1 (F0 = 0.1, {ctx.impulse} "
                f"impulses), {s.count} values of c, {s.record} recorded periods after "
                f"{s.transient}: (a) phase plane (x at t = k 2π/ω), (b) constraint plane "
                f"(pre-impact velocity); DMR black circles, EMR_0 orange dots on top; purple: "
@@ -747,7 +753,7 @@ def fig4(ctx):
                      f"{s.portrait_record} periods); "
                      f"{_difference_text(dmr, emr0, m_dmr)}; "
                      f"{_cycle_note(osc, s.portrait_record)}; {_without_impulses(ctx, osc)}.")
-    caption = (f"Fig. 4: set 3.1 (F0 = 0.1, {ctx.options.impulse} impulses), {s.last} of "
+    caption = (f"Fig. 4: set 3.1 (F0 = 0.1, {ctx.impulse} impulses), {s.last} of "
                f"{s.portrait_record} recorded forcing periods after {s.portrait_transient}: "
                f"(a), (c) phase portraits for c = 0.05 and 0.035, DMR (black) and EMR_0 "
                f"(orange dashed), red *: the DMR's Poincaré points t = k 2π/ω; (b), (d) time "
@@ -770,7 +776,7 @@ def fig5(ctx):
                      f"{m_dmr.residual:.2g}); "
                      f"{_difference_text(dmr, emr0, m_dmr)}; "
                      f"{_cycle_note(osc, s.portrait_record)}; {_without_impulses(ctx, osc)}.")
-    caption = (f"Fig. 5: set 3.2 (σ = 0, F0 = 0.1, {ctx.options.impulse} impulses), phase "
+    caption = (f"Fig. 5: set 3.2 (σ = 0, F0 = 0.1, {ctx.impulse} impulses), phase "
                f"portraits of the last {s.last} of {s.portrait_record} recorded periods "
                f"after {s.portrait_transient}: (a) ω = 3.98, (b) ω = 4.2; DMR (black), EMR_0 "
                f"(orange dashed), red ■: the DMR's Poincaré points t = k 2π/ω; panel "
@@ -950,8 +956,7 @@ def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool 
     order = check_order(order)
     os.makedirs(outdir, exist_ok=True)
     ctx = _Context(outdir, sizes or (FULL_SIZES if full else DEFAULT_SIZES),
-                   options=SolverOptions(impulse=impulse, pulse_width=pulse_width),
-                   order=int(order), workers=int(workers), scheduler=scheduler,
+                   impulse=impulse, pulse_width=pulse_width, order=int(order), workers=int(workers), scheduler=scheduler,
                    progress=progress, log=log)
     paths = []
     try:

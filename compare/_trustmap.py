@@ -41,7 +41,6 @@ import json
 import math
 import numbers
 import os
-import re
 import time
 import tomllib
 from dataclasses import dataclass, field
@@ -57,6 +56,7 @@ from opa._memory import check_memory
 from opa._model import (PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
                         preset, time_grid)
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
+from opa._system import IMPULSE_FIELDS, System
 from opa._splits import SPLIT_KINDS, Split, find_splits
 
 VARIANTS = (("mean", "galerkin"), ("ensemble", "galerkin"), ("mean", "paper"),
@@ -94,6 +94,9 @@ class ValidateConfig:
     sigmas: tuple[float, ...] = DEFAULT_SIGMAS
     orders: tuple[int, ...] = tuple(range(9))
     uncertain: str = "mu"
+    impulse: str = "dirac"  # the impulse model: opa.System's fields of the same names
+    pulse_width: float = 0.1
+    impulse_at_zero: bool = True
     horizons: tuple[float, ...] = (10.0, 50.0)
     per_period: int = 8
     samples: int = 1024
@@ -189,6 +192,8 @@ class ValidateConfig:
         outputs = round(max(self.horizons) * self.per_period) + 1
         check_memory(f"horizons up to {max(self.horizons):g} periods x per_period "
                      f"{self.per_period}", outputs * (2 * self.nmax + 8) * 8 * len(VARIANTS))
+        for value in self.values:  # checks the impulse model (e.g. pulse_width < 2 pi/omega1)
+            self.system_at(value)
 
     @property
     def nmax(self) -> int:
@@ -201,23 +206,38 @@ class ValidateConfig:
     def oscillator_at(self, value: float) -> Oscillator:
         return self.oscillator.replace(**{self.parameter: float(value)})
 
+    def system_at(self, value: float, **fields) -> System:
+        """The :class:`opa.System` at one swept value (samples below zero allowed: the map
+        crosses them on purpose), with ``fields`` (sigma, order, ...)."""
+        return System(self.oscillator_at(value), uncertain=self.uncertain, allow_negative=True,
+                      impulse=self.impulse, pulse_width=self.pulse_width,
+                      impulse_at_zero=self.impulse_at_zero, **fields)
+
+    def impulse_key(self) -> list:
+        """The impulse model, for the hashes of the parts (only when not the default, so
+        that the parts of earlier versions stay valid)."""
+        model = [self.impulse, self.pulse_width, self.impulse_at_zero]
+        return [] if model == ["dirac", 0.1, True] else [model]
+
     def key(self, value: float, sigma: float, samples: int) -> str:
         """A hash of everything one Monte Carlo run of the map depends on."""
         return digest([self.oscillator_at(value).as_dict(), dataclasses.asdict(self.options),
                        sigma, self.uncertain, samples, self.seed, max(self.horizons),
-                       self.per_period, self.nmax])
+                       self.per_period, self.nmax, *self.impulse_key()])
 
     def opa_key(self, value: float, sigma: float, order: int) -> str:
         """A hash of everything the OPA runs of the map at one point and one N depend on."""
         return digest(["opa", self.oscillator_at(value).as_dict(),
                        dataclasses.asdict(self.options), float(sigma), int(order),
-                       self.uncertain, VARIANTS, max(self.horizons), self.per_period])
+                       self.uncertain, VARIANTS, max(self.horizons), self.per_period,
+                       *self.impulse_key()])
 
     def splits_key(self, value: float) -> str:
         """A hash of everything the split scan at one swept value depends on."""
         return digest(["splits", self.oscillator_at(value).as_dict(),
                        dataclasses.asdict(self.options), self.uncertain, max(self.sigmas),
-                       min(self.sigmas), self.horizons, self.split_resolution])
+                       min(self.sigmas), self.horizons, self.split_resolution,
+                       *self.impulse_key()])
 
 
 def digest(payload) -> str:
@@ -264,6 +284,9 @@ def load_config(path: str | None, **overrides) -> ValidateConfig:
             raise ValueError(f"config [{name}] must be a table, got {table!r}")
     model = {**model, **(overrides.pop("model", None) or {})}
     solver = {**solver, **(overrides.pop("solver", None) or {})}
+    for name in IMPULSE_FIELDS:  # the impulse model is the system's ([solver] still works)
+        if name in solver:
+            data.setdefault(name, solver.pop(name))
     known = {f.name for f in dataclasses.fields(ValidateConfig)} - {"oscillator", "options"}
     unknown = set(data) - known
     if unknown:
@@ -464,18 +487,17 @@ class _Map:
 
         def compute():
             start = time.perf_counter()
-            ds = simulate_mc(osc, sigma=sigma, samples=samples, sampler="sobol", seed=cfg.seed,
-                             order=0, uncertain=cfg.uncertain, times=times,
-                             options=cfg.options, scheduler=cfg.scheduler,
-                             progress=False, allow_negative=True)
+            ds = simulate_mc(cfg.system_at(value, sigma=sigma, order=0), samples=samples,
+                             sampler="sobol", seed=cfg.seed, times=times, options=cfg.options,
+                             scheduler=cfg.scheduler, progress=False)
             self.mc_runs += 1
             return ds.drop_vars(["xi", "weight", "sample", "n_impacts"]).assign_attrs(
                 impacts_min=int(ds.n_impacts.min()), impacts_max=int(ds.n_impacts.max()),
                 wall_seconds=time.perf_counter() - start)
 
         def check(ds):  # a part of an older version, which stored no key
-            expected = {**provenance_attrs("mc", osc, cfg.options, sigma=sigma,
-                                           uncertain=cfg.uncertain, seed=cfg.seed),
+            expected = {**provenance_attrs("mc", cfg.system_at(value, sigma=sigma),
+                                           cfg.options, seed=cfg.seed),
                         "samples": samples}
             wrong = [f"{name}={_plain(ds.attrs.get(name))!r} (expected {expected[name]!r})"
                      for name in (*PARAMETER_NAMES, "sigma", "uncertain", "seed", "samples",
@@ -496,9 +518,8 @@ class _Map:
         def compute():
             start = time.perf_counter()
             mean, var, first = opa_variants(
-                osc, sigma=sigma, order=order, uncertain=cfg.uncertain,
-                variants=[(law, trunc) for law, trunc in VARIANTS], times=times,
-                options=cfg.options)
+                cfg.system_at(value, sigma=sigma, order=order),
+                [(law, trunc) for law, trunc in VARIANTS], times, cfg.options)
             self.opa_runs += 1
             return {"x_mean": mean, "x_var": var, "first_impact": first,
                     "seconds": time.perf_counter() - start}
@@ -600,9 +621,10 @@ class _Map:
             found = {}
             for h in sorted(cfg.horizons, reverse=True):
                 found[h] = find_splits(
-                    osc, cfg.options, cfg.uncertain, centre - smax, centre + smax, h * T,
+                    cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax, centre + smax, h * T,
                     tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache)
-            seq_centre = cache.get(centre) or _sequence(osc, cfg, cache, centre)
+            seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache,
+                                                        centre)
             scans = []
             for h in cfg.horizons:
                 speed, when = seq_centre.slowest_impact(h * T)
@@ -694,7 +716,8 @@ class _Map:
         value, sigma = cfg.values[0], _phase_sigma(cfg, results[0][2])
         key = digest(["details", cfg.oscillator_at(value).as_dict(),
                       dataclasses.asdict(cfg.options), float(sigma), cfg.nmax, cfg.uncertain,
-                      cfg.horizons, cfg.per_period, cfg.seed, DENSE_PER_PERIOD])
+                      cfg.horizons, cfg.per_period, cfg.seed, DENSE_PER_PERIOD,
+                      *cfg.impulse_key()])
         return self.parts.dataset(f"details_{self._name(value, sigma)}", key,
                                   lambda: _details(cfg, sigma))
 
@@ -720,7 +743,8 @@ def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
         uniform=(), budgets=FRONTIER_BUDGETS, order_budget=FRONTIER_BUDGETS[-1],
         single_nodes=(1, 2, 4, 8), mc_samples=FRONTIER_SAMPLES,
         reference=FRONTIER_REFERENCE, seed=cfg.seed + 1, outdir=cfg.outdir,
-        allow_negative=True)
+        allow_negative=True, impulse=cfg.impulse, pulse_width=cfg.pulse_width,
+        impulse_at_zero=cfg.impulse_at_zero)
     memo = None
     if parts is not None:
         def memo(run, spec, compute):
@@ -735,10 +759,11 @@ def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
     return out
 
 
-def _sequence(osc, cfg, cache, value):
+def _sequence(system, cfg, cache, value):
     from opa._splits import event_sequence
 
-    seq = event_sequence(osc.replace(**{cfg.uncertain: value}), cfg.options, cache["t_end"])
+    seq = event_sequence(system.replace(**{cfg.uncertain: value}), cfg.options,
+                         cache["t_end"])
     cache[value] = seq
     return seq
 
@@ -993,22 +1018,22 @@ def _details(cfg: ValidateConfig, sig: float) -> xr.Dataset:
     times = time_grid(osc.omega, cfg.horizons[0], DENSE_PER_PERIOD)
     curves = {}
     for law in ("mean", "ensemble"):
-        ds = simulate_opa(osc, sigma=sig, order=cfg.nmax, uncertain=cfg.uncertain,
-                          impact_law=law, times=times, options=cfg.options, allow_negative=True)
+        ds = simulate_opa(cfg.system_at(value, sigma=sig, order=cfg.nmax, impact_law=law),
+                          times=times, options=cfg.options)
         curves[law] = (ds.x_mean.values, ds.v_mean.values)
-    ens = simulate_mc(osc, sigma=sig, samples=256, sampler="sobol", seed=cfg.seed, order=0,
-                      uncertain=cfg.uncertain, times=times, options=cfg.options,
-                      progress=False, allow_negative=True, keep_paths=True)
+    ens = simulate_mc(cfg.system_at(value, sigma=sig, order=0), samples=256, sampler="sobol",
+                      seed=cfg.seed, times=times, options=cfg.options, progress=False,
+                      keep_paths=True)
     pick = np.argsort(ens.xi.values)[np.linspace(0, 255, 7).astype(int)]
     long = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
-    dmr = simulate_dmr(osc, times=long, options=cfg.options).x.values
-    emr0 = simulate_opa(osc, sigma=0.0, order=cfg.nmax, times=long, options=cfg.options,
-                        uncertain=cfg.uncertain).x_mean.values
+    dmr = simulate_dmr(cfg.system_at(value), times=long, options=cfg.options).x.values
+    emr0 = simulate_opa(cfg.system_at(value, sigma=0.0, order=cfg.nmax), times=long,
+                        options=cfg.options).x_mean.values
     diff = [float(np.max(np.abs(emr0[: int(round(h * cfg.per_period)) + 1]
                                 - dmr[: int(round(h * cfg.per_period)) + 1])))
             for h in cfg.horizons]
-    emr1 = simulate_opa(osc, sigma=0.0, order=0, times=long, options=cfg.options,
-                        uncertain=cfg.uncertain).x_mean.values
+    emr1 = simulate_opa(cfg.system_at(value, sigma=0.0, order=0), times=long,
+                        options=cfg.options).x_mean.values
     one = {"units": "1"}
     return xr.Dataset(
         {
@@ -1040,11 +1065,11 @@ def _details(cfg: ValidateConfig, sig: float) -> xr.Dataset:
 
 
 def _attrs(cfg: ValidateConfig) -> dict:
-    attrs = provenance_attrs(
-        "validate", cfg.oscillator, cfg.options, sigma=max(cfg.sigmas), order=cfg.nmax,
-        uncertain=cfg.uncertain, truncation="galerkin,paper", impact_law="mean,ensemble,saltation",
-        seed=cfg.seed, sampler="sobol",
-    )
+    attrs = provenance_attrs("validate", cfg.system_at(cfg.values[0], sigma=max(cfg.sigmas),
+                                                        order=cfg.nmax),
+                             cfg.options, seed=cfg.seed, sampler="sobol")
+    attrs.update({cfg.parameter: float(cfg.oscillator.as_dict()[cfg.parameter]),
+                  "truncation": "galerkin,paper", "impact_law": "mean,ensemble,saltation"})
     attrs.update(
         preset=cfg.preset, parameter=cfg.parameter, samples=int(cfg.samples),
         max_samples=int(cfg.max_samples), per_period=int(cfg.per_period),

@@ -105,8 +105,8 @@ def impulses():
         print("   from the orbit at c = 0.05, both ways:")
         _print(up)
     print("  pulse impulses (width 0.1), rtol 1e-10:")
-    system = ImpactSystem(preset("3.1"), options=SolverOptions(rtol=1e-10, atol=1e-10,
-                                                               impulse="pulse"))
+    system = ImpactSystem(preset("3.1"), impulse="pulse",
+                          options=SolverOptions(rtol=1e-10, atol=1e-10))
     _print(continue_orbits(system, "c", 0.1, 0.02, seed=0.05, depth=1, max_multiplier=100))
 
 

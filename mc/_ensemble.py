@@ -40,9 +40,14 @@ from opa import _kernel as K
 from opa._basis import chebyshev_u, orthonormal
 from opa._dataset import package_version, provenance_attrs, time_coord
 from opa._memory import check_memory
-from opa._model import Oscillator, SolverOptions, Uncertainty, check_instance, check_order
+from opa._model import Oscillator, SolverOptions, check_instance
 from opa._run import SimulationError, output_times, run_batch, sampled_batch
-from opa._system import pack_parameters
+from opa._system import IMPULSE_FIELDS, System, as_system
+
+#: the System fields a Monte Carlo ensemble takes (it has no closures: each sample is the
+#: true impact system)
+MC_FIELDS = ("sigma", "uncertain", "distribution", "allow_negative", "order",
+             *IMPULSE_FIELDS)
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -200,16 +205,12 @@ def _chunk_size(n_times: int, requested: int | None) -> int:
 
 
 def simulate_mc(
-    oscillator: Oscillator | None = None,
+    system: System | Oscillator | None = None,
     *,
-    sigma: float = 0.01,
     samples: int = 1024,
     sampler: str = "sobol",
     seed: int | None = 0,
     replicates: int | None = None,
-    order: int = 4,
-    uncertain: str = "mu",
-    allow_negative: bool = False,
     periods: float = 100,
     per_period: int = 1,
     options: SolverOptions | None = None,
@@ -218,17 +219,21 @@ def simulate_mc(
     chunk_size: int | None = None,
     scheduler: str | Client | None = None,
     progress: bool | None = None,
-    distribution=None,
     checkpoint: str | os.PathLike | None = None,
     connect_timeout: float = 5.0,
     worker_timeout: float | None = 60.0,
     log: Callable[[str], object] | None = None,
+    **fields,
 ) -> xr.Dataset:
     """Monte Carlo ensemble of the sampled impact system, eq. (1), p = p_bar + sigma xi.
 
     Parameters
     ----------
-    sigma, uncertain : intensity and name of the uncertain parameter (mu, a or c).
+    system : an :class:`opa.System`, or an :class:`opa.Oscillator` (paper defaults when
+        omitted) with these System fields as keywords: ``sigma`` (default 0.01) and
+        ``uncertain`` (mu, a or c), the intensity and name of the uncertain parameter;
+        ``distribution`` (the law of xi, default the semicircle); ``allow_negative``;
+        ``order`` (below); ``impulse``, ``pulse_width``, ``impulse_at_zero``.
     samples, sampler, seed : M samples of xi from ``random``, ``sobol`` (scrambled) or
         ``gauss`` (M collocation nodes with their weights); the same seed gives the same
         result whatever the thread count or scheduler.
@@ -289,8 +294,9 @@ def simulate_mc(
         The Dask cluster lost all its workers (or never had any) for ``worker_timeout``
         seconds, a chunk killed the workers that ran it, or the scheduler went away.
     """
-    oscillator = check_instance("oscillator", oscillator, Oscillator, Oscillator())
     options = check_instance("options", options, SolverOptions, SolverOptions())
+    system = as_system(system, options, allowed=MC_FIELDS, where="simulate_mc", **fields)
+    oscillator, order, uncertain = system.oscillator, system.order, system.uncertain
     for name, flag in (("keep_paths", keep_paths), ("progress", progress)):
         if flag not in (True, False, None) or isinstance(flag, str) or \
                 (name == "keep_paths" and flag is None):
@@ -302,14 +308,12 @@ def simulate_mc(
                          f"{samples}")
     check_memory("sampling", samples * SAMPLE_BYTES,
                  f"samples {samples} x {SAMPLE_BYTES} bytes")
-    order = check_order(order)
     _check_dask_timeouts(connect_timeout, worker_timeout)
     if checkpoint is not None and not isinstance(checkpoint, (str, os.PathLike)):
         raise ValueError(f"checkpoint must be a directory path, got {checkpoint!r:.60}")
     if scheduler is not None and not isinstance(scheduler, str):
         _connect(scheduler, connect_timeout)  # only checks that it is a Client
-    unc = Uncertainty(sigma, uncertain, allow_negative)
-    unc.check(oscillator)
+    system.check_samples()
     times = output_times(oscillator, periods, per_period, times)
     T = len(times)
     if sampler != "sobol":
@@ -326,15 +330,7 @@ def simulate_mc(
     check_memory("x_coef", (order + 1) * T * 8 * 2,
                  f"order + 1 = {order + 1} coefficients x {T} outputs, running sum and "
                  f"a chunk's")
-    measure = None
-    if distribution is not None:
-        from opa._measure import parse
-        from opa._run import check_support
-
-        measure = parse(distribution)
-        check_support(oscillator, unc, measure)
-        if measure.name == "semicircle" and measure.is_whole:
-            measure = None
+    measure = None if system.semicircle else system.measure
     xi, w = sample_xi(sampler, samples, seed, replicates, distribution=measure)
     check_memory("the replicate sums", 3 * replicates * T * 8 * 2,
                  f"3 x replicates {replicates} x {T} outputs, running sums and a chunk's")
@@ -343,7 +339,7 @@ def simulate_mc(
                  f"{T} outputs, running sums and a chunk's")
     recurrence = None if measure is None else measure.recurrence(order + 1)
     rep = np.arange(len(xi)) // (len(xi) // replicates)
-    p, cfg = pack_parameters(oscillator, options, sigma=unc.sigma, uncertain=uncertain)
+    p, cfg = system.replace(order=0).pack(options)
     y0 = np.array([oscillator.x0, oscillator.v0])
     bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
     args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths, recurrence)
@@ -355,8 +351,8 @@ def simulate_mc(
         store, finished = None, set()
         if checkpoint is not None:
             store = Checkpoint(checkpoint, _manifest(
-                oscillator, options, unc, sampler, samples, seed, replicates, order, times,
-                measure, recurrence, xi, w, bounds, keep_paths), log)
+                system, options, sampler, samples, seed, replicates, times, measure,
+                recurrence, xi, w, bounds, keep_paths), log)
             finished = store.finished(bounds, check)
             if finished and log is not None:
                 log(f"resuming from checkpoint {store.directory}: {len(finished)} of "
@@ -378,7 +374,7 @@ def simulate_mc(
                     m, xi_m, code = extra
                     raise SimulationError(
                         f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {uncertain} = "
-                        f"{getattr(oscillator, uncertain) + unc.sigma * xi_m:.6g}) stopped: "
+                        f"{getattr(oscillator, uncertain) + system.sigma * xi_m:.6g}) stopped: "
                         f"{K.STATUS_MESSAGES[code]}"
                     )
                 n_impacts[lo:hi] = imp
@@ -390,8 +386,8 @@ def simulate_mc(
     finally:
         if own:
             client.close()
-    return _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler,
-                    seed, order, replicates, "semicircle" if measure is None else measure.name)
+    return _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,
+                    replicates, "semicircle" if measure is None else measure.name)
 
 
 def _check_dask_timeouts(connect_timeout, worker_timeout) -> None:
@@ -410,8 +406,8 @@ def _check_dask_timeouts(connect_timeout, worker_timeout) -> None:
             raise ValueError(f"{name} must be {allowed}, got {value!r}")
 
 
-def _manifest(oscillator, options, unc, sampler, samples, seed, replicates, order, times,
-              measure, recurrence, xi, w, bounds, keep_paths) -> dict:
+def _manifest(system, options, sampler, samples, seed, replicates, times, measure,
+              recurrence, xi, w, bounds, keep_paths) -> dict:
     """Everything that determines the result of a run, for its checkpoint."""
     if measure is None:
         law = "semicircle"
@@ -421,16 +417,17 @@ def _manifest(oscillator, options, unc, sampler, samples, seed, replicates, orde
         law["recurrence"] = [digest(np.asarray(c)) for c in recurrence]
     return {
         "opa_mc_version": package_version(),
-        "oscillator": oscillator.as_dict(),
+        "oscillator": system.oscillator.as_dict(),
         "options": dataclasses.asdict(options),
-        "sigma": unc.sigma,
-        "uncertain": unc.parameter,
+        "impulse": {k: getattr(system, k) for k in IMPULSE_FIELDS},
+        "sigma": system.sigma,
+        "uncertain": system.uncertain,
         "distribution": law,
         "sampler": sampler,
         "samples": samples,
         "seed": None if seed is None else int(seed),
         "replicates": int(replicates),
-        "order": int(order),
+        "order": int(system.order),
         "times": {"count": len(times), "first": float(times[0]), "last": float(times[-1]),
                   "sha256": digest(times)},
         "xi": digest(xi),
@@ -702,8 +699,8 @@ class _Watchdog:
                             f"unfinished; start workers or raise worker_timeout")
 
 
-def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sampler, seed,
-             order, replicates, distribution="semicircle"):
+def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,
+             replicates, distribution="semicircle"):
     M = total.count
     if sampler == "gauss":
         x_var = total.x_m2 / total.weight
@@ -760,12 +757,11 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
                                                           "units": "1"})
     ds = xr.Dataset(
         data,
-        coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1)),
+        coords={**time_coord(times, system.oscillator.omega),
+                "order": ("order", np.arange(system.order + 1)),
                 "sample": ("sample", np.arange(M))},
-        attrs=provenance_attrs(
-            "mc", oscillator, options, sigma=unc.sigma, order=order, uncertain=unc.parameter,
-            seed=-1 if seed is None else int(seed), sampler=sampler,
-        ),
+        attrs=provenance_attrs("mc", system, options, sampler=sampler,
+                               seed=-1 if seed is None else int(seed)),
     )
     ds.attrs["samples"] = int(M)
     ds.attrs["replicates"] = int(replicates)
@@ -775,6 +771,5 @@ def _dataset(total, xi, w, n_impacts, paths, times, oscillator, options, unc, sa
         else "sqrt(Var/M)"
     )
     ds.attrs["rhs_evaluations"] = int(total.rhs_evaluations)
-    ds.attrs["allow_negative"] = int(unc.allow_negative)
     ds.attrs["distribution"] = distribution
     return ds

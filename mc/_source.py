@@ -14,10 +14,9 @@ from mc._ensemble import simulate_mc
 def sweep_source(task, times: np.ndarray) -> dict:
     """One sweep point of the Monte Carlo mean: ``task.samples`` sampled systems, their
     mean state at ``times`` (no impact log: the mean has none)."""
-    ds = simulate_mc(task.oscillator, sigma=task.sigma, samples=task.samples,
-                     sampler=task.sampler, seed=task.seed, order=0, uncertain=task.uncertain,
-                     allow_negative=task.allow_negative, times=times, options=task.options,
-                     progress=False)
+    ds = simulate_mc(task.system.replace(order=0, truncation="galerkin", impact_law="mean"),
+                     samples=task.samples, sampler=task.sampler, seed=task.seed, times=times,
+                     options=task.options, progress=False)
     x, v = ds.x_mean.values, ds.v_mean.values
     return {"x": x, "v": v, "impact_time": None, "impact_velocity": None,
             "stick_time": np.zeros(0), "release_time": np.zeros(0),

@@ -6,6 +6,7 @@ Public names are re-exported here; every other module is private.
 from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, triple_product
 from opa._dataset import write_netcdf
 from opa._model import Oscillator, SolverOptions, Uncertainty, preset, time_grid
+from opa._system import System
 from opa._shims import reproduce, sweep
 from opa.dynamics._continuation import Located, continue_orbits, locate_bifurcations
 from opa.dynamics._sections import Motion, constraint_section, detect_period, identify_motion, phase_section
@@ -34,6 +35,7 @@ def __getattr__(name: str):
 
 __all__ = [
     "Oscillator",
+    "System",
     "SolverOptions",
     "Uncertainty",
     "SimulationError",

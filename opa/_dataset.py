@@ -15,7 +15,7 @@ from importlib import metadata
 import numpy as np
 
 from opa._lazy import lazy
-from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions
+from opa._model import PARAMETER_NAMES, SolverOptions
 
 xr = lazy("xarray")
 
@@ -27,35 +27,17 @@ def package_version() -> str:
         return "0+unknown"
 
 
-def provenance_attrs(
-    model: str,
-    oscillator: Oscillator,
-    options: SolverOptions,
-    *,
-    sigma: float = 0.0,
-    order: int = 0,
-    uncertain: str = "mu",
-    truncation: str = "galerkin",
-    impact_law: str = "mean",
-    seed: int = -1,
-    sampler: str = "none",
-) -> dict:
-    """Attributes every dataset carries: each parameter by its name and the choices made.
+def provenance_attrs(model: str, system, options: SolverOptions, *, seed: int = -1,
+                     sampler: str = "none") -> dict:
+    """Attributes every dataset carries: each parameter by its name and the choices made
+    (the :class:`opa.System`'s and the solver's).
 
     netCDF attributes cannot be bools, dicts or None, so flags are stored as 0/1 ints,
     a missing seed as -1 and a missing sampler as "none".
     """
-    attrs = {name: float(getattr(oscillator, name)) for name in PARAMETER_NAMES}
+    attrs = {name: float(getattr(system.oscillator, name)) for name in PARAMETER_NAMES}
+    attrs.update(model=model, **system.dataset_attrs())
     attrs.update(
-        model=model,
-        sigma=float(sigma),
-        N=int(order),
-        uncertain=uncertain,
-        impulse=options.impulse,
-        pulse_width=float(options.pulse_width),
-        impulse_at_zero=int(bool(options.impulse_at_zero)),
-        truncation=truncation,
-        impact_law=impact_law,
         rtol=float(options.rtol),
         atol=float(options.atol),
         method=options.method,

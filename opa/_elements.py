@@ -33,9 +33,9 @@ import numpy as np
 from opa import _kernel as K
 from opa._basis import quadrature_order
 from opa._measure import Measure
-from opa._model import Oscillator, SolverOptions
+from opa._model import SolverOptions
 from opa._run import quadrature, run_batch, sampled_batch
-from opa._system import pack_parameters
+from opa._system import System
 
 MAX_ELEMENTS = 256
 # Splits located before the edges are chosen (all of them in the cases measured: 192 at
@@ -84,15 +84,14 @@ def element_rule(measure: Measure, order: int):
     return nodes, weights, np.ascontiguousarray(basis)
 
 
-def run_elements(oscillator: Oscillator, options: SolverOptions, measures: list[Measure], *,
-                 sigma: float, order: int, uncertain: str, impact_law: str,
+def run_elements(system: System, options: SolverOptions, measures: list[Measure], *,
                  times: np.ndarray, partial: bool = False) -> list[ElementRun]:
     """The OPA systems of several elements over ``times``, in parallel (compiled kernel).
 
     An element whose system cannot be completed raises :class:`SimulationError`, or with
     ``partial`` comes back with NaN after the failure and the reason in ``failure``."""
-    p, cfg = pack_parameters(oscillator, options, sigma=sigma, order=order,
-                             uncertain=uncertain, truncation="galerkin", impact_law=impact_law)
+    p, cfg = system.replace(truncation="galerkin").pack(options)
+    oscillator, order = system.oscillator, system.order
     dim = 2 * (order + 1)
     y0 = np.zeros(dim)
     y0[0] = oscillator.x0
@@ -125,9 +124,9 @@ def run_elements(oscillator: Oscillator, options: SolverOptions, measures: list[
             for e, m in enumerate(measures)]
 
 
-def run_element(oscillator, options, measure, **kw) -> ElementRun:
+def run_element(system, options, measure, **kw) -> ElementRun:
     """One element's OPA system (see :func:`run_elements`)."""
-    return run_elements(oscillator, options, [measure], **kw)[0]
+    return run_elements(system, options, [measure], **kw)[0]
 
 
 def assemble(runs: list[ElementRun]) -> dict[str, np.ndarray]:
@@ -156,22 +155,23 @@ def uniform_edges(measure: Measure, count: int) -> np.ndarray:
     return np.maximum.accumulate(edges)
 
 
-def split_edges(oscillator, options, measure, *, sigma, uncertain, t_end, max_splits=64,
+def split_edges(system, options, measure, *, t_end, max_splits=64,
                 tol=1e-6) -> tuple[np.ndarray, list]:
     """Edges at the splits of the sampled systems' impact sequences up to ``t_end`` (xi
     located to ``tol``); returns the edges and the splits."""
     from opa._splits import find_splits
 
-    centre = getattr(oscillator, uncertain)
+    sigma, uncertain = system.sigma, system.uncertain
+    centre = getattr(system.oscillator, uncertain)
     if sigma == 0.0:
         return np.array([measure.lo, measure.hi]), []
-    key = (oscillator, options, uncertain, sigma, measure.name, measure.lo, measure.hi,
-           t_end, max_splits, tol)
+    key = (system.deterministic(), options, uncertain, sigma, measure.name, measure.lo,
+           measure.hi, t_end, max_splits, tol)
     if key not in _SPLIT_CACHE:
         if len(_SPLIT_CACHE) >= 8:
             _SPLIT_CACHE.pop(next(iter(_SPLIT_CACHE)))
         _SPLIT_CACHE[key] = find_splits(
-            oscillator, options, uncertain, centre + sigma * measure.lo,
+            system, options, uncertain, centre + sigma * measure.lo,
             centre + sigma * measure.hi, t_end, tol=tol * sigma, max_splits=max_splits,
             center=centre, order="generation")[0]
     found = _SPLIT_CACHE[key]
@@ -194,8 +194,7 @@ def merge_smallest(measure: Measure, edges, count: int) -> np.ndarray:
     return np.array(edges)
 
 
-def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, impact_law,
-                   times, tolerance, max_elements, log=None):
+def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, log=None):
     """Edges at the splits, then halving of the element with the largest variance share
     ``P_k max_t s_k(t)`` until it is below ``tolerance`` or ``max_elements`` is reached.
 
@@ -206,16 +205,12 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
                          f"{max_elements!r}")
     if not (tolerance > 0 and math.isfinite(tolerance)):
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
-    edges, _ = split_edges(oscillator, options, measure, sigma=sigma, uncertain=uncertain,
-                           t_end=float(times[-1]),
+    edges, _ = split_edges(system, options, measure, t_end=float(times[-1]),
                            max_splits=min(SPLIT_BUDGET, SPLITS_PER_ELEMENT * max_elements))
     edges = merge_smallest(measure, edges, max(1, max_elements // SPLIT_SHARE))
-    kw = dict(sigma=sigma, order=order, uncertain=uncertain, impact_law=impact_law,
-              times=times)
-
     def run(pairs):
-        return run_elements(oscillator, options, [measure.restrict(a, b) for a, b in pairs],
-                            partial=True, **kw)
+        return run_elements(system, options, [measure.restrict(a, b) for a, b in pairs],
+                            times=times, partial=True)
 
     runs = run(list(zip(edges[:-1], edges[1:])))
     history = []
@@ -260,7 +255,7 @@ def adaptive_edges(oscillator, options, measure, *, sigma, order, uncertain, imp
     return runs, history
 
 
-def collocation(oscillator, options, measure, edges, q, *, sigma, uncertain, times):
+def collocation(system, options, measure, edges, q, *, times):
     """Multi-element Gauss collocation: the q-point rule of each element's law, each node
     a true impact system. Returns (x_mean, x_var, rhs evaluations)."""
     xs, ws = [], []
@@ -272,8 +267,9 @@ def collocation(oscillator, options, measure, edges, q, *, sigma, uncertain, tim
     xi = np.concatenate(xs)
     w = np.concatenate(ws)
     w = w / w.sum()
-    p, cfg = pack_parameters(oscillator, options, sigma=sigma, uncertain=uncertain)
+    p, cfg = system.pack(options)
     P, cfgs, rule = sampled_batch(p, cfg, xi=xi)
+    oscillator = system.oscillator
     paths, _, counters = run_batch(np.array([oscillator.x0, oscillator.v0]), times, P, cfgs,
                                    rule, rtol=options.rtol, atol=options.atol,
                                    stop_on_failure=True)
@@ -297,26 +293,23 @@ def timed(fn, *args, **kwargs):
 
 
 
-def simulate_elements(oscillator, *, sigma, order, uncertain, impact_law, truncation,
-                      options, times, unc, measure, elements, tolerance, max_elements,
-                      allow_negative, log=None):
+def simulate_elements(system, *, options, times, elements, tolerance, max_elements, log=None):
     """The multi-element OPA dataset (see :func:`opa.simulate_opa`)."""
     import xarray as xr
 
     from opa._dataset import provenance_attrs, time_coord
 
-    if truncation != "galerkin":
+    oscillator, order, measure = system.oscillator, system.order, system.measure
+    if system.truncation != "galerkin":
         raise ValueError("truncation='paper' is eq. (27) of the semicircle basis on the whole "
                          "support; with elements or another distribution use 'galerkin'")
-    kw = dict(sigma=unc.sigma, order=order, uncertain=uncertain, impact_law=impact_law,
-              times=times)
     history = []
     if isinstance(elements, str):
         if elements != "adaptive":
             raise ValueError(f"elements must be a positive integer, 'adaptive' or a list of "
                              f"edges, got {elements!r}")
-        runs, history = adaptive_edges(oscillator, options, measure, tolerance=tolerance,
-                                       max_elements=max_elements, log=log, **kw)
+        runs, history = adaptive_edges(system, options, measure, times=times,
+                                       tolerance=tolerance, max_elements=max_elements, log=log)
     else:
         if np.ndim(elements) == 0:
             edges = uniform_edges(measure, elements)
@@ -326,9 +319,9 @@ def simulate_elements(oscillator, *, sigma, order, uncertain, impact_law, trunca
                     or edges[0] != measure.lo or edges[-1] != measure.hi):
                 raise ValueError(f"element edges must increase from {measure.lo} to "
                                  f"{measure.hi}, got {elements!r}")
-        runs = run_elements(oscillator, options,
+        runs = run_elements(system, options,
                             [measure.restrict(a, b) for a, b in zip(edges[:-1], edges[1:])],
-                            **kw)
+                            times=times)
     stats = assemble(runs)
     one = {"units": "1"}
     edges = np.array([r.a for r in runs] + [runs[-1].b])
@@ -359,16 +352,13 @@ def simulate_elements(oscillator, *, sigma, order, uncertain, impact_law, trunca
         coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1)),
                 "element": ("element", np.arange(len(runs))),
                 "edge": ("edge", np.arange(len(runs) + 1))},
-        attrs=provenance_attrs("opa", oscillator, options, sigma=unc.sigma, order=order,
-                               uncertain=uncertain, truncation=truncation,
-                               impact_law=impact_law),
+        attrs=provenance_attrs("opa", system, options),
     )
     ds.attrs.update(
         distribution=measure.name, elements=len(runs),
         element_mode=("adaptive" if isinstance(elements, str) else
                       "uniform" if np.ndim(elements) == 0 else "edges"),
         rhs_evaluations=int(sum(r.rhs_evaluations for r in runs)),
-        allow_negative=int(allow_negative),
     )
     if history:
         ds["refinement_elements"] = ("refinement", np.array([h[0] for h in history]),

@@ -13,7 +13,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import numbers
-from dataclasses import dataclass
+import warnings
+from dataclasses import InitVar, dataclass
 
 PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n", "x0", "v0")
 UNCERTAIN_PARAMETERS = ("mu", "a", "c")
@@ -180,14 +181,13 @@ def preset(name: str, **changes) -> Oscillator:
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """Numerical and modelling choices of the integrator (README, 'Choices the paper leaves open').
+    """Numerical choices of the integrator (README, 'Choices the paper leaves open').
+
+    The impulse model (``impulse``, ``pulse_width``, ``impulse_at_zero``) belongs to the
+    system (``opa.System``); passing it here still works but is deprecated.
 
     Attributes
     ----------
-    impulse : "dirac" (velocity jump at t_j = j 2 pi / omega1) or "pulse" (rectangular
-        force of the same height and width ``pulse_width`` starting at t_j).
-    pulse_width : width tau of the rectangular pulses, 0 < tau < 2 pi / omega1.
-    impulse_at_zero : whether the train includes j = 0 (an impulse at t = 0).
     rtol, atol : tolerances of the error control (max-norm over the components).
     method : the Runge-Kutta pair: "dop853" (Dormand-Prince 8(5,3) with its seventh-order
         dense output, the default: fewer steps at the tolerances of this project, 1e-8 to
@@ -199,30 +199,35 @@ class SolverOptions:
     max_step : upper bound on the step size.
     """
 
-    impulse: str = "dirac"
-    pulse_width: float = 0.1
-    impulse_at_zero: bool = True
     rtol: float = 1e-10
     atol: float = 1e-10
     max_steps: int = 50_000_000
     chatter_velocity: float = 1e-6
     max_step: float = math.inf
     method: str = "dop853"
+    impulse: InitVar[str | None] = None
+    pulse_width: InitVar[float | None] = None
+    impulse_at_zero: InitVar[bool | None] = None
 
-    def __post_init__(self):
-        _choice("impulse", self.impulse, IMPULSE_MODELS)
+    def __post_init__(self, impulse, pulse_width, impulse_at_zero):
+        legacy = {name: value for name, value in (("impulse", impulse),
+                                                  ("pulse_width", pulse_width),
+                                                  ("impulse_at_zero", impulse_at_zero))
+                  if value is not None}
+        if legacy:
+            warnings.warn(
+                f"SolverOptions({', '.join(legacy)}=...) is deprecated: the impulse model "
+                f"belongs to the system, opa.System({', '.join(legacy)}=...), or the same "
+                f"keywords of simulate_dmr, simulate_opa, simulate_mc and sweep",
+                DeprecationWarning, stacklevel=3)
+        # read by opa._system.as_system, which hands it to the System it builds
+        object.__setattr__(self, "legacy_impulse", legacy)
         _choice("method", self.method, METHODS)
-        if isinstance(self.impulse_at_zero, str) or self.impulse_at_zero not in (True, False, 0, 1):
-            raise ValueError(f"impulse_at_zero must be True or False, got {self.impulse_at_zero!r}")
         for name in ("rtol", "atol"):
             value = _finite(name, getattr(self, name))
             if not 1e-15 <= value < 1.0:
                 raise ValueError(f"{name} must be in [1e-15, 1), got {value}")
             object.__setattr__(self, name, value)
-        tau = _finite("pulse_width", self.pulse_width)
-        if tau <= 0.0:
-            raise ValueError(f"pulse_width must be > 0, got {tau}")
-        object.__setattr__(self, "pulse_width", tau)
         steps = self.max_steps
         whole = isinstance(steps, numbers.Integral) or (
             isinstance(steps, float) and steps.is_integer()
@@ -243,6 +248,19 @@ class SolverOptions:
         if not max_step > 0.0 or math.isnan(max_step):
             raise ValueError(f"max_step must be > 0, got {max_step}")
         object.__setattr__(self, "max_step", max_step)
+
+
+def _legacy(name: str) -> property:
+    return property(lambda self: self.legacy_impulse.get(name),
+                    doc=f"Deprecated: the {name} given to SolverOptions, or None (the system's "
+                        f"is opa.System.{name}).")
+
+
+# the deprecated impulse keywords are init-only; reading them back gives what was given
+# (None when nothing was), so dataclasses.replace carries them over
+for _name in ("impulse", "pulse_width", "impulse_at_zero"):
+    setattr(SolverOptions, _name, _legacy(_name))
+del _name
 
 
 @dataclass(frozen=True)

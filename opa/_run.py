@@ -11,7 +11,7 @@ import numpy as np
 from opa import _kernel as K
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
 from opa._memory import check_memory
-from opa._model import Oscillator, Uncertainty, check_span, time_grid
+from opa._model import check_span, time_grid
 
 
 class SimulationError(RuntimeError):
@@ -180,17 +180,6 @@ def output_times(oscillator, periods, per_period, times, dim: int = 2):
 
     check_memory(f"{len(times)} outputs x {dim} states", len(times) * (dim + 1) * 8 * 2)
     return times
-
-
-def check_support(oscillator: Oscillator, unc: Uncertainty, measure) -> None:
-    """Refuse samples p_bar + sigma xi < 0 over xi's support unless allowed."""
-    mean = getattr(oscillator, unc.parameter)
-    lowest = mean + unc.sigma * measure.lo
-    if not unc.allow_negative and lowest < 0.0 <= mean:
-        raise ValueError(
-            f"sigma = {unc.sigma} with xi down to {measure.lo:g} makes {unc.parameter} = "
-            f"{lowest:.6g} negative for some samples; pass allow_negative=True "
-            f"(--allow-negative) if that is intended")
 
 
 def event_vars(log: np.ndarray) -> dict:

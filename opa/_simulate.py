@@ -14,16 +14,10 @@ from opa._dataset import provenance_attrs, time_coord
 from opa._lazy import lazy
 from opa._model import (
     check_instance,
-    check_order,
-    IMPACT_LAWS,
-    TRUNCATIONS,
     Oscillator,
     SolverOptions,
-    Uncertainty,
-    _choice,
 )
 from opa._run import (
-    check_support,
     event_vars,
     kernel_quadrature,
     output_times,
@@ -31,27 +25,31 @@ from opa._run import (
     run_batch,
     run_kernel,
 )
-from opa._system import pack_parameters
+from opa._system import IMPULSE_FIELDS, System, as_system
 
 xr = lazy("xarray")
 
 
 def simulate_dmr(
-    oscillator: Oscillator | None = None,
+    system: System | Oscillator | None = None,
     *,
     periods: float = 100,
     per_period: int = 1,
     options: SolverOptions | None = None,
     times: np.ndarray | None = None,
+    **impulse_model,
 ) -> xr.Dataset:
     """One deterministic trajectory of the impact oscillator (the DMR, eq. (29)).
 
     Parameters
     ----------
-    oscillator : model parameters (paper defaults when omitted).
+    system : an :class:`opa.System` (its oscillator and impulse model; the uncertainty is
+        not part of the DMR) or an :class:`opa.Oscillator` (paper defaults when omitted).
     periods, per_period : output times t_j = j (2 pi/omega)/K, j = 0..P K; K = 1 gives
         the stroboscopic samples. ``times`` overrides this grid.
-    options : solver options (impulse model, tolerances, ...).
+    options : solver options (tolerances, method, ...).
+    impulse, pulse_width, impulse_at_zero : the impulse model, when ``system`` is an
+        Oscillator (:class:`opa.System`).
 
     Returns
     -------
@@ -65,10 +63,12 @@ def simulate_dmr(
     >>> ds.x.sizes["time"]
     11
     """
-    oscillator = check_instance("oscillator", oscillator, Oscillator, Oscillator())
     options = check_instance("options", options, SolverOptions, SolverOptions())
+    system = as_system(system, options, allowed=IMPULSE_FIELDS, where="simulate_dmr",
+                       **impulse_model).deterministic()
+    oscillator = system.oscillator
     times = output_times(oscillator, periods, per_period, times)
-    p, cfg = pack_parameters(oscillator, options)
+    p, cfg = system.pack(options)
     out, log, stats = run_kernel(
         [oscillator.x0, oscillator.v0], times, p, cfg, quadrature(0),
         rtol=options.rtol, atol=options.atol, label="DMR trajectory",
@@ -80,31 +80,25 @@ def simulate_dmr(
             **event_vars(log),
         },
         coords=time_coord(times, oscillator.omega),
-        attrs=provenance_attrs("dmr", oscillator, options),
+        attrs=provenance_attrs("dmr", system, options),
     )
     ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"])
     return ds
 
 
 def simulate_opa(
-    oscillator: Oscillator | None = None,
+    system: System | Oscillator | None = None,
     *,
-    sigma: float = 0.0,
-    order: int = 4,
-    uncertain: str = "mu",
-    truncation: str = "galerkin",
-    impact_law: str = "mean",
-    allow_negative: bool = False,
     periods: float = 100,
     per_period: int = 1,
     options: SolverOptions | None = None,
     times: np.ndarray | None = None,
     initial: np.ndarray | None = None,
-    distribution=None,
     elements=None,
     tolerance: float = 1e-6,
     max_elements: int = 64,
     partial: bool = False,
+    **fields,
 ) -> xr.Dataset:
     """The OPA equivalent system of order N (the EMR, eqs. (24)-(28)).
 
@@ -116,6 +110,12 @@ def simulate_opa(
     keeps the exact projection. Initial coefficients: x_0 = x0, v_0 = v0, others 0,
     unless ``initial`` (shape (2, N+1): rows x_coef, v_coef) is given, e.g. to continue
     from the end of an earlier run.
+
+    The system is an :class:`opa.System`, or an :class:`opa.Oscillator` (paper
+    defaults when omitted) with the System's fields as keywords: ``sigma`` (default
+    0.01), ``order`` (N, default 4), ``uncertain``, ``distribution``,
+    ``allow_negative``, ``truncation``, ``impact_law``, ``impulse``, ``pulse_width``,
+    ``impulse_at_zero``.
 
     Multi-element OPA (:mod:`opa._elements`): ``distribution`` is the law of xi (a name
     of :data:`opa._measure.DISTRIBUTIONS`, a chaospy distribution with bounded support,
@@ -143,33 +143,22 @@ def simulate_opa(
     >>> ds.x_coef.shape
     (5, 11)
     """
-    oscillator = check_instance("oscillator", oscillator, Oscillator, Oscillator())
     options = check_instance("options", options, SolverOptions, SolverOptions())
-    order = check_order(order)
-    _choice("truncation", truncation, TRUNCATIONS)
-    _choice("impact_law", impact_law, IMPACT_LAWS)
-    unc = Uncertainty(sigma, uncertain, allow_negative)
-    if distribution is not None or elements is not None:
+    system = as_system(system, options, where="simulate_opa", **fields)
+    system.check_samples()
+    oscillator, order = system.oscillator, system.order
+    if system.distribution is not None or elements is not None:
         from opa._elements import simulate_elements
-        from opa._measure import parse
 
         if initial is not None or partial:
             raise ValueError("initial and partial are not supported with elements or a "
                              "distribution")
-        measure = parse(distribution)
-        check_support(oscillator, unc, measure)
         return simulate_elements(
-            oscillator, sigma=unc.sigma, order=order, uncertain=uncertain,
-            impact_law=impact_law, truncation=truncation, options=options,
-            times=output_times(oscillator, periods, per_period, times), unc=unc, measure=measure,
+            system, options=options, times=output_times(oscillator, periods, per_period, times),
             elements=1 if elements is None else elements, tolerance=tolerance,
-            max_elements=max_elements, allow_negative=allow_negative)
-    unc.check(oscillator)
+            max_elements=max_elements)
     times = output_times(oscillator, periods, per_period, times, dim=2 * (order + 1))
-    p, cfg = pack_parameters(
-        oscillator, options, sigma=unc.sigma, order=order, uncertain=uncertain,
-        truncation=truncation, impact_law=impact_law,
-    )
+    p, cfg = system.pack(options)
     y0 = np.zeros(2 * (order + 1))
     if initial is None:
         y0[0] = oscillator.x0
@@ -205,44 +194,35 @@ def simulate_opa(
             **event_vars(log),
         },
         coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1))},
-        attrs=provenance_attrs(
-            "opa", oscillator, options, sigma=unc.sigma, order=order, uncertain=uncertain,
-            truncation=truncation, impact_law=impact_law,
-        ),
+        attrs=provenance_attrs("opa", system, options),
     )
-    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"],
-                    allow_negative=int(allow_negative))
+    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"])
     if "failure" in stats:
         ds.attrs["failure"] = stats["failure"]
     return ds
 
 
-def opa_variants(oscillator: Oscillator, *, sigma: float, order: int, uncertain: str,
-                 variants, times: np.ndarray, options: SolverOptions):
-    """The OPA system of order N under several (impact law, truncation) variants, in
-    parallel: mean and variance of x over ``times`` (NaN after a trajectory that could not
-    be completed) and the time of each variant's first impact (inf: none).
+def opa_variants(system: System, variants, times: np.ndarray, options: SolverOptions):
+    """The OPA system under several (impact law, truncation) variants, in parallel: mean
+    and variance of x over ``times`` (NaN after a trajectory that could not be completed)
+    and the time of each variant's first impact (inf: none).
 
     Returns (x_mean (V, T), x_var (V, T), first_impact (V,))."""
-    order = check_order(order)
-    cfgs = []
-    for law, trunc in variants:
-        _choice("impact_law", law, IMPACT_LAWS)
-        _choice("truncation", trunc, TRUNCATIONS)
-        p, cfg = pack_parameters(oscillator, options, sigma=sigma, order=order,
-                                 uncertain=uncertain, truncation=trunc, impact_law=law)
-        cfgs.append(cfg)
+    order = system.order
+    packed = [system.replace(impact_law=law, truncation=trunc).pack(options)
+              for law, trunc in variants]
+    P = np.stack([p for p, _ in packed])
+    cfgs = np.stack([cfg for _, cfg in packed])
     nodes, weights, basis = kernel_quadrature(quadrature(order))
     dim = 2 * (order + 1)
     y0 = np.zeros(dim)
-    y0[0] = oscillator.x0
-    y0[order + 1] = oscillator.v0
+    y0[0] = system.oscillator.x0
+    y0[order + 1] = system.oscillator.v0
     V = len(cfgs)
     cap = max(64, 4 * len(times))
     rule = tuple(np.repeat(a[None], V, axis=0) for a in (nodes, weights, basis))
-    out, logs, counters = run_batch(y0, times, np.repeat(p[None, :], V, axis=0),
-                                    np.stack(cfgs), rule, rtol=options.rtol, atol=options.atol,
-                                    capacity=cap)
+    out, logs, counters = run_batch(y0, times, P, cfgs, rule, rtol=options.rtol,
+                                    atol=options.atol, capacity=cap)
     first = np.full(V, np.inf)
     for v in range(V):
         if counters[v, 0] != K.OK:

@@ -38,7 +38,7 @@ import numpy as np
 from opa import _kernel as K
 from opa._model import Oscillator, SolverOptions
 from opa._run import quadrature, run_batch, run_kernel, sampled_batch
-from opa._system import pack_parameters
+from opa._system import System, as_system
 
 SPLIT_KINDS = ("grazing", "extra impact", "chatter", "impulse order", "horizon")
 # A new impact slower than this at the located split is a grazing (its velocity vanishes
@@ -95,50 +95,51 @@ class EventSequence:
         return sum(k == _IMPACT for k in self.kind[:n])
 
 
-def event_sequence(oscillator: Oscillator, options: SolverOptions, t_end: float) -> EventSequence:
+def event_sequence(system: System | Oscillator, options: SolverOptions,
+                   t_end: float) -> EventSequence:
     """Run the deterministic system to ``t_end`` and return its events."""
-    p, cfg = pack_parameters(oscillator, options)
+    system = as_system(system, options).deterministic()
+    p, cfg = system.pack(options)
+    oscillator = system.oscillator
     _, log, _ = run_kernel([oscillator.x0, oscillator.v0], np.array([0.0, t_end]), p, cfg,
                            quadrature(0), rtol=options.rtol, atol=options.atol,
                            label="sampled system")
-    return _sequence_from_log(oscillator, log)
+    return _sequence_from_log(system, log)
 
 
-def event_sequences(oscillator: Oscillator, options: SolverOptions, parameter: str,
+def event_sequences(system: System | Oscillator, options: SolverOptions, parameter: str,
                     values, t_end: float) -> list[EventSequence]:
     """The event sequences of the sampled systems with ``parameter`` at each of ``values``
     (absolute values), run in parallel by the compiled kernel."""
+    system = as_system(system, options).deterministic()
     values = np.asarray(values, dtype=float)
     if parameter not in ("mu", "a", "c"):  # not a kernel-side uncertain parameter
-        return [event_sequence(oscillator.replace(**{parameter: float(v)}), options, t_end)
+        return [event_sequence(system.replace(**{parameter: float(v)}), options, t_end)
                 for v in values]
-    p, cfg = pack_parameters(oscillator, options, uncertain=parameter)
+    p, cfg = system.replace(uncertain=parameter).pack(options)
     cap = 256
     P, cfgs, rule = sampled_batch(p, cfg, values=values)
+    oscillator = system.oscillator
     _, logs, counters = run_batch(np.array([oscillator.x0, oscillator.v0]),
                                   np.array([0.0, t_end]), P, cfgs, rule, rtol=options.rtol,
                                   atol=options.atol, capacity=cap)
     status, n_events = counters[:, 0], counters[:, 1]
     out = []
     for m, value in enumerate(values):
-        osc = oscillator.replace(**{parameter: float(value)})
+        one = system.replace(**{parameter: float(value)})
         if status[m] != K.OK or n_events[m] > cap:  # the single run raises or has room
-            out.append(event_sequence(osc, options, t_end))
+            out.append(event_sequence(one, options, t_end))
         else:
-            out.append(_sequence_from_log(osc, logs[m, : n_events[m]]))
+            out.append(_sequence_from_log(one, logs[m, : n_events[m]]))
     return out
 
 
-def _sequence_from_log(oscillator: Oscillator, log: np.ndarray) -> EventSequence:
+def _sequence_from_log(system: System, log: np.ndarray) -> EventSequence:
     codes = log[:, 2].astype(int)
     names = {K.EV_IMPACT: _IMPACT, K.EV_GRAZE: _IMPACT, K.EV_KICK: _IMPACT,
              K.EV_STICK: _STICK, K.EV_RELEASE: _RELEASE}
-    if oscillator.F0 != 0.0:
-        interval = np.floor(log[:, 0] / (2 * math.pi / oscillator.omega1)).astype(int)
-    else:
-        interval = np.zeros(len(log), dtype=int)
     return EventSequence(log[:, 0].copy(), log[:, 1].copy(),
-                         tuple(names[c] for c in codes), interval)
+                         tuple(names[c] for c in codes), system.impulse_interval(log[:, 0]))
 
 
 @dataclass(frozen=True)
@@ -210,7 +211,7 @@ def _classify_events(a: EventSequence, b: EventSequence, horizon: float, period:
 
 
 def find_splits(
-    oscillator: Oscillator,
+    system: System | Oscillator,
     options: SolverOptions,
     parameter: str,
     lo: float,
@@ -245,6 +246,8 @@ def find_splits(
     """
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ValueError(f"need finite lo < hi, got [{lo}, {hi}]")
+    system = as_system(system, options).deterministic()
+    oscillator = system.oscillator
     if scan < 2:
         raise ValueError(f"scan must be >= 2, got {scan}")
     if not tol > 0:
@@ -262,7 +265,7 @@ def find_splits(
     def ensure(values) -> None:
         """Run every value not in the cache, in one parallel batch."""
         todo = sorted({float(v) for v in values if float(v) not in cache})
-        for v, sq in zip(todo, event_sequences(oscillator, options, parameter, todo, t_end)):
+        for v, sq in zip(todo, event_sequences(system, options, parameter, todo, t_end)):
             cache[v] = sq
 
     slack = TIME_SLACK * oscillator.forcing_period

@@ -1,56 +1,327 @@
 """Which system: the oscillator with its impulse model, the uncertainty and the OPA order
-with its closures, and the one packer that turns them into the kernel's arguments."""
+with its closures (:class:`System`); the one packer that turns a System into the kernel's
+arguments; and the impulse schedule, computed here and nowhere else.
+
+Every entry point (``simulate_dmr``, ``simulate_opa``, ``simulate_mc``, ``sweep``,
+``ImpactSystem``, the CLI) takes a System or builds one from the same keywords
+(:func:`as_system`), so each choice has one name, one default and one check.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from opa import _kernel as K
-from opa._model import IMPACT_LAWS, METHODS, TRUNCATIONS, Oscillator, SolverOptions
+from opa._model import (
+    IMPACT_LAWS,
+    IMPULSE_MODELS,
+    METHODS,
+    TRUNCATIONS,
+    Oscillator,
+    SolverOptions,
+    Uncertainty,
+    _choice,
+    _finite,
+    check_order,
+)
+
+#: the intensity of the uncertain parameter when none is given (every entry point)
+DEFAULT_SIGMA = 0.01
+#: the OPA order N when none is given (every entry point)
+DEFAULT_ORDER = 4
+#: most impulse times :meth:`System.impulse_times` lists (a bound on what it allocates)
+MAX_IMPULSE_TIMES = 10_000_000
 
 
-def pack_parameters(
-    oscillator: Oscillator,
-    options: SolverOptions,
-    *,
-    sigma: float = 0.0,
-    order: int = 0,
-    uncertain: str = "mu",
-    truncation: str = "galerkin",
-    impact_law: str = "mean",
-) -> tuple[np.ndarray, np.ndarray]:
-    """The kernel's float vector ``p`` and integer vector ``cfg``."""
-    T1 = 2.0 * math.pi / oscillator.omega1
-    if options.impulse == "pulse" and options.pulse_width >= T1:
-        raise ValueError(
-            f"pulse_width must be shorter than the impulse period 2 pi/omega1 = {T1:.6g}, "
-            f"got {options.pulse_width}"
-        )
-    p = np.zeros(K.N_PARAMS)
-    p[K.P_MU] = oscillator.mu
-    p[K.P_A] = oscillator.a
-    p[K.P_C] = oscillator.c
-    p[K.P_F] = oscillator.f
-    p[K.P_OMEGA] = oscillator.omega
-    p[K.P_ETA] = oscillator.eta
-    p[K.P_DELTA] = oscillator.delta
-    p[K.P_F0] = oscillator.F0
-    p[K.P_A1] = oscillator.a1
-    p[K.P_OMEGA1] = oscillator.omega1
-    p[K.P_N] = oscillator.n
-    p[K.P_TAU] = options.pulse_width
-    p[K.P_SIGMA] = sigma
-    p[K.P_CHATTER_V] = options.chatter_velocity
-    p[K.P_HMAX] = options.max_step
-    cfg = np.zeros(K.N_CFG, dtype=np.int64)
-    cfg[K.C_NCOEF] = order + 1
-    cfg[K.C_UNCERTAIN] = ("mu", "a", "c").index(uncertain)
-    cfg[K.C_IMPULSE] = ("dirac", "pulse").index(options.impulse)
-    cfg[K.C_AT_ZERO] = int(bool(options.impulse_at_zero))
-    cfg[K.C_TRUNC] = TRUNCATIONS.index(truncation)
-    cfg[K.C_LAW] = IMPACT_LAWS.index(impact_law)
-    cfg[K.C_MAXSTEPS] = int(options.max_steps)
-    cfg[K.C_METHOD] = (K.METHOD_DOP853, K.METHOD_DP5)[METHODS.index(options.method)]
-    return p, cfg
+def impulse_schedule(t_end: float, omega1: float, *, at_zero: bool = True,
+                     t_start: float = 0.0) -> np.ndarray:
+    """The impulse times ``t_j = j 2 pi/omega1`` in ``[t_start, t_end]``, j >= 0 (j >= 1
+    without the impulse at zero), exactly as the kernel computes them.
+
+    Examples
+    --------
+    >>> impulse_schedule(7.0, 1.0).round(4).tolist()
+    [0.0, 6.2832]
+    >>> impulse_schedule(7.0, 1.0, at_zero=False).round(4).tolist()
+    [6.2832]
+    """
+    t_end = _finite("t_end", t_end)
+    t_start = _finite("t_start", t_start)
+    if not (math.isfinite(omega1) and omega1 > 0):
+        raise ValueError(f"omega1 must be finite and > 0, got {omega1}")
+    T1 = 2.0 * math.pi / omega1
+    if (t_end - min(t_start, 0.0)) / T1 > MAX_IMPULSE_TIMES:
+        raise ValueError(f"t_end = {t_end:g} holds {t_end / T1:.3g} impulse times, more than "
+                         f"{MAX_IMPULSE_TIMES:g}")
+    first = max(0 if at_zero else 1, math.ceil(t_start / T1) - 1)
+    j = np.arange(first, int(t_end // T1) + 2)
+    tj = j * T1
+    return tj[(tj >= t_start) & (tj <= t_end)]
+
+
+@dataclass(frozen=True)
+class System:
+    """Which system: the oscillator of eq. (1) with its impulse model, the uncertain
+    parameter ``p = p_bar + sigma xi`` and the OPA order N with its closures.
+
+    Parameters
+    ----------
+    oscillator : the parameters of eq. (1) (the paper's section 3.2 set when omitted).
+    sigma, uncertain : intensity and name (``mu``, ``a`` or ``c``) of the uncertain
+        parameter. The DMR ignores them (:meth:`deterministic`).
+    distribution : the law of xi: None (the semicircle of the paper), a name of
+        ``opa._measure.DISTRIBUTIONS``, a chaospy distribution with bounded support or an
+        ``opa._measure.Measure``.
+    allow_negative : permit samples ``p_bar + sigma xi < 0`` (e.g. negative damping).
+    order : the OPA order N (the number of MC coefficients E[x U_i] estimated, i <= N).
+    truncation : ``galerkin`` (exact projection) or ``paper`` (eq. (27) drops the
+        ``sigma/2 Y_{N+1}`` term).
+    impact_law : ``mean`` (eq. (28): only x_0' jumps), ``ensemble`` (every velocity
+        coefficient times -eta) or ``saltation``.
+    impulse : ``dirac`` (velocity jumps at t_j = j 2 pi/omega1) or ``pulse`` (a
+        rectangular force of the same height and width ``pulse_width`` from t_j).
+    impulse_at_zero : whether the train includes j = 0 (an impulse at t = 0).
+
+    Examples
+    --------
+    >>> from opa import preset
+    >>> s = System(preset("3.1"), sigma=0.02, order=8)
+    >>> s.order, s.sigma, s.impulse
+    (8, 0.02, 'dirac')
+    >>> s.deterministic().order, s.deterministic().sigma
+    (0, 0.0)
+    """
+
+    oscillator: Oscillator = field(default_factory=Oscillator)
+    sigma: float = DEFAULT_SIGMA
+    uncertain: str = "mu"
+    distribution: object = None
+    allow_negative: bool = False
+    order: int = DEFAULT_ORDER
+    truncation: str = "galerkin"
+    impact_law: str = "mean"
+    impulse: str = "dirac"
+    pulse_width: float = 0.1
+    impulse_at_zero: bool = True
+
+    def __post_init__(self):
+        if not isinstance(self.oscillator, Oscillator):
+            raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r:.80}")
+        unc = Uncertainty(self.sigma, self.uncertain, self.allow_negative)
+        object.__setattr__(self, "sigma", unc.sigma)
+        object.__setattr__(self, "allow_negative", bool(self.allow_negative))
+        object.__setattr__(self, "order", check_order(self.order))
+        _choice("truncation", self.truncation, TRUNCATIONS)
+        _choice("impact_law", self.impact_law, IMPACT_LAWS)
+        _choice("impulse", self.impulse, IMPULSE_MODELS)
+        if isinstance(self.impulse_at_zero, str) or self.impulse_at_zero not in (True, False):
+            raise ValueError(f"impulse_at_zero must be True or False, got "
+                             f"{self.impulse_at_zero!r}")
+        object.__setattr__(self, "impulse_at_zero", bool(self.impulse_at_zero))
+        tau = _finite("pulse_width", self.pulse_width)
+        if tau <= 0.0:
+            raise ValueError(f"pulse_width must be > 0, got {tau}")
+        if self.impulse == "pulse" and tau >= self.impulse_period:
+            raise ValueError(
+                f"pulse_width must be shorter than the impulse period 2 pi/omega1 = "
+                f"{self.impulse_period:.6g}, got {tau}")
+        object.__setattr__(self, "pulse_width", tau)
+        if self.distribution is not None:
+            self.measure  # noqa: B018 -- parses (and so checks) the distribution
+
+    # ------------------------------------------------------------------ the uncertainty
+    @property
+    def measure(self):
+        """The law of xi as an ``opa._measure.Measure``."""
+        from opa._measure import parse
+
+        return parse(self.distribution)
+
+    @property
+    def semicircle(self) -> bool:
+        """Whether xi has the paper's law, the semicircle on [-1, 1]."""
+        if self.distribution is None:
+            return True
+        measure = self.measure
+        return measure.name == "semicircle" and measure.is_whole
+
+    @property
+    def support(self) -> tuple[float, float]:
+        """The interval xi lies in."""
+        if self.distribution is None:
+            return -1.0, 1.0
+        return self.measure.lo, self.measure.hi
+
+    def check_samples(self) -> None:
+        """Refuse samples ``p_bar + sigma xi < 0`` over xi's support unless allowed."""
+        mean = getattr(self.oscillator, self.uncertain)
+        lo = self.support[0]
+        lowest = mean + self.sigma * lo
+        if not self.allow_negative and lowest < 0.0 <= mean:
+            raise ValueError(
+                f"sigma = {self.sigma} with xi down to {lo:g} makes {self.uncertain} = "
+                f"{lowest:.6g} negative for some samples; pass allow_negative=True "
+                f"(--allow-negative) if that is intended")
+
+    def deterministic(self) -> System:
+        """The same oscillator and impulse model without uncertainty: the DMR (N = 0,
+        sigma = 0, the default closures)."""
+        return dataclasses.replace(self, sigma=0.0, order=0, distribution=None,
+                                   truncation="galerkin", impact_law="mean")
+
+    def replace(self, **changes) -> System:
+        """A copy with some fields changed (validated again); the oscillator's parameters
+        may be given by name too (``replace(c=0.05, sigma=0.02)``)."""
+        own = {k: v for k, v in changes.items() if k in SYSTEM_FIELDS}
+        physical = {k: v for k, v in changes.items() if k not in SYSTEM_FIELDS}
+        if physical:
+            own["oscillator"] = own.get("oscillator", self.oscillator).replace(**physical)
+        return dataclasses.replace(self, **own)
+
+    # ------------------------------------------------------------------ the impulse train
+    @property
+    def impulse_period(self) -> float:
+        """T1 = 2 pi/omega1, the spacing of the impulse times."""
+        return 2.0 * math.pi / self.oscillator.omega1
+
+    @property
+    def impulsive(self) -> bool:
+        """Whether the train acts at all (F0 != 0)."""
+        return self.oscillator.F0 != 0.0
+
+    def impulse_times(self, t_end: float, t_start: float = 0.0) -> np.ndarray:
+        """The impulse times in ``[t_start, t_end]`` (empty when F0 = 0)."""
+        if not self.impulsive:
+            return np.zeros(0)
+        return impulse_schedule(t_end, self.oscillator.omega1, at_zero=self.impulse_at_zero,
+                                t_start=t_start)
+
+    def impulse_heights(self, times) -> np.ndarray:
+        """The strength ``F0 (1 + a1 sin(omega1 t / n))`` of the impulse at each time."""
+        o = self.oscillator
+        return o.F0 * (1.0 + o.a1 * np.sin(o.omega1 * np.asarray(times, float) / o.n))
+
+    def impulse_breaks(self, t_end: float) -> np.ndarray:
+        """The times where the impulse force changes: the impulse times, and for pulses
+        their ends too, sorted."""
+        tj = self.impulse_times(t_end)
+        if self.impulse == "pulse":
+            tj = np.sort(np.concatenate([tj, tj + self.pulse_width]))
+        return tj
+
+    def impulse_interval(self, times) -> np.ndarray:
+        """The index j of the impulse interval ``[t_j, t_{j+1})`` holding each time (all
+        zero when F0 = 0)."""
+        times = np.asarray(times, dtype=float)
+        if not self.impulsive:
+            return np.zeros(times.shape, dtype=int)
+        return np.floor(times / self.impulse_period).astype(int)
+
+    def snap_to_impulses(self, times, tolerance: float) -> np.ndarray:
+        """``times`` with each one within ``tolerance`` of an impulse time moved onto it,
+        so that it is sampled just after the impulse (outputs are right-continuous)."""
+        times = np.asarray(times, dtype=float)
+        if not self.impulsive:
+            return times
+        T1 = self.impulse_period
+        j = np.round(times / T1)
+        near = (np.abs(times - j * T1) <= tolerance) & (j >= (0 if self.impulse_at_zero else 1))
+        return np.where(near, j * T1, times)
+
+    # ------------------------------------------------------------------ the kernel's arguments
+    def pack(self, options: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+        """The kernel's float vector ``p`` and integer vector ``cfg`` (the one packer)."""
+        o = self.oscillator
+        p = np.zeros(K.N_PARAMS)
+        p[K.P_MU] = o.mu
+        p[K.P_A] = o.a
+        p[K.P_C] = o.c
+        p[K.P_F] = o.f
+        p[K.P_OMEGA] = o.omega
+        p[K.P_ETA] = o.eta
+        p[K.P_DELTA] = o.delta
+        p[K.P_F0] = o.F0
+        p[K.P_A1] = o.a1
+        p[K.P_OMEGA1] = o.omega1
+        p[K.P_N] = o.n
+        p[K.P_TAU] = self.pulse_width
+        p[K.P_SIGMA] = self.sigma
+        p[K.P_CHATTER_V] = options.chatter_velocity
+        p[K.P_HMAX] = options.max_step
+        cfg = np.zeros(K.N_CFG, dtype=np.int64)
+        cfg[K.C_NCOEF] = self.order + 1
+        cfg[K.C_UNCERTAIN] = ("mu", "a", "c").index(self.uncertain)
+        cfg[K.C_IMPULSE] = IMPULSE_MODELS.index(self.impulse)
+        cfg[K.C_AT_ZERO] = int(self.impulse_at_zero)
+        cfg[K.C_TRUNC] = TRUNCATIONS.index(self.truncation)
+        cfg[K.C_LAW] = IMPACT_LAWS.index(self.impact_law)
+        cfg[K.C_MAXSTEPS] = int(options.max_steps)
+        cfg[K.C_METHOD] = (K.METHOD_DOP853, K.METHOD_DP5)[METHODS.index(options.method)]
+        return p, cfg
+
+    def dataset_attrs(self) -> dict:
+        """The system's dataset attributes (docs/datasets.md; netCDF-safe types)."""
+        return dict(sigma=float(self.sigma), N=int(self.order), uncertain=self.uncertain,
+                    impulse=self.impulse, pulse_width=float(self.pulse_width),
+                    impulse_at_zero=int(self.impulse_at_zero), truncation=self.truncation,
+                    impact_law=self.impact_law, allow_negative=int(self.allow_negative))
+
+
+SYSTEM_FIELDS = tuple(f.name for f in dataclasses.fields(System))
+IMPULSE_FIELDS = ("impulse", "pulse_width", "impulse_at_zero")
+
+
+def as_system(system=None, options: SolverOptions | None = None, *, allowed=SYSTEM_FIELDS,
+              where: str = "", **fields) -> System:
+    """The System an entry point works on.
+
+    ``system`` is a :class:`System` (then no ``fields`` may be given), or an
+    :class:`Oscillator` or None (the paper's defaults) from which a System is built with
+    ``fields``, the keywords of :class:`System` (``allowed`` of them; None values count as
+    not given). A ``SolverOptions`` that still carries the deprecated impulse model
+    (``SolverOptions(impulse=...)``) passes it on when the fields do not set it.
+
+    Examples
+    --------
+    >>> as_system(None, sigma=0.02, order=2).order
+    2
+    >>> as_system(System(order=3), order=2)
+    Traceback (most recent call last):
+    ...
+    ValueError: give either a System or its fields (order), not both
+    """
+    given = {k: v for k, v in fields.items() if v is not None}
+    if "oscillator" in given and system is None:  # the former keyword of the entry points
+        system = given.pop("oscillator")
+    unknown = [k for k in given if k not in allowed]
+    if unknown:
+        name = f"{where}() " if where else ""
+        raise TypeError(f"{name}got unexpected keyword(s) {', '.join(unknown)} (the system's "
+                        f"fields here: {', '.join(allowed)})")
+    legacy = getattr(options, "legacy_impulse", None) or {}
+    if isinstance(system, System):
+        if given:
+            raise ValueError(f"give either a System or its fields ({', '.join(given)}), "
+                             f"not both")
+        clash = [k for k, v in legacy.items() if getattr(system, k) != v]
+        if clash:
+            raise ValueError(f"SolverOptions and the System disagree on {', '.join(clash)}: "
+                             f"the impulse model belongs to the System (System(impulse=...))")
+        return system
+    if system is not None and not isinstance(system, Oscillator):
+        raise ValueError(f"the system must be an opa.System or an opa.Oscillator, got "
+                         f"{system!r:.80}")
+    for name, value in legacy.items():
+        given.setdefault(name, value)
+    return System(system if system is not None else Oscillator(), **given)
+
+
+def pack_parameters(oscillator: Oscillator, options: SolverOptions, **fields):
+    """``System(oscillator, **fields).pack(options)`` with the DMR's defaults (sigma 0,
+    N 0) for the fields not given; kept for callers of the kernel layout."""
+    fields = {"sigma": 0.0, "order": 0, **fields}
+    return as_system(oscillator, options, **fields).pack(options)

@@ -1,6 +1,6 @@
 """``opa-mc bifurcation`` and ``opa-mc reproduce``: sweeps and the paper's figures.
 
-Wired into ``opa.cli._main.build_parser`` by ``register(sub, _model_flags, _common_flags)``.
+Wired into ``opa.cli._main.build_parser`` by ``register(sub)``.
 User mistakes raise ``ValueError`` (reported by ``opa.cli._main.main`` as one line, exit 2).
 """
 
@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from opa.cli._args import MAX_SWEEP_VALUES, positive_int, whole_number
+from opa.cli._flags import _common_flags, _model_flags
 
 from opa.dynamics._sweep import CONTINUATIONS, DEFAULT_WORKERS, MODELS, SWEEPABLE, summary_lines
 from opa._model import IMPULSE_MODELS
@@ -93,22 +94,20 @@ def _check_sizes(osc, param, values, args) -> None:
 def cmd_bifurcation(args) -> int:
     from mc import sweep_source
     from opa.dynamics._sweep import sweep
-    from opa.cli._flags import check_outputs, options_from, oscillator_from
+    from opa.cli._flags import check_outputs, options_from, system_from
 
     check_outputs(args)
     if args.periods is not None:
         raise ValueError("--periods does not apply to bifurcation sweeps; use --transient P "
                          "and --record P")
     param, values = parse_sweep(args.sweep)
-    osc = oscillator_from(args)
+    system = system_from(args)
     opts = options_from(args)
-    _check_sizes(osc, param, values, args)
+    _check_sizes(system.oscillator, param, values, args)
     start = time.perf_counter()
     ds = sweep(
-        args.model, param, values, osc, transient=args.transient, record=args.record,
-        per_period=args.per_period, continuation=args.continuation, sigma=args.sigma,
-        order=args.order, uncertain=args.uncertain, truncation=args.truncation,
-        impact_law=args.impact_law, allow_negative=args.allow_negative,
+        args.model, param, values, system, transient=args.transient, record=args.record,
+        per_period=args.per_period, continuation=args.continuation,
         samples=getattr(args, "samples", 256), sampler=getattr(args, "sampler", "sobol"),
         seed=getattr(args, "seed", 0), options=opts, period_tol=args.period_tol,
         graze_velocity=args.graze_velocity, graze_gap=args.graze_gap, out=args.out,
@@ -160,12 +159,9 @@ def _set_help(parser: argparse.ArgumentParser, dest: str, text: str, default) ->
             action.help = text
 
 
-def register(subparsers, model_flags, common_flags) -> None:
-    """Add ``bifurcation`` and ``reproduce`` to the ``opa-mc`` subcommands.
-
-    ``model_flags(parser)`` and ``common_flags(parser)`` are ``opa.cli._main``'s
-    ``_model_flags`` and ``_common_flags``.
-    """
+def register(subparsers) -> None:
+    """Add ``bifurcation`` and ``reproduce`` to the ``opa-mc`` subcommands (flags from
+    ``opa.cli._flags``)."""
     from compare._figures import FIGURES
 
     b = subparsers.add_parser(
@@ -184,8 +180,8 @@ def register(subparsers, model_flags, common_flags) -> None:
     b.add_argument("model", choices=MODELS,
                    help="dmr: deterministic system; opa: EMR of the OPA system (--sigma 0: "
                         "EMR_0); mc: Monte Carlo mean")
-    model_flags(b)
-    common_flags(b)
+    _model_flags(b)
+    _common_flags(b)
     if "--out" not in b._option_string_actions:  # shared output flags, unless common has them
         o = b.add_argument_group("output")
         o.add_argument("--out", default=None, metavar="FILE.nc",

@@ -24,6 +24,7 @@ from opa._model import (
     SolverOptions,
 )
 
+from opa._system import DEFAULT_ORDER, DEFAULT_SIGMA, SYSTEM_FIELDS, System
 from opa.cli._args import positive_int, whole_number
 
 EXIT_SIMULATION = 3
@@ -45,37 +46,71 @@ def _model_flags(parser: argparse.ArgumentParser) -> None:
                            help=f"{PARAMETER_DOCS[name]} (default {getattr(defaults, name):g})")
 
 
-def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
+def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS) -> None:
+    """The uncertainty, the OPA order and its closures, and the impulse model: the fields
+    of ``opa.System`` (defaults from there)."""
+    g = parser.add_argument_group("system: uncertainty, OPA order and closures")
+    g.add_argument("--sigma", type=float, default=DEFAULT_SIGMA, metavar="S",
+                   help=f"intensity of the uncertain parameter p = p_bar + S xi "
+                        f"(default {DEFAULT_SIGMA:g})")
+    g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
+                   help="which parameter is uncertain (default mu)")
+    g.add_argument("--allow-negative", action="store_true",
+                   help="allow p_bar - sigma < 0 for the uncertain parameter")
+    g.add_argument("--order", type=whole_number, default=DEFAULT_ORDER, metavar="N",
+                   help=f"OPA truncation order / highest MC Chebyshev coefficient "
+                        f"(default {DEFAULT_ORDER})")
+    g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
+                   help="galerkin: exact projection; paper: eq. (27), drops sigma/2 Y_{N+1} "
+                        "(default galerkin)")
+    g.add_argument("--impact-law", choices=laws, default="mean",
+                   help="mean: only x_0' jumps (eq. 28); ensemble: every velocity coefficient "
+                        "is multiplied by -eta; saltation: the impact's saltation matrix "
+                        "maps the deviation coefficients (default mean)")
+    _impulse_flags(parser)
+
+
+def _impulse_flags(parser: argparse.ArgumentParser, *, defaults: bool = True) -> None:
+    """The impulse model (``opa.System``); with ``defaults=False`` unset flags stay None
+    (a config file decides)."""
+    s = parser.add_argument_group("impulse model")
+    s.add_argument("--impulse", choices=IMPULSE_MODELS, default="dirac" if defaults else None,
+                   help="dirac: velocity jumps at t_j = j 2 pi/omega1; pulse: rectangular "
+                        "force of width --pulse-width (default dirac)")
+    s.add_argument("--pulse-width", type=float, default=0.1 if defaults else None,
+                   metavar="TAU", help="width of the rectangular pulses (default 0.1)")
+    s.add_argument("--impulse-at-zero", action=argparse.BooleanOptionalAction,
+                   default=True if defaults else None,
+                   help="include the impulse at t = 0 (j = 0) (default yes)")
+
+
+def _run_flags(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("run")
     g.add_argument("--periods", type=float, default=100.0, metavar="P",
                    help="length in forcing periods 2 pi/omega (default 100)")
     g.add_argument("--per-period", type=positive_int, default=1, metavar="K",
                    help="outputs per forcing period: t_j = j (2 pi/omega)/K, j = 0..P K; "
                         "K = 1 gives the stroboscopic samples (default 1)")
-    g.add_argument("--sigma", type=float, default=0.01, metavar="S",
-                   help="intensity of the uncertain parameter p = p_bar + S xi (default 0.01)")
-    g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
-                   help="which parameter is uncertain (default mu)")
-    g.add_argument("--allow-negative", action="store_true",
-                   help="allow p_bar - sigma < 0 for the uncertain parameter")
-    g.add_argument("--order", type=whole_number, default=4, metavar="N",
-                   help="OPA truncation order / highest MC Chebyshev coefficient (default 4)")
-    g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
-                   help="galerkin: exact projection; paper: eq. (27), drops sigma/2 Y_{N+1} "
-                        "(default galerkin)")
-    g.add_argument("--impact-law", choices=IMPACT_LAWS, default="mean",
-                   help="mean: only x_0' jumps (eq. 28); ensemble: every velocity coefficient "
-                        "is multiplied by -eta; saltation: the impact's saltation matrix "
-                        "maps the deviation coefficients (default mean)")
+
+
+def _mc_flags(parser: argparse.ArgumentParser) -> None:
+    g = parser.add_argument_group("Monte Carlo")
+    g.add_argument("--samples", type=positive_int, default=1024, metavar="M",
+                   help="Monte Carlo samples (default 1024)")
+    g.add_argument("--sampler", choices=("random", "sobol", "gauss"), default="sobol",
+                   help="random, scrambled sobol, or gauss collocation (default sobol)")
+    g.add_argument("--seed", type=whole_number, default=0, metavar="K",
+                   help="random seed (default 0)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask distributed scheduler address (default: local threads)")
+
+
+def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
+    """Run, system, Monte Carlo (with ``mc``) and solver flags."""
+    _run_flags(parser)
+    _system_flags(parser)
     if mc:
-        g.add_argument("--samples", type=positive_int, default=1024, metavar="M",
-                       help="Monte Carlo samples (default 1024)")
-        g.add_argument("--sampler", choices=("random", "sobol", "gauss"), default="sobol",
-                       help="random, scrambled sobol, or gauss collocation (default sobol)")
-        g.add_argument("--seed", type=whole_number, default=0, metavar="K",
-                       help="random seed (default 0)")
-        g.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                       help="Dask distributed scheduler address (default: local threads)")
+        _mc_flags(parser)
     _solver_flags(parser)
 
 
@@ -108,19 +143,13 @@ def _element_flags(parser: argparse.ArgumentParser) -> None:
 
 def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,
                   defaults: bool = True) -> None:
-    """Solver flags; with ``defaults=False`` unset flags stay None (a config file decides)."""
+    """Solver flags (``opa.SolverOptions``: numerics only); with ``defaults=False`` unset
+    flags stay None (a config file decides)."""
 
     def d(value):
         return value if defaults else None
 
     s = parser.add_argument_group("solver")
-    s.add_argument("--impulse", choices=IMPULSE_MODELS, default=d("dirac"),
-                   help="dirac: velocity jumps at t_j = j 2 pi/omega1; pulse: rectangular "
-                        "force of width --pulse-width (default dirac)")
-    s.add_argument("--pulse-width", type=float, default=d(0.1), metavar="TAU",
-                   help="width of the rectangular pulses (default 0.1)")
-    s.add_argument("--impulse-at-zero", action=argparse.BooleanOptionalAction, default=d(True),
-                   help="include the impulse at t = 0 (j = 0) (default yes)")
     s.add_argument("--rtol", type=float, default=d(tolerance),
                    help=f"relative tolerance (default {tolerance:g})")
     s.add_argument("--atol", type=float, default=d(tolerance),
@@ -155,16 +184,16 @@ def oscillator_from(args) -> Oscillator:
 
 
 def options_from(args) -> SolverOptions:
-    return SolverOptions(
-        impulse=args.impulse,
-        pulse_width=args.pulse_width,
-        impulse_at_zero=args.impulse_at_zero,
-        rtol=args.rtol,
-        atol=args.atol,
-        max_step=args.max_step,
-        chatter_velocity=args.chatter_velocity,
-        method=args.method,
-    )
+    return SolverOptions(rtol=args.rtol, atol=args.atol, max_step=args.max_step,
+                         chatter_velocity=args.chatter_velocity, method=args.method)
+
+
+def system_from(args, **changes) -> System:
+    """The ``opa.System`` of the parsed flags: the oscillator (``--preset`` and the
+    parameter flags) and every System field the subcommand has a flag for."""
+    fields = {name: getattr(args, name) for name in SYSTEM_FIELDS
+              if name != "oscillator" and getattr(args, name, None) is not None}
+    return System(oscillator_from(args), **{**fields, **changes})
 
 
 def _summary_events(ds) -> str:

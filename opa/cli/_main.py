@@ -21,11 +21,10 @@ from opa.cli._flags import (
     _element_flags,
     _model_flags,
     _output_flags,
-    _solver_flags,
     _summary_events,
     check_outputs,
     options_from,
-    oscillator_from,
+    system_from,
 )
 
 
@@ -34,7 +33,7 @@ def cmd_simulate(args) -> int:
     from opa.plots._diagrams import plot_run
 
     check_outputs(args)
-    osc = oscillator_from(args)
+    system = system_from(args)
     opts = options_from(args)
     if args.model != "opa" and args.elements is not None:
         raise CliError(f"--elements applies to simulate opa, not simulate {args.model}")
@@ -44,17 +43,15 @@ def cmd_simulate(args) -> int:
     if args.model == "dmr":
         from opa._simulate import simulate_dmr
 
-        ds = simulate_dmr(osc, periods=args.periods, per_period=args.per_period, options=opts)
+        ds = simulate_dmr(system, periods=args.periods, per_period=args.per_period,
+                          options=opts)
         final = f"x = {float(ds.x[-1]):.10g}, v = {float(ds.v[-1]):.10g}"
     elif args.model == "opa":
         from opa._simulate import simulate_opa
 
-        ds = simulate_opa(osc, sigma=args.sigma, order=args.order, uncertain=args.uncertain,
-                          truncation=args.truncation, impact_law=args.impact_law,
-                          allow_negative=args.allow_negative, periods=args.periods,
-                          per_period=args.per_period, options=opts,
-                          distribution=args.distribution, elements=args.elements,
-                          tolerance=args.tolerance, max_elements=args.max_elements)
+        ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
+                          options=opts, elements=args.elements, tolerance=args.tolerance,
+                          max_elements=args.max_elements)
         final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = "
                  f"{float(ds.x_var[-1]):.4g}")
         if "element" in ds.dims:
@@ -68,12 +65,14 @@ def cmd_simulate(args) -> int:
         parts = f"{args.out}.parts" if args.out else None
 
         try:
-            ds = simulate_mc(osc, sigma=args.sigma, samples=args.samples,
-                             sampler=args.sampler, seed=args.seed, order=args.order,
-                             uncertain=args.uncertain, allow_negative=args.allow_negative,
+            if args.truncation != "galerkin" or args.impact_law != "mean":
+                raise CliError("--truncation and --impact-law are closures of the OPA "
+                               "system: simulate mc integrates the true sampled systems")
+            ds = simulate_mc(system.replace(truncation="galerkin", impact_law="mean"),
+                             samples=args.samples, sampler=args.sampler, seed=args.seed,
                              periods=args.periods, per_period=args.per_period, options=opts,
                              scheduler=args.scheduler, progress=not args.quiet,
-                             distribution=args.distribution, checkpoint=parts,
+                             checkpoint=parts,
                              connect_timeout=args.connect_timeout,
                              log=None if args.quiet else
                              (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
@@ -138,10 +137,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     from opa.cli._stability import register_stability
 
-    register_validate(sub, _model_flags, _solver_flags)
-    register_converge(sub, _model_flags, _solver_flags)
-    register_bifurcation(sub, _model_flags, _common_flags)
-    register_stability(sub, _model_flags, _solver_flags)
+    register_validate(sub)
+    register_converge(sub)
+    register_bifurcation(sub)
+    register_stability(sub)
 
     return parser
 

@@ -1,7 +1,7 @@
 """``opa-mc stability``: periodic orbits, Floquet multipliers, branches, Lyapunov exponents.
 
 Wired into ``opa.cli._main.build_parser`` by
-``register_stability(sub, _model_flags, _solver_flags)``. User mistakes raise
+``register_stability(sub)``. User mistakes raise
 ``ValueError`` (reported by ``opa.cli._main.main`` as one line, exit 2).
 """
 
@@ -13,8 +13,8 @@ import time
 import numpy as np
 
 from opa.cli._args import MAX_SWEEP_VALUES, positive_int, whole_number
+from opa.cli._flags import _model_flags, _solver_flags, _system_flags
 
-from opa._model import IMPACT_LAWS, TRUNCATIONS, UNCERTAIN_PARAMETERS
 
 
 def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
@@ -47,16 +47,10 @@ def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
 
 
 def _system(args):
-    from opa.cli._flags import options_from, oscillator_from
+    from opa.cli._flags import options_from, system_from
     from opa.dynamics._orbits import ImpactSystem
 
-    osc = oscillator_from(args)
-    if args.model == "dmr":
-        return ImpactSystem(osc, model="dmr", options=options_from(args))
-    return ImpactSystem(osc, model="opa", sigma=args.sigma, order=args.order,
-                        uncertain=args.uncertain, truncation=args.truncation,
-                        impact_law=args.impact_law, allow_negative=args.allow_negative,
-                        options=options_from(args))
+    return ImpactSystem.of(system_from(args), model=args.model, options=options_from(args))
 
 
 def _format_multipliers(mu: np.ndarray, count: int = 4) -> str:
@@ -148,12 +142,10 @@ def cmd_stability(args) -> int:
     return 0
 
 
-def register_stability(subparsers, model_flags, solver_flags) -> None:
-    """Add ``stability`` to the ``opa-mc`` subcommands.
+def register_stability(subparsers) -> None:
+    """Add ``stability`` to the ``opa-mc`` subcommands (flags from ``opa.cli._flags``)."""
+    from opa.dynamics._orbits import STABILITY_LAWS
 
-    ``model_flags(parser)`` and ``solver_flags(parser)`` are ``opa.cli._main``'s
-    ``_model_flags`` and ``_solver_flags``.
-    """
     p = subparsers.add_parser(
         "stability",
         help="periodic orbits, Floquet multipliers, branches through period doubling, "
@@ -168,19 +160,8 @@ def register_stability(subparsers, model_flags, solver_flags) -> None:
     )
     p.add_argument("model", choices=("dmr", "opa"),
                    help="dmr: deterministic system (eq. 29); opa: OPA equivalent system")
-    model_flags(p)
-    g = p.add_argument_group("OPA system")
-    g.add_argument("--sigma", type=float, default=0.0, metavar="S",
-                   help="intensity of the uncertain parameter (opa; default 0)")
-    g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
-                   help="which parameter is uncertain (default mu)")
-    g.add_argument("--allow-negative", action="store_true",
-                   help="allow p_bar - sigma < 0 for the uncertain parameter")
-    g.add_argument("--order", type=whole_number, default=4, metavar="N", help="OPA order N (default 4)")
-    g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
-                   help="galerkin or paper (eq. 27) (default galerkin)")
-    g.add_argument("--impact-law", choices=IMPACT_LAWS[:2], default="mean",
-                   help="mean (eq. 28) or ensemble (default mean)")
+    _model_flags(p)
+    _system_flags(p, laws=STABILITY_LAWS)
     s = p.add_argument_group("orbit and branch")
     s.add_argument("--orbit-periods", type=positive_int, default=None, metavar="K",
                    help="period of the orbit in forcing periods (default: detected after "
@@ -205,7 +186,7 @@ def register_stability(subparsers, model_flags, solver_flags) -> None:
                    help="forcing periods averaged for the Lyapunov exponent (default 2000)")
     s.add_argument("--benettin", action="store_true",
                    help="with --lyapunov: the two-trajectory check as well")
-    solver_flags(p)
+    _solver_flags(p)
     o = p.add_argument_group("output")
     o.add_argument("--out", default=None, metavar="FILE.nc", help="write the dataset here")
     o.add_argument("--plot", default=None, metavar="FILE.png",

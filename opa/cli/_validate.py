@@ -11,8 +11,10 @@ import time
 import numpy as np
 
 from opa.cli._args import positive_int, whole_number
+from opa.cli._flags import _impulse_flags, _model_flags, _solver_flags
 
 from opa._model import PARAMETER_NAMES
+from opa._system import IMPULSE_FIELDS
 
 # Largest grid of swept values, sigmas or orders on the command line: every point of a
 # trust map runs Monte Carlo ensembles, so even this is days of work.
@@ -70,7 +72,7 @@ def _sweep(text: str) -> tuple[str, tuple[float, ...]]:
     return name.strip(), tuple(float(np.round(v, 12)) for v in values)
 
 
-def register_validate(sub, model_flags, solver_flags) -> None:
+def register_validate(sub) -> None:
     p = sub.add_parser(
         "validate",
         help="the main job: the trust map of OPA against Monte Carlo, its boundary and why",
@@ -83,7 +85,7 @@ def register_validate(sub, model_flags, solver_flags) -> None:
         "summary.md and figures; finished Monte Carlo runs are kept in OUTDIR/parts and "
         "reused, so an interrupted run resumes.",
     )
-    model_flags(p)
+    _model_flags(p)
     g = p.add_argument_group("trust map")
     g.add_argument("--config", default=None, metavar="FILE.toml",
                    help="TOML file with any of the settings below and [model]/[solver] tables")
@@ -126,7 +128,8 @@ def register_validate(sub, model_flags, solver_flags) -> None:
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask distributed scheduler for the Monte Carlo chunks")
     g.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
-    solver_flags(p, tolerance=1e-9, defaults=False)
+    _solver_flags(p, tolerance=1e-9, defaults=False)
+    _impulse_flags(p, defaults=False)
     p.set_defaults(func=cmd_validate)
 
 
@@ -150,10 +153,10 @@ def cmd_validate(args) -> int:
              if getattr(args, name, None) is not None}
     if args.preset:
         model["preset"] = args.preset
-    solver = {k: getattr(args, k) for k in ("rtol", "atol", "impulse", "pulse_width",
-                                            "impulse_at_zero", "max_step", "chatter_velocity",
+    solver = {k: getattr(args, k) for k in ("rtol", "atol", "max_step", "chatter_velocity",
                                             "method")
               if getattr(args, k, None) is not None}
+    impulse = {k: getattr(args, k) for k in IMPULSE_FIELDS if getattr(args, k, None) is not None}
     parameter, values = (args.sweep if args.sweep else (None, None))
     if args.values is not None:
         values = args.values
@@ -164,7 +167,7 @@ def cmd_validate(args) -> int:
         z=args.z, resolution=args.resolution, samples=args.samples,
         max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,
-        frontier=False if args.no_frontier else None,
+        frontier=False if args.no_frontier else None, **impulse,
     )
     _check_outdir(cfg.outdir)
     start = time.perf_counter()
@@ -193,7 +196,7 @@ def cmd_validate(args) -> int:
     return 0
 
 
-def register_converge(sub, model_flags, solver_flags) -> None:
+def register_converge(sub) -> None:
     p = sub.add_parser(
         "converge",
         help="multi-element OPA against Monte Carlo: error against elements, N and cost",
@@ -203,7 +206,7 @@ def register_converge(sub, model_flags, solver_flags) -> None:
         "sides and wall times. Default: section 3.2 set, omega = 3.98, sigma = 0.05, 10 "
         "forcing periods, 2^16 reference samples.",
     )
-    model_flags(p)
+    _model_flags(p)
     g = p.add_argument_group("study")
     g.add_argument("--sigma", type=float, default=0.05, metavar="S",
                    help="intensity of the uncertain parameter (default 0.05)")
@@ -222,7 +225,8 @@ def register_converge(sub, model_flags, solver_flags) -> None:
     g.add_argument("--outdir", default="results-elements", metavar="DIR",
                    help="output folder (default results-elements)")
     g.add_argument("--quiet", action="store_true", help="no log lines")
-    solver_flags(p, tolerance=1e-9)
+    _solver_flags(p, tolerance=1e-9)
+    _impulse_flags(p)
     p.set_defaults(func=cmd_converge)
 
 
@@ -237,7 +241,9 @@ def cmd_converge(args) -> int:
     cfg = ConvergenceConfig(oscillator=oscillator_from(args), options=options_from(args),
                             sigma=args.sigma, distribution=args.distribution,
                             periods=args.periods, order=args.order, reference=args.reference,
-                            outdir=args.outdir, **kw)
+                            outdir=args.outdir, impulse=args.impulse,
+                            pulse_width=args.pulse_width, impulse_at_zero=args.impulse_at_zero,
+                            **kw)
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     ds = run_convergence(cfg, log=log)
     written = write_report(ds, args.outdir, command="opa-mc " + shlex.join(

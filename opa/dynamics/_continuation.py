@@ -40,6 +40,7 @@ import numpy as np
 from opa._lazy import lazy
 from opa._model import Oscillator, SolverOptions
 from opa._run import SimulationError
+from opa._system import System
 from opa.dynamics._orbits import (
     SWEEPABLE,
     ConvergenceError,
@@ -283,7 +284,7 @@ def follow(system: ImpactSystem, parameter: str, orbit: PeriodicOrbit, stop: flo
             # an impact crossed an impulse time: the map jumps there, the new orbit lies on
             # another sheet of it
             branch.end = ("an impact crossed an impulse time (the map is discontinuous there)"
-                          if system.options.impulse == "dirac" else
+                          if system.impulse == "dirac" else
                           "an impact crossed a pulse edge (the map is not smooth there)")
             events.append(("impulse-impact", len(branch.orbits) - 1, len(branch.orbits) - 1))
             break
@@ -1020,7 +1021,7 @@ def _note(bif: Bifurcation, branch: Branch, parameter: str) -> str:
             text = f"the period-{k} orbit ({label}) grazes and its branch ends"
     elif bif.kind == "impulse-impact":
         what = ("an impulse time (the map is discontinuous)"
-                if branch.orbits[0].system.options.impulse == "dirac" else
+                if branch.orbits[0].system.impulse == "dirac" else
                 "a pulse edge (the map is not smooth)")
         text = f"an impact of the period-{k} orbit ({label}) meets {what}; "
         text += ("the orbit goes on beyond with impact and impulse swapped" if bif.child >= 0
@@ -1134,8 +1135,9 @@ def locate_bifurcations(oscillator: Oscillator | ImpactSystem, parameter: str, l
 
     Parameters
     ----------
-    oscillator : the model parameters (DMR, with ``options``), or an ``ImpactSystem``
-        (DMR or OPA system) whose value of ``parameter`` is ignored.
+    oscillator : the model parameters (DMR, with ``options``), an ``opa.System`` (its
+        DMR, with ``options``) or an ``ImpactSystem`` (DMR or OPA system) whose value of
+        ``parameter`` is ignored.
     parameter : a model parameter name or ``sigma``; the forcing's common period
         (``impulse_cycle``) must not change over the interval.
     lo, hi : the interval.
@@ -1179,6 +1181,8 @@ def locate_bifurcations(oscillator: Oscillator | ImpactSystem, parameter: str, l
         if options is not None:
             raise ValueError("options belong to the ImpactSystem: give them there")
         system = oscillator
+    elif isinstance(oscillator, System):
+        system = ImpactSystem.of(oscillator, options=options)
     else:
         system = ImpactSystem(oscillator, options=options or SolverOptions())
     for name, value in (("lo", lo), ("hi", hi)):

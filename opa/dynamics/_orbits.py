@@ -32,18 +32,14 @@ import numpy as np
 from opa import _kernel as V
 from opa._model import (
     _finite,
-    check_order,
     IMPACT_LAWS,
     PARAMETER_NAMES,
-    TRUNCATIONS,
-    UNCERTAIN_PARAMETERS,
     Oscillator,
     SolverOptions,
-    Uncertainty,
     _choice,
 )
 from opa._run import SimulationError, announce_compilation, kernel_quadrature, quadrature
-from opa._system import pack_parameters
+from opa._system import SYSTEM_FIELDS, System
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
 STABILITY_LAWS = IMPACT_LAWS[:2]
@@ -67,17 +63,19 @@ class ConvergenceError(SimulationError):
 
 # --------------------------------------------------------------------------- the system
 @dataclass(frozen=True)
-class ImpactSystem:
+class ImpactSystem(System):
     """The impact system whose stroboscopic map is studied: DMR or OPA of order N.
+
+    An :class:`opa.System` (every field of it, with the same names and defaults) with the
+    model and the solver options.
 
     Parameters
     ----------
     oscillator : model parameters (paper eq. (1)); x0, v0 only start transients.
-    model : ``"dmr"`` (eq. (29), state (x, v)) or ``"opa"`` (eqs. (24)-(28), state
-        ``[x_0..x_N, v_0..v_N]``).
-    sigma, order, uncertain, truncation, impact_law, allow_negative : as in
-        ``opa.simulate_opa`` (ignored, and must be left at their defaults, for ``dmr``
-        except ``order``, which is forced to 0).
+    model : ``"dmr"`` (eq. (29), state (x, v); the uncertainty and the closures are not
+        part of it: sigma, order are set to 0) or ``"opa"`` (eqs. (24)-(28), state
+        ``[x_0..x_N, v_0..v_N]``, xi with the semicircle law, impact law ``mean`` or
+        ``ensemble``).
     options : solver options; ``rtol``/``atol`` control the state and the variational
         matrix alike.
 
@@ -90,38 +88,34 @@ class ImpactSystem:
     10
     """
 
-    oscillator: Oscillator = field(default_factory=Oscillator)
     model: str = "dmr"
-    sigma: float = 0.0
-    order: int = 4
-    uncertain: str = "mu"
-    truncation: str = "galerkin"
-    impact_law: str = "mean"
-    allow_negative: bool = False
     options: SolverOptions = field(default_factory=SolverOptions)
     _packed: tuple = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self):
         _choice("model", self.model, MODELS)
-        _choice("truncation", self.truncation, TRUNCATIONS)
-        _choice("impact_law", self.impact_law, STABILITY_LAWS)
-        _choice("uncertain", self.uncertain, UNCERTAIN_PARAMETERS)
-        if not isinstance(self.oscillator, Oscillator):
-            raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r}")
         if not isinstance(self.options, SolverOptions):
             raise ValueError(f"options must be an opa.SolverOptions, got {self.options!r}")
-        order = check_order(self.order)
+        for name, value in self.options.legacy_impulse.items():  # deprecated spelling
+            object.__setattr__(self, name, value)
         if self.model == "dmr":
-            if self.sigma != 0.0:
-                raise ValueError(f"sigma applies to the opa model only, got sigma = {self.sigma} "
-                                 "with model 'dmr'")
+            object.__setattr__(self, "sigma", 0.0)
             object.__setattr__(self, "order", 0)
-        else:
-            object.__setattr__(self, "order", int(order))
-        unc = Uncertainty(self.sigma, self.uncertain, self.allow_negative)
-        unc.check(self.oscillator)
-        object.__setattr__(self, "sigma", unc.sigma)
+        super().__post_init__()
+        if self.model == "opa":
+            _choice("impact_law", self.impact_law, STABILITY_LAWS)
+            if self.distribution is not None:
+                raise ValueError("the stability of the OPA system is implemented for the "
+                                 "semicircle law of xi only (distribution=None)")
+            self.check_samples()
         object.__setattr__(self, "_packed", _pack(self))
+
+    @classmethod
+    def of(cls, system: System, *, model: str = "dmr",
+           options: SolverOptions | None = None) -> ImpactSystem:
+        """The ImpactSystem of a :class:`opa.System` under ``model``."""
+        return cls(**{name: getattr(system, name) for name in SYSTEM_FIELDS}, model=model,
+                   options=SolverOptions() if options is None else options)
 
     @property
     def dim(self) -> int:
@@ -134,11 +128,9 @@ class ImpactSystem:
 
     def with_parameter(self, name: str, value: float) -> ImpactSystem:
         """A copy with one model parameter (or ``sigma``) changed."""
-        if name == "sigma":
-            return dataclasses.replace(self, sigma=float(value))
-        if name not in PARAMETER_NAMES or name in ("x0", "v0"):
+        if name not in SWEEPABLE:
             raise ValueError(f"parameter must be one of {', '.join(SWEEPABLE)}, got {name!r}")
-        return dataclasses.replace(self, oscillator=self.oscillator.replace(**{name: value}))
+        return self.replace(**{name: float(value)})
 
     def parameter(self, name: str) -> float:
         return self.sigma if name == "sigma" else float(getattr(self.oscillator, name))
@@ -154,10 +146,7 @@ class ImpactSystem:
         """Dataset attributes (docs/datasets.md)."""
         from opa._dataset import provenance_attrs
 
-        return provenance_attrs(
-            self.model, self.oscillator, self.options, sigma=self.sigma, order=self.order,
-            uncertain=self.uncertain, truncation=self.truncation, impact_law=self.impact_law,
-        )
+        return provenance_attrs(self.model, self, self.options)
 
 
 SWEEPABLE = tuple(n for n in PARAMETER_NAMES if n not in ("x0", "v0")) + ("sigma",)
@@ -165,10 +154,8 @@ SWEEPABLE = tuple(n for n in PARAMETER_NAMES if n not in ("x0", "v0")) + ("sigma
 
 def _pack(system: ImpactSystem):
     """The kernel's vectors and node-major rule for the system (the one packer,
-    ``opa._system.pack_parameters``)."""
-    p, cfg = pack_parameters(system.oscillator, system.options, sigma=system.sigma,
-                             order=system.order, uncertain=system.uncertain,
-                             truncation=system.truncation, impact_law=system.impact_law)
+    ``opa.System.pack``)."""
+    p, cfg = system.pack(system.options)
     nodes, weights, U = kernel_quadrature(quadrature(system.order))
     return p, cfg, nodes, weights, U
 
@@ -432,8 +419,8 @@ class PeriodicOrbit:
             return math.inf
         T1 = 2.0 * math.pi / osc.omega1
         edges = [0.0]
-        if self.system.options.impulse == "pulse":
-            edges.append(self.system.options.pulse_width)
+        if self.system.impulse == "pulse":
+            edges.append(self.system.pulse_width)
         sep = math.inf
         for e in edges:
             ph = np.mod(self.impact_time - e, T1)
@@ -452,8 +439,8 @@ class PeriodicOrbit:
             return ()
         T1 = 2.0 * math.pi / osc.omega1
         count = np.floor(self.impact_time / T1)
-        if self.system.options.impulse == "pulse":
-            count = count + np.floor((self.impact_time - self.system.options.pulse_width) / T1)
+        if self.system.impulse == "pulse":
+            count = count + np.floor((self.impact_time - self.system.pulse_width) / T1)
         return tuple(int(c) for c in count)
 
     @property
@@ -640,7 +627,7 @@ def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = No
         transient = check_count("transient", transient, 0)
         n_tr = int(math.ceil(transient / k0)) * k0
         # a guess is a right-continuous state: a kick at t = 0 is already in it
-        kick = system.options.impulse_at_zero and guess is None
+        kick = system.impulse_at_zero and guess is None
         y0 = system.initial_state() if guess is None else _as_state(system, guess)
         # the phase of t0 in the forcing's period: the same motion, without integrating
         # from 0 up to a large t0
@@ -742,7 +729,7 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
     check_time("the end time t0 + (transient + periods) T", t0 + (transient + periods) * T, T)
     D = system.dim
     y = system.initial_state() if initial is None else _as_state(system, initial)
-    start = bool(system.options.impulse_at_zero) and t0 == 0.0
+    start = bool(system.impulse_at_zero) and t0 == 0.0
     t_rec = t0
     if transient > 0:
         t_rec = t0 + transient * T
@@ -791,7 +778,7 @@ def transverse_lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000,
     T = one.forcing_period
     y = one.initial_state()
     if transient > 0:
-        y = flow(one, y, [0.0, transient * T], include_start=one.options.impulse_at_zero
+        y = flow(one, y, [0.0, transient * T], include_start=one.impulse_at_zero
                  ).states[-1]
     w = np.array([0.0, 1.0, 0.0, 1.0]) / math.sqrt(2.0)
     growth = np.empty(periods)
@@ -799,7 +786,7 @@ def transverse_lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000,
     for k in range(periods):
         y[[1, 3]] = 0.0
         res = flow(one, y, [(transient + k) * T, (transient + k + 1) * T], tangent=w,
-                   include_start=transient == 0 and k == 0 and one.options.impulse_at_zero)
+                   include_start=transient == 0 and k == 0 and one.impulse_at_zero)
         y, w = res.states[-1], res.tangent[:, 0]
         norm = float(np.linalg.norm(w))
         growth[k] = math.log(norm) if norm > 0 else -math.inf
@@ -834,14 +821,10 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
     T = system.forcing_period
     delta = system.oscillator.delta
     impacts, vmin = 0, math.inf
-    at_zero = bool(system.options.impulse_at_zero)
+    at_zero = bool(system.impulse_at_zero)
     if engine == "solver":
         from opa._run import run_kernel
-        from opa._system import pack_parameters
-
-        p, cfg = pack_parameters(system.oscillator, system.options, sigma=system.sigma,
-                                 order=system.order, uncertain=system.uncertain,
-                                 truncation=system.truncation, impact_law=system.impact_law)
+        p, cfg = system.pack(system.options)
         quad = quadrature(system.order)
         opts = system.options
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from opa._lazy import lazy
 from opa._model import _finite
+from opa._system import impulse_schedule
 
 xr = lazy("xarray")
 
@@ -40,8 +41,6 @@ GRAZE_VELOCITY = 1e-2
 GRAZE_GAP = 1e-4
 #: relative tolerance deciding that an output time is a stroboscopic time k 2 pi / omega
 _STROBE_TOL = 1e-9
-#: most impulse times ``impulse_times`` lists (a bound on the array it allocates)
-MAX_IMPULSE_TIMES = 10_000_000
 
 
 def _optional_time(name: str, value) -> float | None:
@@ -286,17 +285,9 @@ def stroboscopic_mask(t: np.ndarray, forcing_period: float, start: float | None 
 
 
 def impulse_times(t_end: float, omega1: float, *, impulse_at_zero: bool = True) -> np.ndarray:
-    """Impulse times ``j 2 pi/omega1`` up to ``t_end`` (as the solver computes them)."""
-    t_end = _optional_time("t_end", t_end)
-    if not (math.isfinite(omega1) and omega1 > 0):
-        raise ValueError(f"omega1 must be finite and > 0, got {omega1}")
-    T1 = 2.0 * math.pi / omega1
-    if t_end / T1 > MAX_IMPULSE_TIMES:
-        raise ValueError(f"t_end = {t_end:g} holds {t_end / T1:.3g} impulse times, more than "
-                         f"{MAX_IMPULSE_TIMES:g}")
-    j = np.arange(0 if impulse_at_zero else 1, int(t_end // T1) + 2)
-    tj = j * T1
-    return tj[tj <= t_end]
+    """Impulse times ``j 2 pi/omega1`` up to ``t_end``: ``opa._system.impulse_schedule``,
+    the one place the schedule is computed."""
+    return impulse_schedule(_finite("t_end", t_end), omega1, at_zero=impulse_at_zero)
 
 
 def sticking_mask(t: np.ndarray, stick_time: np.ndarray, release_time: np.ndarray

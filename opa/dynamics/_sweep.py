@@ -40,20 +40,19 @@ import numpy as np
 from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
 from opa._lazy import lazy
 from opa._model import (
-    check_order,
     PARAMETER_NAMES,
     Oscillator,
     SolverOptions,
-    Uncertainty,
     _choice,
+    check_instance,
 )
+from opa._system import SYSTEM_FIELDS, System, as_system
 from opa.dynamics._sections import (
     GRAZE_GAP,
     GRAZE_VELOCITY,
     PERIOD_TOL,
     grazing_points,
     identify,
-    impulse_times,
     period_doubling,
     sticking_mask,
     stroboscopic_mask,
@@ -64,6 +63,8 @@ xr = lazy("xarray")
 MODELS = ("dmr", "opa", "mc")
 CONTINUATIONS = ("fixed", "forward", "backward")
 SWEEPABLE = PARAMETER_NAMES + ("sigma",)
+#: the System fields a sweep takes as keywords (its OPA system uses the semicircle law)
+SWEEP_FIELDS = tuple(f for f in SYSTEM_FIELDS if f != "distribution")
 DEFAULT_WORKERS = 2
 _MANIFEST = "sweep.json"
 
@@ -71,8 +72,7 @@ _MANIFEST = "sweep.json"
 # --------------------------------------------------------------------------- one point
 
 
-def sweep_times(oscillator: Oscillator, options: SolverOptions, transient: int, record: int,
-                per_period: int) -> np.ndarray:
+def sweep_times(system: System, transient: int, record: int, per_period: int) -> np.ndarray:
     """Output times of one sweep point: stroboscopic through the transient, then
     ``per_period`` outputs per forcing period through the record.
 
@@ -81,16 +81,10 @@ def sweep_times(oscillator: Oscillator, options: SolverOptions, transient: int, 
     forcing periods) is always sampled just after it (outputs are right-continuous).
     Left to round-off, such a sample falls on either side of the velocity jump.
     """
-    T = oscillator.forcing_period
+    T = system.oscillator.forcing_period
     strobe = np.arange(transient + 1) * T
     dense = transient * T + np.arange(1, record * per_period + 1) * (T / per_period)
-    times = np.concatenate([strobe, dense])
-    if oscillator.F0 != 0.0:
-        T1 = 2.0 * math.pi / oscillator.omega1
-        j = np.round(times / T1)
-        near = (np.abs(times - j * T1) <= 1e-9 * T) & (j >= (0 if options.impulse_at_zero else 1))
-        times = np.where(near, j * T1, times)
-    return times
+    return system.snap_to_impulses(np.concatenate([strobe, dense]), 1e-9 * T)
 
 
 @dataclass(frozen=True)
@@ -100,14 +94,8 @@ class PointTask:
     index: int
     value: float
     model: str
-    oscillator: Oscillator
+    system: System  # the point's system (its deterministic part for the DMR)
     options: SolverOptions
-    sigma: float
-    order: int
-    uncertain: str
-    truncation: str
-    impact_law: str
-    allow_negative: bool
     samples: int
     sampler: str
     seed: int
@@ -121,23 +109,22 @@ class PointTask:
     single_thread: bool = False
     source: Callable[[PointTask, np.ndarray], dict] | None = None
 
+    @property
+    def oscillator(self) -> Oscillator:
+        return self.system.oscillator
+
 
 def _trajectory(task: PointTask, times: np.ndarray) -> dict:
     """Integrate one point; arrays only (the compiled kernel directly for dmr and opa,
     which saves building a dataset per point, about a fifth of a point's time)."""
     from opa import _kernel as K
     from opa._run import quadrature, run_kernel
-    from opa._system import pack_parameters
 
-    osc = task.oscillator
     if task.source is not None:
         return task.source(task, times)
-    order = task.order if task.model == "opa" else 0
+    osc, order = task.system.oscillator, task.system.order
     ncoef = order + 1
-    sigma = task.sigma if task.model == "opa" else 0.0
-    p, cfg = pack_parameters(osc, task.options, sigma=sigma, order=order,
-                             uncertain=task.uncertain, truncation=task.truncation,
-                             impact_law=task.impact_law)
+    p, cfg = task.system.pack(task.options)
     y0 = np.zeros(2 * ncoef)
     if task.initial is None:
         y0[0], y0[ncoef] = osc.x0, osc.v0
@@ -167,9 +154,9 @@ def compute_point(task: PointTask) -> dict:
         import numba
 
         numba.set_num_threads(1)
-    ncoef = task.order + 1 if task.model == "opa" else 1
+    ncoef = task.system.order + 1
     osc = task.oscillator
-    times = sweep_times(osc, task.options, task.transient, task.record, task.per_period)
+    times = sweep_times(task.system, task.transient, task.record, task.per_period)
     try:
         run = _trajectory(task, times)
     except SimulationError as err:
@@ -188,8 +175,7 @@ def compute_point(task: PointTask) -> dict:
     if run["impact_time"] is not None:
         breaks.append(run["impact_time"])
     if osc.F0 != 0.0:
-        tj = impulse_times(times[-1], osc.omega1, impulse_at_zero=task.options.impulse_at_zero)
-        breaks += [tj, tj + task.options.pulse_width] if task.options.impulse == "pulse" else [tj]
+        breaks.append(task.system.impulse_breaks(times[-1]))
     sticking = (sticking_mask(times, run["stick_time"], run["release_time"])
                 if len(run["stick_time"]) else None)
     motion = identify(times, run["x"], run["v"], forcing_period=T, delta=osc.delta,
@@ -371,13 +357,14 @@ def _open_parts(out: str | None, manifest: dict) -> tuple[str | None, dict]:
 # --------------------------------------------------------------------------- the sweep
 
 
-def _settings(model, param, values, oscillator, options, kw) -> dict:
+def _settings(model, param, values, base, options, kw) -> dict:
     """The sweep's settings as plain JSON values: the resume manifest."""
     return {
         "model": model,
         "param": param,
         "values": [float(v) for v in values],
-        "oscillator": oscillator.as_dict(),
+        "oscillator": base.oscillator.as_dict(),
+        "system": {k: v for k, v in base.dataset_attrs().items()},
         "options": {k: (float(v) if isinstance(v, float) else v)
                     for k, v in asdict(options).items()},
         **kw,
@@ -388,18 +375,12 @@ def sweep(
     model: str,
     param: str,
     values,
-    oscillator: Oscillator | None = None,
+    system: System | Oscillator | None = None,
     *,
     transient: int = 500,
     record: int = 100,
     per_period: int = 16,
     continuation: str = "fixed",
-    sigma: float = 0.0,
-    order: int = 4,
-    uncertain: str = "mu",
-    truncation: str = "galerkin",
-    impact_law: str = "mean",
-    allow_negative: bool = False,
     samples: int = 256,
     sampler: str = "sobol",
     seed: int = 0,
@@ -415,6 +396,7 @@ def sweep(
     progress: bool | None = None,
     locate: bool | None = None,
     source: Callable | None = None,
+    **fields,
 ) -> xr.Dataset:
     """Bifurcation diagram: sections and motion labels over values of one parameter.
 
@@ -429,15 +411,18 @@ def sweep(
     param : the swept parameter, any of ``mu a c f omega eta delta F0 a1 omega1 n x0 v0``
         or ``sigma`` (opa, mc).
     values : (P,) distinct parameter values (stored in increasing order).
-    oscillator : the other parameters (paper defaults when omitted).
+    system : an :class:`opa.System` (the other parameters, the uncertainty, N and the
+        closures, the impulse model), or an :class:`opa.Oscillator` (paper defaults when
+        omitted) with the System's fields as keywords (``sigma`` default 0.01, ``order``
+        default 4, ``uncertain``, ``truncation``, ``impact_law``, ``allow_negative``,
+        ``impulse``, ``pulse_width``, ``impulse_at_zero``; the DMR ignores the
+        uncertainty; xi has the semicircle law).
     transient, record : forcing periods 2 pi/omega dropped, then recorded.
     per_period : outputs per forcing period in the record (>= 8 resolves free-flight
         maxima for grazing; the transient is sampled once per period).
     continuation : "fixed" (every value starts from ``x0, v0``), "forward" (increasing
         values, each from the final state of the previous) or "backward" (decreasing).
         A failed value hands ``x0, v0`` on to the next.
-    sigma, order, uncertain, truncation, impact_law, allow_negative : the OPA / MC
-        settings (see ``simulate_opa``, ``simulate_mc``).
     samples, sampler, seed : Monte Carlo settings (model "mc").
     options : solver options.
     period_tol, graze_velocity, graze_gap : see ``identify_motion``.
@@ -493,8 +478,10 @@ def sweep(
                          "(opa.sweep and the CLI do)")
     if source is not None and not callable(source):
         raise ValueError(f"source must be a function (task, times) -> arrays, got {source!r}")
-    oscillator = oscillator or Oscillator()
-    options = options or SolverOptions()
+    options = check_instance("options", options, SolverOptions, SolverOptions())
+    base = as_system(system, options, allowed=SWEEP_FIELDS, where="sweep", **fields)
+    base = (base.deterministic() if model == "dmr" else
+            base.replace(order=0) if model == "mc" else base)
     if param == "sigma" and model == "dmr":
         raise ValueError("the DMR has no uncertainty: sweep sigma with model 'opa' or 'mc'")
     if continuation != "fixed" and model == "mc":
@@ -504,7 +491,6 @@ def sweep(
                              ("per_period", per_period, 1), ("workers", workers, 1)):
         if isinstance(value, bool) or int(value) != value or value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value}")
-    order = check_order(order)
     values = np.asarray(values, dtype=float).ravel()
     if len(values) < 1 or not np.all(np.isfinite(values)):
         raise ValueError(f"sweep values of {param} must be finite, got {values.tolist()}")
@@ -517,26 +503,20 @@ def sweep(
             raise ValueError(f"{name} must be > 0, got {value}")
 
     kw = {
-        "sigma": float(sigma), "order": int(order) if model == "opa" else 0,
-        "uncertain": uncertain, "truncation": truncation, "impact_law": impact_law,
-        "allow_negative": bool(allow_negative), "samples": int(samples), "sampler": sampler,
+        "samples": int(samples), "sampler": sampler,
         "seed": int(seed), "transient": int(transient), "record": int(record),
         "per_period": int(per_period), "period_tol": float(period_tol),
         "graze_velocity": float(graze_velocity), "graze_gap": float(graze_gap),
     }
     tasks = []
     for i, value in enumerate(values):
-        osc, task_kw = oscillator, dict(kw)
-        if param == "sigma":
-            task_kw["sigma"] = float(value)
-        else:
-            osc = oscillator.replace(**{param: float(value)})  # validates, names the value
+        point = base.replace(**{param: float(value)})  # validates, names the value
         if model != "dmr":
-            Uncertainty(task_kw["sigma"], uncertain, allow_negative).check(osc)
-        tasks.append(PointTask(index=i, value=float(value), model=model, oscillator=osc,
-                               options=options, source=source, **task_kw))
-    system, not_located = _locate_setup(locate, model, param, values, oscillator, options, kw)
-    manifest = _settings(model, param, values, oscillator, options,
+            point.check_samples()
+        tasks.append(PointTask(index=i, value=float(value), model=model, system=point,
+                               options=options, source=source, **kw))
+    system, not_located = _locate_setup(locate, model, param, values, base, options)
+    manifest = _settings(model, param, values, base, options,
                          {**kw, "continuation": continuation})
     out = None if out is None else os.fspath(out)
     parts, done = _open_parts(out, manifest)
@@ -563,14 +543,14 @@ def sweep(
             _run_continuation(order_, done, finish, scheduler)
     computed = len(tasks) - len(done)
     ordered = [results[i] for i in range(len(tasks))]
-    ds = assemble(model, param, values, ordered, oscillator, options, kw, continuation)
+    ds = assemble(model, param, values, ordered, base, options, kw, continuation)
     ds.attrs.update(points_resumed=len(done), points_computed=computed)
     if system is None:
         ds = add_located(ds, [], method=f"not located: {not_located}")
     else:
         from opa.dynamics._continuation import locate_bifurcations
 
-        seeds = observed_seeds(param, values, ordered, oscillator, options, kw)
+        seeds = observed_seeds(param, values, ordered, base, kw)
         points = locate_bifurcations(system, param, float(values[0]), float(values[-1]),
                                      seeds=seeds)
         ds = add_located(ds, points, method=(
@@ -586,7 +566,7 @@ def sweep(
 # --------------------------------------------------------------------------- located points
 
 
-def _locate_setup(locate, model, param, values, oscillator, options, kw):
+def _locate_setup(locate, model, param, values, base, options):
     """(ImpactSystem, None) when the sweep's bifurcations are to be located, else
     (None, why not). ``locate=True`` turns a reason into a ValueError."""
     from opa.dynamics._continuation import check_locatable
@@ -602,13 +582,7 @@ def _locate_setup(locate, model, param, values, oscillator, options, kw):
             raise ValueError("the Monte Carlo mean has no periodic orbits to continue")
         if len(values) < 2:
             raise ValueError("one value: no interval to locate bifurcations in")
-        if model == "dmr":
-            system = ImpactSystem(oscillator, options=options)
-        else:
-            system = ImpactSystem(oscillator, model="opa", sigma=kw["sigma"],
-                                  order=kw["order"], uncertain=kw["uncertain"],
-                                  truncation=kw["truncation"], impact_law=kw["impact_law"],
-                                  allow_negative=kw["allow_negative"], options=options)
+        system = ImpactSystem.of(base, model=model, options=options)
         check_locatable(system, param, float(values[0]), float(values[-1]))
     except ValueError as err:
         if locate:
@@ -617,7 +591,7 @@ def _locate_setup(locate, model, param, values, oscillator, options, kw):
     return system, None
 
 
-def observed_seeds(param, values, results, oscillator, options, kw) -> list:
+def observed_seeds(param, values, results, base: System, kw) -> list:
     """Seeds for ``locate_bifurcations`` from a sweep's points: ``(value, final state,
     end time, stroboscopic points)`` of every value with a periodic motion. First the
     middle value of every run of equal labels, shorter periods and longer runs first (a
@@ -640,8 +614,8 @@ def observed_seeds(param, values, results, oscillator, options, kw) -> list:
         if p <= 0 or int(r["failed"]) or not np.all(np.isfinite(final)):
             continue
         points = np.stack([np.asarray(r["section_x"])[:p], np.asarray(r["section_v"])[:p]], 1)
-        osc = oscillator if param == "sigma" else oscillator.replace(**{param: float(values[m])})
-        end = sweep_times(osc, options, kw["transient"], kw["record"], kw["per_period"])[-1]
+        end = sweep_times(base.replace(**{param: float(values[m])}), kw["transient"],
+                          kw["record"], kw["per_period"])[-1]
         seeds.append((float(values[m]), final.ravel(), float(end), points))
     return seeds
 
@@ -807,7 +781,7 @@ def _padded(rows, width):
     return out
 
 
-def assemble(model, param, values, results, oscillator, options, kw, continuation
+def assemble(model, param, values, results, base, options, kw, continuation
              ) -> xr.Dataset:
     """The sweep dataset (docs/datasets.md) from per-point results in value order."""
     width = max([kw["record"]] + [len(r["impact_v"]) for r in results])
@@ -844,10 +818,7 @@ def assemble(model, param, values, results, oscillator, options, kw, continuatio
     data["grazing_parameter"] = ("graze", graze_at,
                                  {"long_name": f"estimated {param} of grazing bifurcations",
                                   "units": "1"})
-    attrs = provenance_attrs(model, oscillator, options, sigma=kw["sigma"], order=kw["order"],
-                             uncertain=kw["uncertain"], truncation=kw["truncation"],
-                             impact_law=kw["impact_law"],
-                             seed=kw["seed"] if model == "mc" else -1,
+    attrs = provenance_attrs(model, base, options, seed=kw["seed"] if model == "mc" else -1,
                              sampler=kw["sampler"] if model == "mc" else "none")
     attrs[param] = math.nan  # swept: see the coordinate
     attrs.update(
