@@ -20,6 +20,7 @@ THEMES = {
     "tests/test_docs.py": "docs/ against fresh runs",
     "tests/test_layout.py": "this rule",
     "tests/test_reference.py": "tests/reference.py against closed forms",
+    "tests/test_truths.py": "tests/truths.py against scipy",
     "tests/opa/test_solver.py": "the event-driven integrator (opa._kernel) and simulate_dmr",
     "tests/opa/test_opa_system.py": "the OPA equivalent system against the paper's equations",
     "tests/opa/test_hard_dynamics.py": "failures and time bounds across kernel, runs, orbits",

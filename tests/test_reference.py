@@ -1,4 +1,5 @@
-"""Self-checks of the scipy reference (tests/reference.py) against closed-form solutions."""
+"""Self-checks of the scipy reference (tests/reference.py) against closed-form solutions
+(``tests/truths.py``)."""
 
 from __future__ import annotations
 
@@ -6,29 +7,25 @@ import numpy as np
 import pytest
 
 from tests.reference import reference_final_state, reference_trajectory
+from tests.truths import (
+    accumulation_time,
+    bouncing_sequence,
+    impulse_size,
+    kick_at_rest_on_the_wall,
+    kicked_linear_oscillator,
+    linear_oscillator,
+    pulsed_linear_oscillator,
+)
 
 NO_WALL = dict(mu=0.0, c=0.0, eta=0.8, delta=1e9)
 SLOW_IMPULSES = dict(a1=1.0, omega1=1.0, n=2)
-
-
-def linear_free(t, a, f, omega, x0, v0):
-    """x'' + a x = f cos(omega t), x(0) = x0, x'(0) = v0 (a > 0, omega^2 != a)."""
-    w0 = np.sqrt(a)
-    p = f / (a - omega**2)
-    x = (x0 - p) * np.cos(w0 * t) + v0 / w0 * np.sin(w0 * t) + p * np.cos(omega * t)
-    v = -(x0 - p) * w0 * np.sin(w0 * t) + v0 * np.cos(w0 * t) - p * omega * np.sin(omega * t)
-    return x, v
-
-
-def impulse_sizes(t_j, F0, a1=1.0, omega1=1.0, n=2):
-    return F0 * (1.0 + a1 * np.sin(omega1 * t_j / n))
 
 
 def test_linear_oscillator_without_wall():
     t = np.linspace(0.0, 20.0, 401)
     model = dict(a=1.3, f=2.0, omega=2.8, F0=0.0, x0=-1.0, v0=0.4, **NO_WALL, **SLOW_IMPULSES)
     out = reference_trajectory(t_out=t, **model)
-    x, v = linear_free(t, 1.3, 2.0, 2.8, -1.0, 0.4)
+    x, v = linear_oscillator(t, 1.3, 2.0, 2.8, -1.0, 0.4)
     np.testing.assert_allclose(out["x"], x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(out["v"], v, rtol=0, atol=1e-9)
     assert out["impact_time"].shape == out["impact_velocity"].shape == (0,)
@@ -40,17 +37,14 @@ def test_dirac_impulses_by_superposition(impulse_at_zero):
     t = np.linspace(0.0, 4 * 2 * np.pi, 801)  # contains every t_j = 2 pi j exactly
     model = dict(a=a, f=1.5, omega=2.0, F0=F0, x0=-0.5, v0=0.0, **NO_WALL, **SLOW_IMPULSES)
     out = reference_trajectory(t_out=t, impulse_at_zero=impulse_at_zero, **model)
-    x, v = linear_free(t, a, 1.5, 2.0, -0.5, 0.0)
-    w0 = np.sqrt(a)
-    for t_j in 2 * np.pi * np.arange(0 if impulse_at_zero else 1, 5):
-        s = np.where(t >= t_j, t - t_j, 0.0)
-        kick = impulse_sizes(t_j, F0) * (t >= t_j)
-        x += kick * np.sin(w0 * s) / w0
-        v += kick * np.cos(w0 * s)
+    kicks = [(t_j, impulse_size(t_j, F0, **SLOW_IMPULSES))
+             for t_j in 2 * np.pi * np.arange(0 if impulse_at_zero else 1, 5)]
+    x, v = kicked_linear_oscillator(t, a, 1.5, 2.0, -0.5, 0.0, kicks)
     np.testing.assert_allclose(out["x"], x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(out["v"], v, rtol=0, atol=1e-9)
     # Outputs are right-continuous: at t = 0 the first kick is already in.
-    assert out["v"][0] == pytest.approx(impulse_sizes(0.0, F0) if impulse_at_zero else 0.0)
+    first = impulse_size(0.0, F0, **SLOW_IMPULSES)
+    assert out["v"][0] == pytest.approx(first if impulse_at_zero else 0.0)
 
 
 def test_rectangular_pulses_by_superposition():
@@ -58,16 +52,8 @@ def test_rectangular_pulses_by_superposition():
     t = np.linspace(0.0, 3 * 2 * np.pi, 601)
     model = dict(a=a, f=0.0, omega=2.0, F0=F0, x0=0.0, v0=0.0, **NO_WALL, **SLOW_IMPULSES)
     out = reference_trajectory(t_out=t, impulse="pulse", tau=tau, **model)
-    w0 = np.sqrt(a)
-    x, v = np.zeros_like(t), np.zeros_like(t)
-    for t_j in 2 * np.pi * np.arange(0, 4):
-        h = impulse_sizes(t_j, F0) / a
-        s = t - t_j
-        on, after = (s >= 0) & (s < tau), s >= tau
-        x += np.where(on, h * (1 - np.cos(w0 * s)), 0.0)
-        x += np.where(after, h * (np.cos(w0 * (s - tau)) - np.cos(w0 * s)), 0.0)
-        v += np.where(on, h * w0 * np.sin(w0 * s), 0.0)
-        v += np.where(after, h * w0 * (np.sin(w0 * s) - np.sin(w0 * (s - tau))), 0.0)
+    pulses = [(t_j, impulse_size(t_j, F0, **SLOW_IMPULSES)) for t_j in 2 * np.pi * np.arange(0, 4)]
+    x, v = pulsed_linear_oscillator(t, a, 0.0, 2.0, 0.0, 0.0, pulses, tau)
     np.testing.assert_allclose(out["x"], x, rtol=0, atol=1e-9)
     np.testing.assert_allclose(out["v"], v, rtol=0, atol=1e-9)
 
@@ -92,20 +78,13 @@ def test_kick_at_the_wall_is_an_impact():
     out = reference_trajectory(eta=0.8, delta=0.0, x0=0.0, v0=0.0, t_out=t, **model)
     np.testing.assert_allclose(out["impact_time"], [0.0])
     np.testing.assert_allclose(out["impact_velocity"], [1.0])
-    np.testing.assert_allclose(out["x"], -0.8 * t, atol=1e-12)
-
-
-def bouncing_under_gravity(g, h, eta, count):
-    """Impact times and velocities of a mass dropped from rest at distance h from the wall."""
-    velocity = np.sqrt(2 * g * h) * eta ** np.arange(count)
-    flights = np.concatenate([[np.sqrt(2 * h / g)], 2 * eta * velocity[:-1] / g])
-    return np.cumsum(flights), velocity
+    np.testing.assert_allclose(out["x"], kick_at_rest_on_the_wall(1.0, 0.8) * t, atol=1e-12)
 
 
 def test_bouncing_under_constant_force():
     g, h, eta = 2.0, 1.0, 0.6  # omega = 0 turns f cos(omega t) into a constant force g
     model = {**FREE_MASS, "f": g, "omega": 0.0}
-    times, speeds = bouncing_under_gravity(g, h, eta, 8)
+    times, speeds = bouncing_sequence(g, h, eta, 8)
     t_end = 0.5 * (times[7] + times[6])
     out = reference_trajectory(eta=eta, delta=0.0, x0=-h, v0=0.0, t_out=[0.0, t_end], **model)
     np.testing.assert_allclose(out["impact_time"], times[:7], rtol=0, atol=1e-10)
@@ -115,7 +94,7 @@ def test_bouncing_under_constant_force():
 def test_chatter_raises_instead_of_hanging():
     g, h, eta = 2.0, 1.0, 0.6
     model = {**FREE_MASS, "f": g, "omega": 0.0}
-    accumulation = np.sqrt(2 * h / g) + 2 * eta * np.sqrt(2 * g * h) / (g * (1 - eta))
+    accumulation = accumulation_time(g, h, eta)
     with pytest.raises(RuntimeError, match="impacts"):
         reference_trajectory(
             eta=eta, delta=0.0, x0=-h, v0=0.0, t_out=[0.0, accumulation + 1.0],

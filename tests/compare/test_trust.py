@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.integrate import quad
 
 from compare._trust import (
     bisect_boundary,
@@ -19,6 +18,7 @@ from compare._trust import (
 )
 from compare._trustmap import count_distribution
 from opa._splits import Split
+from tests.truths import semicircle_mass
 
 
 def test_running_rms_by_hand():
@@ -110,18 +110,14 @@ def test_bisection_rejects_bad_brackets():
 
 
 # -- impact-count distributions from located splits --------------------------------------
-def _semicircle_mass(lo, hi):
-    return quad(lambda x: 2 / math.pi * math.sqrt(max(0.0, 1 - x * x)), lo, hi)[0]
-
-
 def test_count_distribution_is_the_semicircle_mass_between_splits():
     centre, sigma = 0.8, 0.05
     splits = [Split(0.78, 1e-9, "grazing", 5.0, 1e-5, 4, 3),
               Split(0.81, 1e-9, "extra impact", 7.0, 0.2, 3, 5)]
     got = count_distribution(centre, sigma, splits, count_at_centre=3)
-    assert got[4] == pytest.approx(_semicircle_mass(-1, -0.4), abs=1e-12)
-    assert got[3] == pytest.approx(_semicircle_mass(-0.4, 0.2), abs=1e-12)
-    assert got[5] == pytest.approx(_semicircle_mass(0.2, 1), abs=1e-12)
+    assert got[4] == pytest.approx(semicircle_mass(-1, -0.4), abs=1e-12)
+    assert got[3] == pytest.approx(semicircle_mass(-0.4, 0.2), abs=1e-12)
+    assert got[5] == pytest.approx(semicircle_mass(0.2, 1), abs=1e-12)
     assert sum(got.values()) == pytest.approx(1.0, abs=1e-14)
     # a sigma that does not reach either split: every sample makes the centre's count
     assert count_distribution(centre, 0.01, splits, count_at_centre=3) == {3: 1.0}

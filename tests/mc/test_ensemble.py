@@ -9,7 +9,7 @@ Ground truths, one per purpose:
   rtol 1e-11, which is converged to round-off (Q = 8 already agrees to 1e-13);
 * for the Gauss path itself, the closed-form linear oscillator with uncertain stiffness,
   whose mean and Chebyshev coefficients are integrated over the semicircle by
-  ``scipy.integrate.quad``.
+  ``scipy.integrate.quad`` (both from ``tests/truths.py``).
 
 Measured on the 2-core development container (printed with ``-s``): on the same 200 xi
 the engine and the scipy reference differ by 6e-10 at most (sample means by 5e-11); the
@@ -34,12 +34,12 @@ import tracemalloc
 import numba
 import numpy as np
 import pytest
-from scipy import integrate
 
 import mc
 import opa
 from opa._basis import chebyshev_u
 from tests.reference import reference_trajectory
+from tests.truths import linear_oscillator, semicircle_expectation
 
 SECTION_32 = opa.preset("3.2", omega=3.98)
 SIGMA = 0.05
@@ -252,15 +252,10 @@ def test_gauss_matches_closed_form_linear_oscillator():
                         periods=3, per_period=2, options=TIGHT)  # fmt: skip
 
     def x_exact(t, xi):
-        w0 = math.sqrt(a_bar + sigma * xi)
-        p = f / (w0**2 - omega**2)
-        return (x0 - p) * math.cos(w0 * t) + p * math.cos(omega * t)
+        return float(linear_oscillator(t, a_bar + sigma * xi, f, omega, x0, 0.0)[0])
 
     def expectation(g):
-        # weight="alg" with (1/2, 1/2) integrates against sqrt(1 - xi^2) exactly
-        value, _ = integrate.quad(lambda xi: 2 / math.pi * g(xi), -1, 1, weight="alg",
-                                  wvar=(0.5, 0.5), epsabs=1e-14, epsrel=1e-14)  # fmt: skip
-        return value
+        return semicircle_expectation(g, epsabs=1e-14, epsrel=1e-14)
 
     for j, t in enumerate(ds.time.values):
         mean = expectation(lambda xi: x_exact(t, xi))

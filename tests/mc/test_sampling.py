@@ -1,33 +1,16 @@
-"""Tests for mc._sampling: the semicircle law, its samplers and its Gauss rule."""
+"""Tests for mc._sampling: the semicircle law, its samplers and its Gauss rule (against
+the semicircle truths of ``tests/truths.py``, moments and the closed-form Gauss rule)."""
 
 from __future__ import annotations
 
-from math import comb
-
 import numpy as np
 import pytest
-from scipy import integrate, stats
+from scipy import stats
 
 from mc._sampling import SAMPLERS, gauss_nodes, sample_xi, semicircle_cdf, semicircle_ppf
+from tests.truths import semicircle_density, semicircle_gauss_rule, semicircle_moment
 
 SEEDS = (0, 1, 2, 3, 4, 5, 6, 7)
-
-
-def semicircle_moment(k: int) -> float:
-    """Exact E[xi^k] under p(xi) = (2/pi) sqrt(1 - xi^2): Catalan(k/2) / 4^(k/2), 0 if odd."""
-    if k % 2:
-        return 0.0
-    m = k // 2
-    return comb(2 * m, m) / (m + 1) / 4.0**m
-
-
-def test_exact_moments_helper_matches_quadrature():
-    for k in range(9):
-        # weight "alg" integrates against (1 + x)^1/2 (1 - x)^1/2 = sqrt(1 - x^2) exactly.
-        moment, _ = integrate.quad(lambda x: 2 / np.pi * x**k, -1, 1, weight="alg", wvar=(0.5, 0.5))
-        assert semicircle_moment(k) == pytest.approx(moment, abs=1e-14)
-    assert semicircle_moment(2) == 0.25
-    assert semicircle_moment(4) == 0.125
 
 
 # --- CDF and inverse CDF --------------------------------------------------------------------
@@ -47,7 +30,7 @@ def test_cdf_derivative_is_the_density():
     x = np.linspace(-0.95, 0.95, 39)
     h = 1e-6
     slope = (semicircle_cdf(x + h) - semicircle_cdf(x - h)) / (2 * h)
-    np.testing.assert_allclose(slope, 2 / np.pi * np.sqrt(1 - x**2), rtol=1e-8)
+    np.testing.assert_allclose(slope, semicircle_density(x), rtol=1e-8)
 
 
 def test_ppf_inverts_cdf():
@@ -165,10 +148,9 @@ def test_gauss_exact_up_to_degree_2q_minus_1(order):
 def test_gauss_nodes_formula_and_symmetry():
     order = 7
     xi, weights = gauss_nodes(order)
-    k = np.arange(1, order + 1)
-    angle = k * np.pi / (order + 1)
-    np.testing.assert_allclose(xi, np.sort(np.cos(angle)), atol=1e-15)
-    np.testing.assert_allclose(weights, 2 / (order + 1) * np.sin(angle) ** 2, atol=1e-15)
+    nodes, expected = semicircle_gauss_rule(order)
+    np.testing.assert_allclose(xi, nodes, atol=1e-15)
+    np.testing.assert_allclose(weights, expected, atol=1e-15)
     np.testing.assert_array_equal(xi, -xi[::-1])
     assert xi[order // 2] == 0.0
     assert sample_xi("gauss", order, seed=1)[0].tolist() == xi.tolist()

@@ -1,15 +1,14 @@
 """Tests for ``opa._basis`` against references that do not share its code.
 
-References: ``scipy.integrate.quad`` with the algebraic weight ``sqrt(1 - xi^2)`` (QAWS),
-scipy's Gauss-Jacobi rule ``roots_jacobi(n, 1/2, 1/2)`` (Golub-Welsch, the semicircle up to
-the factor 2/pi), ``scipy.special.eval_chebyu``, the exact semicircle moments
-``E[xi^(2m)] = Catalan(m) / 4^m``, chaospy's orthonormal expansion and Gauss rule for
-``Beta(3/2, 3/2)`` on [-1, 1], and the paper's printed formulas (14)-(19).
+References (the shared ones from ``tests/truths.py``): ``scipy.integrate.quad`` with the
+algebraic weight ``sqrt(1 - xi^2)`` (QAWS), scipy's Gauss-Jacobi rule
+``roots_jacobi(n, 1/2, 1/2)`` (Golub-Welsch, the semicircle up to the factor 2/pi), the
+cubic projection by a 200-point such rule, ``scipy.special.eval_chebyu``, the exact
+semicircle moments ``E[xi^(2m)] = Catalan(m) / 4^m``, chaospy's orthonormal expansion and
+Gauss rule for ``Beta(3/2, 3/2)`` on [-1, 1], and the paper's printed formulas (14)-(19).
 """
 
 from __future__ import annotations
-
-from math import comb
 
 import chaospy
 import numpy as np
@@ -17,8 +16,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
-from scipy.integrate import quad
-from scipy.special import eval_chebyu, roots_jacobi
+from scipy.special import eval_chebyu
 
 from opa._basis import (
     chebyshev_u,
@@ -29,39 +27,15 @@ from opa._basis import (
     quadrature_order,
     triple_product,
 )
+from tests.truths import (
+    semicircle_cubic_projection,
+    semicircle_density,
+    semicircle_expectation,
+    semicircle_golub_welsch_rule,
+    semicircle_moment,
+)
 
 RNG_SEED = 20240611
-
-
-# --------------------------------------------------------------------------- references
-
-
-def semicircle_quad(f) -> float:
-    """E[f(xi)] under (2/pi) sqrt(1 - xi^2) by adaptive QAWS (scipy.integrate.quad)."""
-    value, _ = quad(f, -1.0, 1.0, weight="alg", wvar=(0.5, 0.5), limit=200)
-    return 2.0 / np.pi * value
-
-
-def jacobi_rule(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Independent n-point Gauss rule of the semicircle (exact to degree 2n - 1)."""
-    nodes, weights = roots_jacobi(n, 0.5, 0.5)
-    return nodes, weights * (2.0 / np.pi)
-
-
-def semicircle_moment(d: int) -> float:
-    """E[xi^d] = Catalan(d/2) / 4^(d/2) for even d, 0 for odd d."""
-    if d % 2:
-        return 0.0
-    m = d // 2
-    return comb(2 * m, m) / (m + 1) / 4.0**m
-
-
-def brute_cubic_projection(coef: np.ndarray, n_out: int) -> np.ndarray:
-    """X_i = E[x^3 U_i] with a 96-point Jacobi rule and scipy's U_i (exact to degree 191)."""
-    nodes, weights = jacobi_rule(96)
-    u = np.array([eval_chebyu(i, nodes) for i in range(max(len(coef), n_out + 1))])
-    x = coef @ u[: len(coef)]
-    return u[: n_out + 1] @ (weights * x**3)
 
 
 # --------------------------------------------------------------------------- basis
@@ -92,7 +66,7 @@ def test_orthonormality_by_quad():
     gram = np.empty((n + 1, n + 1))
     for i in range(n + 1):
         for j in range(i, n + 1):
-            gram[i, j] = gram[j, i] = semicircle_quad(
+            gram[i, j] = gram[j, i] = semicircle_expectation(
                 lambda x, i=i, j=j: basis_at(x)[i] * basis_at(x)[j]
             )
     np.testing.assert_allclose(gram, np.eye(n + 1), atol=1e-12)
@@ -136,7 +110,7 @@ def test_gauss_rule_not_exact_at_degree_2q(q):
 
 def test_gauss_rule_matches_scipy_jacobi():
     nodes, weights = gauss_nodes(25)
-    ref_nodes, ref_weights = jacobi_rule(25)
+    ref_nodes, ref_weights = semicircle_golub_welsch_rule(25)
     np.testing.assert_allclose(nodes, ref_nodes, atol=1e-13)
     np.testing.assert_allclose(weights, ref_weights, atol=1e-13)
 
@@ -149,7 +123,7 @@ def test_triple_product_rule_against_quad():
         for j in range(9):
             for k in range(9):
                 exact = triple_product(i, j, k)
-                numeric = semicircle_quad(
+                numeric = semicircle_expectation(
                     lambda x, i=i, j=j, k=k: (
                         eval_chebyu(i, x) * eval_chebyu(j, x) * eval_chebyu(k, x)
                     )
@@ -173,7 +147,7 @@ SEMICIRCLE = chaospy.Beta(1.5, 1.5, lower=-1, upper=1)
 
 def test_chaospy_distribution_is_the_semicircle():
     xi = np.linspace(-0.99, 0.99, 9)
-    np.testing.assert_allclose(SEMICIRCLE.pdf(xi), 2 / np.pi * np.sqrt(1 - xi**2), rtol=1e-12)
+    np.testing.assert_allclose(SEMICIRCLE.pdf(xi), semicircle_density(xi), rtol=1e-12)
 
 
 @pytest.mark.parametrize("n", [0, 1, 2, 5, 10, 15])
@@ -221,7 +195,7 @@ def test_cubic_projection_against_brute_force(n, data):
     coef = data.draw(arrays(np.float64, n + 1, elements=st.floats(-3.0, 3.0)), label="coef")
     # |x^3 U_i| <= (sum |c_j| (j + 1))^3 (i + 1) on [-1, 1]: rounding scale of both routes.
     scale = max(1.0, np.abs(coef) @ np.arange(1, n + 2)) ** 3 * (3 * n + 3)
-    expected = brute_cubic_projection(coef, 3 * n + 2)
+    expected = semicircle_cubic_projection(coef, 3 * n + 2)
     got = cubic_projection(coef, n_out=3 * n + 2)
     assert got.shape == (3 * n + 3,)
     np.testing.assert_allclose(got, expected, atol=1e-14 * scale)
@@ -266,7 +240,7 @@ def test_quadrature_order_is_enough_for_the_opa_rhs():
         coef = rng.normal(size=n + 1)
         nodes, weights = gauss_nodes(q)
         got = project(nodes * evaluate(coef, nodes) ** 3, n, nodes, weights)
-        ref_nodes, ref_weights = jacobi_rule(64)
+        ref_nodes, ref_weights = semicircle_golub_welsch_rule(64)
         ref = project(ref_nodes * evaluate(coef, ref_nodes) ** 3, n, ref_nodes, ref_weights)
         np.testing.assert_allclose(got, ref, atol=1e-11)
 

@@ -16,6 +16,7 @@ from opa._model import time_grid
 from opa._splits import event_sequence
 from tests.reference import reference_trajectory
 from tests.reference_splits import GRAZING_CASE
+from tests.truths import semicircle_density
 
 OPTIONS = SolverOptions(rtol=1e-10, atol=1e-10)
 
@@ -34,7 +35,7 @@ def test_assembly_is_exact_for_a_polynomial_response(law):
         coef = (basis * w) @ poly(x)
         runs.append(ElementRun(a, b, element.probability(), coef[:, None], coef[:, None], 0, 0))
     got = assemble(runs)
-    dens = {"semicircle": lambda t: 2 / math.pi * math.sqrt(1 - t * t),
+    dens = {"semicircle": semicircle_density,
             "beta:2,3": lambda t: 12 * ((1 + t) / 2) * ((1 - t) / 2) ** 2 / 2}[law.name]
     mean = integrate.quad(lambda t: dens(t) * poly(t), -1, 1)[0]
     second = integrate.quad(lambda t: dens(t) * poly(t) ** 2, -1, 1)[0]

@@ -4,11 +4,12 @@ Each check is pinned against a reference that shares no code with the library:
 
 * the right-hand side against the paper's Galerkin equations (10)-(13), written out here
   term by term, with ``X_i = E[x^3 U_i]`` and ``Y_i = E[(x')^3 U_i]`` from a 200-point
-  Gauss-Jacobi rule (``scipy.special.roots_jacobi``) and ``scipy.special.eval_chebyu``;
+  Gauss-Jacobi rule (``scipy.special.roots_jacobi``) and ``scipy.special.eval_chebyu``
+  (``tests.truths.semicircle_cubic_projection``);
 * ``sigma = 0`` against the deterministic model (EMR_0 == DMR, paper section 3.1);
 * means and variances against ensembles of the sampled systems ``p = p_bar + sigma xi_k``
   integrated one by one with ``tests/reference.py`` (scipy DOP853, rtol = atol = 1e-12)
-  at Gauss nodes of the semicircle computed here from the closed form.
+  at Gauss nodes of the semicircle from the closed form (``tests.truths``).
 
 Measured values (quoted in the test docstrings) are printed; run with ``-s`` to see them.
 """
@@ -19,13 +20,13 @@ import math
 
 import numpy as np
 import pytest
-from scipy.special import eval_chebyu, roots_jacobi
 
 import opa
 from opa import _kernel
 from opa._run import kernel_quadrature, quadrature
 from opa._system import pack_parameters
 from tests.reference import reference_trajectory
+from tests.truths import semicircle_cubic_projection, semicircle_gauss_rule
 
 RNG_SEED = 20240612
 PRESET = "3.2"  # section 3.2 of the paper: omega = 3.98, impacts on delta = 0
@@ -33,24 +34,6 @@ ACCURATE = opa.SolverOptions(rtol=1e-12, atol=1e-12)
 
 
 # --------------------------------------------------------------------------- references
-
-
-def semicircle_rule(q: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss rule of p(xi) = (2/pi) sqrt(1 - xi^2) from its closed form (not opa._basis)."""
-    k = np.arange(1, q + 1)
-    theta = k * np.pi / (q + 1)
-    return np.cos(theta), 2.0 / (q + 1) * np.sin(theta) ** 2
-
-
-_JACOBI_NODES, _JACOBI_WEIGHTS = roots_jacobi(200, 0.5, 0.5)
-_JACOBI_WEIGHTS = _JACOBI_WEIGHTS * (2.0 / np.pi)  # exact to degree 399 under p
-_JACOBI_U = np.array([eval_chebyu(i, _JACOBI_NODES) for i in range(40)])
-
-
-def brute_cubic(coef: np.ndarray, n_out: int) -> np.ndarray:
-    """(E[(sum_j c_j U_j)^3 U_i])_{i=0..n_out}, the paper's X_i (or Y_i for velocities)."""
-    values = (coef @ _JACOBI_U[: len(coef)]) ** 3
-    return _JACOBI_U[: n_out + 1] @ (_JACOBI_WEIGHTS * values)
 
 
 def paper_rhs(t, y, model, sigma, uncertain, truncation, pulse=0.0):
@@ -69,8 +52,8 @@ def paper_rhs(t, y, model, sigma, uncertain, truncation, pulse=0.0):
     """
     n1 = len(y) // 2
     x, v = y[:n1], y[n1:]
-    X = brute_cubic(x, n1)  # X_0 .. X_{N+1}
-    Y = brute_cubic(v, n1)
+    X = semicircle_cubic_projection(x, n1)  # X_0 .. X_{N+1}
+    Y = semicircle_cubic_projection(v, n1)
     if truncation == "paper":
         X[n1] = Y[n1] = 0.0
 
@@ -114,7 +97,7 @@ def sampled_moments(oscillator, sigma, uncertain, t_out, q):
     Each sample ``p_bar + sigma xi_k`` is integrated by the scipy reference
     (DOP853, rtol = atol = 1e-12); the q-point semicircle Gauss rule averages them.
     """
-    nodes, weights = semicircle_rule(q)
+    nodes, weights = semicircle_gauss_rule(q)
     paths, impacts = [], []
     for xi in nodes:
         model = oscillator.as_dict()
@@ -185,7 +168,7 @@ def test_paper_truncation_differs_by_the_dropped_term(uncertain, order):
         assert diff[-1] == 0.0
         return
     coef = y[order + 1 :] if uncertain == "mu" else y[: order + 1]
-    dropped = 0.5 * sigma * brute_cubic(coef, order + 1)[order + 1]
+    dropped = 0.5 * sigma * semicircle_cubic_projection(coef, order + 1)[order + 1]
     assert abs(dropped) > 1e-4  # the check is not vacuous
     assert diff[-1] == pytest.approx(dropped, rel=1e-12, abs=1e-14)
 

@@ -3,11 +3,12 @@
 Every check is pinned to a reference that shares no code with the solver:
 
 - the Dormand-Prince 5(4) tableau's own order conditions;
-- closed forms: the forced linear oscillator (no wall), Dirac kicks and rectangular
-  pulses by superposition, a mass bouncing under a constant force (impact times,
-  chatter accumulation time ``t_inf = t_1 + 2 eta v_1 / (g (1 - eta))``), release from
-  the wall when the force turns, the impact sequence of an undamped oscillator against
-  a wall just inside its amplitude, a parabola grazing the wall;
+- closed forms (the shared ones in ``tests/truths.py``): the forced linear oscillator
+  (no wall), Dirac kicks and rectangular pulses by superposition, a mass bouncing under a
+  constant force (impact times, chatter accumulation time
+  ``t_inf = t_1 + 2 eta v_1 / (g (1 - eta))``), release from the wall when the force
+  turns, the impact sequence of an undamped oscillator against a wall just inside its
+  amplitude, a parabola grazing the wall;
 - the independent scipy implementation in ``tests/reference.py`` (DOP853, rtol 1e-12)
   on the paper's section 3.1 and 3.2 parameter sets;
 - the measured convergence slope of the integrator (order 5).
@@ -30,6 +31,17 @@ from opa import _kernel as K
 from opa._run import kernel_quadrature, quadrature
 from opa._system import pack_parameters
 from tests.reference import reference_trajectory
+from tests.truths import (
+    accumulation_time,
+    bouncing_sequence,
+    chatter_time,
+    impulse_size,
+    kick_at_rest_on_the_wall,
+    kicked_linear_oscillator,
+    linear_oscillator,
+    pulsed_linear_oscillator,
+    release_from_wall,
+)
 
 TIGHT = SolverOptions(rtol=1e-12, atol=1e-12)
 
@@ -40,17 +52,9 @@ NO_WALL = dict(mu=0.0, c=0.0, eta=0.8, delta=1e6)
 # --------------------------------------------------------------------------- references
 
 
-def linear_free(t, a, f, omega, x0, v0):
-    """x'' + a x = f cos(omega t), x(0) = x0, x'(0) = v0 (a > 0, omega^2 != a)."""
-    w0 = math.sqrt(a)
-    p = f / (a - omega**2)
-    x = (x0 - p) * np.cos(w0 * t) + v0 / w0 * np.sin(w0 * t) + p * np.cos(omega * t)
-    v = -(x0 - p) * w0 * np.sin(w0 * t) + v0 * np.cos(w0 * t) - p * omega * np.sin(omega * t)
-    return x, v
-
-
-def impulse_size(t_j, osc: Oscillator):
-    return osc.F0 * (1.0 + osc.a1 * np.sin(osc.omega1 * t_j / osc.n))
+def impulses(osc: Oscillator, times) -> list[tuple[float, float]]:
+    """(t_j, I_j) of the oscillator's impulse train at ``times``."""
+    return [(t_j, impulse_size(t_j, osc.F0, osc.a1, osc.omega1, osc.n)) for t_j in times]
 
 
 def scipy_reference(osc: Oscillator, times, options: SolverOptions = TIGHT) -> dict:
@@ -215,7 +219,7 @@ def test_kernel_reports_status_codes_and_fills_unreached_outputs_with_nan():
 def test_linear_oscillator_without_wall_matches_closed_form():
     osc = Oscillator(a=1.3, f=2.0, omega=2.8, F0=0.0, x0=-1.0, v0=0.4, **NO_WALL)
     ds = simulate_dmr(osc, periods=10, per_period=16, options=TIGHT)
-    x, v = linear_free(ds.time.values, 1.3, 2.0, 2.8, -1.0, 0.4)
+    x, v = linear_oscillator(ds.time.values, 1.3, 2.0, 2.8, -1.0, 0.4)
     np.testing.assert_allclose(ds.x, x, rtol=0, atol=1e-10)
     np.testing.assert_allclose(ds.v, v, rtol=0, atol=1e-10)
     assert ds.impact_time.size == 0 and ds.stick_time.size == 0
@@ -229,13 +233,8 @@ def test_dirac_kicks_superpose_and_outputs_are_right_continuous(impulse_at_zero)
     opts = SolverOptions(rtol=1e-12, atol=1e-12, impulse_at_zero=impulse_at_zero)
     t = np.linspace(0.0, 4 * 2 * math.pi, 401)  # holds every kick time t_j = 2 pi j exactly
     ds = simulate_dmr(osc, times=t, options=opts)
-    x, v = linear_free(t, a, 1.5, 2.0, -0.5, 0.0)
-    w0 = math.sqrt(a)
-    for t_j in 2 * math.pi * np.arange(0 if impulse_at_zero else 1, 5):
-        kick = impulse_size(t_j, osc) * (t >= t_j)
-        s = np.maximum(t - t_j, 0.0)
-        x += kick * np.sin(w0 * s) / w0
-        v += kick * np.cos(w0 * s)
+    kicks = impulses(osc, 2 * math.pi * np.arange(0 if impulse_at_zero else 1, 5))
+    x, v = kicked_linear_oscillator(t, a, 1.5, 2.0, -0.5, 0.0, kicks)
     np.testing.assert_allclose(ds.x, x, rtol=0, atol=1e-10)
     np.testing.assert_allclose(ds.v, v, rtol=0, atol=1e-10)
     assert ds.v.values[0] == (0.3 if impulse_at_zero else 0.0)
@@ -247,16 +246,8 @@ def test_rectangular_pulses_superpose():
     opts = SolverOptions(rtol=1e-12, atol=1e-12, impulse="pulse", pulse_width=tau)
     t = np.linspace(0.0, 3 * 2 * math.pi, 301)
     ds = simulate_dmr(osc, times=t, options=opts)
-    w0 = math.sqrt(a)
-    x, v = np.zeros_like(t), np.zeros_like(t)
-    for t_j in 2 * math.pi * np.arange(0, 4):
-        h = impulse_size(t_j, osc) / a
-        s = t - t_j
-        on, after = (s >= 0) & (s < tau), s >= tau
-        x += np.where(on, h * (1 - np.cos(w0 * s)), 0.0)
-        x += np.where(after, h * (np.cos(w0 * (s - tau)) - np.cos(w0 * s)), 0.0)
-        v += np.where(on, h * w0 * np.sin(w0 * s), 0.0)
-        v += np.where(after, h * w0 * (np.sin(w0 * s) - np.sin(w0 * (s - tau))), 0.0)
+    x, v = pulsed_linear_oscillator(t, a, 0.0, 2.0, 0.0, 0.0,
+                                    impulses(osc, 2 * math.pi * np.arange(0, 4)), tau)
     np.testing.assert_allclose(ds.x, x, rtol=0, atol=1e-10)
     np.testing.assert_allclose(ds.v, v, rtol=0, atol=1e-10)
 
@@ -268,7 +259,7 @@ SMOOTH_END = 20.0
 
 def end_error(options: SolverOptions) -> tuple[float, int]:
     ds = simulate_dmr(SMOOTH, times=np.array([0.0, SMOOTH_END]), options=options)
-    x, v = linear_free(SMOOTH_END, 1.3, 2.0, 2.8, -1.0, 0.4)
+    x, v = linear_oscillator(SMOOTH_END, 1.3, 2.0, 2.8, -1.0, 0.4)
     return max(abs(ds.x.values[-1] - x), abs(ds.v.values[-1] - v)), ds.attrs["steps"]
 
 
@@ -316,22 +307,15 @@ FREE_FALL = Oscillator(mu=0.0, a=0.0, c=0.0, f=G, omega=1e-6, eta=ETA, delta=0.0
                        x0=-DROP, v0=0.0)
 
 
-def bouncing_sequence(count):
-    """Impact times and velocities of a mass released at rest DROP from the wall."""
-    v = math.sqrt(2 * G * DROP) * ETA ** np.arange(count)
-    flights = np.concatenate([[math.sqrt(2 * DROP / G)], 2 * ETA * v[:-1] / G])
-    return np.cumsum(flights), v
-
-
 def test_bouncing_mass_chatters_then_sticks_at_the_accumulation_point():
     t1, v1 = math.sqrt(2 * DROP / G), math.sqrt(2 * G * DROP)
-    t_inf = t1 + 2 * ETA * v1 / (G * (1 - ETA))  # = 3
+    t_inf = accumulation_time(G, DROP, ETA)  # = 3
     t = np.linspace(0.0, t_inf + 5.0, 81)
     ds = simulate_dmr(FREE_FALL, times=t, options=TIGHT)
     n = ds.impact_time.size
     # impacts until the velocity drops below chatter_velocity = 1e-6: v1 eta^k < 1e-6
     assert n == math.ceil(math.log(1e-6 / v1) / math.log(ETA)) + 1
-    times, speeds = bouncing_sequence(n)
+    times, speeds = bouncing_sequence(G, DROP, ETA, n)
     np.testing.assert_allclose(ds.impact_time, times, rtol=0, atol=1e-10)
     np.testing.assert_allclose(ds.impact_velocity, speeds, rtol=1e-8, atol=1e-14)
     assert ds.stick_time.size == 1 and ds.release_time.size == 0
@@ -347,21 +331,22 @@ def test_bouncing_mass_chatters_then_sticks_at_the_accumulation_point():
 def test_stuck_mass_is_released_when_the_force_turns():
     """x'' = cos t: sticks after chatter, released at t = pi/2 where cos t turns negative.
 
-    After release x = -cos t - (t - pi/2), v = sin t - 1 (closed form from rest at the wall).
+    After release x = -cos t - (t - pi/2), v = sin t - 1 (closed form from rest at the wall,
+    ``tests.truths.release_from_wall``).
     """
     osc = Oscillator(mu=0.0, a=0.0, c=0.0, f=1.0, omega=1.0, eta=0.5, delta=0.0, F0=0.0,
                      x0=-0.01, v0=0.0)
     t = np.linspace(0.0, 10.0, 101)
     ds = simulate_dmr(osc, times=t, options=TIGHT)
+    t_release, x_free, v_free = release_from_wall(t, 1.0, 1.0)
     assert ds.stick_time.size == 1 and ds.release_time.size == 1
-    assert ds.stick_time.item() < math.pi / 2
-    assert ds.release_time.item() == pytest.approx(math.pi / 2, abs=1e-10)
-    stuck = (t > ds.stick_time.item()) & (t <= math.pi / 2)
+    assert ds.stick_time.item() < t_release
+    assert ds.release_time.item() == pytest.approx(t_release, abs=1e-10)
+    stuck = (t > ds.stick_time.item()) & (t <= t_release)
     assert stuck.sum() > 5 and np.all(ds.x.values[stuck] == 0.0)
-    after = t > math.pi / 2
-    np.testing.assert_allclose(ds.x.values[after], -np.cos(t[after]) - (t[after] - math.pi / 2),
-                               rtol=0, atol=1e-10)
-    np.testing.assert_allclose(ds.v.values[after], np.sin(t[after]) - 1.0, rtol=0, atol=1e-10)
+    after = t > t_release
+    np.testing.assert_allclose(ds.x.values[after], x_free[after], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(ds.v.values[after], v_free[after], rtol=0, atol=1e-10)
     assert ds.x.max() <= 0.0
 
 
@@ -378,11 +363,11 @@ def test_kick_while_stuck_releases_and_chatter_resumes(kick):
     t = np.linspace(0.0, 9.0, 37)
     ds = simulate_dmr(osc, times=t, options=opts)
     speed = abs(kick)
-    again = 5.0 + (0.0 if kick > 0 else 2 * speed / G) + 2 * ETA * speed / (G * (1 - ETA))
+    again = 5.0 + (0.0 if kick > 0 else 2 * speed / G) + chatter_time(speed, G, ETA)
     np.testing.assert_allclose(ds.stick_time, [3.0, again], rtol=1e-5)
     np.testing.assert_allclose(ds.release_time, [5.0], rtol=0, atol=1e-12)
     at_kick = np.flatnonzero(t == 5.0)[0]
-    assert ds.v.values[at_kick] == pytest.approx(-ETA * kick if kick > 0 else kick, abs=1e-15)
+    assert ds.v.values[at_kick] == pytest.approx(kick_at_rest_on_the_wall(kick, ETA), abs=1e-15)
     assert ds.x.max() <= 0.0
 
 
@@ -393,7 +378,7 @@ def test_start_at_rest_on_the_wall_with_force_into_it_sticks():
     ds = simulate_dmr(osc, times=t, options=TIGHT)
     assert ds.x.max() <= 0.0
     assert ds.release_time.size == 1
-    assert ds.release_time.item() == pytest.approx(math.pi / 2, abs=1e-10)
+    assert ds.release_time.item() == pytest.approx(release_from_wall(0.0, 1.0, 1.0)[0], abs=1e-10)
 
 
 @pytest.mark.parametrize(("delta", "graze"), [(0.0, True), (-1e-14, True), (-1e-13, True),
@@ -629,10 +614,6 @@ def test_impulses_before_a_late_start_are_not_applied():
     t0 = 10 * T1 + 0.5
     t = t0 + np.linspace(0.0, 3 * T1, 31)
     ds = simulate_dmr(osc, times=t, options=TIGHT)
-    w = np.sqrt(a)
-    x = 0.3 * np.cos(w * (t - t0))
-    for j in (11, 12, 13):
-        tj = j * T1
-        kick = F0 * (1 + 0.5 * np.sin(tj / 2))
-        x += np.where(t >= tj, kick / w * np.sin(w * (t - tj)), 0.0)
+    kicks = [(j * T1 - t0, impulse_size(j * T1, F0, 0.5, 1.0, 2.0)) for j in (11, 12, 13)]
+    x, _ = kicked_linear_oscillator(t - t0, a, 0.0, 1.0, 0.3, 0.0, kicks)
     np.testing.assert_allclose(ds.x.values, x, rtol=0, atol=1e-9)

@@ -10,9 +10,9 @@ Independent references:
   code with the variational kernel, for the DMR, the OPA system (both impact laws, both
   truncations, uncertain mu and c) and with Dirac and pulse impulses;
 - the closed form of the period-1 single-impact orbit of the linear impact oscillator
-  (mu = c = 0): impact phase and velocity from the fixed-point equations of the impact
-  map, and the monodromy matrix composed of the explicit linear flow and the saltation
-  matrix (whose determinant is eta^2);
+  (mu = c = 0, ``tests.truths.linear_impact_orbit``): impact phase and velocity from the
+  fixed-point equations of the impact map, and the monodromy matrix composed of the
+  explicit linear flow and the saltation matrix (whose determinant is eta^2);
 - two Lyapunov estimates: tangent vector with saltation matrices vs two trajectories
   of ``opa._solver`` (Benettin), in a chaotic impacting regime;
 """
@@ -36,6 +36,7 @@ from opa.dynamics._orbits import (
     shoot,
     transverse_lyapunov_exponent,
 )
+from tests.truths import linear_impact_orbit
 
 TIGHT = SolverOptions(rtol=1e-12, atol=1e-12)
 H = 1e-6  # finite-difference step
@@ -116,45 +117,6 @@ def test_flow_jacobian_through_impulses(impulse):
 
 
 # --------------------------------------------------------------------------- closed form
-def _linear_impact_orbit(a, f, omega, eta, delta):
-    """Period-1 single-impact orbit of x'' + a x = f cos(omega t), x <= delta.
-
-    With x = X cos(omega t) + h(t), X = f / (a - omega^2), the free flight of one period
-    T from the post-impact state (delta, -eta v) at phase phi = omega t* back to
-    (delta, v) gives, with K = -sqrt(a) tan(sqrt(a) T / 2),
-
-        (1 - eta) v = -2 X omega sin(phi),   (1 + eta) v = 2 (delta - X cos phi) K,
-
-    i.e. X omega (1 + eta) sin(phi) - (1 - eta) K X cos(phi) = -(1 - eta) K delta.
-    The monodromy matrix over [0, T] is Phi(T - t*) S Phi(t*) with the linear flow Phi
-    and the saltation matrix S = [[-eta, 0], [(1 + eta) acc / v, -eta]].
-    Returns (state at t = 0, monodromy matrix, impact phase, impact velocity).
-    """
-    w0 = math.sqrt(a)
-    T = 2 * math.pi / omega
-    X = f / (a - omega**2)
-    K = -w0 * math.tan(w0 * T / 2)
-    alpha, beta = X * omega * (1 + eta), (1 - eta) * K * X
-    R, psi = math.hypot(alpha, beta), math.atan2(beta, alpha)
-    base = math.asin(-(1 - eta) * K * delta / R)
-    for root in (base, math.pi - base):
-        phi = (root + psi) % (2 * math.pi)
-        v = -2 * X * omega * math.sin(phi) / (1 - eta)
-        if v > 0:
-            break
-    t_star = phi / omega
-    h0, dh0 = delta - X * math.cos(phi), -eta * v + X * omega * math.sin(phi)
-    s = T - t_star
-    y0 = np.array([X + h0 * math.cos(w0 * s) + dh0 / w0 * math.sin(w0 * s),
-                   -h0 * w0 * math.sin(w0 * s) + dh0 * math.cos(w0 * s)])
-
-    def phi_mat(s):
-        return np.array([[math.cos(w0 * s), math.sin(w0 * s) / w0],
-                         [-w0 * math.sin(w0 * s), math.cos(w0 * s)]])
-
-    acc = -a * delta + f * math.cos(phi)
-    S = np.array([[-eta, 0.0], [(1 + eta) * acc / v, -eta]])
-    return y0, phi_mat(T - t_star) @ S @ phi_mat(t_star), phi, v
 
 
 @pytest.mark.parametrize(
@@ -162,7 +124,7 @@ def _linear_impact_orbit(a, f, omega, eta, delta):
     [(1.0, 1.0, 1.6, 0.8, 0.1, True), (1.0, 2.0, 2.8, 0.8, 0.1, False)],
 )
 def test_linear_impact_oscillator_closed_form(a, f, omega, eta, delta, stable):
-    y_ref, M_ref, phi, v = _linear_impact_orbit(a, f, omega, eta, delta)
+    y_ref, M_ref, phi, v = linear_impact_orbit(a, f, omega, eta, delta)
     osc = Oscillator(mu=0.0, c=0.0, a=a, f=f, omega=omega, eta=eta, delta=delta, F0=0.0,
                      x0=min(delta, -0.5))
     system = ImpactSystem(osc, options=TIGHT)
