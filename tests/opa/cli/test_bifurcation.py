@@ -17,11 +17,10 @@ from opa.cli._bifurcation import parse_sweep, register
 
 
 def cli(argv):
-    from opa.cli._flags import CliError, _common_flags, _model_flags
+    from opa.cli._flags import CliError
 
     parser = argparse.ArgumentParser(prog="opa-mc")
-    register(parser.add_subparsers(dest="command", required=True), _model_flags,
-             _common_flags)
+    register(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
     try:
         return args.func(args)

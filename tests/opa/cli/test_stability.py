@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import argparse
 
-from opa.cli._flags import _model_flags, _solver_flags
 from opa.cli._stability import register_stability
 
 
 def test_cli_orbit_and_sweep(tmp_path, capsys):
     parser = argparse.ArgumentParser()
-    register_stability(parser.add_subparsers(), _model_flags, _solver_flags)
+    register_stability(parser.add_subparsers())
     args = parser.parse_args(["stability", "dmr", "--preset", "3.1", "--F0", "0", "--c", "0.05"])
     assert args.func(args) == 0
     out = capsys.readouterr().out

@@ -1,0 +1,385 @@
+"""Every ``opa-mc`` subcommand on its happy path, run in process (``opa.cli.main``) at tiny
+sizes: exit status 0, and what it wrote (netCDF, figure, text) checked against something
+that shares no code with it: the scipy integrator of ``tests/reference.py`` (one
+trajectory, or Gauss collocation over the semicircle law with ``tests/truths.py``'s rule),
+the closed forms of ``tests/truths.py`` (the linear impact orbit, the impulse sizes), and
+the parameter sets of the paper's section 3.2 and 3.3 written out here.
+
+The subcommands are read from ``opa.cli._main.build_parser()``: each subcommand, and for
+those whose positional ``model`` chooses the system (dmr, opa, mc), each model. A test
+named ``test_<command>_<model>_...`` (or ``test_<command>_...``) covers it;
+``test_every_subcommand_has_a_happy_path_test`` fails when one has none.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import xarray as xr  # noqa: E402
+
+from opa.cli._main import build_parser, main  # noqa: E402
+from tests.reference import reference_trajectory  # noqa: E402
+from tests.truths import (  # noqa: E402
+    impulse_size,
+    linear_flow,
+    linear_impact_orbit,
+    semicircle_gauss_rule,
+)
+
+#: the paper's section 3.2 set, the CLI's defaults (README, "What is in the box")
+SECTION_32 = dict(mu=0.8, a=0.5, c=0.05, f=1.5, omega=3.98, eta=0.8, delta=0.0, F0=0.1,
+                  a1=1.0, omega1=1.0, n=2.0, x0=-1.0, v0=0.0)
+#: section 3.3 without impulses: 1/1 at omega = 4.8, 2/2 at omega = 5.1
+SECTION_33_NO_IMPULSES = {**SECTION_32, "a": 3.5, "f": 3.5, "F0": 0.0}
+SWEEP_33 = ["--preset", "3.3", "--F0", "0", "--sweep", "omega=4.8,5.1", "--transient", "200",
+            "--record", "40", "--workers", "1"]
+#: the linear impact oscillator whose period-1 orbit is known in closed form
+LINEAR = dict(a=1.0, f=1.0, omega=1.6, eta=0.8, delta=0.1)
+LINEAR_FLAGS = ["--mu", "0", "--c", "0", "--a", "1", "--f", "1", "--omega", "1.6", "--eta",
+                "0.8", "--delta", "0.1", "--F0", "0", "--x0", "-0.5"]
+
+
+def commands() -> list[str]:
+    """``opa-mc``'s subcommands, with each model of those that take one."""
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    found = []
+    for name, command in sub.choices.items():
+        model = next((a for a in command._actions if a.dest == "model"), None)
+        found += [f"{name} {m}" for m in model.choices] if model else [name]
+    return found
+
+
+def assert_same_multipliers(got, expected, atol):
+    """The same complex numbers, whatever their order (each matched once)."""
+    left = list(np.asarray(expected, dtype=complex))
+    assert len(got) == len(left)
+    for mu in np.asarray(got, dtype=complex):
+        k = int(np.argmin(np.abs(np.array(left) - mu)))
+        assert abs(left[k] - mu) <= atol, (got, expected)
+        left.pop(k)
+
+
+def run(argv) -> None:
+    assert main([str(a) for a in argv]) == 0, argv
+
+
+def load(path) -> xr.Dataset:
+    with xr.open_dataset(path) as ds:
+        return ds.load()
+
+
+def strobe_times(omega, periods, per_period):
+    """t_j = j (2 pi / omega) / K, j = 0 .. P K (written out, not opa.time_grid)."""
+    return np.arange(periods * per_period + 1) * (2 * math.pi / omega / per_period)
+
+
+def collocation(model, sigma, times, nodes=12, tol=1e-12):
+    """E[x], Var[x] over mu = mu_bar + sigma xi, xi semicircle: Gauss collocation of the
+    scipy reference (exact to round-off for a response smooth in xi)."""
+    xi, w = semicircle_gauss_rule(nodes)
+    paths = np.array([reference_trajectory(**{**model, "mu": model["mu"] + sigma * x},
+                                           t_out=times, rtol=tol, atol=tol)["x"] for x in xi])
+    mean = w @ paths
+    return mean, w @ paths**2 - mean**2
+
+
+@pytest.fixture
+def kept_figures(monkeypatch):
+    """Figures that plt.close would have closed, to inspect what was drawn."""
+    kept = []
+    monkeypatch.setattr(plt, "close", kept.append)
+    yield kept
+    monkeypatch.undo()  # pyplot's own close, before closing
+    for fig in kept:
+        plt.close(fig)
+
+
+@pytest.fixture(scope="module")
+def sections_33():
+    """The scipy reference's stroboscopic and impact sections of SECTION_33_NO_IMPULSES
+    after 200 periods (a sweep records t = (200 + k) T, k = 1..40)."""
+    out = {}
+    for omega in (4.8, 5.1):
+        T = 2 * math.pi / omega
+        t = np.concatenate([[0.0], (201 + np.arange(40)) * T])
+        ref = reference_trajectory(**{**SECTION_33_NO_IMPULSES, "omega": omega}, t_out=t,
+                                   rtol=1e-10, atol=1e-10)
+        after = ref["impact_time"] > 200 * T
+        out[omega] = dict(x=ref["x"][1:], v=ref["v"][1:],
+                          phase=np.mod(omega * ref["impact_time"][after], 2 * math.pi),
+                          speed=ref["impact_velocity"][after])
+    return out
+
+
+# --------------------------------------------------------------------------- the list
+
+
+def test_help_lists_every_subcommand(capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["--help"])
+    assert done.value.code == 0
+    text = capsys.readouterr().out
+    names = {c.split()[0] for c in commands()}
+    assert names >= {"simulate", "validate", "converge", "bifurcation", "reproduce",
+                     "stability"}
+    assert all(f"    {name}" in text for name in names), text
+
+
+def test_every_subcommand_has_a_happy_path_test():
+    tests = [name for name, f in globals().items() if name.startswith("test_") and callable(f)]
+    missing = [c for c in commands()
+               if not any(t.startswith(f"test_{c.replace(' ', '_')}_") for t in tests)]
+    assert missing == [], f"add a test_<command>_<model>_... here for {missing}"
+
+
+# --------------------------------------------------------------------------- simulate
+
+
+def test_simulate_dmr_is_the_scipy_reference(tmp_path, kept_figures):
+    out, png = tmp_path / "dmr.nc", tmp_path / "dmr.png"
+    run(["simulate", "dmr", "--periods", 5, "--per-period", 8, "--rtol", 1e-12, "--atol",
+         1e-12, "--out", out, "--plot", png, "--quiet"])
+    ds = load(out)
+    assert {k: ds.attrs[k] for k in SECTION_32} == SECTION_32
+    t = strobe_times(3.98, 5, 8)
+    np.testing.assert_allclose(ds.time, t, rtol=1e-15, atol=0)
+    ref = reference_trajectory(**SECTION_32, t_out=t)  # the dirac impulse at t = 0 included
+    np.testing.assert_allclose(ds.x, ref["x"], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(ds.v, ref["v"], rtol=0, atol=1e-8)
+    assert ds.sizes["impact"] == len(ref["impact_time"]) >= 2
+    np.testing.assert_allclose(ds.impact_time, ref["impact_time"], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(ds.impact_velocity, ref["impact_velocity"], rtol=0, atol=1e-8)
+    # the figure: the time history is x(t) of the file, the wall at delta = 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    (fig,) = kept_figures
+    history = fig.axes[0].get_lines()[0]
+    np.testing.assert_array_equal(history.get_xdata(), ds.time.values)
+    np.testing.assert_array_equal(history.get_ydata(), ds.x.values)
+
+
+def test_simulate_opa_with_sigma_0_is_the_dmr_run(tmp_path):
+    common = ["--periods", 5, "--per-period", 8, "--quiet"]
+    run(["simulate", "dmr", *common, "--out", tmp_path / "dmr.nc"])
+    run(["simulate", "opa", "--sigma", 0, "--order", 2, *common, "--out", tmp_path / "opa.nc"])
+    dmr, emr = load(tmp_path / "dmr.nc"), load(tmp_path / "opa.nc")
+    assert emr.attrs["sigma"] == 0.0 and emr.attrs["N"] == 2
+    np.testing.assert_allclose(emr.x_mean, dmr.x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(emr.v_mean, dmr.v, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(emr.x_var, 0.0, rtol=0, atol=1e-20)
+    np.testing.assert_allclose(emr.impact_time, dmr.impact_time, rtol=0, atol=1e-12)
+
+
+def test_simulate_opa_before_the_first_impact_is_the_collocation_of_the_reference(tmp_path):
+    """sigma = 0.02 on mu over the first forcing period (no impact yet): the OPA mean and
+    variance at N = 4 are those of the sampled systems to round-off (measured 5e-13)."""
+    out = tmp_path / "opa.nc"
+    run(["simulate", "opa", "--sigma", 0.02, "--order", 4, "--periods", 1, "--per-period", 8,
+         "--rtol", 1e-12, "--atol", 1e-12, "--out", out, "--quiet"])
+    ds = load(out)
+    assert ds.sizes["impact"] == 0
+    mean, var = collocation(SECTION_32, 0.02, strobe_times(3.98, 1, 8))
+    np.testing.assert_allclose(ds.x_mean, mean, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(ds.x_var, var, rtol=0, atol=1e-12)
+
+
+def test_simulate_mc_with_the_same_seed_writes_the_same_file(tmp_path):
+    argv = ["simulate", "mc", "--sigma", 0.02, "--samples", 64, "--sampler", "random",
+            "--periods", 5, "--per-period", 4, "--quiet"]
+    run([*argv, "--seed", 3, "--out", tmp_path / "a.nc"])
+    run([*argv, "--seed", 3, "--out", tmp_path / "b.nc"])
+    run([*argv, "--seed", 4, "--out", tmp_path / "c.nc"])
+    a, b, c = (load(tmp_path / f"{name}.nc") for name in "abc")
+    assert not any(p.name.endswith(".parts") for p in tmp_path.iterdir())  # checkpoint gone
+    # every variable and attribute but the history (a time stamp and the command line)
+    for ds in (a, b, c):
+        del ds.attrs["history"]
+    xr.testing.assert_identical(a, b)
+    assert a.sizes["sample"] == 64 and not np.array_equal(a.xi.values, c.xi.values)
+    assert np.all(np.abs(a.xi.values) <= 1.0)
+
+
+def test_simulate_mc_gauss_is_the_collocation_of_the_reference(tmp_path):
+    """8 Gauss nodes of the semicircle: the ensemble mean and variance are the weighted
+    sampled systems, here integrated one by one by the scipy reference (impacts included)."""
+    out = tmp_path / "mc.nc"
+    run(["simulate", "mc", "--sigma", 0.02, "--samples", 8, "--sampler", "gauss", "--periods",
+         5, "--per-period", 8, "--rtol", 1e-12, "--atol", 1e-12, "--out", out, "--quiet"])
+    ds = load(out)
+    xi, _ = semicircle_gauss_rule(8)
+    np.testing.assert_allclose(np.sort(ds.xi.values), xi, rtol=0, atol=1e-14)
+    mean, var = collocation(SECTION_32, 0.02, strobe_times(3.98, 5, 8), nodes=8)
+    assert int(ds.n_impacts.min()) >= 2
+    np.testing.assert_allclose(ds.x_mean, mean, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(ds.x_var, var, rtol=0, atol=1e-9)
+
+
+# --------------------------------------------------------------------------- validate, converge
+
+
+def test_validate_against_collocation_of_the_reference(tmp_path):
+    """A one-value map over 2 periods: its Monte Carlo reference lies within 4 standard
+    errors of the sampled systems' exact mean and variance, its OPA mean (N = 2) is theirs
+    before the first impact, and its impact counts are those of the scipy reference."""
+    run(["validate", "--values", 3.98, "--sigmas", "0.01,0.03", "--orders", "0:2",
+         "--horizons", 2, "--samples", 64, "--max-samples", 64, "--per-period", 4,
+         "--no-plots", "--no-frontier", "--quiet", "--outdir", tmp_path])
+    assert "# opa-mc validate" in (tmp_path / "summary.md").read_text(encoding="utf-8")
+    ds = load(tmp_path / "validate.nc")
+    t = ds.periods.values * 2 * math.pi / 3.98
+    np.testing.assert_allclose(t, strobe_times(3.98, 2, 4), rtol=1e-15)
+    first_impact = reference_trajectory(**SECTION_32, t_out=[0.0, t[-1]])["impact_time"][0]
+    for sigma in (0.01, 0.03):
+        point = ds.sel(omega=3.98, sigma=sigma)
+        mean, var = collocation(SECTION_32, sigma, t)
+        assert np.all(np.abs(point.mc_x_mean - mean) <= 4 * point.mc_x_sem + 1e-8)
+        assert np.all(np.abs(point.mc_x_var - var) <= 4 * point.mc_x_var_sem + 1e-10)
+        opa = point.opa_x_mean.sel(variant="mean/galerkin", N=2).values
+        np.testing.assert_allclose(opa[t < first_impact], mean[t < first_impact], rtol=0,
+                                   atol=1e-7)
+        counts = {reference_trajectory(**{**SECTION_32, "mu": 0.8 + s}, t_out=[0.0, t[-1]])[
+            "impact_time"].size for s in (-sigma, 0.0, sigma)}
+        assert len(counts) == 1  # no sampled system's impact count differs at the ends
+        assert point.count_prob.sel(horizon=2.0, count=counts.pop()).item() == 1.0
+
+
+def test_converge_errors_against_the_collocation_of_the_reference(tmp_path):
+    """The study's reference R (1024 Sobol samples) is within a few standard errors of the
+    exact mean T (scipy collocation), so each reported error |X - R| is |X - T| to within
+    |R - T|. With N = 0 the OPA system, and with one node the collocation, are the nominal
+    system mu = 0.8, integrated here by the scipy reference."""
+    out = tmp_path / "c"
+    run(["converge", "--sigma", 0.05, "--periods", 2, "--order", 1, "--budgets", 4,
+         "--uniform", "1,2", "--reference", 1024, "--outdir", out, "--quiet"])
+    assert {p.name for p in out.iterdir()} >= {"convergence.nc", "convergence.md",
+                                                "convergence.png"}
+    ds = load(out / "convergence.nc")
+    per_period = int(ds.attrs["per_period"])
+    t = strobe_times(3.98, 2, per_period)
+    truth, _ = collocation(SECTION_32, 0.05, t, nodes=16)
+    nominal = reference_trajectory(**SECTION_32, t_out=t, rtol=1e-12, atol=1e-12)["x"]
+    bound = 5 * ds.attrs["reference_sem"]  # |R - T| (RMS over the window)
+    expected = math.sqrt(np.mean((nominal - truth) ** 2))
+    rows = ds.to_dataframe()
+    for method, order in (("OPA (one element), N", 0), ("collocation (one element), Q", 1)):
+        (error,) = rows[(rows.method == method) & (rows.order == order)].error.unique()
+        assert abs(error - expected) <= bound, (method, error, expected)
+    converged = rows[(rows.method == "collocation (one element), Q") & (rows.order == 16)]
+    assert converged.error.item() <= bound
+    uniform = rows[(rows.method == "ME-OPA uniform") & (rows.law == "mean")]
+    assert sorted(uniform["size"]) == [1, 2] and set(uniform.order) == {1}
+
+
+# --------------------------------------------------------------------------- bifurcation
+
+
+def _sweep_matches(ds, sections_33, atol):
+    for omega in (4.8, 5.1):
+        ref = sections_33[omega]
+        np.testing.assert_allclose(ds.section_x.sel(omega=omega), ref["x"], rtol=0, atol=atol)
+        np.testing.assert_allclose(ds.section_v.sel(omega=omega), ref["v"], rtol=0, atol=atol)
+
+
+def test_bifurcation_dmr_labels_and_sections_of_section_33(tmp_path, sections_33,
+                                                           kept_figures):
+    """Section 3.3 without impulses: 1/1 at omega = 4.8, 2/2 at 5.1 (a period doubling in
+    between); both sections are the scipy reference's."""
+    out, png = tmp_path / "b.nc", tmp_path / "b.png"
+    run(["bifurcation", "dmr", *SWEEP_33, "--out", out, "--plot", png, "--quiet"])
+    ds = load(out)
+    assert ds.label.values.tolist() == ["1/1", "2/2"]
+    _sweep_matches(ds, sections_33, atol=1e-7)
+    for omega in (4.8, 5.1):
+        ref = sections_33[omega]
+        k = len(ref["phase"]) // 2
+        np.testing.assert_allclose(ds.impact_phase.sel(omega=omega)[:k], ref["phase"][:k],
+                                   rtol=0, atol=1e-7)
+        np.testing.assert_allclose(ds.impact_v.sel(omega=omega)[:k], ref["speed"][:k],
+                                   rtol=0, atol=1e-7)
+    meanings = ds.bifurcation_kind.attrs["flag_meanings"].split()
+    kinds = [meanings[k] for k in ds.bifurcation_kind.values]
+    (doubling,) = ds.bifurcation_parameter.values[[k == "period_doubling" for k in kinds]]
+    assert 4.8 < doubling < 5.1
+    # the figure draws the located doubling and nothing else as a vertical line
+    assert png.stat().st_size > 10_000
+    (fig,) = kept_figures
+    for ax in fig.axes:
+        xs = [line.get_xdata()[0] for line in ax.get_lines()
+              if len(line.get_xdata()) == 2 and line.get_xdata()[0] == line.get_xdata()[1]]
+        assert xs == pytest.approx([doubling])
+
+
+def test_bifurcation_opa_with_sigma_0_is_the_reference(tmp_path, sections_33):
+    out = tmp_path / "b.nc"
+    run(["bifurcation", "opa", "--sigma", 0, "--order", 1, *SWEEP_33, "--out", out, "--quiet"])
+    ds = load(out)
+    assert ds.label.values.tolist() == ["1/1", "2/2"]
+    _sweep_matches(ds, sections_33, atol=1e-7)
+
+
+def test_bifurcation_mc_mean_of_a_narrow_ensemble_is_the_reference(tmp_path, sections_33):
+    """sigma = 0.001: every sample falls on the same stable orbit, within 1e-5 of the
+    nominal one (measured 2e-7); the Monte Carlo mean has no constraint section."""
+    out = tmp_path / "b.nc"
+    run(["bifurcation", "mc", "--sigma", 0.001, "--samples", 8, *SWEEP_33, "--out", out,
+         "--quiet"])
+    ds = load(out)
+    assert ds.label.values.tolist() == ["1/?", "2/?"]
+    _sweep_matches(ds, sections_33, atol=1e-5)
+
+
+# --------------------------------------------------------------------------- reproduce
+
+
+def test_reproduce_fig2_draws_the_impulse_sizes(tmp_path, kept_figures):
+    run(["reproduce", "fig2", "--outdir", tmp_path, "--quiet"])
+    assert (tmp_path / "fig2.png").stat().st_size > 10_000
+    text = " ".join((tmp_path / "fig2.txt").read_text(encoding="utf-8").split())
+    (fig,) = kept_figures
+    t_j = 2 * math.pi * np.arange(int(64 / (2 * math.pi)) + 1)  # 0 <= t <= 64, omega1 = 1
+    for ax, n in zip(fig.axes, (2, 4)):
+        heights = impulse_size(t_j, 0.1, 1.0, 1.0, n)
+        (stems,) = [line for line in ax.get_lines() if line.get_marker() == "o"]
+        np.testing.assert_allclose(stems.get_xdata(), t_j, rtol=1e-14)
+        np.testing.assert_allclose(stems.get_ydata(), heights, rtol=0, atol=1e-15)
+    cycle = ", ".join(f"{h:.3g}" for h in impulse_size(t_j[:4], 0.1, 1.0, 1.0, 4))
+    assert f"4 cycles through {cycle}," in text and cycle == "0.1, 0.2, 0.1, 0"
+
+
+# --------------------------------------------------------------------------- stability
+
+
+def test_stability_dmr_finds_the_closed_form_linear_impact_orbit(tmp_path):
+    out = tmp_path / "s.nc"
+    run(["stability", "dmr", *LINEAR_FLAGS, "--out", out, "--quiet"])
+    ds = load(out)
+    state, monodromy, _, speed = linear_impact_orbit(**LINEAR)
+    np.testing.assert_allclose(ds.state.values[0], state, rtol=0, atol=1e-9)
+    assert ds.period.item() == 1 and ds.impacts.item() == 1 and ds.stable.item() == 1
+    assert ds.min_impact_velocity.item() == pytest.approx(speed, rel=1e-9)
+    got = ds.multiplier_real.values[0] + 1j * ds.multiplier_imag.values[0]
+    assert_same_multipliers(got, np.linalg.eigvals(monodromy), atol=1e-8)
+
+
+def test_stability_opa_with_sigma_0_is_the_dmr_orbit_and_free_higher_modes(tmp_path):
+    """At sigma = 0 (mean impact law) the OPA orbit is the DMR orbit in x_0, v_0 with zero
+    higher coefficients, and each higher mode is the free flow x_i'' + a x_i = 0 over a
+    period: multipliers exp(+-i sqrt(a) T) besides the DMR's."""
+    out = tmp_path / "s.nc"
+    run(["stability", "opa", "--sigma", 0, "--order", 2, *LINEAR_FLAGS, "--out", out,
+         "--quiet"])
+    ds = load(out)
+    state, monodromy, _, _ = linear_impact_orbit(**LINEAR)
+    np.testing.assert_allclose(ds.state.values[0], [state[0], 0, 0, state[1], 0, 0], rtol=0,
+                               atol=1e-9)
+    free = np.linalg.eigvals(linear_flow(LINEAR["a"], 2 * math.pi / LINEAR["omega"]))
+    expected = np.concatenate([np.linalg.eigvals(monodromy), free, free])
+    got = ds.multiplier_real.values[0] + 1j * ds.multiplier_imag.values[0]
+    assert_same_multipliers(got, expected, atol=1e-8)
