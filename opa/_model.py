@@ -215,11 +215,19 @@ class SolverOptions:
                                                   ("impulse_at_zero", impulse_at_zero))
                   if value is not None}
         if legacy:
+            given = ", ".join(f"{name}=..." for name in legacy)
             warnings.warn(
-                f"SolverOptions({', '.join(legacy)}=...) is deprecated: the impulse model "
-                f"belongs to the system, opa.System({', '.join(legacy)}=...), or the same "
-                f"keywords of simulate_dmr, simulate_opa, simulate_mc and sweep",
-                DeprecationWarning, stacklevel=3)
+                f"SolverOptions({given}) is deprecated: the impulse model belongs to the "
+                f"system, opa.System({given}), or the same keywords of simulate_dmr, "
+                f"simulate_opa, simulate_mc and sweep", DeprecationWarning, stacklevel=3)
+            if "impulse" in legacy:
+                _choice("impulse", impulse, IMPULSE_MODELS)
+            if "pulse_width" in legacy and not _finite("pulse_width", pulse_width) > 0.0:
+                raise ValueError(f"pulse_width must be > 0, got {pulse_width}")
+            if "impulse_at_zero" in legacy and (isinstance(impulse_at_zero, str) or
+                                                impulse_at_zero not in (True, False)):
+                raise ValueError(f"impulse_at_zero must be True or False, got "
+                                 f"{impulse_at_zero!r}")
         # read by opa._system.as_system, which hands it to the System it builds
         object.__setattr__(self, "legacy_impulse", legacy)
         _choice("method", self.method, METHODS)

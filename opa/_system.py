@@ -164,8 +164,8 @@ class System:
         if not self.allow_negative and lowest < 0.0 <= mean:
             raise ValueError(
                 f"sigma = {self.sigma} with xi down to {lo:g} makes {self.uncertain} = "
-                f"{lowest:.6g} negative for some samples; pass allow_negative=True "
-                f"(--allow-negative) if that is intended")
+                f"{mean:g} + sigma xi = {lowest:.6g} negative for some samples; pass "
+                f"allow_negative=True (--allow-negative) if that is intended")
 
     def deterministic(self) -> System:
         """The same oscillator and impulse model without uncertainty: the DMR (N = 0,
@@ -313,8 +313,8 @@ def as_system(system=None, options: SolverOptions | None = None, *, allowed=SYST
                              f"the impulse model belongs to the System (System(impulse=...))")
         return system
     if system is not None and not isinstance(system, Oscillator):
-        raise ValueError(f"the system must be an opa.System or an opa.Oscillator, got "
-                         f"{system!r:.80}")
+        raise ValueError(f"oscillator must be an opa.Oscillator (or the system an "
+                         f"opa.System), got {system!r:.80}")
     for name, value in legacy.items():
         given.setdefault(name, value)
     return System(system if system is not None else Oscillator(), **given)

@@ -36,7 +36,6 @@ THEMES = {
 TESTED_IN = {
     "opa/_run.py": ("tests/opa/test_kernel.py",),
     "opa/_simulate.py": ("tests/opa/test_solver.py",),
-    "opa/_system.py": ("tests/opa/test_kernel.py", "tests/opa/test_opa_system.py"),
     "opa/dynamics/_warm_worker.py": ("tests/opa/dynamics/test_pool.py",),
     "opa/cli/_main.py": ("tests/opa/cli/test_bad_inputs.py", "tests/opa/cli/test_commands.py"),
     "opa/cli/_flags.py": ("tests/opa/cli/test_bifurcation.py",),
@@ -51,7 +50,6 @@ TESTED_IN = {
 NAMED_AS = {
     "opa/_run.py": "opa._run",
     "opa/_simulate.py": "simulate_dmr",
-    "opa/_system.py": "opa._system",
     "opa/dynamics/_warm_worker.py": "_warm_worker",
     "opa/cli/_main.py": "opa.cli._main",
     "opa/cli/_flags.py": "opa.cli._flags",

@@ -10,6 +10,7 @@ from scipy import integrate
 
 from mc import simulate_mc
 from opa import Oscillator, SolverOptions, simulate_opa
+from opa._system import System
 from opa._elements import ElementRun, assemble, run_element, run_elements, split_edges
 from opa._measure import beta, parse, semicircle
 from opa._model import time_grid
@@ -66,11 +67,11 @@ def test_parallel_elements_equal_single_runs():
     osc = Oscillator(omega=3.98)
     times = time_grid(3.98, 4, 4)
     law = semicircle()
-    kw = dict(sigma=0.02, order=2, uncertain="mu", impact_law="saltation", times=times)
+    system = System(osc, sigma=0.02, order=2, uncertain="mu", impact_law="saltation")
     parts = [law.restrict(-1.0, 0.0), law.restrict(0.0, 0.5), law.restrict(0.5, 1.0)]
-    together = run_elements(osc, OPTIONS, parts, **kw)
+    together = run_elements(system, OPTIONS, parts, times=times)
     for element, run in zip(parts, together):
-        alone = run_element(osc, OPTIONS, element, **kw)
+        alone = run_element(system, OPTIONS, element, times=times)
         np.testing.assert_array_equal(run.x_coef, alone.x_coef)
 
 
@@ -82,7 +83,7 @@ def test_an_element_edge_sits_on_the_scipy_grazing():
     mu_bar, sigma = 0.78, 0.01
     osc = Oscillator(mu=mu_bar, **GRAZING_CASE["model"])
     t_end = GRAZING_CASE["t_end"]
-    edges, _ = split_edges(osc, OPTIONS, semicircle(), sigma=sigma, uncertain="mu",
+    edges, _ = split_edges(System(osc, sigma=sigma, uncertain="mu"), OPTIONS, semicircle(),
                            t_end=t_end)
     xi_s = (GRAZING_CASE["mu_split"] - mu_bar) / sigma
     k = int(np.argmin(np.abs(edges - xi_s)))

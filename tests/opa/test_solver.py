@@ -57,12 +57,13 @@ def impulses(osc: Oscillator, times) -> list[tuple[float, float]]:
     return [(t_j, impulse_size(t_j, osc.F0, osc.a1, osc.omega1, osc.n)) for t_j in times]
 
 
-def scipy_reference(osc: Oscillator, times, options: SolverOptions = TIGHT) -> dict:
-    """``tests/reference.py`` (DOP853 at rtol = atol = 1e-12) for the same problem."""
+def scipy_reference(osc: Oscillator, times, *, impulse: str = "dirac",
+                    pulse_width: float = 0.1, impulse_at_zero: bool = True) -> dict:
+    """``tests/reference.py`` (DOP853 at rtol = atol = 1e-12) for the same problem, under
+    the impulse model given (``opa.System``'s fields of the same names)."""
     return reference_trajectory(
-        **osc.as_dict(), t_out=np.asarray(times), impulse=options.impulse,
-        tau=options.pulse_width, impulse_at_zero=options.impulse_at_zero,
-        rtol=1e-12, atol=1e-12,
+        **osc.as_dict(), t_out=np.asarray(times), impulse=impulse, tau=pulse_width,
+        impulse_at_zero=impulse_at_zero, rtol=1e-12, atol=1e-12,
     )  # fmt: skip
 
 
@@ -243,9 +244,8 @@ def test_dirac_kicks_superpose_and_outputs_are_right_continuous(impulse_at_zero)
 def test_rectangular_pulses_superpose():
     a, tau = 0.7, 0.25
     osc = Oscillator(a=a, f=0.0, omega=2.0, F0=0.3, x0=0.0, v0=0.0, **NO_WALL)
-    opts = SolverOptions(rtol=1e-12, atol=1e-12, impulse="pulse", pulse_width=tau)
     t = np.linspace(0.0, 3 * 2 * math.pi, 301)
-    ds = simulate_dmr(osc, times=t, options=opts)
+    ds = simulate_dmr(osc, times=t, options=TIGHT, impulse="pulse", pulse_width=tau)
     x, v = pulsed_linear_oscillator(t, a, 0.0, 2.0, 0.0, 0.0,
                                     impulses(osc, 2 * math.pi * np.arange(0, 4)), tau)
     np.testing.assert_allclose(ds.x, x, rtol=0, atol=1e-10)
@@ -481,13 +481,15 @@ PAPER_CASES = [
 ]
 
 
-def sensitivity(osc: Oscillator, periods: int, options: SolverOptions, eps=1e-8) -> float:
-    """Largest |d state(t_k) / d (x0, v0)| over the stroboscopic points, by finite differences."""
-    base = simulate_dmr(osc, periods=periods, options=options)
+def sensitivity(osc: Oscillator, periods: int, options: SolverOptions, eps=1e-8,
+                **model) -> float:
+    """Largest |d state(t_k) / d (x0, v0)| over the stroboscopic points, by finite
+    differences (``model``: the impulse model)."""
+    base = simulate_dmr(osc, periods=periods, options=options, **model)
     worst = 0.0
     for name in ("x0", "v0"):
         moved = simulate_dmr(osc.replace(**{name: getattr(osc, name) - eps}), periods=periods,
-                             options=options)
+                             options=options, **model)
         worst = max(worst, state_difference(moved, base).max() / eps)
     return worst
 
@@ -496,11 +498,11 @@ def sensitivity(osc: Oscillator, periods: int, options: SolverOptions, eps=1e-8)
 def test_paper_parameter_sets_agree_with_scipy_reference(section, changes, impulse, at_zero,
                                                          periods):
     osc = preset(section, **changes)
-    opts = SolverOptions(rtol=1e-12, atol=1e-12, impulse=impulse, impulse_at_zero=at_zero)
+    model = dict(impulse=impulse, impulse_at_zero=at_zero)
     # the horizon is short enough that 1e-12 local errors cannot grow past 1e-9
-    assert sensitivity(osc, periods, opts) < 1e3
-    ds = simulate_dmr(osc, periods=periods, per_period=1, options=opts)
-    ref = scipy_reference(osc, ds.time.values, opts)
+    assert sensitivity(osc, periods, TIGHT, **model) < 1e3
+    ds = simulate_dmr(osc, periods=periods, per_period=1, options=TIGHT, **model)
+    ref = scipy_reference(osc, ds.time.values, **model)
     assert state_difference(ds, ref).max() < 1e-7
     assert ds.impact_time.size == ref["impact_time"].size > 0
     np.testing.assert_allclose(ds.impact_time, ref["impact_time"], rtol=0, atol=1e-7)

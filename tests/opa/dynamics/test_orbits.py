@@ -186,7 +186,8 @@ def test_transverse_exponent_matches_growth_of_a_seed():
     osc = preset("3.2", omega=4.2, F0=0.0)
     dmr = simulate_dmr(osc, periods=300, options=options)
     est = transverse_lyapunov_exponent(
-        ImpactSystem(osc, model="opa", order=1, impact_law="ensemble", options=options),
+        ImpactSystem(osc, model="opa", sigma=0.0, order=1, impact_law="ensemble",
+                     options=options),
         periods=1000, transient=300)
     ds = simulate_opa(osc, sigma=0.0, order=1, impact_law="ensemble", periods=200,
                       options=options,
@@ -230,8 +231,8 @@ def test_map_with_impulses_needs_the_common_period():
 def test_bad_input_is_reported():
     with pytest.raises(ValueError, match="model"):
         ImpactSystem(model="mc")
-    with pytest.raises(ValueError, match="sigma applies to the opa model"):
-        ImpactSystem(sigma=0.1)
+    # the DMR has no uncertainty: the System's sigma and N are not part of it
+    assert (ImpactSystem(sigma=0.1).sigma, ImpactSystem(order=6).order) == (0.0, 0)
     with pytest.raises(ValueError, match="periods"):
         poincare_map(ImpactSystem(preset("3.1", F0=0.0)), [-1.0, 0.0], periods=0)
     with pytest.raises(ValueError, match="beyond the wall"):
