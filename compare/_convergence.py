@@ -38,7 +38,7 @@ from opa._system import System
 from opa._simulate import simulate_opa
 from opa._run import SimulationError
 
-LAWS = ("mean", "saltation")
+STUDY_LAWS = ("mean", "saltation")
 
 
 @dataclass(frozen=True)
@@ -178,7 +178,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
 
     adaptive = {}  # budget -> the saltation law's adaptive edges
     failures: list[str] = []
-    for law in LAWS:
+    for law in STUDY_LAWS:
         log(f"multi-element OPA ({law} law) ...")
         for k in cfg.uniform:
             opa_row("ME-OPA uniform", law, k, cfg.order, elements=int(k))
@@ -327,7 +327,7 @@ def summary_lines(ds) -> list[str]:
                f"searches was of the same problem with the same split budget.")
     if a.get("failures", 0):
         out.append(f"{a['failures']} OPA runs diverged and are left out: {a['failure_text']}")
-    for law in LAWS:
+    for law in STUDY_LAWS:
         for method in ("ME-OPA uniform", "ME-OPA adaptive"):
             idx = _select(ds, method, law)
             if len(idx) >= 2:
@@ -370,7 +370,7 @@ def plot(ds, path):
     ax = axes[0]
     for method, style in (("ME-OPA uniform", "o-"), ("ME-OPA adaptive", "s-"),
                           ("ME-collocation uniform", "^--"), ("ME-collocation adaptive", "v--")):
-        for law in (*LAWS, "true system"):
+        for law in (*STUDY_LAWS, "true system"):
             idx = _select(ds, method, law)
             if len(idx):
                 ax.loglog(ds["size"].values[idx], ds.error.values[idx], style, ms=4,
@@ -381,7 +381,7 @@ def plot(ds, path):
     ax.legend(fontsize=6)
     ax = axes[1]
     for method in ("ME-OPA adaptive, N", "OPA (one element), N"):
-        for law in LAWS:
+        for law in STUDY_LAWS:
             idx = _select(ds, method, law)
             ax.semilogy(ds.order.values[idx], ds.error.values[idx], "o-", ms=4,
                         label=f"{method} ({law})")

@@ -15,10 +15,10 @@ import xarray as xr
 # Variant shown where one must be picked: the paper's OPA (mean impact law) with the
 # exact Galerkin truncation.
 HEADLINE = 0
-MARKERS = ("o", "s", "^", "v", "D")
+VARIANT_MARKERS = ("o", "s", "^", "v", "D")
 # The impact laws drawn and summarised side by side: mean/galerkin, ensemble/galerkin,
 # saltation/galerkin (variant indices).
-LAWS = (0, 1, 4)
+DRAWN_VARIANTS = (0, 1, 4)
 KIND_COLOURS = {"grazing": "tab:red", "extra impact": "tab:orange", "chatter": "tab:purple",
                 "impulse order": "tab:brown", "horizon": "0.6"}
 
@@ -64,7 +64,7 @@ def star_phrase(lo: float, hi: float, smax: float) -> str:
 
 def _laws(ds) -> list[int]:
     """Indices of the variants compared across impact laws (those in the dataset)."""
-    return [v for v in LAWS if v < ds.sizes["variant"]]
+    return [v for v in DRAWN_VARIANTS if v < ds.sizes["variant"]]
 
 
 def _vals(ds):
@@ -465,7 +465,7 @@ def plot_error_vs_order(ds, path, q=0):
             ax = axes[r, c]
             for v, name in enumerate(ds.variant.values):
                 ax.semilogy(N + 0.07 * (v - 2), np.maximum(err[v], 1e-16),
-                            MARKERS[v] + "-", ms=5, mfc="none" if v % 2 else None, lw=0.8,
+                            VARIANT_MARKERS[v] + "-", ms=5, mfc="none" if v % 2 else None, lw=0.8,
                             label=str(name))
             ax.axhline(_window_sem(ds, q, s, n), color="k", ls="--", lw=1,
                        label="MC noise floor (RMS SE)")

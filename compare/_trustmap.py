@@ -53,7 +53,7 @@ from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
 from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
 from opa._memory import check_memory
-from opa._model import (PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
+from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
                         preset, time_grid)
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._system import IMPULSE_FIELDS, System
@@ -246,9 +246,6 @@ def digest(payload) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:12]
 
 
-# Largest grid of values, sigmas, orders or horizons: every point runs Monte Carlo
-# ensembles, so 1000 values is already days of work on two cores.
-MAX_GRID = 1000
 # Largest ensemble the map may double up to (2^20 samples, hours per point).
 MAX_SAMPLES = 2**20
 

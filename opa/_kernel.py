@@ -71,7 +71,7 @@ EV_IMPACT, EV_GRAZE, EV_STICK, EV_RELEASE, EV_KICK = 0, 1, 2, 3, 4
 
 # An impact whose pre-impact velocity is below this is logged as a graze (EV_GRAZE), and
 # the saltation law, whose matrix divides by it, reflects every v_i instead.
-GRAZE_VELOCITY = 1e-6
+EVENT_GRAZE_VELOCITY = 1e-6
 
 # Impulse and pulse times within this relative distance before an output time belong to
 # that output time (t_j = j T1 and t_k = k T are computed differently and may differ by
@@ -983,7 +983,7 @@ def _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work):
     z[0] = p[P_DELTA]
     v_minus = z[n]
     evals = 0
-    if law == LAW_SALTATION and v_minus > GRAZE_VELOCITY:
+    if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
         a_minus = vector_field(z, m0, p, cfg, nodes, weights, U, forcing(t, p, force), off,
                                f_minus, work)
         z[n] = -eta * z[n]
@@ -1379,7 +1379,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                                              f_plus, work)
                     n_rhs += evals
                     n_impacts += 1
-                    kind = np.int64(EV_GRAZE if v_minus < GRAZE_VELOCITY else EV_IMPACT)
+                    kind = np.int64(EV_GRAZE if v_minus < EVENT_GRAZE_VELOCITY else EV_IMPACT)
                     n_events = _log_event(log, n_events, t, v_minus, kind)
                     if want_stats:
                         stats[seg, S_IMPACTS] += 1.0

@@ -51,6 +51,9 @@ MAX_TIME = 1e8
 MIN_PERIOD = 1e-6
 # At most this many impulses in one run (each one restarts the integrator).
 MAX_IMPULSES = 10**7
+# Largest grid of swept values, sigmas or orders of a validation study: every point of a
+# trust map runs Monte Carlo ensembles, so even this is days of work.
+MAX_GRID = 1000
 
 
 def _finite(name: str, value) -> float:

@@ -199,7 +199,7 @@ def event_vars(log: np.ndarray) -> dict:
         "impact_graze": (
             "impact",
             (kinds[impact] == K.EV_GRAZE).astype(np.int8),
-            {"long_name": f"1 where the impact velocity is below {K.GRAZE_VELOCITY} (graze)",
+            {"long_name": f"1 where the impact velocity is below {K.EVENT_GRAZE_VELOCITY} (graze)",
              "units": "1"},
         ),
         "stick_time": (

@@ -20,6 +20,7 @@ from opa._model import (
     IMPACT_LAWS,
     IMPULSE_MODELS,
     METHODS,
+    PARAMETER_NAMES,
     TRUNCATIONS,
     Oscillator,
     SolverOptions,
@@ -33,6 +34,8 @@ from opa._model import (
 DEFAULT_SIGMA = 0.01
 #: the OPA order N when none is given (every entry point)
 DEFAULT_ORDER = 4
+#: the names a System can vary: each parameter of the oscillator, and sigma
+SWEEPABLE = PARAMETER_NAMES + ("sigma",)
 #: most impulse times :meth:`System.impulse_times` lists (a bound on what it allocates)
 MAX_IMPULSE_TIMES = 10_000_000
 

@@ -188,3 +188,18 @@ def test_importing_a_package_does_not_import_matplotlib(package):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, cwd=ROOT).stdout.strip()
     assert out == "False"
+
+
+def test_one_name_one_meaning_for_module_constants():
+    """No upper-case constant is defined in two modules (three different thresholds were
+    once all called GRAZE_VELOCITY): a second module imports it or names its own."""
+    defined: dict[str, list[str]] = {}
+    for module, path in MODULES.items():
+        for node in ast.parse(path.read_text()).body:
+            targets = (node.targets if isinstance(node, ast.Assign) else
+                       [node.target] if isinstance(node, ast.AnnAssign) else [])
+            for target in targets:
+                if isinstance(target, ast.Name) and target.id.isupper() \
+                        and not target.id.startswith("_"):
+                    defined.setdefault(target.id, []).append(module)
+    assert {name: where for name, where in defined.items() if len(where) > 1} == {}

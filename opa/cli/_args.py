@@ -52,4 +52,73 @@ def whole_number(text: str) -> int:
     return _whole(text, 0)
 
 
-__all__ = ["EXIT_USAGE", "MAX_SWEEP_VALUES", "Parser", "positive_int", "whole_number"]
+
+
+def parse_sweep(spec: str, *, names, default_count: int | None = None,
+                max_count: int = MAX_SWEEP_VALUES, ranges_only: bool = False,
+                flag: str = "--sweep"):
+    """The one ``--sweep`` grammar: ``NAME=START:STOP:COUNT`` (COUNT equally spaced
+    values, ends included; ``:COUNT`` may be left out where ``default_count`` is given)
+    or ``NAME=V1,V2,...`` (distinct values; not where ``ranges_only``).
+
+    Returns (name, values, (start, stop, count)); the last is None for a list.
+
+    >>> name, values, span = parse_sweep("c=0.01:0.1:10", names=("c",))
+    >>> name, len(values), float(values[-1]), span
+    ('c', 10, 0.1, (0.01, 0.1, 10))
+    """
+    counted = "[:COUNT]" if default_count is not None else ":COUNT"
+    usage = (f"expected NAME=START:STOP{counted} (e.g. c=0.01:0.1:200)"
+             + ("" if ranges_only else " or NAME=V1,V2,..."))
+    name, sep, rhs = spec.partition("=")
+    name = name.strip().lstrip("-")
+    if not sep or not name or not rhs:
+        raise ValueError(f"{flag} {spec!r}: {usage}")
+    if name not in names:
+        raise ValueError(f"{flag} {spec!r}: unknown parameter {name!r} "
+                         f"(choose from {', '.join(names)})")
+
+    def number(text, what):
+        try:
+            value = float(text)
+        except ValueError:
+            raise ValueError(f"{flag} {spec!r}: {what} {text!r} is not a number") from None
+        if not math.isfinite(value):
+            raise ValueError(f"{flag} {spec!r}: {what} must be finite, got {text!r}")
+        return value
+
+    if ":" not in rhs:
+        if ranges_only:
+            raise ValueError(f"{flag} {spec!r}: {usage}")
+        values = [number(v, "value") for v in rhs.split(",")]
+        if len(values) > max_count:
+            raise ValueError(f"{flag}: at most {max_count} values, got {len(values)}")
+        if len(set(values)) != len(values):
+            raise ValueError(f"{flag} {spec!r}: values must be distinct")
+        return name, values, None
+    fields = rhs.split(":")
+    if len(fields) != 3 and not (len(fields) == 2 and default_count is not None):
+        raise ValueError(f"{flag} {spec!r}: {usage}")
+    start, stop = number(fields[0], "START"), number(fields[1], "STOP")
+    if len(fields) == 2:
+        count = default_count
+    else:
+        try:
+            count = int(fields[2])
+        except ValueError:
+            raise ValueError(f"{flag} {spec!r}: COUNT must be an integer >= 1, "
+                             f"got {fields[2]!r}") from None
+    if not 1 <= count <= max_count:
+        raise ValueError(f"{flag} {spec!r}: COUNT must be an integer in 1..{max_count}, "
+                         f"got {count}")
+    if count == 1 and start != stop:
+        raise ValueError(f"{flag} {spec!r}: COUNT = 1 needs START == STOP")
+    if count > 1 and start == stop:
+        raise ValueError(f"{flag} {spec!r}: START and STOP are equal, got {start:g}")
+    step = (stop - start) / (count - 1) if count > 1 else 0.0
+    values = [start + k * step for k in range(count - 1)] + [stop]
+    return name, values, (start, stop, count)
+
+
+__all__ = ["EXIT_USAGE", "MAX_SWEEP_VALUES", "Parser", "parse_sweep", "positive_int",
+           "whole_number"]

@@ -7,71 +7,32 @@ User mistakes raise ``ValueError`` (reported by ``opa.cli._main.main`` as one li
 from __future__ import annotations
 
 import argparse
-import math
 import time
 
 import numpy as np
 
-from opa.cli._args import MAX_SWEEP_VALUES, positive_int, whole_number
+from opa.cli._args import positive_int, whole_number
+from opa.cli._args import parse_sweep as _parse_sweep
 from opa.cli._flags import _common_flags, _model_flags
 
-from opa.dynamics._sweep import CONTINUATIONS, DEFAULT_WORKERS, MODELS, SWEEPABLE, summary_lines
+from opa._system import SWEEPABLE
+from opa.dynamics._sweep import CONTINUATIONS, DEFAULT_WORKERS, SWEEP_MODELS, summary_lines
 from opa._model import IMPULSE_MODELS
-from opa.dynamics._sections import GRAZE_GAP, GRAZE_VELOCITY, PERIOD_TOL
+from opa.dynamics._sections import MOTION_GRAZE_GAP, MOTION_GRAZE_VELOCITY, PERIOD_TOL
 
 SECTIONS = ("phase", "constraint", "both")
 
 
 def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
-    """``NAME=START:STOP:COUNT`` (COUNT values, ends included) or ``NAME=V1,V2,...``.
+    """``--sweep`` of ``bifurcation`` (the grammar of ``opa.cli._args.parse_sweep``):
+    the swept parameter and its values.
 
     >>> name, values = parse_sweep("c=0.01:0.1:10")
     >>> name, len(values), float(values[-1])
     ('c', 10, 0.1)
     """
-    usage = "expected NAME=START:STOP:COUNT (e.g. c=0.01:0.1:200) or NAME=V1,V2,..."
-    name, sep, rhs = spec.partition("=")
-    name = name.strip().lstrip("-")
-    if not sep or not name or not rhs:
-        raise ValueError(f"--sweep {spec!r}: {usage}")
-    if name not in SWEEPABLE:
-        raise ValueError(f"--sweep {spec!r}: unknown parameter {name!r} "
-                         f"(choose from {', '.join(SWEEPABLE)})")
-
-    def number(text, what):
-        try:
-            value = float(text)
-        except ValueError:
-            raise ValueError(f"--sweep {spec!r}: {what} {text!r} is not a number") from None
-        if not math.isfinite(value):
-            raise ValueError(f"--sweep {spec!r}: {what} must be finite, got {text!r}")
-        return value
-
-    if ":" in rhs:
-        fields = rhs.split(":")
-        if len(fields) != 3:
-            raise ValueError(f"--sweep {spec!r}: {usage}")
-        start, stop = number(fields[0], "START"), number(fields[1], "STOP")
-        try:
-            count = int(fields[2])
-        except ValueError:
-            raise ValueError(f"--sweep {spec!r}: COUNT must be an integer >= 1, "
-                             f"got {fields[2]!r}") from None
-        if not 1 <= count <= MAX_SWEEP_VALUES:
-            raise ValueError(f"--sweep {spec!r}: COUNT must be an integer in 1.."
-                             f"{MAX_SWEEP_VALUES}, got {count}")
-        if count == 1 and start != stop:
-            raise ValueError(f"--sweep {spec!r}: COUNT = 1 needs START == STOP")
-        if count > 1 and start == stop:
-            raise ValueError(f"--sweep {spec!r}: START and STOP are equal, got {start:g}")
-        values = np.linspace(start, stop, count)
-    else:
-        values = np.array([number(v, "value") for v in rhs.split(",")])
-        if len(values) > MAX_SWEEP_VALUES:
-            raise ValueError(f"--sweep: at most {MAX_SWEEP_VALUES} values, got {len(values)}")
-        if len(np.unique(values)) != len(values):
-            raise ValueError(f"--sweep {spec!r}: values must be distinct")
-    return name, values
+    name, values, span = _parse_sweep(spec, names=SWEEPABLE)
+    return name, (np.linspace(*span) if span else np.array(values))
 
 
 
@@ -177,7 +138,7 @@ def register(subparsers) -> None:
         "or --scheduler); with --out, finished values are kept in OUT.parts/ and a rerun "
         "resumes.",
     )
-    b.add_argument("model", choices=MODELS,
+    b.add_argument("model", choices=SWEEP_MODELS,
                    help="dmr: deterministic system; opa: EMR of the OPA system (--sigma 0: "
                         "EMR_0); mc: Monte Carlo mean")
     _model_flags(b)
@@ -209,11 +170,11 @@ def register(subparsers) -> None:
                    help=f"local worker processes (default {DEFAULT_WORKERS}; 1: in process)")
     g.add_argument("--period-tol", type=float, default=PERIOD_TOL, metavar="TOL",
                    help=f"relative tolerance of the stroboscopic repeat (default {PERIOD_TOL:g})")
-    g.add_argument("--graze-velocity", type=float, default=GRAZE_VELOCITY, metavar="V",
-                   help=f"impacts slower than V count as grazing (default {GRAZE_VELOCITY:g})")
-    g.add_argument("--graze-gap", type=float, default=GRAZE_GAP, metavar="D",
+    g.add_argument("--graze-velocity", type=float, default=MOTION_GRAZE_VELOCITY, metavar="V",
+                   help=f"impacts slower than V count as grazing (default {MOTION_GRAZE_VELOCITY:g})")
+    g.add_argument("--graze-gap", type=float, default=MOTION_GRAZE_GAP, metavar="D",
                    help="free-flight maxima within D of the wall count as grazing "
-                        f"(default {GRAZE_GAP:g})")
+                        f"(default {MOTION_GRAZE_GAP:g})")
     g.add_argument("--keep-parts", action="store_true",
                    help="keep OUT.parts/ (one file per finished value) after writing OUT")
     g.add_argument("--locate", action=argparse.BooleanOptionalAction, default=None,

@@ -7,42 +7,28 @@ Wired into ``opa.cli._main.build_parser`` by
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
-from opa.cli._args import MAX_SWEEP_VALUES, positive_int, whole_number
+from opa.cli._args import parse_sweep, positive_int, whole_number
 from opa.cli._flags import _model_flags, _solver_flags, _system_flags
 
 
 
 def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
-    """``NAME=START:STOP[:COUNT]``: follow from START to STOP, at least COUNT steps.
+    """``--sweep`` of ``stability`` (the grammar of ``opa.cli._args.parse_sweep``):
+    follow the branch from START to STOP in at least COUNT steps (default 20).
 
     >>> parse_branch_sweep("c=0.1:0.02:40")
     ('c', 0.1, 0.02, 40)
     """
-    from opa.dynamics._orbits import SWEEPABLE
+    from opa.dynamics._orbits import CONTINUABLE
 
-    usage = "expected NAME=START:STOP[:COUNT] (e.g. c=0.1:0.02:40)"
-    name, sep, rhs = spec.partition("=")
-    name = name.strip().lstrip("-")
-    fields = rhs.split(":")
-    if not sep or not name or len(fields) not in (2, 3):
-        raise ValueError(f"--sweep {spec!r}: {usage}")
-    if name not in SWEEPABLE:
-        raise ValueError(f"--sweep {spec!r}: unknown parameter {name!r} (choose from "
-                         f"{', '.join(SWEEPABLE)})")
-    try:
-        start, stop = float(fields[0]), float(fields[1])
-        count = int(fields[2]) if len(fields) == 3 else 20
-    except ValueError:
-        raise ValueError(f"--sweep {spec!r}: {usage}") from None
-    if not (math.isfinite(start) and math.isfinite(stop)) or start == stop:
-        raise ValueError(f"--sweep {spec!r}: START and STOP must be finite and differ")
-    if not 1 <= count <= MAX_SWEEP_VALUES:
-        raise ValueError(f"--sweep {spec!r}: COUNT must be in 1..{MAX_SWEEP_VALUES}, got {count}")
+    name, _, (start, stop, count) = parse_sweep(spec, names=CONTINUABLE, default_count=20,
+                                                ranges_only=True)
+    if count < 2:
+        raise ValueError(f"--sweep {spec!r}: START and STOP must differ")
     return name, start, stop, count
 
 

@@ -10,15 +10,12 @@ import time
 
 import numpy as np
 
-from opa.cli._args import positive_int, whole_number
+from opa.cli._args import parse_sweep, positive_int, whole_number
 from opa.cli._flags import _impulse_flags, _model_flags, _solver_flags
 
-from opa._model import PARAMETER_NAMES
+from opa._model import MAX_GRID, PARAMETER_NAMES
 from opa._system import IMPULSE_FIELDS
 
-# Largest grid of swept values, sigmas or orders on the command line: every point of a
-# trust map runs Monte Carlo ensembles, so even this is days of work.
-MAX_GRID = 1000
 
 
 def _float_list(text: str) -> tuple[float, ...]:
@@ -58,18 +55,14 @@ def _order_list(text: str) -> tuple[int, ...]:
 
 
 def _sweep(text: str) -> tuple[str, tuple[float, ...]]:
-    """NAME=START:STOP:COUNT (COUNT equally spaced values, ends included)."""
+    """``--sweep`` of ``validate`` (the grammar of ``opa.cli._args.parse_sweep``)."""
     try:
-        name, spec = text.split("=", 1)
-        start, stop, count = spec.split(":")
-        count = int(count)
-        if not 1 <= count <= MAX_GRID:
-            raise argparse.ArgumentTypeError(f"COUNT must be in 1..{MAX_GRID}, got {text!r}")
-        values = np.linspace(float(start), float(stop), count)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected NAME=START:STOP:COUNT, got {text!r}") \
+        name, values, span = parse_sweep(text, names=PARAMETER_NAMES, max_count=MAX_GRID)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err).removeprefix(f"--sweep {text!r}: ")) \
             from None
-    return name.strip(), tuple(float(np.round(v, 12)) for v in values)
+    values = np.linspace(*span) if span else np.array(values)
+    return name, tuple(float(np.round(v, 12)) for v in values)
 
 
 def register_validate(sub) -> None:

@@ -39,15 +39,15 @@ from opa._model import (
     _choice,
 )
 from opa._run import SimulationError, announce_compilation, kernel_quadrature, quadrature
-from opa._system import SYSTEM_FIELDS, System
+from opa._system import SWEEPABLE, SYSTEM_FIELDS, System
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
 STABILITY_LAWS = IMPACT_LAWS[:2]
 
-MODELS = ("dmr", "opa")
+ORBIT_MODELS = ("dmr", "opa")
 MAX_CYCLE = 1000  # longest common period (in forcing periods) accepted for a map
-GRAZE_VELOCITY = 1e-3  # classification: impacts slower than this are (near) grazing
-GRAZE_GAP = 1e-3  # classification: free-flight maxima closer than this to the wall
+ORBIT_GRAZE_VELOCITY = 1e-3  # classification: impacts slower than this are (near) grazing
+ORBIT_GRAZE_GAP = 1e-3  # classification: free-flight maxima closer than this to the wall
 CRITICAL_TOL = 1e-3  # classification: |mu + 1|, |mu - 1|, ||mu| - 1| below this
 # Times: the kernel cannot take a step shorter than STEP_FLOOR |t| (round-off of t), so a
 # time is resolvable only while that floor is at most TIME_RESOLUTION of a forcing period,
@@ -93,7 +93,7 @@ class ImpactSystem(System):
     _packed: tuple = field(init=False, repr=False, compare=False, default=None)
 
     def __post_init__(self):
-        _choice("model", self.model, MODELS)
+        _choice("model", self.model, ORBIT_MODELS)
         if not isinstance(self.options, SolverOptions):
             raise ValueError(f"options must be an opa.SolverOptions, got {self.options!r}")
         for name, value in self.options.legacy_impulse.items():  # deprecated spelling
@@ -128,8 +128,8 @@ class ImpactSystem(System):
 
     def with_parameter(self, name: str, value: float) -> ImpactSystem:
         """A copy with one model parameter (or ``sigma``) changed."""
-        if name not in SWEEPABLE:
-            raise ValueError(f"parameter must be one of {', '.join(SWEEPABLE)}, got {name!r}")
+        if name not in CONTINUABLE:
+            raise ValueError(f"parameter must be one of {', '.join(CONTINUABLE)}, got {name!r}")
         return self.replace(**{name: float(value)})
 
     def parameter(self, name: str) -> float:
@@ -149,7 +149,9 @@ class ImpactSystem(System):
         return provenance_attrs(self.model, self, self.options)
 
 
-SWEEPABLE = tuple(n for n in PARAMETER_NAMES if n not in ("x0", "v0")) + ("sigma",)
+#: what continuation can follow: every SWEEPABLE name but x0 and v0, which only select
+#: the attractor
+CONTINUABLE = tuple(n for n in SWEEPABLE if n not in ("x0", "v0"))
 
 
 def _pack(system: ImpactSystem):
@@ -466,8 +468,8 @@ class PeriodicOrbit:
         """All Floquet multipliers strictly inside the unit circle."""
         return self.spectral_radius < 1.0
 
-    def classify(self, *, tol: float = CRITICAL_TOL, graze_velocity: float = GRAZE_VELOCITY,
-                 graze_gap: float = GRAZE_GAP) -> list[str]:
+    def classify(self, *, tol: float = CRITICAL_TOL, graze_velocity: float = ORBIT_GRAZE_VELOCITY,
+                 graze_gap: float = ORBIT_GRAZE_GAP) -> list[str]:
         """Labels of the orbit: ``stable``/``unstable`` and any critical multiplier.
 
         ``period-doubling``: a real multiplier within ``tol`` of -1; ``fold``: within

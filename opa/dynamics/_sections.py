@@ -36,9 +36,9 @@ xr = lazy("xarray")
 #: default relative tolerance of the stroboscopic repeat, see ``detect_period``
 PERIOD_TOL = 1e-4
 #: an impact slower than this counts as grazing
-GRAZE_VELOCITY = 1e-2
+MOTION_GRAZE_VELOCITY = 1e-2
 #: a free-flight maximum of x closer than this to the wall counts as grazing
-GRAZE_GAP = 1e-4
+MOTION_GRAZE_GAP = 1e-4
 #: relative tolerance deciding that an output time is a stroboscopic time k 2 pi / omega
 _STROBE_TOL = 1e-9
 
@@ -350,8 +350,8 @@ def identify(
     sticking: np.ndarray | None = None,
     period_tol: float = PERIOD_TOL,
     max_period: int | None = None,
-    graze_velocity: float = GRAZE_VELOCITY,
-    graze_gap: float = GRAZE_GAP,
+    graze_velocity: float = MOTION_GRAZE_VELOCITY,
+    graze_gap: float = MOTION_GRAZE_GAP,
 ) -> Motion:
     """Array form of ``identify_motion``: outputs ``t, x, v`` (n,), impacts (m,) or None
     when the run has no impact record (MC mean), ``breaks`` the times where the velocity
@@ -493,8 +493,8 @@ def identify_motion(
     start: float | None = None,
     period_tol: float = PERIOD_TOL,
     max_period: int | None = None,
-    graze_velocity: float = GRAZE_VELOCITY,
-    graze_gap: float = GRAZE_GAP,
+    graze_velocity: float = MOTION_GRAZE_VELOCITY,
+    graze_gap: float = MOTION_GRAZE_GAP,
 ) -> Motion:
     """Period, impacts per period, label z = n/p and grazing of a run after ``start``.
 

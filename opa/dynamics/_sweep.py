@@ -46,10 +46,10 @@ from opa._model import (
     _choice,
     check_instance,
 )
-from opa._system import SYSTEM_FIELDS, System, as_system
+from opa._system import SWEEPABLE, SYSTEM_FIELDS, System, as_system
 from opa.dynamics._sections import (
-    GRAZE_GAP,
-    GRAZE_VELOCITY,
+    MOTION_GRAZE_GAP,
+    MOTION_GRAZE_VELOCITY,
     PERIOD_TOL,
     grazing_points,
     identify,
@@ -60,9 +60,8 @@ from opa.dynamics._sections import (
 
 xr = lazy("xarray")
 
-MODELS = ("dmr", "opa", "mc")
+SWEEP_MODELS = ("dmr", "opa", "mc")
 CONTINUATIONS = ("fixed", "forward", "backward")
-SWEEPABLE = PARAMETER_NAMES + ("sigma",)
 #: the System fields a sweep takes as keywords (its OPA system uses the semicircle law)
 SWEEP_FIELDS = tuple(f for f in SYSTEM_FIELDS if f != "distribution")
 DEFAULT_WORKERS = 2
@@ -386,8 +385,8 @@ def sweep(
     seed: int = 0,
     options: SolverOptions | None = None,
     period_tol: float = PERIOD_TOL,
-    graze_velocity: float = GRAZE_VELOCITY,
-    graze_gap: float = GRAZE_GAP,
+    graze_velocity: float = MOTION_GRAZE_VELOCITY,
+    graze_gap: float = MOTION_GRAZE_GAP,
     out: str | os.PathLike | None = None,
     keep_parts: bool = False,
     scheduler=None,
@@ -470,7 +469,7 @@ def sweep(
     >>> ds.label.values.tolist()
     ['4/4', '2/2']
     """
-    _choice("model", model, MODELS)
+    _choice("model", model, SWEEP_MODELS)
     _choice("continuation", continuation, CONTINUATIONS)
     _choice("parameter", param, SWEEPABLE)
     if model == "mc" and source is None:
@@ -954,7 +953,7 @@ def _located_lines(ds) -> list[str]:
 
 __all__ = [
     "CONTINUATIONS",
-    "MODELS",
+    "SWEEP_MODELS",
     "SWEEPABLE",
     "PointTask",
     "add_located",

@@ -8,7 +8,7 @@ import xarray as xr
 
 from opa.dynamics._continuation import BIFURCATION_KINDS
 
-MARKERS = {"period-doubling": ("o", "tab:red"), "fold": ("s", "k"),
+BIFURCATION_MARKERS = {"period-doubling": ("o", "tab:red"), "fold": ("s", "k"),
            "neimark-sacker": ("D", "tab:purple"), "grazing": ("^", "tab:green"),
            "impulse-impact": ("x", "tab:brown")}
 
@@ -53,7 +53,7 @@ def plot_branches(ds: xr.Dataset, path: str | None = None, *, ax=None, coordinat
                     label = f"period {k}, {'stable' if flag else 'unstable'}"
                     labelled.add((k, flag))
                 ax.plot(lam, yy, style, color=colour, lw=1.2, label=label)
-    for kind, (marker, colour) in MARKERS.items():
+    for kind, (marker, colour) in BIFURCATION_MARKERS.items():
         sel = ds.bifurcation_kind.values == BIFURCATION_KINDS.index(kind)
         if sel.any():
             ax.plot(ds[f"bifurcation_{parameter}"].values[sel],

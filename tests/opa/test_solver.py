@@ -388,7 +388,7 @@ def test_graze_is_reported_not_a_crash(delta, graze, eta):
     """A parabola x = -1/2 + t - t^2/2 (force -1 away from the wall) peaks at x = 0.
 
     With the wall just below the apex the contact velocity sqrt(-2 delta) is below
-    GRAZE_VELOCITY = 1e-6: one impact, flagged as a graze; the run goes on and the mass
+    EVENT_GRAZE_VELOCITY = 1e-6: one impact, flagged as a graze; the run goes on and the mass
     stays behind the wall. A deeper wall gives an ordinary impact. With the wall exactly
     at the apex the tangency is decided by round-off (DOP853 ends a step at the apex
     3e-16 below the wall): a graze or no impact, never an ordinary one.
@@ -402,7 +402,7 @@ def test_graze_is_reported_not_a_crash(delta, graze, eta):
         return
     assert ds.impact_time.size == 1
     assert bool(ds.impact_graze.item()) is graze
-    assert (ds.impact_velocity.item() < K.GRAZE_VELOCITY) is graze
+    assert (ds.impact_velocity.item() < K.EVENT_GRAZE_VELOCITY) is graze
     v_hit = math.sqrt(-2 * delta)
     t_hit = 1.0 - v_hit
     assert ds.impact_time.item() == pytest.approx(t_hit, abs=1e-7)
