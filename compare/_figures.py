@@ -131,14 +131,16 @@ class _Context:
     """Sizes and shared resources of one ``reproduce`` call."""
 
     def __init__(self, outdir, sizes: Sizes = DEFAULT_SIZES, *, options=None, order=4,
-                 impulse="dirac", pulse_width=0.1, workers=1, scheduler=None,
-                 progress=False, log=None):
+                 impulse="dirac", pulse_width=0.1, impulse_at_zero=True, workers=1,
+                 scheduler=None, progress=False, log=None):
         self.outdir = os.fspath(outdir)
         self.sizes = sizes
         self.options = options or SolverOptions()
         # the impulse model of every figure (the System's fields)
-        self.impulse_model = {"impulse": impulse, "pulse_width": pulse_width}
+        self.impulse_model = {"impulse": impulse, "pulse_width": pulse_width,
+                              "impulse_at_zero": impulse_at_zero}
         self.impulse, self.pulse_width = impulse, pulse_width
+        System(preset("3.1"), **self.impulse_model)  # checks the model before any figure
         self.order = order
         self.workers = workers
         self.scheduler = scheduler
@@ -475,7 +477,8 @@ def fig2(ctx):
              else f"black: rectangular pulses of width {ctx.pulse_width:g}")
     caption = (f"Fig. 2: the impulse force F(t) for F0 = 0.1, a1 = 1, ω1 = 1, 0 ≤ t ≤ "
                f"{t_end:g}: (a) n = 2, (b) n = 4; {shape} at t_j = j 2π/ω1 (j from "
-               "0); dotted: the switched signal "
+               f"{0 if ctx.impulse_model['impulse_at_zero'] else 1}); dotted: the switched "
+               "signal "
                f"F0 (1 + a1 sin(ω1 t/n)).")
 
     def cycle(h):
@@ -926,7 +929,8 @@ _MAKERS = {"fig2": fig2, "fig3": fig3, "fig4": fig4, "fig5": fig5, "fig6": fig6,
 
 
 def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool = False,
-              impulse: str = "dirac", pulse_width: float = 0.1, order: int = 4,
+              impulse: str = "dirac", pulse_width: float = 0.1,
+              impulse_at_zero: bool = True, order: int = 4,
               workers: int = 2, scheduler=None, progress: bool | None = None,
               log=None, sizes: Sizes | None = None) -> list[str]:
     """Regenerate one of the paper's figures (``"fig2"`` .. ``"fig11"``) or ``"all"``.
@@ -937,7 +941,8 @@ def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool 
     full : the paper's resolution for the bifurcation diagrams (200 values of the
         parameter, 500 transient + 100 recorded periods) and larger Monte Carlo
         ensembles (:data:`FULL_SIZES`) instead of :data:`DEFAULT_SIZES`.
-    impulse, pulse_width : impulse model for every figure (README, 'Choices the paper leaves open').
+    impulse, pulse_width, impulse_at_zero : the impulse model of every figure
+        (``opa.System``'s fields; README, 'Choices the paper leaves open').
     order : OPA order N of EMR_0 and EMR.
     workers, scheduler : parallel sweeps (local processes or a Dask scheduler).
     log : callable for progress lines (e.g. ``print``), or None.
@@ -956,7 +961,8 @@ def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool 
     order = check_order(order)
     os.makedirs(outdir, exist_ok=True)
     ctx = _Context(outdir, sizes or (FULL_SIZES if full else DEFAULT_SIZES),
-                   impulse=impulse, pulse_width=pulse_width, order=int(order), workers=int(workers), scheduler=scheduler,
+                   impulse=impulse, pulse_width=pulse_width,
+                   impulse_at_zero=impulse_at_zero, order=int(order), workers=int(workers), scheduler=scheduler,
                    progress=progress, log=log)
     paths = []
     try:

@@ -13,11 +13,11 @@ import numpy as np
 
 from opa.cli._args import positive_int, whole_number
 from opa.cli._args import parse_sweep as _parse_sweep
-from opa.cli._flags import _common_flags, _model_flags
+from opa._system import DEFAULT_ORDER
+from opa.cli._flags import _common_flags, _impulse_flags, _model_flags
 
 from opa._system import SWEEPABLE
 from opa.dynamics._sweep import CONTINUATIONS, DEFAULT_WORKERS, SWEEP_MODELS, summary_lines
-from opa._model import IMPULSE_MODELS
 from opa.dynamics._sections import MOTION_GRAZE_GAP, MOTION_GRAZE_VELOCITY, PERIOD_TOL
 
 SECTIONS = ("phase", "constraint", "both")
@@ -103,7 +103,7 @@ def cmd_reproduce(args) -> int:
     names = list(FIGURES) if args.figure == "all" else [args.figure]
     start = time.perf_counter()
     paths = reproduce(args.figure, args.outdir, full=args.full, impulse=args.impulse,
-                      pulse_width=args.pulse_width, order=args.order, workers=args.workers,
+                      pulse_width=args.pulse_width, impulse_at_zero=args.impulse_at_zero, order=args.order, workers=args.workers,
                       scheduler=args.scheduler, progress=not args.quiet,
                       log=None if args.quiet else print)
     if not args.quiet:
@@ -207,12 +207,9 @@ def register(subparsers) -> None:
                    help="where to write the PNG and netCDF files (default ./figures)")
     r.add_argument("--full", action="store_true",
                    help="paper resolution: 200 sweep values, 500 + 100 periods (slow)")
-    r.add_argument("--impulse", choices=IMPULSE_MODELS, default="dirac",
-                   help="impulse model for every figure (default dirac)")
-    r.add_argument("--pulse-width", type=float, default=0.1, metavar="TAU",
-                   help="width of the rectangular pulses with --impulse pulse (default 0.1)")
-    r.add_argument("--order", type=whole_number, default=4, metavar="N",
-                   help="OPA order N of EMR_0 and EMR (default 4)")
+    r.add_argument("--order", type=whole_number, default=DEFAULT_ORDER, metavar="N",
+                   help=f"OPA order N of EMR_0 and EMR (default {DEFAULT_ORDER})")
+    _impulse_flags(r)
     r.add_argument("--workers", type=positive_int, default=DEFAULT_WORKERS, metavar="W",
                    help=f"local worker processes for sweeps (default {DEFAULT_WORKERS})")
     r.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -6,7 +6,7 @@ of the OPA equivalent system of any order N (eqs. (24)-(28)); states are
 right-continuous (just after an impulse or impact at that instant). Its Jacobian comes
 from the variational equation carried through every impact with the saltation matrix
 of the impact law (the kernel ``opa._kernel`` with m tangent columns), so it is exact
-up to the integration tolerance; ``tests/opa/test_stability.py`` checks it against
+up to the integration tolerance; ``tests/opa/dynamics/test_orbits.py`` checks it against
 finite differences of plain trajectories and against an independent scipy reference.
 
 Impulses. With ``F0 = 0`` the system is T-periodic and every ``k >= 1`` gives an
@@ -33,7 +33,6 @@ from opa import _kernel as V
 from opa._model import (
     _finite,
     IMPACT_LAWS,
-    PARAMETER_NAMES,
     Oscillator,
     SolverOptions,
     _choice,

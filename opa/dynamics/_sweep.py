@@ -40,7 +40,6 @@ import numpy as np
 from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
 from opa._lazy import lazy
 from opa._model import (
-    PARAMETER_NAMES,
     Oscillator,
     SolverOptions,
     _choice,
