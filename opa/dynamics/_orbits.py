@@ -415,10 +415,9 @@ class PeriodicOrbit:
         (kick then impact, or impact then kick, differ by (1 + eta) F0 in velocity), so
         a branch ends where this separation goes to zero. inf when F0 = 0.
         """
-        osc = self.system.oscillator
-        if osc.F0 == 0.0 or not self.impacts:
+        if not self.system.impulsive or not self.impacts:
             return math.inf
-        T1 = 2.0 * math.pi / osc.omega1
+        T1 = self.system.impulse_period
         edges = [0.0]
         if self.system.impulse == "pulse":
             edges.append(self.system.pulse_width)
@@ -435,13 +434,12 @@ class PeriodicOrbit:
         Two orbits of one branch with the same impacts but a different order have had an
         impact cross an impulse time between them (a discontinuity of the map).
         """
-        osc = self.system.oscillator
-        if osc.F0 == 0.0:
+        if not self.system.impulsive:
             return ()
-        T1 = 2.0 * math.pi / osc.omega1
-        count = np.floor(self.impact_time / T1)
+        count = self.system.impulse_interval(self.impact_time)
         if self.system.impulse == "pulse":
-            count = count + np.floor((self.impact_time - self.system.pulse_width) / T1)
+            count = count + self.system.impulse_interval(self.impact_time
+                                                         - self.system.pulse_width)
         return tuple(int(c) for c in count)
 
     @property
