@@ -82,7 +82,7 @@ def cascade():
         sys_t = ImpactSystem(preset("3.1", F0=0.0), options=SolverOptions(rtol=tol, atol=tol))
         values = _relocate(sys_t, ds)
         print(f"  relocated at rtol = atol = {tol:g}: " + ", ".join(f"{v:.11f}" for v in values))
-    emr0 = ImpactSystem(preset("3.1", F0=0.0), model="opa", order=4, options=OPTS)
+    emr0 = ImpactSystem(preset("3.1", F0=0.0), model="opa", sigma=0.0, order=4, options=OPTS)
     ds0 = continue_orbits(emr0, "c", 0.1, 0.035, depth=1)
     print("  EMR_0 (OPA N = 4, sigma = 0):")
     _print(ds0)
@@ -168,7 +168,8 @@ def lyapunov(periods=10000):
                     cells.append(f"{s:g}: {est.exponent:+.4f} ± {est.standard_error:.4f}")
                 print(f"    OPA N = 4 ({law} law), sigma " + "; ".join(cells))
             for law in ("mean", "ensemble"):
-                system = ImpactSystem(osc, model="opa", order=1, impact_law=law, options=OPTS)
+                system = ImpactSystem(osc, model="opa", sigma=0.0, order=1, impact_law=law,
+                                      options=OPTS)
                 tr = transverse_lyapunov_exponent(system, periods=periods)
                 print(f"    transverse exponent of EMR_0 = DMR ({law} law): "
                       f"{tr.exponent:+.4f} ± {tr.standard_error:.4f}")
