@@ -1,27 +1,19 @@
 """opa: the vibro-impact oscillator, its OPA equivalent system and the event-driven solver.
 
-Public names are re-exported here; every other module is private.
+Public names are re-exported here; every other module is private. The analyses of
+trajectories are ``opa.dynamics``' public names, re-exported as they are; the figures
+(``opa.plots``) are imported only when drawn.
 """
 
+from opa import dynamics as _dynamics
+from opa.dynamics import *  # noqa: F403 -- exactly opa.dynamics.__all__ (sweep: see _shims)
 from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, triple_product
 from opa._dataset import write_netcdf
 from opa._model import Oscillator, SolverOptions, Uncertainty, preset, time_grid
-from opa._system import System
-from opa._shims import reproduce, sweep
-from opa.dynamics._continuation import Located, continue_orbits, locate_bifurcations
-from opa.dynamics._sections import Motion, constraint_section, detect_period, identify_motion, phase_section
-from opa._simulate import simulate_dmr, simulate_opa
 from opa._run import SimulationError
-from opa.dynamics._orbits import (
-    ImpactSystem,
-    PeriodicOrbit,
-    impulse_cycle,
-    lyapunov_benettin,
-    lyapunov_exponent,
-    periodic_orbit,
-    poincare_map,
-    transverse_lyapunov_exponent,
-)
+from opa._shims import reproduce, sweep
+from opa._simulate import simulate_dmr, simulate_opa
+from opa._system import System
 
 
 def __getattr__(name: str):
@@ -46,26 +38,11 @@ __all__ = [
     "write_netcdf",
     "sweep",
     "reproduce",
-    "Motion",
-    "identify_motion",
-    "phase_section",
-    "constraint_section",
-    "detect_period",
-    "ImpactSystem",
-    "PeriodicOrbit",
-    "periodic_orbit",
-    "poincare_map",
-    "lyapunov_exponent",
-    "lyapunov_benettin",
-    "transverse_lyapunov_exponent",
-    "impulse_cycle",
-    "continue_orbits",
-    "locate_bifurcations",
-    "Located",
-    "plot_branches",
+    "plot_branches",  # noqa: F405 -- module __getattr__
     "chebyshev_u",
     "cubic_projection",
     "gauss_nodes",
     "project",
     "triple_product",
+    *(name for name in _dynamics.__all__ if name != "sweep"),
 ]
