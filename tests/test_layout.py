@@ -18,6 +18,7 @@ PACKAGES = ("opa", "mc", "compare")
 THEMES = {
     "tests/test_architecture.py": "the import layers of every package",
     "tests/test_docs.py": "docs/ against fresh runs",
+    "tests/test_readme.py": "the README's examples run and its map names every module",
     "tests/test_layout.py": "this rule",
     "tests/test_reference.py": "tests/reference.py against closed forms",
     "tests/test_truths.py": "tests/truths.py against scipy",
