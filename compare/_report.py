@@ -627,8 +627,10 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     md = os.path.join(outdir, "summary.md")
     lines = [
         "# opa-mc validate: where OPA agrees with Monte Carlo", "",
-        f"Command: `{command}` ({a['wall_seconds']:.0f} s, {a['mc_runs_computed']} Monte "
-        f"Carlo runs computed, the rest reused from parts/).", "",
+        f"Command: `{command}` ({a['wall_seconds']:.0f} s; computed: "
+        f"{a['mc_runs_computed']} Monte Carlo runs, {a['opa_runs_computed']} OPA runs, "
+        f"{a['parts_computed']} parts in all (splits and the frontier included); the rest "
+        f"reused from parts/).", "",
         f"Model: preset {a['preset']} (mu = {a['mu']:g}, a = {a['a']:g}, c = {a['c']:g}, "
         f"f = {a['f']:g}, eta = {a['eta']:g}, delta = {a['delta']:g}, F0 = {a['F0']:g}, "
         f"{a['impulse']} impulses), {a['parameter']} swept over "

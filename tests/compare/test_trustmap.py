@@ -173,6 +173,11 @@ def test_report_files_and_tables(tiny):
         assert os.path.getsize(out / name) > 0
     text = (out / "summary.md").read_text()
     assert "Trust boundary" in text and "opa-mc validate (test)" in text
+    # the first line counts every kind of part the run computed, not only Monte Carlo
+    a = ds.attrs
+    assert (f"computed: {a['mc_runs_computed']} Monte Carlo runs, {a['opa_runs_computed']} "
+            f"OPA runs, {a['parts_computed']} parts in all") in text
+    assert a["parts_computed"] > a["mc_runs_computed"] > 0 and a["opa_runs_computed"] > 0
 
 
 def test_config_errors_name_the_key(tmp_path):
