@@ -365,10 +365,28 @@ def _cycle_note(osc, record: int) -> str:
     return text
 
 
-def _marks_text(marks, param, ds=None) -> str:
-    """The located bifurcations for the text beside a figure, with the dataset's notes."""
+def _opa_not_located(ctx, osc, param, values, sigma) -> str:
+    """Why a figure's OPA sweep has no located bifurcations: the reason the continuation
+    cannot be done, or (EMR_0) where the DMR's, which are EMR_0's, are located."""
+    from opa.dynamics._sweep import _locate_setup
+
+    system = System(osc, sigma=sigma, order=ctx.order, **ctx.impulse_model)
+    try:
+        _locate_setup(True, "opa", param, np.asarray(values, dtype=float), system,
+                      ctx.options)
+    except ValueError as err:
+        return "not located: " + str(err).removeprefix("locate=True: ")
+    cycle = _cycle(osc)
+    return ("not located here: the OPA system is continued only on request; EMR_0 equals "
+            f"the DMR, whose bifurcations `opa-mc bifurcation dmr --locate` locates over "
+            f"the same {param} (maps over the forcing's cycle of {cycle} periods)")
+
+
+def _marks_text(marks, param, ds=None, why=None) -> str:
+    """The located bifurcations for the text beside a figure, with the dataset's notes
+    (``why``: the reason there are none, instead of the dataset's)."""
     if not marks:
-        why = ds.attrs.get("bifurcation_method", "") if ds is not None else ""
+        why = why or (ds.attrs.get("bifurcation_method", "") if ds is not None else "")
         why = f" ({why})" if why and not why.startswith("continuation") else ""
         return (f"no located bifurcations in the sweep dataset{why}, so no bifurcation lines "
                 f"are drawn")
@@ -596,13 +614,14 @@ def fig9(ctx):
         firsts.append(first)
         slow = int(np.nanargmin(np.where(np.isfinite(emr.min_impact_velocity.values),
                                          emr.min_impact_velocity.values, np.inf)))
+        why = None if marks else _opa_not_located(ctx, osc, "omega", values, sigma)
         line += (f"first grazing flag (impact slower than {emr.attrs['graze_velocity']:g} or "
                  f"free flight within {emr.attrs['graze_gap']:g} of the wall) at ω = "
                  f"{_first_text(first)}; slowest impact "
                  f"{emr.min_impact_velocity.values[slow]:.3g} at "
                  f"ω = {emr.omega.values[slow]:.4g}; periodic at "
                  f"{int(np.sum(emr.period.values > 0))} of {s.count} values; "
-                 f"{_marks_text(marks, 'ω', emr)}.")
+                 f"{_marks_text(marks, 'ω', emr, why)}.")
         diffs.append(line)
     for ax in axes[:, 1]:
         ax.set_ylabel("")
@@ -668,9 +687,11 @@ def fig10(ctx):
             _guide_lines(ax, (0.0356,), "c = 0.0356 (Fig. 11)")
             draw_marks(ax, marks)
             _finish_section_panel(ax, f"({tag}) n = {n}: {SECTION_LABELS[section][1]}", cnt)
+        why = None if marks else _opa_not_located(ctx, osc, "c", values, 0.0)
         diffs.append(f"n = {n}: periodic at {int(np.sum(emr0.period.values > 0))} of "
                      f"{s.count} values of c ({_label_counts(emr0)}) in a record of {record} "
-                     f"periods; {_cycle_note(osc, record)}; {_marks_text(marks, 'c', emr0)}.")
+                     f"periods; {_cycle_note(osc, record)}; "
+                     f"{_marks_text(marks, 'c', emr0, why)}.")
         records.append(record)
     marks_text = ("; ".join(f"n = {n}: {describe_marks(m, 'c')}" for n, m in
                             zip((2, 4), all_marks)) if any(all_marks)
