@@ -627,8 +627,8 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force
     if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes):
         step2(t, z, h, K, z_new, p, force, sticking, 1.0, 1.0)
         return last
-    cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, 1, last, m, p, cfg, nodes, weights, U, force,
-                         sticking, work)
+    cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, np.int64(1), last, m, p, cfg, nodes,
+                         weights, U, force, sticking, work)
     for j in range(size):
         acc = 0.0
         for r in range(last):
@@ -718,8 +718,8 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights,
                     acc += K[s, j] * DP_P[s, d]
                 F[d, j] = h * acc
         return 0
-    _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, 13, 16, m, p, cfg, nodes, weights, U, force,
-                sticking, work)
+    _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, np.int64(13), np.int64(16), m, p, cfg, nodes,
+                weights, U, force, sticking, work)
     for j in range(size):
         dy = z_new[j] - z[j]
         F[0, j] = dy
@@ -811,7 +811,7 @@ def _bisect_wall(method, lo, hi, z_old, F, h, delta):
         mid = 0.5 * (lo + hi)
         if mid <= lo or mid >= hi:
             break
-        if dense_value(method, mid, z_old, F, 0) - delta > 0.0:
+        if dense_value(method, mid, z_old, F, np.int64(0)) - delta > 0.0:
             hi = mid
         else:
             lo = mid
@@ -842,17 +842,17 @@ def wall_crossing(method, z_old, F, h, delta):
     inspected, so a step whose interpolant touches the wall and comes back is caught.
     """
     prev_t = 0.0
-    prev_g = dense_value(method, 0.0, z_old, F, 0) - delta
+    prev_g = dense_value(method, 0.0, z_old, F, np.int64(0)) - delta
     prev_s = dense_slope(method, 0.0, F, 0)
     for i in range(1, N_SCAN + 1):
         th = i / N_SCAN
-        g = dense_value(method, th, z_old, F, 0) - delta
+        g = dense_value(method, th, z_old, F, np.int64(0)) - delta
         s = dense_slope(method, th, F, 0)
         hit = g > 0.0
         hi_t = th
         if not hit and prev_s > 0.0 and s < 0.0:
             tm = _bisect_maximum(method, prev_t, th, F)
-            if dense_value(method, tm, z_old, F, 0) - delta > 0.0:
+            if dense_value(method, tm, z_old, F, np.int64(0)) - delta > 0.0:
                 hit = True
                 hi_t = tm
         if hit:
@@ -865,7 +865,7 @@ def wall_crossing(method, z_old, F, h, delta):
                     tt *= 0.5
                     if tt <= lo_t:
                         break
-                    if dense_value(method, tt, z_old, F, 0) - delta < 0.0:
+                    if dense_value(method, tt, z_old, F, np.int64(0)) - delta < 0.0:
                         found = True
                         break
                 if not found:
@@ -892,7 +892,7 @@ def free_flight_maximum(method, z_old, F, delta):
         s = dense_slope(method, th, F, 0)
         if prev_s > 0.0 and s <= 0.0:
             tm = _bisect_maximum(method, prev_t, th, F)
-            g = delta - dense_value(method, tm, z_old, F, 0)
+            g = delta - dense_value(method, tm, z_old, F, np.int64(0))
             if g < gap:
                 gap = g
                 where = tm
