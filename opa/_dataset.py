@@ -1,8 +1,8 @@
-"""Dataset conventions shared by every model (docs/datasets.md): attributes, safe I/O and
-the memory budget that sizes are checked against before any work starts."""
+"""Dataset conventions shared by every model (docs/datasets.md): attributes and safe I/O."""
 
 from __future__ import annotations
 
+import contextvars
 import datetime as _dt
 import os
 import re
@@ -18,6 +18,11 @@ from opa._lazy import lazy
 from opa._model import PARAMETER_NAMES, SolverOptions
 
 xr = lazy("xarray")
+
+#: the command a dataset's ``history`` records: set by ``opa.cli.main`` for the command it
+#: runs (so that an in-process ``main([...])`` records its own arguments); None: sys.argv
+COMMAND: contextvars.ContextVar[tuple[str, ...] | None] = contextvars.ContextVar(
+    "opa_mc_command", default=None)
 
 
 def package_version() -> str:
@@ -46,11 +51,16 @@ def provenance_attrs(model: str, system, options: SolverOptions, *, seed: int = 
         sampler=sampler,
         Conventions="CF-1.8",
         history=f"{_dt.datetime.now(_dt.timezone.utc).isoformat(timespec='seconds')} "
-        f"{' '.join(os.path.basename(a) if i == 0 else a for i, a in enumerate(sys.argv))}",
+        f"{_command_line()}",
         source="opa-mc",
         opa_mc_version=package_version(),
     )
     return attrs
+
+
+def _command_line() -> str:
+    argv = COMMAND.get() or sys.argv
+    return " ".join(os.path.basename(a) if i == 0 else a for i, a in enumerate(argv))
 
 
 def time_coord(times: np.ndarray, omega: float) -> dict:

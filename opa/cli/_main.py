@@ -158,6 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     args.argv = list(sys.argv[1:] if argv is None else argv)
     from opa._run import SimulationError
 
+    from opa._dataset import COMMAND
+
+    token = COMMAND.set(("opa-mc", *args.argv))
     try:
         return args.func(args)
     except (ValueError, CliError) as err:
@@ -183,6 +186,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"opa-mc: internal error: {type(err).__name__}: {_one_line(err)} (please "
               f"report it; OPA_MC_TRACEBACK=1 shows the traceback)", file=sys.stderr)
         return 1
+    finally:
+        COMMAND.reset(token)
 
 
 if __name__ == "__main__":

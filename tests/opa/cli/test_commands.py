@@ -204,6 +204,10 @@ def test_simulate_mc_with_the_same_seed_writes_the_same_file(tmp_path):
     xr.testing.assert_identical(a, b)
     assert a.sizes["sample"] == 64 and not np.array_equal(a.xi.values, c.xi.values)
     assert np.all(np.abs(a.xi.values) <= 1.0)
+    # the history records the command main() ran, not the process's own argv
+    history = load(tmp_path / "c.nc").attrs["history"]
+    assert history.endswith(" ".join(["opa-mc", *map(str, argv), "--seed", "4", "--out",
+                                      str(tmp_path / "c.nc")]))
 
 
 def test_simulate_mc_gauss_is_the_collocation_of_the_reference(tmp_path):
