@@ -365,6 +365,20 @@ def _cycle_note(osc, record: int) -> str:
     return text
 
 
+def _emr0_dmr_text(dmr, emr0, record: int) -> str:
+    """How closely EMR_0's sweep follows the DMR's (their truth at sigma = 0)."""
+    gap = _row_max(np.abs(dmr.section_x.values[:, :record] - emr0.section_x.values[:, :record]))
+    count = len(gap)
+    close = int(np.sum(gap < 1e-6))
+    same = int(np.sum(dmr.label.values == emr0.label.values))
+    worst = float(np.max(gap, initial=0.0, where=np.isfinite(gap)))
+    where = (f"all {count} values" if close == count else
+             f"{close} of {count} values, and differ by up to {worst:.2g} at the others "
+             f"(round-off grows along non-periodic motion)")
+    return (f"EMR_0 against the DMR: phase-plane points within 1e-6 at {where}; the labels "
+            f"agree at {same} of {count} values")
+
+
 def _opa_not_located(ctx, osc, param, values, sigma) -> str:
     """Why a figure's OPA sweep has no located bifurcations: the reason the continuation
     cannot be done, or (EMR_0) where the DMR's, which are EMR_0's, are located."""
@@ -585,8 +599,14 @@ def fig9(ctx):
                               sigma=sigma)
         files.append(path)
         name = "EMR_0" if sigma == 0 else "EMR"
-        diagram(ax, emr, "phase", color=COLORS[name], label=name)
         line = f"({tag}) σ = {sigma:g}: "
+        if sigma == 0:  # the truth at sigma = 0 is the DMR
+            dmr, path = ctx.sweep("fig9_dmr", "dmr", "omega", values, osc, locate=False)
+            files.append(path)
+            diagram(ax, dmr, "phase", color=COLORS["DMR"], label="DMR", ms=4.0, marker="o")
+            line += f"{_emr0_dmr_text(dmr, emr, s.record)}; "
+        diagram(ax, emr, "phase", color=COLORS[name], label=name,
+                **({"ms": 2.2, "zorder": 3} if sigma == 0 else {}))
         if sigma > 0:
             mc, path = ctx.sweep(f"fig9_mc_sigma{sigma:g}", "mc", "omega", mc_values, osc,
                                  sigma=sigma)
@@ -630,7 +650,8 @@ def fig9(ctx):
         describe_marks([], "ω")
     caption = (f"Fig. 9: bifurcation diagrams vs ω in the phase plane (x at t = k 2π/ω), set "
                f"3.3 (a = f = 3.5, c = 0.05, F0 = 0.1), {s.count} values of ω, {s.record} "
-               f"recorded periods after {s.transient}: (a) EMR_0 (σ = 0, orange), (b)-(d) "
+               f"recorded periods after {s.transient}: (a) EMR_0 (σ = 0, orange dots) on the DMR (black circles, its "
+               f"truth), (b)-(d) "
                f"EMR for σ = 0.1, 0.16, 0.18 (blue) with the Monte Carlo mean (green x, "
                f"{s.sweep_mc_samples} Sobol samples, at every {s.sweep_mc_stride}th ω); "
                f"purple: ω = 3.98 and 4.00495 of Figs. 7-8; {drawn_marks}.")
@@ -679,15 +700,21 @@ def fig10(ctx):
         record = _record_for(osc, s.record)
         emr0, path = ctx.sweep(f"fig10_n{n}", "opa", "c", values, osc, sigma=0.0,
                                record=record)
-        files.append(path)
+        # the truth at sigma = 0 is the DMR (not located here: see _opa_not_located)
+        dmr, p_dmr = ctx.sweep(f"fig10_dmr_n{n}", "dmr", "c", values, osc, record=record,
+                               locate=False)
+        files += [path, p_dmr]
         marks = _located_marks(emr0)
         all_marks.append(marks)
         for ax, section, tag in zip(row, ("phase", "constraint"), tags):
-            cnt = diagram(ax, emr0, section, color=COLORS["EMR_0"], label="EMR_0")
+            diagram(ax, dmr, section, color=COLORS["DMR"], label="DMR", ms=4.0, marker="o")
+            cnt = diagram(ax, emr0, section, color=COLORS["EMR_0"], label="EMR_0", ms=2.2,
+                          zorder=3)
             _guide_lines(ax, (0.0356,), "c = 0.0356 (Fig. 11)")
             draw_marks(ax, marks)
             _finish_section_panel(ax, f"({tag}) n = {n}: {SECTION_LABELS[section][1]}", cnt)
         why = None if marks else _opa_not_located(ctx, osc, "c", values, 0.0)
+        diffs.append(f"n = {n}: {_emr0_dmr_text(dmr, emr0, record)}.")
         diffs.append(f"n = {n}: periodic at {int(np.sum(emr0.period.values > 0))} of "
                      f"{s.count} values of c ({_label_counts(emr0)}) in a record of {record} "
                      f"periods; {_cycle_note(osc, record)}; "
@@ -696,11 +723,14 @@ def fig10(ctx):
     marks_text = ("; ".join(f"n = {n}: {describe_marks(m, 'c')}" for n, m in
                             zip((2, 4), all_marks)) if any(all_marks)
                   else describe_marks([], "c"))
-    caption = (f"Fig. 10: EMR_0 (σ = 0, N = {ctx.order}) bifurcation diagrams vs c, set 3.4 "
+    caption = (f"Fig. 10: EMR_0 (σ = 0, N = {ctx.order}) and DMR bifurcation diagrams vs c, "
+               f"set 3.4 "
                f"with the stronger impulse F0 = 10, {s.count} values of c, "
                f"{_records_text(records, (2, 4))} after {s.transient}: (a) phase plane and "
                f"(b) constraint "
-               f"plane for n = 2, (c), (d) the same for n = 4; purple: c = 0.0356 of Fig. 11;"
+               f"plane for n = 2, (c), (d) the same for n = 4; DMR black circles, EMR_0 "
+               f"orange dots on top (σ = 0: the DMR is the truth); purple: c = 0.0356 of "
+               f"Fig. 11;"
                f" {marks_text}.")
     diffs.insert(0, "The paper sees stronger 'diffusion' with F0 = 10 and more with n = 4. "
                     "EMR_0 has σ = 0, so what spreads here is the deterministic motion: a "

@@ -196,11 +196,11 @@ def register(subparsers) -> None:
         help="the paper's figures 2-11 (impulse trains, bifurcation diagrams, portraits)",
         description="Regenerate the paper's figures: fig2 impulse trains; fig3, fig9, "
         "fig10 bifurcation diagrams in both sections; fig4-fig8, fig11 phase portraits "
-        "with section points and time histories; DMR, EMR_0 and EMR with the Monte Carlo "
-        "mean and its band beside every EMR; bifurcation lines only where located. Each "
+        "with section points and time histories; the Monte Carlo mean and its band beside "
+        "every EMR, the DMR beside every EMR_0; bifurcation lines only where located. Each "
         "figure's data is written next to it as netCDF, its caption and measured "
-        "differences from the paper as figN.txt. Default sizes take about 3 minutes on 2 "
-        "cores; --full uses the paper's resolution.",
+        "differences from the paper as figN.txt. Default sizes took 58.5 s on 2 cores "
+        "(docs/figures.md); --full uses the paper's resolution.",
     )
     r.add_argument("figure", choices=list(FIGURES) + ["all"])
     r.add_argument("--outdir", default="figures", metavar="DIR",

@@ -78,9 +78,19 @@ def test_emr_panels_have_mc_mean_and_band(drawn, name):
 def test_fig9_mc_mean_beside_every_emr_diagram(drawn):
     _, figures = drawn
     axes = figures["fig9"].fig.axes
-    assert not any(n.startswith("MC mean") for n in labels(axes[0]))  # sigma = 0: EMR_0
+    # sigma = 0: EMR_0, with its truth, the DMR, beside it and no Monte Carlo
+    assert not any(n.startswith("MC mean") for n in labels(axes[0]))
+    assert labels(axes[0]).count("DMR") == 1 and labels(axes[0]).count("EMR_0") == 1
     for ax in axes[1:]:
         assert any(n.startswith("MC mean (16 Sobol") for n in labels(ax))
+
+
+def test_fig10_draws_the_dmr_beside_every_emr0_diagram(drawn):
+    _, figures = drawn
+    for ax in figures["fig10"].fig.axes:
+        assert labels(ax).count("DMR") == 1 and labels(ax).count("EMR_0") == 1
+    text = " ".join(figures["fig10"].differences)
+    assert text.count("EMR_0 against the DMR: phase-plane points within 1e-6") == 2
 
 
 def test_deterministic_figures_draw_each_run_once(drawn):
