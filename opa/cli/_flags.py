@@ -1,8 +1,10 @@
 """Flags declared once for every subcommand, and the objects built from them.
 
-Each group (model parameters, run, elements, solver, output) is one function that adds
-its flags to a subcommand's parser; ``oscillator_from`` and ``options_from`` turn the
-parsed flags back into the model's objects; ``check_outputs`` refuses unwritable paths
+Each group is one function that adds its flags to a subcommand's parser: the model's
+parameters, the system (uncertainty, N, closures), the impulse model, the run's output
+grid, Monte Carlo, the law of xi and elements, the solver, the output. ``system_from``,
+``oscillator_from`` and ``options_from`` turn the parsed flags back into ``opa.System``,
+``opa.Oscillator`` and ``opa.SolverOptions``; ``check_outputs`` refuses unwritable paths
 before any work starts."""
 
 from __future__ import annotations
