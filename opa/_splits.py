@@ -126,11 +126,11 @@ def event_sequences(system: System | Oscillator, options: SolverOptions, paramet
     status, n_events = counters[:, 0], counters[:, 1]
     out = []
     for m, value in enumerate(values):
-        one = system.replace(**{parameter: float(value)})
         if status[m] != K.OK or n_events[m] > cap:  # the single run raises or has room
-            out.append(event_sequence(one, options, t_end))
-        else:
-            out.append(_sequence_from_log(one, logs[m, : n_events[m]]))
+            out.append(event_sequence(system.replace(**{parameter: float(value)}), options,
+                                      t_end))
+        else:  # mu, a and c leave the impulse schedule alone: the system's intervals hold
+            out.append(_sequence_from_log(system, logs[m, : n_events[m]]))
     return out
 
 

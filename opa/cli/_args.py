@@ -6,6 +6,8 @@ import argparse
 import math
 import re
 
+import numpy as np
+
 EXIT_USAGE = 2
 # A sweep of more values than this is refused: at the paper's 600 periods per value it
 # would run for days on two cores (the paper's diagrams use 200 values).
@@ -61,7 +63,8 @@ def parse_sweep(spec: str, *, names, default_count: int | None = None,
     values, ends included; ``:COUNT`` may be left out where ``default_count`` is given)
     or ``NAME=V1,V2,...`` (distinct values; not where ``ranges_only``).
 
-    Returns (name, values, (start, stop, count)); the last is None for a list.
+    Returns (name, values as an array, (start, stop, count)); the last is None for a
+    list.
 
     >>> name, values, span = parse_sweep("c=0.01:0.1:10", names=("c",))
     >>> name, len(values), float(values[-1]), span
@@ -95,7 +98,7 @@ def parse_sweep(spec: str, *, names, default_count: int | None = None,
             raise ValueError(f"{flag}: at most {max_count} values, got {len(values)}")
         if len(set(values)) != len(values):
             raise ValueError(f"{flag} {spec!r}: values must be distinct")
-        return name, values, None
+        return name, np.array(values), None
     fields = rhs.split(":")
     if len(fields) != 3 and not (len(fields) == 2 and default_count is not None):
         raise ValueError(f"{flag} {spec!r}: {usage}")
@@ -115,9 +118,7 @@ def parse_sweep(spec: str, *, names, default_count: int | None = None,
         raise ValueError(f"{flag} {spec!r}: COUNT = 1 needs START == STOP")
     if count > 1 and start == stop:
         raise ValueError(f"{flag} {spec!r}: START and STOP are equal, got {start:g}")
-    step = (stop - start) / (count - 1) if count > 1 else 0.0
-    values = [start + k * step for k in range(count - 1)] + [stop]
-    return name, values, (start, stop, count)
+    return name, np.linspace(start, stop, count), (start, stop, count)
 
 
 __all__ = ["EXIT_USAGE", "MAX_SWEEP_VALUES", "Parser", "parse_sweep", "positive_int",

@@ -31,8 +31,8 @@ def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
     >>> name, len(values), float(values[-1])
     ('c', 10, 0.1)
     """
-    name, values, span = _parse_sweep(spec, names=SWEEPABLE)
-    return name, (np.linspace(*span) if span else np.array(values))
+    name, values, _ = _parse_sweep(spec, names=SWEEPABLE)
+    return name, values
 
 
 

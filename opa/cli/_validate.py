@@ -57,11 +57,10 @@ def _order_list(text: str) -> tuple[int, ...]:
 def _sweep(text: str) -> tuple[str, tuple[float, ...]]:
     """``--sweep`` of ``validate`` (the grammar of ``opa.cli._args.parse_sweep``)."""
     try:
-        name, values, span = parse_sweep(text, names=PARAMETER_NAMES, max_count=MAX_GRID)
+        name, values, _ = parse_sweep(text, names=PARAMETER_NAMES, max_count=MAX_GRID)
     except ValueError as err:
         raise argparse.ArgumentTypeError(str(err).removeprefix(f"--sweep {text!r}: ")) \
             from None
-    values = np.linspace(*span) if span else np.array(values)
     return name, tuple(float(np.round(v, 12)) for v in values)
 
 
