@@ -825,7 +825,7 @@ def _bisect_maximum(method, lo, hi, F):
     """Location of a maximum of x_0(theta) in [lo, hi] where the slope goes + to -."""
     for _ in range(100):
         mid = 0.5 * (lo + hi)
-        if dense_slope(method, mid, F, 0) > 0.0:
+        if dense_slope(method, mid, F, np.int64(0)) > 0.0:
             lo = mid
         else:
             hi = mid
@@ -843,11 +843,11 @@ def wall_crossing(method, z_old, F, h, delta):
     """
     prev_t = 0.0
     prev_g = dense_value(method, 0.0, z_old, F, np.int64(0)) - delta
-    prev_s = dense_slope(method, 0.0, F, 0)
+    prev_s = dense_slope(method, 0.0, F, np.int64(0))
     for i in range(1, N_SCAN + 1):
         th = i / N_SCAN
         g = dense_value(method, th, z_old, F, np.int64(0)) - delta
-        s = dense_slope(method, th, F, 0)
+        s = dense_slope(method, th, F, np.int64(0))
         hit = g > 0.0
         hi_t = th
         if not hit and prev_s > 0.0 and s < 0.0:
@@ -886,10 +886,10 @@ def free_flight_maximum(method, z_old, F, delta):
     gap = np.inf
     where = -1.0
     prev_t = 0.0
-    prev_s = dense_slope(method, 0.0, F, 0)
+    prev_s = dense_slope(method, 0.0, F, np.int64(0))
     for i in range(1, N_SCAN + 1):
         th = i / N_SCAN
-        s = dense_slope(method, th, F, 0)
+        s = dense_slope(method, th, F, np.int64(0))
         if prev_s > 0.0 and s <= 0.0:
             tm = _bisect_maximum(method, prev_t, th, F)
             g = delta - dense_value(method, tm, z_old, F, np.int64(0))
@@ -1210,7 +1210,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
             force = impulse_strength(j_prev * T1, p)
             force_end = j_prev * T1 + tau
     sticking = off
-    n_events = 0
+    n_events = np.int64(0)
     n_impacts = 0
     n_steps = 0
     n_rhs = 0

@@ -4,7 +4,10 @@ advice, event-log decoding, and the checks on output times every run shares."""
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -46,10 +49,11 @@ def kernel_quadrature(quad):
 _ANNOUNCED = []
 
 
-def announce_compilation(dispatcher) -> None:
-    """Print "compiling kernels (first run only)..." once per process, to stderr, before
-    a kernel entry point that is neither compiled in this process nor in numba's on-disk
-    cache (a first run sits for several seconds compiling)."""
+def prepare_kernels(dispatcher) -> None:
+    """Before a kernel entry point that is neither compiled in this process nor in
+    numba's on-disk cache: print "compiling kernels (first run only)..." once per
+    process, to stderr, and compile the driver's callees on two cores
+    (:func:`compile_callees`). A first run otherwise sits for about 10 s compiling."""
     if _ANNOUNCED or dispatcher.signatures:
         return
     try:  # numba's index of cached overloads, empty when the source changed
@@ -59,6 +63,93 @@ def announce_compilation(dispatcher) -> None:
     if not cached:
         _ANNOUNCED.append(True)
         print("compiling kernels (first run only)...", file=sys.stderr, flush=True)
+        compile_callees()
+
+
+def callee_signatures() -> dict[str, dict[str, tuple]]:
+    """The argument types with which ``integrate``, the one driver behind every entry
+    point, calls each kernel function, in two groups ("main", "helper") of about equal
+    compile time (3 to 4 s each when cold). A test compiles both groups and then
+    ``integrate``, and checks that ``integrate`` compiled no callee of its own."""
+    from numba import types as nt
+
+    f8, i8, b1 = nt.float64, nt.int64, nt.boolean
+    v, m, iv = nt.float64[::1], nt.float64[:, ::1], nt.int64[::1]
+    table_v, table_m = nt.Array(f8, 1, "C", readonly=True), nt.Array(f8, 2, "C", readonly=True)
+    system = (v, iv, v, v, m)  # p, cfg, nodes, weights, U
+    helper = {  # leaves and the 2-D stepper: nothing here calls the vector field
+        "_stages2_dop853": (f8,) * 14 + (b1,),
+        "_error2": (f8,) * 7 + (nt.UniTuple(f8, 12),) * 2 + (f8, f8),
+        "is_deterministic": (i8, iv, v),
+        "last_stage": (i8,),
+        "_cos_sin_small": (f8,),
+        "stage_forcing": (f8,) * 8,
+        "error_norm": (i8, v, v, m, f8, f8, f8),
+        "wall_margin": (m, i8, i8, f8),
+        "state_status": (v, i8, f8),
+        "escape_bound": (v, v),
+        "first_impulse": (f8, b1, f8, b1),
+        "impulse_strength": (f8, v),
+        "_log_event": (m, i8, f8, f8, i8),
+        "_hold": (v, i8, i8, i8),
+        "_reflect": (v, i8, i8, f8, b1),
+        "dense_value": (i8, f8, v, m, i8),
+        "dense_slope": (i8, f8, m, i8),
+        "_bisect_wall": (i8, f8, f8, v, m, f8, f8),
+        "_bisect_maximum": (i8, f8, f8, m),
+        "wall_crossing": (i8, v, m, f8, f8),
+        "dense_state": (i8, f8, v, m, v),
+        "free_flight_maximum": (i8, v, m, f8),
+    }
+    main = {  # the vector field and everything that calls it
+        "vector_field": (v, i8) + system + (f8, b1, v, m),
+        "_stage_rows": (f8, v, f8, m, v, table_m, table_v, i8, i8, i8) + system + (f8, b1, m),
+        "_impact": (f8, v, i8) + system + (f8, v, v, m),
+        "dense_prepare": (i8, f8, v, v, f8, m, m, v, i8) + system + (f8, b1, m),
+        "rk_step": (i8, f8, v, f8, m, v, v, i8) + system + (f8, b1, m),
+        "restep_to": (i8, i8, f8, v, f8, f8, m, m, v, v, i8) + system + (f8, m),
+    }
+    return {"main": main, "helper": helper}
+
+
+def compile_group(group: str) -> None:
+    """Compile one group of :func:`callee_signatures` (into numba's on-disk cache)."""
+    for name, signature in callee_signatures()[group].items():
+        getattr(K, name).compile(signature)
+
+
+def compile_callees() -> None:
+    """Compile ``integrate``'s callees on two cores: a helper process compiles the
+    "helper" group into numba's on-disk cache while this process compiles the "main"
+    group; ``integrate``, compiled next by its first call, then loads whatever the
+    helper has finished from the cache (and compiles the rest itself). Cold compilation
+    of the DMR path drops from about 9.5 s to about 7 s (``benchmarks/bench_startup.py``).
+
+    With one core, or one numba thread (as in Dask workers), nothing is started here:
+    the first call compiles everything in this process. A helper that fails costs only
+    time; it is never waited for."""
+    import numba
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if numba.get_num_threads() < 2 or (cores or 1) < 2:
+        return
+    env = dict(os.environ)
+    if numba.config.CACHE_DIR:
+        env["NUMBA_CACHE_DIR"] = str(numba.config.CACHE_DIR)
+    root = str(Path(__file__).resolve().parents[1])
+    env["PYTHONPATH"] = os.pathsep.join([root, env["PYTHONPATH"]]) if env.get("PYTHONPATH") \
+        else root
+    try:
+        _HELPERS.append(subprocess.Popen(
+            [sys.executable, "-c", "from opa._run import compile_group; compile_group('helper')"],
+            env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL))
+    except OSError:
+        pass
+    compile_group("main")
+
+
+_HELPERS: list = []  # the helper process, kept so that it is reaped
 
 
 def sampled_batch(p: np.ndarray, cfg: np.ndarray, *, xi=None, values=None):
@@ -101,7 +192,7 @@ def run_batch(y0, times, P, cfgs, rule, *, rtol, atol, capacity=0, stop_on_failu
     logs = np.empty((B, capacity, 3))
     counters = np.zeros((B, 5), dtype=np.int64)
     abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
-    announce_compilation(K.run_batch)
+    prepare_kernels(K.run_batch)
     K.run_batch(y0, np.ascontiguousarray(times, dtype=float), np.ascontiguousarray(P),
                 np.ascontiguousarray(cfgs, dtype=np.int64), nodes, weights, U, rtol, atol, out,
                 logs, counters, abort)
@@ -123,7 +214,7 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", parti
         out = np.empty((len(times), len(y0)))
         log = np.empty((capacity, 3))
         z = np.array(y0, dtype=float)
-        announce_compilation(K.integrate)
+        prepare_kernels(K.integrate)
         status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
             z, 0, np.ascontiguousarray(times, dtype=float), include_start, False, p, cfg, nodes,
             weights, basis, rtol, atol, out, np.empty((0, K.N_STATS)), np.empty(0), log

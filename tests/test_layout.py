@@ -35,7 +35,6 @@ THEMES = {
 
 #: source modules without a test module of their own -> the test modules that cover them
 TESTED_IN = {
-    "opa/_run.py": ("tests/opa/test_kernel.py",),
     "opa/_simulate.py": ("tests/opa/test_solver.py",),
     "opa/dynamics/_warm_worker.py": ("tests/opa/dynamics/test_pool.py",),
     "opa/cli/_main.py": ("tests/opa/cli/test_bad_inputs.py", "tests/opa/cli/test_commands.py"),
@@ -49,7 +48,6 @@ TESTED_IN = {
 
 #: what a covering test module must contain to name the source module
 NAMED_AS = {
-    "opa/_run.py": "opa._run",
     "opa/_simulate.py": "simulate_dmr",
     "opa/dynamics/_warm_worker.py": "_warm_worker",
     "opa/cli/_main.py": "opa.cli._main",

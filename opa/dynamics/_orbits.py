@@ -37,7 +37,7 @@ from opa._model import (
     SolverOptions,
     _choice,
 )
-from opa._run import SimulationError, announce_compilation, kernel_quadrature, quadrature
+from opa._run import SimulationError, prepare_kernels, kernel_quadrature, quadrature
 from opa._system import SWEEPABLE, SYSTEM_FIELDS, System
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
@@ -304,7 +304,7 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
         out = np.empty((len(times), D))
         stats = np.empty((len(times) - 1, V.N_STATS))
         log = np.empty((capacity, 3))
-        announce_compilation(V.integrate)
+        prepare_kernels(V.integrate)
         status, n_log, _, _, _ = V.integrate(z, m, times, include_start, False, p, cfg, nodes,
                                              weights, U, system.options.rtol,
                                              system.options.atol, out, stats, np.empty(0), log)
@@ -739,7 +739,7 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
     out = np.full((periods + 1, D), np.nan)
     stats = np.empty((periods, V.N_STATS))
     growth = np.empty(periods)
-    announce_compilation(V.integrate)
+    prepare_kernels(V.integrate)
     status = V.integrate(z, 1, times, start, True, p, cfg, nodes, weights, U,
                          system.options.rtol, system.options.atol, out, stats, growth,
                          np.empty((0, 3)))[0]

@@ -1,0 +1,74 @@
+"""The kernel's caller on a cold numba cache: the first-run message, the callees compiled
+on two cores, and the table of callee signatures that makes that possible."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+
+import opa
+from opa import _run
+
+REPO = Path(__file__).resolve().parents[2]
+MESSAGE = "compiling kernels (first run only)"
+
+
+def _python(script: str, cache_dir: Path) -> subprocess.CompletedProcess:
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir)}
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(script)], env=env, cwd=REPO,
+                          capture_output=True, text=True, timeout=300, check=True)
+
+
+def test_callee_table_is_what_integrate_calls(tmp_path):
+    """With both groups of the table compiled, ``integrate``'s own compilation compiles
+    no kernel function but itself: every callee it needs was in the table, with the
+    argument types it calls it with (a drifted entry would be compiled again)."""
+    done = _python(
+        """
+        import json
+        from numba.core import event
+        import opa
+        from opa import _kernel as K, _run
+        _run.compile_group("helper")
+        _run.compile_group("main")
+        _run._ANNOUNCED.append(True)  # the table is compiled: no helper process
+        with event.install_recorder("numba:compile") as record:
+            opa.simulate_dmr(periods=1)
+        compiled = [e.data["dispatcher"].py_func.__name__ for _, e in record.buffer
+                    if e.is_start and e.data["dispatcher"].py_func.__module__ == K.__name__]
+        counts = {name: len(getattr(K, name).signatures)
+                  for group in _run.callee_signatures().values() for name in group}
+        print(json.dumps([compiled, counts]))
+        """, tmp_path)
+    compiled, counts = json.loads(done.stdout.strip().splitlines()[-1])
+    assert compiled == ["integrate"]
+    assert set(counts.values()) == {1}
+
+
+def test_cold_first_call_says_so_once_and_matches_the_cached_run(tmp_path):
+    script = """
+        import json, opa
+        first = opa.simulate_dmr(periods=2)
+        again = opa.simulate_dmr(periods=2)
+        print(json.dumps([first["x"].values.tolist(), again["x"].values.tolist()]))
+        """
+    cold = _python(script, tmp_path)
+    warm = _python(script, tmp_path)
+    assert cold.stderr.count(MESSAGE) == 1, cold.stderr
+    assert MESSAGE not in warm.stderr, warm.stderr
+    here = opa.simulate_dmr(periods=2)["x"].values
+    for run in (cold, warm):
+        for x in json.loads(run.stdout.strip().splitlines()[-1]):
+            np.testing.assert_array_equal(np.array(x), here)
+
+
+def test_the_two_groups_do_not_overlap():
+    groups = _run.callee_signatures()
+    assert not set(groups["main"]) & set(groups["helper"])
+    assert "integrate" not in set(groups["main"]) | set(groups["helper"])
