@@ -537,6 +537,48 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, stickin
 
 
 @njit(cache=True)
+def _dense_stages2_dop853(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking):
+    """Rows 13-15 of K (the dense-output stages) of the 2-D system, generated from
+    the tableau (see ``step2``)."""
+    x13 = x + h * (0.056167502283047954 * K[0, 0] + 0.25350021021662483 * K[6, 0] +
+                   -0.2462390374708025 * K[7, 0] + -0.12419142326381637 * K[8, 0] +
+                   0.15329179827876568 * K[9, 0] + 0.00820105229563469 * K[10, 0] +
+                   0.007567897660545699 * K[11, 0] + -0.008298 * K[12, 0])
+    v13 = v + h * (0.056167502283047954 * K[0, 1] + 0.25350021021662483 * K[6, 1] +
+                   -0.2462390374708025 * K[7, 1] + -0.12419142326381637 * K[8, 1] +
+                   0.15329179827876568 * K[9, 1] + 0.00820105229563469 * K[10, 1] +
+                   0.007567897660545699 * K[11, 1] + -0.008298 * K[12, 1])
+    drive = stage_forcing(t, 0.1, h, f, w, cw, sw, force)
+    k13x, k13v = _f2(x13, v13, mu, a, c, drive, sticking)
+    K[13, 0] = k13x
+    K[13, 1] = k13v
+    x14 = x + h * (0.03183464816350214 * K[0, 0] + 0.028300909672366776 * K[5, 0] +
+                   0.053541988307438566 * K[6, 0] + -0.05492374857139099 * K[7, 0] +
+                   -0.00010834732869724932 * K[10, 0] + 0.0003825710908356584 * K[11, 0] +
+                   -0.00034046500868740456 * K[12, 0] + 0.1413124436746325 * k13x)
+    v14 = v + h * (0.03183464816350214 * K[0, 1] + 0.028300909672366776 * K[5, 1] +
+                   0.053541988307438566 * K[6, 1] + -0.05492374857139099 * K[7, 1] +
+                   -0.00010834732869724932 * K[10, 1] + 0.0003825710908356584 * K[11, 1] +
+                   -0.00034046500868740456 * K[12, 1] + 0.1413124436746325 * k13v)
+    drive = stage_forcing(t, 0.2, h, f, w, cw, sw, force)
+    k14x, k14v = _f2(x14, v14, mu, a, c, drive, sticking)
+    K[14, 0] = k14x
+    K[14, 1] = k14v
+    x15 = x + h * (-0.42889630158379194 * K[0, 0] + -4.697621415361164 * K[5, 0] +
+                   7.683421196062599 * K[6, 0] + 4.06898981839711 * K[7, 0] +
+                   0.3567271874552811 * K[8, 0] + -0.0013990241651590145 * K[12, 0] +
+                   2.9475147891527724 * k13x + -9.15095847217987 * k14x)
+    v15 = v + h * (-0.42889630158379194 * K[0, 1] + -4.697621415361164 * K[5, 1] +
+                   7.683421196062599 * K[6, 1] + 4.06898981839711 * K[7, 1] +
+                   0.3567271874552811 * K[8, 1] + -0.0013990241651590145 * K[12, 1] +
+                   2.9475147891527724 * k13v + -9.15095847217987 * k14v)
+    drive = stage_forcing(t, 0.7777777777777778, h, f, w, cw, sw, force)
+    k15x, k15v = _f2(x15, v15, mu, a, c, drive, sticking)
+    K[15, 0] = k15x
+    K[15, 1] = k15v
+
+
+@njit(cache=True)
 def _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol):
     """``error_norm`` and ``wall_margin`` of a DOP853 step of the 2-D system, from its
     scalar stages (no array argument)."""
@@ -580,6 +622,16 @@ def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
     k0v = K[0, 1]
     xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, p[P_MU], p[P_A], p[P_C], p[P_F], w,
                                      cw, sw, force, sticking)
+    store_stages2(K, kx, kv)
+    z_new[0] = xn
+    z_new[1] = vn
+    return _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
+
+
+@njit(cache=True, inline="always")
+def store_stages2(K, kx, kv):
+    """Rows 1-12 of K from the scalar stages of ``_stages2_dop853`` (the driver's 2-D
+    loop keeps them in registers and stores them only for the dense output)."""
     # tuple items by constant index: a runtime index compiles to a 12-way switch
     K[1, 0], K[2, 0], K[3, 0], K[4, 0], K[5, 0], K[6, 0] = kx[0], kx[1], kx[2], kx[3], kx[4], kx[5]
     K[7, 0], K[8, 0], K[9, 0], K[10, 0], K[11, 0], K[12, 0] = (kx[6], kx[7], kx[8], kx[9],
@@ -587,9 +639,6 @@ def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
     K[1, 1], K[2, 1], K[3, 1], K[4, 1], K[5, 1], K[6, 1] = kv[0], kv[1], kv[2], kv[3], kv[4], kv[5]
     K[7, 1], K[8, 1], K[9, 1], K[10, 1], K[11, 1], K[12, 1] = (kv[6], kv[7], kv[8], kv[9],
                                                                 kv[10], kv[11])
-    z_new[0] = xn
-    z_new[1] = vn
-    return _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
 
 
 @njit(cache=True)
@@ -718,9 +767,29 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights,
                     acc += K[s, j] * DP_P[s, d]
                 F[d, j] = h * acc
         return 0
+    if size == 2 and is_deterministic(m, cfg, nodes):
+        return dense_prepare2(t, z, z_new, h, K, F, p, force, sticking)
     _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, np.int64(13), np.int64(16), m, p, cfg, nodes,
                 weights, U, force, sticking, work)
-    for j in range(size):
+    _dop853_coefficients(z, z_new, h, K, F)
+    return 3
+
+
+@njit(cache=True)
+def dense_prepare2(t, z, z_new, h, K, F, p, force, sticking):
+    """``dense_prepare`` for DOP853 and the two-dimensional system: the three extra
+    stages in scalars (``_dense_stages2_dop853``), the same bits as the general loop."""
+    w = p[P_OMEGA]
+    _dense_stages2_dop853(t, h, K, z[0], z[1], p[P_MU], p[P_A], p[P_C], p[P_F], w,
+                          np.cos(w * t), np.sin(w * t), force, sticking)
+    _dop853_coefficients(z, z_new, h, K, F)
+    return 3
+
+
+@njit(cache=True)
+def _dop853_coefficients(z, z_new, h, K, F):
+    """Hairer's dense-output coefficients F of a DOP853 step from its 16 stage rows."""
+    for j in range(z.shape[0]):
         dy = z_new[j] - z[j]
         F[0, j] = dy
         F[1, j] = h * K[0, j] - dy
@@ -730,43 +799,55 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights,
             for s in range(16):
                 acc += D8_D[i, s] * K[s, j]
             F[3 + i, j] = h * acc
-    return 3
 
 
 @njit(cache=True)
-def dense_value(method, theta, z_old, F, j):
-    """Dense output of component j at t_old + theta h."""
+def dense_x(method, theta, y_old, c):
+    """Dense output of one component at t_old + theta h, from its value y_old at t_old
+    and its coefficients c = F[:, j] (a 7-tuple: scalars, so the wall scans pass no
+    array and update no reference count per evaluation)."""
     if method == METHOD_DP5:
-        return z_old[j] + theta * (F[0, j] + theta * (F[1, j] + theta * (
-            F[2, j] + theta * F[3, j])))
+        return y_old + theta * (c[0] + theta * (c[1] + theta * (c[2] + theta * c[3])))
     u = 1.0 - theta
-    q5 = F[5, j] + theta * F[6, j]
-    q4 = F[4, j] + u * q5
-    q3 = F[3, j] + theta * q4
-    q2 = F[2, j] + u * q3
-    q1 = F[1, j] + theta * q2
-    q0 = F[0, j] + u * q1
-    return z_old[j] + theta * q0
+    q5 = c[5] + theta * c[6]
+    q4 = c[4] + u * q5
+    q3 = c[3] + theta * q4
+    q2 = c[2] + u * q3
+    q1 = c[1] + theta * q2
+    q0 = c[0] + u * q1
+    return y_old + theta * q0
 
 
 @njit(cache=True)
-def dense_slope(method, theta, F, j):
-    """d/dtheta of the dense output of component j."""
+def dense_dx(method, theta, c):
+    """d/dtheta of ``dense_x``."""
     if method == METHOD_DP5:
-        return F[0, j] + theta * (2.0 * F[1, j] + theta * (3.0 * F[2, j] + theta * 4.0 * F[3, j]))
+        return c[0] + theta * (2.0 * c[1] + theta * (3.0 * c[2] + theta * 4.0 * c[3]))
     u = 1.0 - theta
-    q5 = F[5, j] + theta * F[6, j]
-    q4 = F[4, j] + u * q5
-    q3 = F[3, j] + theta * q4
-    q2 = F[2, j] + u * q3
-    q1 = F[1, j] + theta * q2
-    d5 = F[6, j]
+    q5 = c[5] + theta * c[6]
+    q4 = c[4] + u * q5
+    q3 = c[3] + theta * q4
+    q2 = c[2] + u * q3
+    q1 = c[1] + theta * q2
+    d5 = c[6]
     d4 = -q5 + u * d5
     d3 = q4 + theta * d4
     d2 = -q3 + u * d3
     d1 = q2 + theta * d2
     d0 = -q1 + u * d1
-    return F[0, j] + u * q1 + theta * d0
+    return c[0] + u * q1 + theta * d0
+
+
+@njit(cache=True, inline="always")
+def dense_column(F, j):
+    """Component j's dense-output coefficients as the 7-tuple ``dense_x`` takes."""
+    return F[0, j], F[1, j], F[2, j], F[3, j], F[4, j], F[5, j], F[6, j]
+
+
+@njit(cache=True)
+def dense_value(method, theta, z_old, F, j):
+    """Dense output of component j at t_old + theta h."""
+    return dense_x(method, theta, z_old[j], dense_column(F, j))
 
 
 @njit(cache=True)
@@ -805,13 +886,13 @@ def may_reach_wall(x_old, x_new, margin, delta):
 
 
 @njit(cache=True)
-def _bisect_wall(method, lo, hi, z_old, F, h, delta):
+def _bisect_wall(method, lo, hi, x_old, c, h, delta):
     """Root of x_0(theta) = delta in [lo, hi] with g(lo) <= 0 < g(hi)."""
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         if mid <= lo or mid >= hi:
             break
-        if dense_value(method, mid, z_old, F, np.int64(0)) - delta > 0.0:
+        if dense_x(method, mid, x_old, c) - delta > 0.0:
             hi = mid
         else:
             lo = mid
@@ -821,11 +902,11 @@ def _bisect_wall(method, lo, hi, z_old, F, h, delta):
 
 
 @njit(cache=True)
-def _bisect_maximum(method, lo, hi, F):
+def _bisect_maximum(method, lo, hi, c):
     """Location of a maximum of x_0(theta) in [lo, hi] where the slope goes + to -."""
     for _ in range(100):
         mid = 0.5 * (lo + hi)
-        if dense_slope(method, mid, F, np.int64(0)) > 0.0:
+        if dense_dx(method, mid, c) > 0.0:
             lo = mid
         else:
             hi = mid
@@ -835,24 +916,24 @@ def _bisect_maximum(method, lo, hi, F):
 
 
 @njit(cache=True)
-def wall_crossing(method, z_old, F, h, delta):
+def wall_crossing(method, x_old, c, h, delta):
     """First theta in (0, 1] where the dense x_0 reaches delta, or -1.
 
     The interpolant is scanned on N_SCAN sub-intervals and every interior maximum is
     inspected, so a step whose interpolant touches the wall and comes back is caught.
     """
     prev_t = 0.0
-    prev_g = dense_value(method, 0.0, z_old, F, np.int64(0)) - delta
-    prev_s = dense_slope(method, 0.0, F, np.int64(0))
+    prev_g = dense_x(method, 0.0, x_old, c) - delta
+    prev_s = dense_dx(method, 0.0, c)
     for i in range(1, N_SCAN + 1):
         th = i / N_SCAN
-        g = dense_value(method, th, z_old, F, np.int64(0)) - delta
-        s = dense_slope(method, th, F, np.int64(0))
+        g = dense_x(method, th, x_old, c) - delta
+        s = dense_dx(method, th, c)
         hit = g > 0.0
         hi_t = th
         if not hit and prev_s > 0.0 and s < 0.0:
-            tm = _bisect_maximum(method, prev_t, th, F)
-            if dense_value(method, tm, z_old, F, np.int64(0)) - delta > 0.0:
+            tm = _bisect_maximum(method, prev_t, th, c)
+            if dense_x(method, tm, x_old, c) - delta > 0.0:
                 hit = True
                 hi_t = tm
         if hit:
@@ -865,13 +946,13 @@ def wall_crossing(method, z_old, F, h, delta):
                     tt *= 0.5
                     if tt <= lo_t:
                         break
-                    if dense_value(method, tt, z_old, F, np.int64(0)) - delta < 0.0:
+                    if dense_x(method, tt, x_old, c) - delta < 0.0:
                         found = True
                         break
                 if not found:
                     return -1.0
                 lo_t = tt
-            return _bisect_wall(method, lo_t, hi_t, z_old, F, h, delta)
+            return _bisect_wall(method, lo_t, hi_t, x_old, c, h, delta)
         prev_t = th
         prev_g = g
         prev_s = s
@@ -879,20 +960,20 @@ def wall_crossing(method, z_old, F, h, delta):
 
 
 @njit(cache=True)
-def free_flight_maximum(method, z_old, F, delta):
+def free_flight_maximum(method, x_old, c, delta):
     """The highest interior maximum of the dense x_0 in a step (the signature of a
     grazing bifurcation when it approaches the wall): (gap delta - x_0, theta), or
     (inf, -1) when x_0 has no interior maximum."""
     gap = np.inf
     where = -1.0
     prev_t = 0.0
-    prev_s = dense_slope(method, 0.0, F, np.int64(0))
+    prev_s = dense_dx(method, 0.0, c)
     for i in range(1, N_SCAN + 1):
         th = i / N_SCAN
-        s = dense_slope(method, th, F, np.int64(0))
+        s = dense_dx(method, th, c)
         if prev_s > 0.0 and s <= 0.0:
-            tm = _bisect_maximum(method, prev_t, th, F)
-            g = delta - dense_value(method, tm, z_old, F, np.int64(0))
+            tm = _bisect_maximum(method, prev_t, th, c)
+            g = delta - dense_x(method, tm, x_old, c)
             if g < gap:
                 gap = g
                 where = tm
@@ -1156,6 +1237,14 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
     two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes)
+    mu = p[P_MU]
+    a_lin = p[P_A]
+    c_cub = p[P_C]
+    f_amp = p[P_F]
+    w = p[P_OMEGA]
+    kx = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    kv = kx
+    stored = np.bool_(True)
     # typed, not literal, constants: numba compiles a callee once per argument type, and
     # a literal 0 or False is a type of its own
     m0 = np.int64(0)
@@ -1334,7 +1423,19 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 status = STEP_COLLAPSE
                 break
             if two_d:
-                err, margin = step2(t, z, h_try, K, z_new, p, force, sticking, rtol, atol)
+                # the register path: the stages stay in scalars (K's rows are stored only
+                # when the dense output needs them); no array crosses a call, so no
+                # reference counts are updated per step
+                x_old = z[0]
+                v_old = z[1]
+                xn, vn, kx, kv = _stages2_dop853(t, x_old, v_old, h_try, K[0, 0], K[0, 1], mu,
+                                                 a_lin, c_cub, f_amp, w, np.cos(w * t),
+                                                 np.sin(w * t), force, sticking)
+                err, margin = _error2(h_try, x_old, v_old, xn, vn, K[0, 0], K[0, 1], kx, kv,
+                                      rtol, atol)
+                z_new[0] = xn
+                z_new[1] = vn
+                stored = off
                 n_rhs += last
             else:
                 n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, nodes, weights,
@@ -1362,10 +1463,16 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
 
             prepared = off
             if not sticking and may_reach_wall(z[0], z_new[0], margin, delta):
-                n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg, nodes,
-                                       weights, U, force, sticking, work)
+                if not stored:
+                    store_stages2(K, kx, kv)
+                    stored = on
+                if two_d:
+                    n_rhs += dense_prepare2(t, z, z_new, h_try, K, F, p, force, sticking)
+                else:
+                    n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg,
+                                           nodes, weights, U, force, sticking, work)
                 prepared = on
-                theta = wall_crossing(method, z, F, h_try, delta)
+                theta = wall_crossing(method, z[0], dense_column(F, np.int64(0)), h_try, delta)
                 if theta > 0.0:
                     hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h_try, theta, K,
                                           K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
@@ -1420,8 +1527,14 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                                        work)
                 n_rhs += 1
                 if rel_end < 0.0:
-                    n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg,
-                                           nodes, weights, U, force, sticking, work)
+                    if not stored:
+                        store_stages2(K, kx, kv)
+                        stored = on
+                    if two_d:
+                        n_rhs += dense_prepare2(t, z, z_new, h_try, K, F, p, force, sticking)
+                    else:
+                        n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg,
+                                               nodes, weights, U, force, sticking, work)
                     lo = 0.0
                     hi = 1.0
                     for _ in range(60):
@@ -1464,9 +1577,16 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 if may_reach_wall(z[0], z_new[0], margin,
                                   delta - stats[seg, S_GAP]):
                     if not prepared:
-                        n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p,
-                                               cfg, nodes, weights, U, force, sticking, work)
-                    gap, theta = free_flight_maximum(method, z, F, delta)
+                        if not stored:
+                            store_stages2(K, kx, kv)
+                            stored = on
+                        if two_d:
+                            n_rhs += dense_prepare2(t, z, z_new, h_try, K, F, p, force, sticking)
+                        else:
+                            n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p,
+                                                   cfg, nodes, weights, U, force, sticking, work)
+                    gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)),
+                                                     delta)
                     if gap < stats[seg, S_GAP]:
                         _, evals = restep_to(method, np.int64(MAXIMUM_ROOT), t, z, h_try,
                                              theta, K, K2, z_top, ztmp, m, p, cfg, nodes,
@@ -1474,9 +1594,15 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                         n_rhs += evals
                         stats[seg, S_GAP] = delta - z_top[0]
             t = t_break if is_last else t + h_try
-            for j in range(size):
-                z[j] = z_new[j]
-                K[0, j] = K[last, j]
+            if two_d:
+                z[0] = z_new[0]
+                z[1] = z_new[1]
+                K[0, 0] = kx[11]
+                K[0, 1] = kv[11]
+            else:
+                for j in range(size):
+                    z[j] = z_new[j]
+                    K[0, j] = K[last, j]
             if sticking:
                 z[0] = delta
                 z[n] = 0.0

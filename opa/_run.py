@@ -4,6 +4,7 @@ advice, event-log decoding, and the checks on output times every run shares."""
 
 from __future__ import annotations
 
+import atexit
 import os
 import subprocess
 import sys
@@ -77,9 +78,13 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     v, m, iv = nt.float64[::1], nt.float64[:, ::1], nt.int64[::1]
     table_v, table_m = nt.Array(f8, 1, "C", readonly=True), nt.Array(f8, 2, "C", readonly=True)
     system = (v, iv, v, v, m)  # p, cfg, nodes, weights, U
+    column = nt.UniTuple(f8, 7)  # a component's dense-output coefficients
     helper = {  # leaves and the 2-D stepper: nothing here calls the vector field
         "_stages2_dop853": (f8,) * 14 + (b1,),
         "_error2": (f8,) * 7 + (nt.UniTuple(f8, 12),) * 2 + (f8, f8),
+        "_dense_stages2_dop853": (f8, f8, m) + (f8,) * 10 + (b1,),
+        "_dop853_coefficients": (v, v, f8, m, m),
+        "dense_prepare2": (f8, v, v, f8, m, m, v, f8, b1),
         "is_deterministic": (i8, iv, v),
         "last_stage": (i8,),
         "_cos_sin_small": (f8,),
@@ -93,13 +98,14 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "_log_event": (m, i8, f8, f8, i8),
         "_hold": (v, i8, i8, i8),
         "_reflect": (v, i8, i8, f8, b1),
+        "dense_x": (i8, f8, f8, column),
+        "dense_dx": (i8, f8, column),
         "dense_value": (i8, f8, v, m, i8),
-        "dense_slope": (i8, f8, m, i8),
-        "_bisect_wall": (i8, f8, f8, v, m, f8, f8),
-        "_bisect_maximum": (i8, f8, f8, m),
-        "wall_crossing": (i8, v, m, f8, f8),
+        "_bisect_wall": (i8, f8, f8, f8, column, f8, f8),
+        "_bisect_maximum": (i8, f8, f8, column),
+        "wall_crossing": (i8, f8, column, f8, f8),
         "dense_state": (i8, f8, v, m, v),
-        "free_flight_maximum": (i8, v, m, f8),
+        "free_flight_maximum": (i8, f8, column, f8),
     }
     main = {  # the vector field and everything that calls it
         "vector_field": (v, i8) + system + (f8, b1, v, m),
@@ -112,9 +118,12 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     return {"main": main, "helper": helper}
 
 
-def compile_group(group: str) -> None:
-    """Compile one group of :func:`callee_signatures` (into numba's on-disk cache)."""
+def compile_group(group: str, parent: int | None = None) -> None:
+    """Compile one group of :func:`callee_signatures` (into numba's on-disk cache). A
+    helper process passes its parent's pid and stops when that process is gone."""
     for name, signature in callee_signatures()[group].items():
+        if parent is not None and os.getppid() != parent:
+            return
         getattr(K, name).compile(signature)
 
 
@@ -127,7 +136,8 @@ def compile_callees() -> None:
 
     With one core, or one numba thread (as in Dask workers), nothing is started here:
     the first call compiles everything in this process. A helper that fails costs only
-    time; it is never waited for."""
+    time; it is not waited for until this process exits (at most 10 s more, then it is
+    stopped), and it stops by itself when this process is killed."""
     import numba
 
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
@@ -139,17 +149,26 @@ def compile_callees() -> None:
     root = str(Path(__file__).resolve().parents[1])
     env["PYTHONPATH"] = os.pathsep.join([root, env["PYTHONPATH"]]) if env.get("PYTHONPATH") \
         else root
+    code = f"from opa._run import compile_group; compile_group('helper', parent={os.getpid()})"
     try:
-        _HELPERS.append(subprocess.Popen(
-            [sys.executable, "-c", "from opa._run import compile_group; compile_group('helper')"],
-            env=env, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL))
+        helper = subprocess.Popen([sys.executable, "-c", code], env=env,
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                  stderr=subprocess.DEVNULL)
     except OSError:
-        pass
+        helper = None
+    if helper is not None:
+        atexit.register(_end_helper, helper)
     compile_group("main")
 
 
-_HELPERS: list = []  # the helper process, kept so that it is reaped
+def _end_helper(helper: subprocess.Popen, timeout: float = 10.0) -> None:
+    """At exit: let the helper finish what it is writing to the cache (it is seconds
+    from done), then stop it; no process outlives the run."""
+    try:
+        helper.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        helper.kill()
+        helper.wait()
 
 
 def sampled_batch(p: np.ndarray, cfg: np.ndarray, *, xi=None, values=None):

@@ -233,8 +233,30 @@ def unrolled_step(name, A, C, B, last):
     return "\n".join(lines) + "\n"
 
 
+def unrolled_dense_stages(name, A, C, first, stop):
+    """Source of the kernel's dense-output stages first..stop-1 of the two-dimensional
+    system: the earlier stages read from K, the new ones kept in scalars and stored."""
+    lines = ["@njit(cache=True)",
+             f"def {name}(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking):",
+             f'    """Rows {first}-{stop - 1} of K (the dense-output stages) of the 2-D system, '
+             'generated from',
+             '    the tableau (see ``step2``)."""']
+    for s in range(first, stop):
+        for comp, j in (("x", 0), ("v", 1)):
+            terms = [f"{float(A[s, r])!r} * " + (f"K[{r}, {j}]" if r < first else f"k{r}{comp}")
+                     for r in range(s) if A[s, r] != 0.0]
+            head = f"    {comp}{s} = {comp} + h * ("
+            lines.append(head + _wrapped_sum(terms, len(head)) + ")")
+        lines.append(f"    drive = stage_forcing(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
+        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, mu, a, c, drive, sticking)")
+        lines.append(f"    K[{s}, 0] = k{s}x")
+        lines.append(f"    K[{s}, 1] = k{s}v")
+    return "\n".join(lines) + "\n"
+
+
 def kernel_steps_source() -> str:
-    return unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12)
+    return (unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12) + "\n\n"
+            + unrolled_dense_stages("_dense_stages2_dop853", K.D8_A, K.D8_C, 13, 16))
 
 
 def test_the_unrolled_steps_are_generated_from_the_tableaux():
@@ -246,8 +268,9 @@ def test_the_unrolled_steps_are_generated_from_the_tableaux():
 
 @pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
 def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method):
-    """The same step by the unrolled 2-D path and by the general loop (forced by a
-    one-node rule at a node that is not exactly 0, with sigma = 0): every stage equal."""
+    """The same step and dense output by the unrolled 2-D path and by the general loop
+    (forced by a one-node rule at a node that is not exactly 0, with sigma = 0): every
+    stage, the new state and every dense-output coefficient equal."""
     osc = opa.preset("3.2")
     p, cfg = pack_parameters(osc, opa.SolverOptions())
     nodes, weights, U = kernel_quadrature(quadrature(0))
@@ -262,8 +285,11 @@ def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method):
         z_new = np.empty(2)
         K.rk_step(method, 2.3, z, 0.07, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
                   U, 0.0, False, work)
+        F = np.zeros((7, 2))  # and the dense output: DOP853's three more stages, then F
+        K.dense_prepare(method, 2.3, z, z_new, 0.07, Ks, F, np.empty(2), 0, p, cfg, rule_nodes,
+                        weights, U, 0.0, False, work)
         stages.append(Ks)
-        results.append(z_new)
+        results.append(np.concatenate([z_new, F.ravel()]))
     assert K.is_deterministic(0, cfg, nodes) and not K.is_deterministic(0, cfg, general_nodes)
     np.testing.assert_array_equal(stages[0], stages[1])
     np.testing.assert_array_equal(results[0], results[1])

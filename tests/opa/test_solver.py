@@ -149,8 +149,8 @@ def test_dense_output_is_continuous_with_the_step_and_accurate(method, tol):
     for th in (0.1, 0.5, 0.9):
         d = 1e-6
         fd = (K.dense_value(method, th + d, y0, F, 0) - K.dense_value(method, th - d, y0, F, 0))
-        assert K.dense_slope(method, th, F, 0) == pytest.approx(fd / (2 * d), abs=1e-7)
-        assert K.dense_slope(method, th, F, 0) / h == pytest.approx(
+        assert K.dense_dx(method, th, tuple(F[:, 0])) == pytest.approx(fd / (2 * d), abs=1e-7)
+        assert K.dense_dx(method, th, tuple(F[:, 0])) / h == pytest.approx(
             math.sin(t0 + th * h), abs=50 * tol)
 
 
@@ -184,7 +184,7 @@ def test_wall_crossing_between_two_points_below_the_wall_is_found(depth, method)
     stages, y_new, F = kernel_step(HARMONIC, t0, y0, h, method)
     delta = 1.0 - depth
     assert y0[0] < delta and y_new[0] < delta
-    theta = K.wall_crossing(method, y0, F, h, delta)
+    theta = K.wall_crossing(method, y0[0], tuple(F[:, 0]), h, delta)
     exact = (math.pi - math.acos(delta) - t0) / h  # first crossing, rising side
     assert 0.0 < theta < 0.42
     assert K.dense_value(method, theta, y0, F, 0) == pytest.approx(delta, abs=1e-12)
@@ -197,8 +197,8 @@ def test_no_wall_crossing_when_the_step_stays_below(method):
     t0, h = math.pi - 0.21, 0.5
     y0 = np.array([-math.cos(t0), math.sin(t0)])
     stages, y_new, F = kernel_step(HARMONIC, t0, y0, h, method)
-    assert K.wall_crossing(method, y0, F, h, 1.0 + 1e-4) == -1.0
-    assert K.wall_crossing(method, y0, F, h, 50.0) == -1.0
+    assert K.wall_crossing(method, y0[0], tuple(F[:, 0]), h, 1.0 + 1e-4) == -1.0
+    assert K.wall_crossing(method, y0[0], tuple(F[:, 0]), h, 50.0) == -1.0
 
 
 def test_kernel_reports_status_codes_and_fills_unreached_outputs_with_nan():
