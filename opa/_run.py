@@ -79,20 +79,17 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     table_v, table_m = nt.Array(f8, 1, "C", readonly=True), nt.Array(f8, 2, "C", readonly=True)
     system = (v, iv, v, v, m)  # p, cfg, nodes, weights, U
     column = nt.UniTuple(f8, 7)  # a component's dense-output coefficients
-    helper = {  # leaves and the 2-D stepper: nothing here calls the vector field
+    helper = {  # leaves and the 2-D stepper: nothing here calls the vector field; what
+        # the main group calls first comes first (the main group's leaves give the
+        # helper the time to finish the 2-D step before rk_step needs it)
+        "is_deterministic": (i8, iv, v),
+        "last_stage": (i8,),
         "_stages2_dop853": (f8,) * 14 + (b1,),
         "_error2": (f8,) * 7 + (nt.UniTuple(f8, 12),) * 2 + (f8, f8),
         "_dense_stages2_dop853": (f8, f8, m) + (f8,) * 10 + (b1,),
         "_dop853_coefficients": (v, v, f8, m, m),
         "dense_prepare2": (f8, v, v, f8, m, m, v, f8, b1),
-        "is_deterministic": (i8, iv, v),
-        "last_stage": (i8,),
-        "_cos_sin_small": (f8,),
-        "stage_forcing": (f8,) * 8,
-        "error_norm": (i8, v, v, m, f8, f8, f8),
-        "wall_margin": (m, i8, i8, f8),
         "state_status": (v, i8, f8),
-        "escape_bound": (v, v),
         "first_impulse": (f8, b1, f8, b1),
         "impulse_strength": (f8, v),
         "_log_event": (m, i8, f8, f8, i8),
@@ -109,11 +106,16 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     }
     main = {  # the vector field and everything that calls it
         "vector_field": (v, i8) + system + (f8, b1, v, m),
+        "_stage_forcing_long": (f8,) * 8,
+        "stage_drive": (f8,) * 8,
         "_stage_rows": (f8, v, f8, m, v, table_m, table_v, i8, i8, i8) + system + (f8, b1, m),
         "_impact": (f8, v, i8) + system + (f8, v, v, m),
-        "dense_prepare": (i8, f8, v, v, f8, m, m, v, i8) + system + (f8, b1, m),
+        "error_norm": (i8, v, v, m, f8, f8, f8),
+        "wall_margin": (m, i8, i8, f8),
+        "escape_bound": (v, v),
         "rk_step": (i8, f8, v, f8, m, v, v, i8) + system + (f8, b1, m),
         "restep_to": (i8, i8, f8, v, f8, f8, m, m, v, v, i8) + system + (f8, m),
+        "dense_prepare": (i8, f8, v, v, f8, m, m, v, i8) + system + (f8, b1, m),
     }
     return {"main": main, "helper": helper}
 

@@ -224,7 +224,8 @@ def unrolled_step(name, A, C, B, last):
         terms = [f"{float(B[r])!r} * k{r}{comp}" for r in range(last) if B[r] != 0.0]
         head = f"    {comp}n = {comp} + h * ("
         lines.append(head + _wrapped_sum(terms, len(head)) + ")")
-    lines.append("    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)")
+    if float(C[last - 1]) != 1.0:  # else stage last - 1 is at t + h too: its force is reused
+        lines.append("    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)")
     lines.append(f"    k{last}x, k{last}v = _f2(xn, vn, mu, a, c, drive, sticking)")
     for comp in ("x", "v"):
         names = [f"k{s}{comp}" for s in range(1, last + 1)]
@@ -247,7 +248,7 @@ def unrolled_dense_stages(name, A, C, first, stop):
                      for r in range(s) if A[s, r] != 0.0]
             head = f"    {comp}{s} = {comp} + h * ("
             lines.append(head + _wrapped_sum(terms, len(head)) + ")")
-        lines.append(f"    drive = stage_forcing(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
+        lines.append(f"    drive = stage_drive(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
         lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, mu, a, c, drive, sticking)")
         lines.append(f"    K[{s}, 0] = k{s}x")
         lines.append(f"    K[{s}, 1] = k{s}v")
