@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextvars
 import datetime as _dt
+import functools
 import os
 import re
 import sys
@@ -25,7 +26,9 @@ COMMAND: contextvars.ContextVar[tuple[str, ...] | None] = contextvars.ContextVar
     "opa_mc_command", default=None)
 
 
+@functools.cache
 def package_version() -> str:
+    """The installed opa-mc version (read once: the metadata lookup scans sys.path)."""
     try:
         return metadata.version("opa-mc")
     except metadata.PackageNotFoundError:  # running from a source tree
