@@ -644,7 +644,7 @@ def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
     return _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def store_stages2(K, kx, kv):
     """Rows 1-12 of K from the scalar stages of ``_stages2_dop853`` (the driver's 2-D
     loop keeps them in registers and stores them only for the dense output)."""

@@ -88,6 +88,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "_error2": (f8,) * 7 + (nt.UniTuple(f8, 12),) * 2 + (f8, f8),
         "_dense_stages2_dop853": (f8, f8, m) + (f8,) * 10 + (b1,),
         "_dop853_coefficients": (v, v, f8, m, m),
+        "store_stages2": (m, nt.UniTuple(f8, 12), nt.UniTuple(f8, 12)),
         "dense_prepare2": (f8, v, v, f8, m, m, v, f8, b1),
         "state_status": (v, i8, f8),
         "first_impulse": (f8, b1, f8, b1),
@@ -133,8 +134,7 @@ def compile_callees() -> None:
     """Compile ``integrate``'s callees on two cores: a helper process compiles the
     "helper" group into numba's on-disk cache while this process compiles the "main"
     group; ``integrate``, compiled next by its first call, then loads whatever the
-    helper has finished from the cache (and compiles the rest itself). Cold compilation
-    of the DMR path drops from about 9.5 s to about 7 s (``benchmarks/bench_startup.py``).
+    helper has finished from the cache (and compiles the rest itself).
 
     With one core, or one numba thread (as in Dask workers), nothing is started here:
     the first call compiles everything in this process. A helper that fails costs only
@@ -148,10 +148,11 @@ def compile_callees() -> None:
     env = dict(os.environ)
     if numba.config.CACHE_DIR:
         env["NUMBA_CACHE_DIR"] = str(numba.config.CACHE_DIR)
+    # the helper imports this opa: its folder goes first on sys.path only when it is not
+    # already there (a site-packages folder keeps its place behind the standard library)
     root = str(Path(__file__).resolve().parents[1])
-    env["PYTHONPATH"] = os.pathsep.join([root, env["PYTHONPATH"]]) if env.get("PYTHONPATH") \
-        else root
-    code = f"from opa._run import compile_group; compile_group('helper', parent={os.getpid()})"
+    code = (f"import sys; root = {root!r}; root in sys.path or sys.path.insert(0, root); "
+            f"from opa._run import compile_group; compile_group('helper', parent={os.getpid()})")
     try:
         helper = subprocess.Popen([sys.executable, "-c", code], env=env,
                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
