@@ -373,20 +373,16 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
     q = nodes.shape[0]
     unc = cfg[C_UNCERTAIN]
     sigma = p[P_SIGMA]
-    xk = work[0]
-    vk = work[1]
-    gx = work[2]
-    gv = work[3]
-    dxk = work[4]
-    dvk = work[5]
+    # work rows 0-5: x and v at the nodes, the Jacobian weights (of x and of v), and one
+    # tangent column's x and v at the nodes, indexed in place (a row view counts references)
     for k in range(q):
         xs = 0.0
         vs = 0.0
         for i in range(n):
             xs += z[i] * U[k, i]
             vs += z[n + i] * U[k, i]
-        xk[k] = xs
-        vk[k] = vs
+        work[0, k] = xs
+        work[1, k] = vs
     # Project the deviation g_k - g_0 from the force at the mean state; the constant g_0
     # goes to U_0 alone. Mathematically the same projection (sum_k w_k U_i(xi_k) = [i = 0]),
     # but with sigma = 0 and zero higher coefficients every g_k equals g_0 bit for bit, so
@@ -409,13 +405,13 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
             a_k = a_k + sigma * nodes[k]
         else:
             c_k = c_k + sigma * nodes[k]
-        x = xk[k]
-        v = vk[k]
+        x = work[0, k]
+        v = work[1, k]
         w = weights[k]
         g = w * (mu_k * (1.0 - v * v) * v - a_k * x - c_k * x * x * x - g0)
         if m > 0:
-            gx[k] = w * (-a_k - 3.0 * c_k * x * x)
-            gv[k] = w * mu_k * (1.0 - 3.0 * v * v)
+            work[2, k] = w * (-a_k - 3.0 * c_k * x * x)
+            work[3, k] = w * mu_k * (1.0 - 3.0 * v * v)
         if g != 0.0:
             for i in range(n):
                 out[n + i] += g * U[k, i]
@@ -425,9 +421,9 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
         extra = 0.0
         for k in range(q):
             if unc == UNCERTAIN_MU:
-                extra += weights[k] * U[k, n] * vk[k] ** 3
+                extra += weights[k] * U[k, n] * work[1, k] ** 3
             else:
-                extra += weights[k] * U[k, n] * xk[k] ** 3
+                extra += weights[k] * U[k, n] * work[0, k] ** 3
         out[dim - 1] += 0.5 * sigma * extra
     out[n] += drive
     release = out[n]
@@ -441,21 +437,21 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
             for j in range(n):
                 dx += U[k, j] * z[dim + j * m + c]
                 dv += U[k, j] * z[dim + (n + j) * m + c]
-            dxk[k] = dx
-            dvk[k] = dv
+            work[4, k] = dx
+            work[5, k] = dv
         for i in range(n):
             out[dim + i * m + c] = z[dim + (n + i) * m + c]
             acc = 0.0
             for k in range(q):
-                acc += U[k, i] * (gx[k] * dxk[k] + gv[k] * dvk[k])
+                acc += U[k, i] * (work[2, k] * work[4, k] + work[3, k] * work[5, k])
             out[dim + (n + i) * m + c] = acc
         if paper:
             extra = 0.0
             for k in range(q):
                 if unc == UNCERTAIN_MU:
-                    extra += weights[k] * U[k, n] * 3.0 * vk[k] ** 2 * dvk[k]
+                    extra += weights[k] * U[k, n] * 3.0 * work[1, k] ** 2 * work[5, k]
                 else:
-                    extra += weights[k] * U[k, n] * 3.0 * xk[k] ** 2 * dxk[k]
+                    extra += weights[k] * U[k, n] * 3.0 * work[0, k] ** 2 * work[4, k]
             out[dim + (dim - 1) * m + c] += 0.5 * sigma * extra
         if sticking:
             out[dim + c] = 0.0
