@@ -799,6 +799,19 @@ def dense_prepare2(t, z, z_new, h, K, F, p, force, sticking):
 
 
 @njit(cache=True)
+def step_dense(two_d, stored, kx, kv, method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes,
+               weights, U, force, sticking, work):
+    """``dense_prepare`` for the step the driver just took: the 2-D loop's stages kx, kv
+    are stored in K first when they are still only in registers (``stored`` false)."""
+    if two_d:
+        if not stored:
+            store_stages2(K, kx, kv)
+        return dense_prepare2(t, z, z_new, h, K, F, p, force, sticking)
+    return dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U,
+                         force, sticking, work)
+
+
+@njit(cache=True)
 def _dop853_coefficients(z, z_new, h, K, F):
     """Hairer's dense-output coefficients F of a DOP853 step from its 16 stage rows."""
     for j in range(z.shape[0]):
@@ -1475,14 +1488,9 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
 
             prepared = off
             if not sticking and may_reach_wall(z[0], z_new[0], margin, delta):
-                if not stored:
-                    store_stages2(K, kx, kv)
-                    stored = on
-                if two_d:
-                    n_rhs += dense_prepare2(t, z, z_new, h_try, K, F, p, force, sticking)
-                else:
-                    n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg,
-                                           nodes, weights, U, force, sticking, work)
+                n_rhs += step_dense(two_d, stored, kx, kv, method, t, z, z_new, h_try, K, F,
+                                    ztmp, m, p, cfg, nodes, weights, U, force, sticking, work)
+                stored = on
                 prepared = on
                 theta = wall_crossing(method, z[0], dense_column(F, np.int64(0)), h_try, delta)
                 if theta > 0.0:
@@ -1539,14 +1547,9 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                                        work)
                 n_rhs += 1
                 if rel_end < 0.0:
-                    if not stored:
-                        store_stages2(K, kx, kv)
-                        stored = on
-                    if two_d:
-                        n_rhs += dense_prepare2(t, z, z_new, h_try, K, F, p, force, sticking)
-                    else:
-                        n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p, cfg,
-                                               nodes, weights, U, force, sticking, work)
+                    n_rhs += step_dense(two_d, stored, kx, kv, method, t, z, z_new, h_try, K, F,
+                                        ztmp, m, p, cfg, nodes, weights, U, force, sticking, work)
+                    stored = on
                     lo = 0.0
                     hi = 1.0
                     for _ in range(60):
@@ -1589,14 +1592,10 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 if may_reach_wall(z[0], z_new[0], margin,
                                   delta - stats[seg, S_GAP]):
                     if not prepared:
-                        if not stored:
-                            store_stages2(K, kx, kv)
-                            stored = on
-                        if two_d:
-                            n_rhs += dense_prepare2(t, z, z_new, h_try, K, F, p, force, sticking)
-                        else:
-                            n_rhs += dense_prepare(method, t, z, z_new, h_try, K, F, ztmp, m, p,
-                                                   cfg, nodes, weights, U, force, sticking, work)
+                        n_rhs += step_dense(two_d, stored, kx, kv, method, t, z, z_new, h_try,
+                                            K, F, ztmp, m, p, cfg, nodes, weights, U, force,
+                                            sticking, work)
+                        stored = on
                     gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)),
                                                      delta)
                     if gap < stats[seg, S_GAP]:

@@ -79,16 +79,17 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     table_v, table_m = nt.Array(f8, 1, "C", readonly=True), nt.Array(f8, 2, "C", readonly=True)
     system = (v, iv, v, v, m)  # p, cfg, nodes, weights, U
     column = nt.UniTuple(f8, 7)  # a component's dense-output coefficients
+    stages = nt.UniTuple(f8, 12)  # one component's stages of a 2-D DOP853 step
     helper = {  # leaves and the 2-D stepper: nothing here calls the vector field; what
         # the main group calls first comes first (the main group's leaves give the
         # helper the time to finish the 2-D step before rk_step needs it)
         "is_deterministic": (i8, iv, v),
         "last_stage": (i8,),
         "_stages2_dop853": (f8,) * 14 + (b1,),
-        "_error2": (f8,) * 7 + (nt.UniTuple(f8, 12),) * 2 + (f8, f8),
+        "_error2": (f8,) * 7 + (stages, stages, f8, f8),
         "_dense_stages2_dop853": (f8, f8, m) + (f8,) * 10 + (b1,),
         "_dop853_coefficients": (v, v, f8, m, m),
-        "store_stages2": (m, nt.UniTuple(f8, 12), nt.UniTuple(f8, 12)),
+        "store_stages2": (m, stages, stages),
         "dense_prepare2": (f8, v, v, f8, m, m, v, f8, b1),
         "state_status": (v, i8, f8),
         "first_impulse": (f8, b1, f8, b1),
@@ -117,6 +118,8 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "rk_step": (i8, f8, v, f8, m, v, v, i8) + system + (f8, b1, m),
         "restep_to": (i8, i8, f8, v, f8, f8, m, m, v, v, i8) + system + (f8, m),
         "dense_prepare": (i8, f8, v, v, f8, m, m, v, i8) + system + (f8, b1, m),
+        "step_dense": (b1, b1, stages, stages, i8, f8, v, v, f8, m, m, v, i8) + system
+        + (f8, b1, m),
     }
     return {"main": main, "helper": helper}
 
