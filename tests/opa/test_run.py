@@ -72,3 +72,14 @@ def test_the_two_groups_do_not_overlap():
     groups = _run.callee_signatures()
     assert not set(groups["main"]) & set(groups["helper"])
     assert "integrate" not in set(groups["main"]) | set(groups["helper"])
+
+
+def test_a_stale_table_entry_is_skipped_not_raised(monkeypatch):
+    """The table is a head start: an entry that no longer types (here one argument too
+    many, as after an edit of the kernel) must not fail the user's run."""
+    from numba import types as nt
+
+    monkeypatch.setattr(_run, "callee_signatures",
+                        lambda: {"main": {"last_stage": (nt.int64, nt.int64)}})
+    _run.compile_group("main")
+    assert all(len(sig) == 1 for sig in _run.K.last_stage.signatures)
