@@ -8,7 +8,7 @@ import atexit
 import os
 import subprocess
 import sys
-from pathlib import Path
+import threading
 
 import numpy as np
 
@@ -146,37 +146,55 @@ def compile_callees() -> None:
     group; ``integrate``, compiled next by its first call, then loads whatever the
     helper has finished from the cache (and compiles the rest itself).
 
-    With one core, or one numba thread (as in Dask workers), nothing is started here:
-    the first call compiles everything in this process. A helper that fails costs only
-    time; it is not waited for until this process exits (at most 10 s more, then it is
-    stopped), and it stops by itself when this process is killed."""
+    With one core, one numba thread (the sweep's and our Dask workers set one), or a
+    frozen application, nothing is started here: the first call compiles everything in
+    this process. The helper imports opa from this process's ``sys.path``. A helper that
+    fails costs only time. It is reaped by a background thread when it ends; at exit this
+    process waits for it at most 10 s, then stops it; if this process is killed, the
+    helper notices between two functions (on POSIX) and stops."""
+    global _HELPER
+    if getattr(sys, "frozen", False) or _threads() < 2:
+        return
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if (cores or 1) < 2:
+        return
     import numba
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    if numba.get_num_threads() < 2 or (cores or 1) < 2:
-        return
     env = dict(os.environ)
     if numba.config.CACHE_DIR:
         env["NUMBA_CACHE_DIR"] = str(numba.config.CACHE_DIR)
-    # the helper imports this opa: its folder goes first on sys.path only when it is not
-    # already there (a site-packages folder keeps its place behind the standard library)
-    root = str(Path(__file__).resolve().parents[1])
-    code = (f"import sys; root = {root!r}; root in sys.path or sys.path.insert(0, root); "
-            f"from opa._run import compile_group; compile_group('helper', parent={os.getpid()})")
+    code = (f"import sys; sys.path[:] = {sys.path!r}; from opa._run import compile_group; "
+            f"compile_group('helper', parent={os.getpid()})")
     try:
-        helper = subprocess.Popen([sys.executable, "-c", code], env=env,
-                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.DEVNULL)
+        _HELPER = subprocess.Popen([sys.executable, "-c", code], env=env,
+                                   stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                   stderr=subprocess.DEVNULL,
+                                   creationflags=getattr(subprocess, "CREATE_NO_WINDOW", 0))
     except OSError:
-        helper = None
-    if helper is not None:
-        atexit.register(_end_helper, helper)
+        _HELPER = None
+    else:
+        threading.Thread(target=_HELPER.wait, daemon=True).start()
+        atexit.register(_end_helper, _HELPER)
     compile_group("main")
+
+
+_HELPER: subprocess.Popen | None = None  # the last helper started (tests read it)
+
+
+def _threads() -> int:
+    """numba's thread count without starting its thread pool (a started pool makes a
+    later fork of this process abort under OpenMP)."""
+    import numba
+    from numba.np.ufunc import parallel
+
+    if getattr(parallel, "_is_initialized", False):
+        return numba.get_num_threads()
+    return numba.config.NUMBA_NUM_THREADS
 
 
 def _end_helper(helper: subprocess.Popen, timeout: float = 10.0) -> None:
     """At exit: let the helper finish what it is writing to the cache (it is seconds
-    from done), then stop it; no process outlives the run."""
+    from done), then stop it."""
     try:
         helper.wait(timeout=timeout)
     except subprocess.TimeoutExpired:

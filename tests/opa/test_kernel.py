@@ -268,7 +268,10 @@ def test_the_unrolled_steps_are_generated_from_the_tableaux():
 
 
 @pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
-def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method):
+@pytest.mark.parametrize("h, force, sticking", [(0.07, 0.0, False), (0.3, 0.8, False),
+                                                (1.0, 0.0, False), (0.07, 0.5, True)])
+def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h, force,
+                                                                       sticking):
     """The same step and dense output by the unrolled 2-D path and by the general loop
     (forced by a one-node rule at a node that is not exactly 0, with sigma = 0): every
     stage, the new state and every dense-output coefficient equal."""
@@ -281,19 +284,61 @@ def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method):
     for rule_nodes in (nodes, general_nodes):
         Ks = np.zeros((K.K_ROWS, 2))
         work = np.empty((6, 1))
-        drive = K.forcing(2.3, p, 0.0)
-        K.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, False, Ks[0], work)
+        drive = K.forcing(2.3, p, force)
+        K.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, sticking, Ks[0], work)
         z_new = np.empty(2)
-        K.rk_step(method, 2.3, z, 0.07, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
-                  U, 0.0, False, work)
+        K.rk_step(method, 2.3, z, h, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
+                  U, force, sticking, work)
         F = np.zeros((7, 2))  # and the dense output: DOP853's three more stages, then F
-        K.dense_prepare(method, 2.3, z, z_new, 0.07, Ks, F, np.empty(2), 0, p, cfg, rule_nodes,
-                        weights, U, 0.0, False, work)
+        K.dense_prepare(method, 2.3, z, z_new, h, Ks, F, np.empty(2), 0, p, cfg, rule_nodes,
+                        weights, U, force, sticking, work)
         stages.append(Ks)
         results.append(np.concatenate([z_new, F.ravel()]))
     assert K.is_deterministic(0, cfg, nodes) and not K.is_deterministic(0, cfg, general_nodes)
     np.testing.assert_array_equal(stages[0], stages[1])
     np.testing.assert_array_equal(results[0], results[1])
+
+
+# Cases for the driver's 2-D register path against its general loop: impacts with Dirac
+# kicks and with pulses, and chattering into sticking with releases (Dirac and pulsed).
+REGISTER_CASES = {
+    "impacts, Dirac": (opa.preset("3.2"), {}, 1e-8),
+    "impacts, pulses": (opa.preset("3.2"), {"impulse": "pulse", "pulse_width": 0.3}, 1e-8),
+    "sticking": (opa.preset("3.2", mu=0.1, a=1.0, c=0.0, f=1.0, omega=1.3, eta=0.5, delta=-0.5,
+                            x0=-1.0, F0=0.4), {}, 1e-9),
+    "sticking, pulses": (opa.preset("3.2", mu=0.1, a=1.0, c=0.0, f=1.0, omega=1.3, eta=0.5,
+                                    delta=-0.5, x0=-1.0, F0=0.4),
+                         {"impulse": "pulse", "pulse_width": 0.7}, 1e-9),
+}
+
+
+@pytest.mark.parametrize("case", list(REGISTER_CASES))
+@pytest.mark.parametrize("with_stats", [False, True])
+def test_the_register_path_of_the_driver_is_the_general_loop_bit_for_bit(case, with_stats):
+    """A whole DOP853 trajectory by the driver's 2-D register path (stages in scalars,
+    stored for the dense output only when needed) and by its general loop (forced by the
+    one-node rule at 1e-300): every output, event, statistic and counter equal."""
+    osc, fields, tol = REGISTER_CASES[case]
+    options = opa.SolverOptions(rtol=tol, atol=tol, chatter_velocity=0.05)
+    p, cfg = pack_parameters(osc, options, **fields)
+    nodes, weights, U = kernel_quadrature(quadrature(0))
+    times = np.linspace(0.0, 80.0, 161)
+    runs = []
+    for rule_nodes in (nodes, np.array([1e-300])):
+        out, log = np.empty((len(times), 2)), np.empty((4000, 3))
+        stats = np.empty((len(times) - 1, K.N_STATS)) if with_stats else np.empty((0, K.N_STATS))
+        counters = K.integrate(np.array([osc.x0, osc.v0]), 0, times, True, False, p, cfg,
+                               rule_nodes, weights, U, options.rtol, options.atol, out, stats,
+                               np.empty(0), log)
+        runs.append((counters, out, stats, log[:counters[1]]))
+    (counters, out, stats, log), general = runs
+    assert counters[0] == K.OK and counters[2] >= 5  # impacts
+    kinds = set(log[:, 2].astype(int))
+    if case.startswith("sticking"):
+        assert {K.EV_STICK, K.EV_RELEASE} <= kinds
+    assert counters == general[0]
+    for mine, theirs in zip((out, stats, log), general[1:]):
+        np.testing.assert_array_equal(mine, theirs)
 
 
 @pytest.mark.parametrize("method", ["dop853", "dp5"])

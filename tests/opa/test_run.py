@@ -52,19 +52,28 @@ def test_callee_table_is_what_integrate_calls(tmp_path):
 
 
 def test_cold_first_call_says_so_once_and_matches_the_cached_run(tmp_path):
+    """The cold run prints the message once, starts the helper (which compiles its group
+    and exits cleanly), and computes what the cached run and this process compute."""
     script = """
         import json, opa
+        from opa import _run
         first = opa.simulate_dmr(periods=2)
         again = opa.simulate_dmr(periods=2)
-        print(json.dumps([first["x"].values.tolist(), again["x"].values.tolist()]))
+        helper = None if _run._HELPER is None else _run._HELPER.wait(timeout=120)
+        print(json.dumps([helper, first["x"].values.tolist(), again["x"].values.tolist()]))
         """
     cold = _python(script, tmp_path)
     warm = _python(script, tmp_path)
     assert cold.stderr.count(MESSAGE) == 1, cold.stderr
     assert MESSAGE not in warm.stderr, warm.stderr
+    helper_cold = json.loads(cold.stdout.strip().splitlines()[-1])[0]
+    helper_warm = json.loads(warm.stdout.strip().splitlines()[-1])[0]
+    if (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()) >= 2:
+        assert helper_cold == 0  # started, and exited without an error
+    assert helper_warm is None  # a warm cache starts nothing
     here = opa.simulate_dmr(periods=2)["x"].values
     for run in (cold, warm):
-        for x in json.loads(run.stdout.strip().splitlines()[-1]):
+        for x in json.loads(run.stdout.strip().splitlines()[-1])[1:]:
             np.testing.assert_array_equal(np.array(x), here)
 
 
@@ -76,10 +85,14 @@ def test_the_two_groups_do_not_overlap():
 
 def test_a_stale_table_entry_is_skipped_not_raised(monkeypatch):
     """The table is a head start: an entry that no longer types (here one argument too
-    many, as after an edit of the kernel) must not fail the user's run."""
+    few, as after an edit of the kernel) must not fail the user's run, nor stop the
+    entries after it from compiling (a float method code: a signature nothing else
+    compiles)."""
     from numba import types as nt
 
-    monkeypatch.setattr(_run, "callee_signatures",
-                        lambda: {"main": {"last_stage": (nt.int64, nt.int64)}})
+    monkeypatch.setattr(_run, "callee_signatures", lambda: {"main": {
+        "is_deterministic": (nt.int64,), "last_stage": (nt.float64,)}})
+    assert (nt.float64,) not in _run.K.last_stage.signatures
     _run.compile_group("main")
-    assert all(len(sig) == 1 for sig in _run.K.last_stage.signatures)
+    assert all(len(sig) == 3 for sig in _run.K.is_deterministic.signatures)
+    assert (nt.float64,) in _run.K.last_stage.signatures
