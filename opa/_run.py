@@ -146,14 +146,15 @@ def compile_callees() -> None:
     group; ``integrate``, compiled next by its first call, then loads whatever the
     helper has finished from the cache (and compiles the rest itself).
 
-    With one core, one numba thread (the sweep's and our Dask workers set one), or a
-    frozen application, nothing is started here: the first call compiles everything in
-    this process. The helper imports opa from this process's ``sys.path``. A helper that
-    fails costs only time. It is reaped by a background thread when it ends; at exit this
-    process waits for it at most 10 s, then stops it; if this process is killed, the
-    helper notices between two functions (on POSIX) and stops."""
+    With one core, one numba thread (the sweep's and our Dask workers set one), a frozen
+    application or no Python executable to start (an embedded interpreter), nothing is
+    started here: the first call compiles everything in this process. The helper
+    imports opa from this process's ``sys.path``. A helper that fails costs only time.
+    It is reaped by a background thread when it ends; at exit this process waits for it
+    at most 10 s, then stops it; if this process is killed, the helper notices between
+    two functions (on POSIX) and stops."""
     global _HELPER
-    if getattr(sys, "frozen", False) or _threads() < 2:
+    if getattr(sys, "frozen", False) or not sys.executable or _threads() < 2:
         return
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     if (cores or 1) < 2:

@@ -98,3 +98,16 @@ def test_a_stale_table_entry_is_skipped_not_raised(monkeypatch):
     _run.compile_group("main")
     assert all(len(sig) == 3 for sig in _run.K.is_deterministic.signatures)
     assert (nt.float64,) in _run.K.last_stage.signatures
+
+
+def test_no_helper_without_a_python_to_start(monkeypatch):
+    """An embedded interpreter has no ``sys.executable``: nothing is started and the
+    main group still compiles (here emptied, so the call is instant)."""
+    started = []
+    monkeypatch.setattr(_run, "_threads", lambda: 2)  # where a helper would start
+    monkeypatch.setattr(_run.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    monkeypatch.setattr(_run.sys, "executable", "")
+    monkeypatch.setattr(_run.subprocess, "Popen", lambda *a, **k: started.append(a))
+    monkeypatch.setattr(_run, "callee_signatures", lambda: {"main": {}, "helper": {}})
+    _run.compile_callees()
+    assert started == []
