@@ -802,11 +802,10 @@ def dense_prepare2(t, z, z_new, h, K, F, p, force, sticking):
 def step_dense(two_d, stored, kx, kv, method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes,
                weights, U, force, sticking, work):
     """``dense_prepare`` for the step the driver just took: the 2-D loop's stages kx, kv
-    are stored in K first when they are still only in registers (``stored`` false)."""
-    if two_d:
-        if not stored:
-            store_stages2(K, kx, kv)
-        return dense_prepare2(t, z, z_new, h, K, F, p, force, sticking)
+    are stored in K first when they are still only in registers (``stored`` false);
+    ``dense_prepare`` itself picks the 2-D path."""
+    if two_d and not stored:
+        store_stages2(K, kx, kv)
     return dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U,
                          force, sticking, work)
 
