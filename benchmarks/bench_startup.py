@@ -5,6 +5,7 @@ and then again with the same directory (cached):
 
 - ``import opa`` alone (numba's own import measured beside it: ``import numba``);
 - the DMR path: the first ``opa.simulate_dmr(periods=1)`` (``opa._kernel.integrate``);
+- the DMR path with one numba thread (no helper process compiles beside it);
 - everything ``opa-mc validate`` compiles: the DMR path, then one small Monte Carlo
   ensemble (``opa._kernel.run_batch``, which also serves OPA variants, elements and
   split scans), then one variational flow with tangents (the same ``integrate``).
@@ -61,8 +62,10 @@ _SCRIPT = textwrap.dedent(
 )
 
 
-def fresh_process(cache_dir: Path, *what: str) -> tuple[dict, str]:
+def fresh_process(cache_dir: Path, *what: str, threads: int | None = None) -> tuple[dict, str]:
     env = {**os.environ, "NUMBA_CACHE_DIR": str(cache_dir)}
+    if threads is not None:
+        env["NUMBA_NUM_THREADS"] = str(threads)
     done = subprocess.run([sys.executable, "-c", _SCRIPT, *what], env=env, cwd=REPO,
                           check=True, capture_output=True, text=True, timeout=600)
     return json.loads(done.stdout.strip().splitlines()[-1]), done.stderr
@@ -81,13 +84,16 @@ def test_import_time(benchmark, tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("what", ["dmr", "validate"])
+@pytest.mark.parametrize("what", ["dmr", "validate", "dmr, one thread"])
 def test_cold_compilation(benchmark, tmp_path, what, capsys):
-    args = () if what == "dmr" else ("validate",)
+    """"dmr, one thread": NUMBA_NUM_THREADS=1, so no helper process compiles beside."""
+    args = ("validate",) if what == "validate" else ()
+    threads = 1 if what.endswith("one thread") else None
     start = time.perf_counter()
-    cold, cold_err = fresh_process(tmp_path, *args)
+    cold, cold_err = fresh_process(tmp_path, *args, threads=threads)
     cold_total = time.perf_counter() - start
-    cached, cached_err = benchmark.pedantic(fresh_process, args=(tmp_path, *args), rounds=1,
+    cached, cached_err = benchmark.pedantic(fresh_process, args=(tmp_path, *args),
+                                            kwargs={"threads": threads}, rounds=1,
                                             iterations=1)
     calls = ("dmr_s", "batch_s", "tangent_s")
     compile_s = sum(v for k, v in cold.items() if k in calls)
