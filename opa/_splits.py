@@ -1,4 +1,4 @@
-"""Where the sampled systems' impact sequences split: the discontinuities of x(t, xi) in xi.
+"""Where the sampled systems' impact sequences split, and where x(t, xi) stops being smooth.
 
 Every Monte Carlo sample is the deterministic impact oscillator with its own value of the
 uncertain parameter ``p``. Its *event sequence* up to a horizon H is the list of its
@@ -21,7 +21,15 @@ every change of the sequence to a given tolerance, and says what happens there:
     an impact moves across an impulse time, so impact and kick change order;
 ``horizon``
     an event slides across the end of the horizon: the count within H changes but x(t, xi)
-    stays continuous for t < H (not a discontinuity; kept to delimit impact counts).
+    stays continuous for t < H (not a discontinuity; kept to delimit impact counts);
+``output crossing``
+    (:func:`scan_splits` with output times) no change of the sequence, but an impact time
+    crosses an output time t_j: x(t_j, xi) stays continuous in xi and has a kink there
+    (one side is sampled just before the impact, the other just after it).
+
+Near a grazing x(t, xi) is continuous too, with a square-root singularity: the new
+impact's speed, and so the change it makes to x at later times, grows like
+sqrt(|p - p_s|).
 
 Because the samples at intensity sigma are the parameter values ``p_bar + sigma xi``, the
 splits in ``p`` serve every sigma at once: at sigma the ensemble contains the split at
@@ -31,6 +39,7 @@ splits in ``p`` serve every sigma at once: at sigma the ensemble contains the sp
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,7 +49,15 @@ from opa._model import Oscillator, SolverOptions
 from opa._run import quadrature, run_batch, run_kernel, sampled_batch
 from opa._system import System, as_system
 
-SPLIT_KINDS = ("grazing", "extra impact", "chatter", "impulse order", "horizon")
+SPLIT_KINDS = ("grazing", "extra impact", "chatter", "impulse order", "horizon",
+               "output crossing")
+# The most splits one scan locates (and, apart, the most output crossings): past it the
+# brackets left over are reported (SplitScan.truncated, complete_within), never dropped
+# silently.
+MAX_SPLITS = 1024
+# Brackets bisected together in one wave of order="nearest" (one parallel batch of runs
+# per level of the bisection).
+WAVE = 16
 # A new impact slower than this at the located split is a grazing (its velocity vanishes
 # like sqrt(|p - p_s|); at the default tolerance it is ~1e-5). Named apart from the
 # solver's graze flag, which marks single impacts.
@@ -159,6 +176,26 @@ class Split:
     right: int
 
 
+@dataclass(frozen=True)
+class SplitScan:
+    """What :func:`scan_splits` found over [lo, hi] up to one horizon.
+
+    ``splits``: the changes of the event sequence, in increasing value; ``crossings``:
+    the values where an impact time crosses an output time (kind ``"output crossing"``),
+    in increasing value; ``truncated``: whether the limit ``limit`` left brackets
+    unopened; ``complete_within``: every change with ``|p - center| < complete_within``
+    is in ``splits`` (``inf``: every change the scan sees over [lo, hi]);
+    ``crossings_within``: the same for ``crossings``.
+    """
+
+    splits: list[Split]
+    crossings: list[Split]
+    truncated: bool
+    complete_within: float
+    crossings_within: float
+    limit: int
+
+
 def _burst(a: EventSequence, b: EventSequence, t: float, period: float) -> bool:
     near = [np.sum(np.abs(x.time - t) <= 0.05 * period) for x in (a, b)]
     return max(near) >= CHATTER_BURST
@@ -220,12 +257,38 @@ def find_splits(
     *,
     scan: int = 129,
     tol: float = 1e-8,
-    max_splits: int = 64,
+    max_splits: int = MAX_SPLITS,
     center: float | None = None,
     cache: dict | None = None,
     order: str = "nearest",
 ) -> tuple[list[Split], bool]:
-    """Every change of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi].
+    """The changes of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi]
+    and whether ``max_splits`` cut the list: :func:`scan_splits` without the output
+    crossings (its ``splits`` and ``truncated``)."""
+    found = scan_splits(system, options, parameter, lo, hi, horizon, scan=scan, tol=tol,
+                        max_splits=max_splits, center=center, cache=cache, order=order)
+    return found.splits, found.truncated
+
+
+def scan_splits(
+    system: System | Oscillator,
+    options: SolverOptions,
+    parameter: str,
+    lo: float,
+    hi: float,
+    horizon: float,
+    *,
+    scan: int = 129,
+    tol: float = 1e-8,
+    max_splits: int = MAX_SPLITS,
+    center: float | None = None,
+    cache: dict | None = None,
+    order: str = "nearest",
+    outputs=None,
+) -> SplitScan:
+    """Every change of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi],
+    and (with ``outputs``, the output times) every value where an impact time crosses an
+    output time.
 
     The interval is scanned at ``scan`` equally spaced values; each pair of neighbours
     whose sequences differ (:meth:`EventSequence.same_as`: other events, or an event time
@@ -233,27 +296,54 @@ def find_splits(
     deterministic runs) until the bracket is shorter than ``tol``; a third sequence met
     inside a bracket is followed as a split of its own. Changes between two scan points
     with equal sequences (an even number of them) are not seen; a bracket whose ends end
-    up matching (fast but continuous event times) is dropped. The scan's brackets are
-    bisected nearest to ``center`` (default: the middle) first (``order="nearest"``: when
-    ``max_splits`` cuts the list, the splits kept are those an ensemble centred there
-    meets first), or (``order="generation"``) every scan bracket before any bracket found
-    inside another, nearest first within a generation: then a cascade of splits packed
-    into one scan interval (chatter) cannot use up ``max_splits`` before the other
-    changes are seen. ``cache`` (value -> EventSequence) lets calls for several horizons share
-    runs; the runs go to the largest horizon asked of the cache's first call.
+    up matching (fast but continuous event times) is dropped.
 
-    Returns the splits in increasing ``value`` and whether ``max_splits`` cut the list.
+    **The limit.** Brackets are bisected nearest to ``center`` (default: the middle) first
+    (``order="nearest"``, in waves of ``WAVE`` brackets), or (``order="generation"``) every
+    scan bracket before any bracket found inside another, nearest first within a
+    generation (a cascade of splits packed into one scan interval cannot then use up the
+    limit before the other changes are seen). No bracket is opened once ``max_splits``
+    splits are located; the brackets left over are the ones cut off, ``truncated`` says
+    that some were, and ``complete_within`` is the distance from ``center`` of the nearest
+    of them: every change of the scanned sequence with ``|p - center| <
+    complete_within`` is in the list (``inf`` when nothing was cut off). With
+    ``order="nearest"`` that radius is as large as the limit allows.
+
+    **Output crossings.** Between two neighbouring runs with the same events (no split
+    between them) each impact time moves continuously with ``p``; where it passes an
+    output time t_j (0 < t_j < horizon), x(t_j, p) has a kink in ``p`` (one side is
+    before the impact, the other after it). Each such crossing seen between neighbouring
+    runs within ``complete_within`` is bisected to ``tol`` on ``t_impact(p) - t_j`` and
+    returned as a :class:`Split` of kind ``"output crossing"`` (``time``: the output time,
+    ``speed``: the impact's speed there, ``left == right``: the impacts up to the
+    horizon). At most ``max_splits`` crossings, nearest to ``center`` first;
+    ``crossings_within`` is the radius within which the crossing list is complete, as
+    ``complete_within`` for the splits. As for splits, two crossings of one output time
+    between neighbouring runs cancel and are not seen.
+
+    ``cache`` (value -> EventSequence) lets calls for several horizons share runs; the
+    runs go to the largest horizon asked of the cache's first call.
     """
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ValueError(f"need finite lo < hi, got [{lo}, {hi}]")
     system = as_system(system, options).deterministic()
     oscillator = system.oscillator
-    if scan < 2:
-        raise ValueError(f"scan must be >= 2, got {scan}")
-    if not tol > 0:
+    if not (isinstance(scan, numbers.Integral) and scan >= 2):
+        raise ValueError(f"scan must be an integer >= 2, got {scan!r}")
+    if not (isinstance(tol, numbers.Real) and tol > 0):
         raise ValueError(f"tol must be > 0, got {tol}")
+    if not (isinstance(max_splits, numbers.Integral) and not isinstance(max_splits, bool)
+            and max_splits >= 1):
+        raise ValueError(f"max_splits must be an integer >= 1, got {max_splits!r}")
     if order not in ("nearest", "generation"):
         raise ValueError(f"order must be 'nearest' or 'generation', got {order!r}")
+    if not (isinstance(horizon, numbers.Real) and math.isfinite(horizon) and horizon > 0):
+        raise ValueError(f"horizon must be a positive number, got {horizon!r}")
+    if outputs is not None:
+        outputs = np.asarray(outputs, dtype=float).ravel()
+        if not np.isfinite(outputs).all():
+            raise ValueError("outputs must be finite times")
+        outputs = np.unique(outputs[(outputs > 0.0) & (outputs < horizon)])
     cache = {} if cache is None else cache
     t_end = cache.setdefault("t_end", horizon)
     if horizon > t_end:
@@ -278,10 +368,9 @@ def find_splits(
     # (generation, a, b): the scan's brackets are generation 0; a bracket set aside when
     # a third sequence turns up inside another is one generation later. The brackets of
     # one wave are bisected together, each level of the bisection one parallel batch of
-    # runs; a "nearest" wave is two brackets (the machine's cores), so the budget goes
-    # to the nearest splits, a "generation" wave all the budget allows.
+    # runs.
     pending = [(0, x, y) for x, y in zip(values[:-1], values[1:]) if differ(x, y)]
-    center = 0.5 * (lo + hi) if center is None else center
+    center = 0.5 * (lo + hi) if center is None else float(center)
 
     def distance(bracket):
         x, y = bracket[-2:]
@@ -294,7 +383,7 @@ def find_splits(
             size = max_splits - len(splits)
         else:
             pending.sort(key=distance)
-            size = min(2, max_splits - len(splits))
+            size = min(WAVE, max_splits - len(splits))
         wave = [list(br) for br in pending[:size]]
         del pending[: len(wave)]
         while True:
@@ -321,10 +410,97 @@ def find_splits(
             kind, t, v = _classify(seq(a), seq(b), horizon, oscillator.forcing_period)
             splits.append(Split(0.5 * (a + b), b - a, kind, t, v, seq(a).count(horizon),
                                 seq(b).count(horizon)))
-    truncated = bool(pending)
+    within = min((distance(br) for br in pending), default=math.inf)
     splits.sort(key=lambda s: s.value)
-    return splits, truncated
+    crossings, crossings_within = [], within
+    if outputs is not None and len(outputs):
+        crossings, crossings_within = _output_crossings(
+            seq, ensure, differ, [v for v in cache if isinstance(v, float) and lo <= v <= hi],
+            outputs, horizon, tol, center, within, max_splits)
+    return SplitScan(splits, crossings, bool(pending), within, crossings_within, max_splits)
 
 
-__all__ = ["EventSequence", "SPLIT_KINDS", "Split", "event_sequence", "event_sequences",
-           "find_splits"]
+def _output_crossings(seq, ensure, differ, points, outputs, horizon, tol, center, within,
+                      limit) -> tuple[list[Split], float]:
+    """The crossings of output times by impact times between neighbouring runs with the
+    same events (see :func:`scan_splits`), nearest to ``center`` first."""
+    points = sorted(v for v in points if abs(v - center) <= within)
+    tasks = []  # [distance, a, b, impact index, output time, sign of t_i(a) - t_j]
+    for x, y in zip(points[:-1], points[1:]):
+        if differ(x, y):
+            continue
+        sx, sy = seq(x), seq(y)
+        n = int(np.searchsorted(sx.time, horizon, side="right"))
+        for i in range(n):
+            if sx.kind[i] != _IMPACT:
+                continue
+            t0, t1 = sorted((float(sx.time[i]), float(sy.time[i])))
+            for tj in outputs[(outputs > t0) & (outputs < t1)]:
+                d = 0.0 if x <= center <= y else min(abs(x - center), abs(y - center))
+                tasks.append([d, x, y, i, float(tj), math.copysign(1.0, sx.time[i] - tj)])
+    tasks.sort(key=lambda task: task[0])
+    radius = within
+    if len(tasks) > limit:
+        radius = min(radius, tasks[limit][0])
+        tasks = tasks[:limit]
+    out = []
+    while tasks:
+        open_ = [tk for tk in tasks if tk[2] - tk[1] > tol]
+        if not open_:
+            break
+        ensure(0.5 * (tk[1] + tk[2]) for tk in open_)
+        for tk in open_:
+            _, a, b, i, tj, sign = tk
+            m = 0.5 * (a + b)
+            if differ(m, a) or differ(m, b):  # a change the scan did not see: give up
+                tasks.remove(tk)
+                continue
+            if math.copysign(1.0, seq(m).time[i] - tj) == sign:
+                tk[1] = m
+            else:
+                tk[2] = m
+    for _, a, b, i, tj, _ in tasks:
+        speed = 0.5 * (abs(seq(a).velocity[i]) + abs(seq(b).velocity[i]))
+        n = seq(a).count(horizon)
+        out.append(Split(0.5 * (a + b), b - a, "output crossing", tj, float(speed), n, n))
+    out.sort(key=lambda s: s.value)
+    return out, radius
+
+
+def count_probabilities(splits, center: float, sigma: float, count_at_center: int, cdf,
+                        complete_within: float = math.inf) -> tuple[dict[int, float], float]:
+    """P(k impacts up to the horizon) for the ensemble ``center + sigma xi``, xi on
+    [-1, 1] with the distribution function ``cdf``, from the located changes of the
+    count (``splits``, each with the counts ``left``/``right`` on its two sides; output
+    crossings, ``left == right``, change nothing).
+
+    Exact where the split list is complete: only the part of the ensemble with
+    ``|p - center| < complete_within`` is assigned a count; the mass beyond it is
+    returned apart as ``unknown`` (0 when ``complete_within >= sigma``). Returns
+    ``(probabilities, unknown)``.
+    """
+    for name, value in (("center", center), ("sigma", sigma)):
+        if not (isinstance(value, numbers.Real) and math.isfinite(value)):
+            raise ValueError(f"{name} must be a finite number, got {value!r}")
+    if not sigma > 0:
+        raise ValueError(f"sigma must be > 0, got {sigma!r}")
+    if not (isinstance(complete_within, numbers.Real) and complete_within >= 0):
+        raise ValueError(f"complete_within must be >= 0, got {complete_within!r}")
+    reach = min(float(sigma), float(complete_within))
+    if reach == 0.0:
+        return {}, 1.0
+    edge = reach / sigma
+    inside = sorted((s for s in splits if abs(s.value - center) < reach),
+                    key=lambda s: s.value)
+    edges = [-edge] + [(s.value - center) / sigma for s in inside] + [edge]
+    counts = [inside[0].left] + [s.right for s in inside] if inside else [count_at_center]
+    prob: dict[int, float] = {}
+    for lo, hi, n in zip(edges[:-1], edges[1:], counts):
+        prob[int(n)] = prob.get(int(n), 0.0) + float(cdf(hi) - cdf(lo))
+    unknown = 0.0 if edge >= 1.0 else float(1.0 - (cdf(edge) - cdf(-edge)))
+    return prob, unknown
+
+
+__all__ = ["EventSequence", "MAX_SPLITS", "SPLIT_KINDS", "Split", "SplitScan",
+           "count_probabilities", "event_sequence", "event_sequences", "find_splits",
+           "scan_splits"]
