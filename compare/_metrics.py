@@ -24,6 +24,62 @@ def _check_same_grid(a: xr.Dataset, b: xr.Dataset) -> None:
         )
 
 
+#: what makes two runs runs of the same system (besides the time grid): every model
+#: parameter, the uncertainty and its law, the impulse model
+SYSTEM_ATTRS = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n",
+                "x0", "v0", "sigma", "uncertain", "distribution", "impulse", "pulse_width",
+                "impulse_at_zero")
+
+
+def _check_same_system(a: xr.Dataset, b: xr.Dataset) -> None:
+    """Refuse, naming the field, two runs of different systems. A field neither dataset
+    carries (a dataset built by hand) is not compared; the law of xi defaults to the
+    semicircle, as in every run before it was recorded."""
+    for name in SYSTEM_ATTRS:
+        default = "semicircle" if name == "distribution" else None
+        va, vb = a.attrs.get(name, default), b.attrs.get(name, default)
+        if va is None and vb is None:
+            continue
+        same = (va == vb if isinstance(va, str) or isinstance(vb, str)
+                else va is not None and vb is not None
+                and np.isclose(float(va), float(vb), rtol=1e-12, atol=0.0))
+        if not same:
+            raise ValueError(f"the runs are of different systems: {name} = {va!r} in the "
+                             f"opa dataset, {vb!r} in the mc dataset")
+
+
+def _check_models(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
+    for name, ds, want in (("opa_ds", opa_ds, "opa"), ("mc_ds", mc_ds, "mc")):
+        if not isinstance(ds, xr.Dataset):
+            raise ValueError(f"{name} must be an xarray.Dataset of an {want} run, got "
+                             f"{type(ds).__name__}")
+        model = ds.attrs.get("model", want)
+        if model != want:
+            raise ValueError(f"{name} must be an {want} run, got model = {model!r}")
+    missing = [v for v in ("x_mean", "x_var") if v not in opa_ds]
+    if missing:
+        raise ValueError(f"the opa dataset lacks {', '.join(missing)}")
+
+
+def _opa_coefficients(opa_ds: xr.Dataset, order: int):
+    """The OPA run's coefficients in the whole law's orthonormal basis (order+1, T), or
+    None where they cannot be formed (a chaospy law of xi, which the dataset names but
+    does not store)."""
+    if "x_coef" in opa_ds:
+        return opa_ds.x_coef.values[: order + 1]
+    if "element_x_coef" not in opa_ds:
+        return None
+    from opa._elements import global_coefficients
+    from opa._measure import parse
+
+    try:
+        measure = parse(opa_ds.attrs.get("distribution", "semicircle"))
+    except ValueError:
+        return None
+    return global_coefficients(opa_ds.element_x_coef.values, opa_ds.element_edges.values,
+                               opa_ds.element_probability.values, measure, order)
+
+
 def _within(err: np.ndarray, sem: np.ndarray, z: float, floor: float) -> np.ndarray:
     """1 where ``|err| <= z sem + floor`` (a NaN sem counts as no noise), else 0."""
     noise = np.where(np.isfinite(sem), z * sem, 0.0) + floor
@@ -42,10 +98,19 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     i.e. where the difference cannot be told from the MC noise at ``z`` standard errors
     (a NaN SE, from a Gauss-quadrature ensemble, leaves only ``floor``).
 
+    Any OPA run (one element or several, any law of xi) against any Monte Carlo run of the
+    same system: the coefficients of a multi-element run are those of its piecewise
+    surrogate in the whole law's orthonormal basis (``opa._elements.global_coefficients``),
+    which is what the ensemble's ``x_coef`` estimates.
+
     Parameters
     ----------
-    opa_ds : ``opa`` dataset: ``x_mean, x_var (time)``, ``x_coef (order, time)``.
-    mc_ds : ``mc`` dataset of :func:`mc.simulate_mc` on the same time grid: the estimates
+    opa_ds : ``opa`` dataset: ``x_mean, x_var (time)``, and ``x_coef (order, time)`` or
+        the element layout (``element_x_coef``, ``element_edges``,
+        ``element_probability``).
+    mc_ds : ``mc`` dataset of :func:`mc.simulate_mc` of the same system (every model
+        parameter, ``sigma``, ``uncertain``, ``distribution``, the impulse model) on the
+        same time grid: the estimates
         ``x_mean, x_var``, ``x_coef`` and their standard errors ``x_sem, x_var_sem``,
         ``x_coef_sem``.
     z : width of the noise band in standard errors.
@@ -63,8 +128,9 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     Raises
     ------
     ValueError
-        Different time grids, or an ``mc`` dataset without the standard errors (written
-        before ``x_coef_sem`` existed: run the ensemble again).
+        Runs of different systems (naming the field), different time grids, or an ``mc``
+        dataset without the standard errors (written before ``x_coef_sem`` existed: run
+        the ensemble again).
 
     Examples
     --------
@@ -76,17 +142,24 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
         cmp.err_coef[1:, 0]           # up to ~0.1
         cmp.coef_within_noise[1:, 0]  # all 1
     """
+    _check_models(opa_ds, mc_ds)
+    _check_same_system(opa_ds, mc_ds)
     _check_same_grid(opa_ds, mc_ds)
     missing = [name for name in ("x_sem", "x_var_sem", "x_coef_sem") if name not in mc_ds]
     if missing:
         raise ValueError(f"the mc dataset lacks the standard errors {missing} (written by "
                          f"an older simulate_mc?); run the ensemble again")
     n = min(opa_ds.sizes["order"], mc_ds.sizes["order"])
+    coef = _opa_coefficients(opa_ds, n - 1)
+    if coef is None:
+        raise ValueError(f"the opa dataset's coefficients cannot be compared: its law of xi "
+                         f"{opa_ds.attrs.get('distribution')!r} is not one opa-mc can "
+                         f"rebuild from its name")
     err = opa_ds.x_mean.values - mc_ds.x_mean.values
     sem = mc_ds.x_sem.values
     err_var = opa_ds.x_var.values - mc_ds.x_var.values
     var_sem = mc_ds.x_var_sem.values
-    err_coef = opa_ds.x_coef.values[:n] - mc_ds.x_coef.values[:n]
+    err_coef = coef - mc_ds.x_coef.values[:n]
     coef_sem = mc_ds.x_coef_sem.values[:n]
     band = f"{z} SE + {floor}"
     ds = xr.Dataset(

@@ -76,6 +76,54 @@ def time_coord(times: np.ndarray, omega: float) -> dict:
     }
 
 
+OPA_LAYOUT = ("x_mean", "x_var", "v_mean", "v_var", "element_x_coef", "element_v_coef",
+              "element_edges", "element_probability")
+
+
+def element_layout(x_coefs, v_coefs, edges, probability, impacts, rhs_evaluations) -> tuple:
+    """The element variables and coordinates every OPA dataset carries (docs/datasets.md).
+
+    One schema for every OPA run: the single-element OPA of the paper is the case K = 1
+    (one element over the whole support, probability 1); multi-element runs have K > 1.
+    ``x_coefs``, ``v_coefs``: (K, N+1, T) coefficients in each element's orthonormal
+    basis; ``edges`` (K+1,) in xi; ``probability``, ``impacts``, ``rhs_evaluations`` (K,).
+
+    Returns (data_vars, coords) for :class:`xarray.Dataset`.
+    """
+    one = {"units": "1"}
+    K = len(probability)
+    data = {
+        "element_x_coef": (("element", "order", "time"), np.asarray(x_coefs),
+                           {"long_name": "coefficients of x in each element's orthonormal "
+                            "basis", **one}),
+        "element_v_coef": (("element", "order", "time"), np.asarray(v_coefs),
+                           {"long_name": "coefficients of x' per element", **one}),
+        "element_edges": ("edge", np.asarray(edges, dtype=float),
+                          {"long_name": "element edges in xi", **one}),
+        "element_probability": ("element", np.asarray(probability, dtype=float),
+                                {"long_name": "probability of each element", **one}),
+        "element_impacts": ("element", np.asarray(impacts, dtype=np.int64),
+                            {"long_name": "impacts of each element's mean", **one}),
+        "element_rhs_evaluations": ("element", np.asarray(rhs_evaluations, dtype=np.int64),
+                                    {"long_name": "right-hand sides per element", **one}),
+    }
+    coords = {"element": ("element", np.arange(K), {"long_name": "element index", **one}),
+              "edge": ("edge", np.arange(K + 1), {"long_name": "edge index", **one})}
+    return data, coords
+
+
+def check_opa_layout(ds, name: str = "the opa dataset") -> None:
+    """Refuse, naming the variable, a dataset that lacks the OPA layout (written by an
+    older version, or not an OPA run)."""
+    if ds.attrs.get("model") != "opa":
+        raise ValueError(f"{name} must be an OPA run (attribute model = 'opa'), got "
+                         f"model = {ds.attrs.get('model')!r}")
+    missing = [v for v in OPA_LAYOUT if v not in ds.variables]
+    if missing:
+        raise ValueError(f"{name} lacks {', '.join(missing)} (written by an older "
+                         f"opa-mc?); run it again")
+
+
 # --------------------------------------------------------------------------- atomic files
 
 # Temporaries are named .tmp-opa-mc-<pid>-<random><suffix> so that a later run can tell

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 import numbers
 import time as _time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +52,11 @@ _SPLIT_CACHE: dict = {}  # the splits of the last few problems (a study repeats 
 SPLIT_SHARE = 4
 
 
+class ElementBudgetWarning(UserWarning):
+    """Adaptive refinement stopped before every element's variance share fell below the
+    tolerance (the element budget ran out)."""
+
+
 @dataclass
 class ElementRun:
     """The result of one element's OPA system."""
@@ -63,6 +69,7 @@ class ElementRun:
     rhs_evaluations: int
     impacts: int
     failure: str = ""  # why the element's system stopped early ("" if it did not)
+    method: str = "opa"  # or "collocation": its OPA system failed (see collocate_element)
 
     @property
     def var(self) -> np.ndarray:
@@ -124,6 +131,73 @@ def run_elements(system: System, options: SolverOptions, measures: list[Measure]
             for e, m in enumerate(measures)]
 
 
+def true_runs(system: System, options: SolverOptions, xi, times, *, what: str):
+    """The true sampled impact systems at the points ``xi`` of the uncertain variable:
+    paths (M, T, 2) of x and x' and the right-hand sides used. A system that cannot be
+    completed raises :class:`SimulationError` naming ``what`` and its xi."""
+    xi = np.asarray(xi, dtype=float)
+    p, cfg = system.pack(options)
+    P, cfgs, rule = sampled_batch(p, cfg, xi=xi)
+    oscillator = system.oscillator
+    paths, _, counters = run_batch(np.array([oscillator.x0, oscillator.v0]), times, P, cfgs,
+                                   rule, rtol=options.rtol, atol=options.atol,
+                                   stop_on_failure=True)
+    status = counters[:, 0]
+    if (status != K.OK).any():
+        from opa._run import SimulationError
+
+        m = int(np.flatnonzero((status != K.OK) & (status != K.SKIPPED))[0])
+        raise SimulationError(f"{what} xi = {xi[m]:.6g} stopped: "
+                              f"{K.STATUS_MESSAGES[int(status[m])]}")
+    return paths, int(counters[:, 4].sum())
+
+
+def collocate_element(system: System, options: SolverOptions, measure: Measure, *,
+                      times, failure: str = "") -> ElementRun:
+    """The element's coefficients by collocation: the true sampled systems at the N+1
+    Gauss nodes of the element's law, projected on its orthonormal basis
+    (``x_j = sum_q w_q x(xi_q) phi_j(xi_q)``; the discrete rule keeps phi_0..phi_N
+    orthonormal, so mean and variance are the rule's exactly).
+
+    The fallback of an element whose OPA system cannot be completed (its mean grazes or
+    the closure diverges): the true systems do not depend on the closure."""
+    order = system.order
+    nodes, weights = measure.gauss(order + 1)
+    phi = measure.basis(order, nodes)  # (N+1, q)
+    paths, rhs = true_runs(system, options, nodes, times,
+                           what=f"collocation of element [{measure.a:.6g}, {measure.b:.6g}] at")
+    coef = np.einsum("jq,qts->sjt", phi * weights, paths)  # (2, N+1, T)
+    return ElementRun(float(measure.a), float(measure.b), measure.probability(), coef[0],
+                      coef[1], rhs, 0, failure, "collocation")
+
+
+def replace_failed(system, options, measure, runs: list[ElementRun], *,
+                   times) -> list[ElementRun]:
+    """Every failed element of ``runs`` computed again by :func:`collocate_element`."""
+    return [collocate_element(system, options, measure.restrict(r.a, r.b), times=times,
+                              failure=r.failure) if r.failure else r for r in runs]
+
+
+def straddling(system: System, options: SolverOptions, edges, t_end: float) -> np.ndarray:
+    """1 for each element whose two edge systems (the true sampled systems at its end
+    points) differ in their event sequence up to ``t_end`` (the impacts, stick and release
+    events and the impulse intervals they fall in, opa._splits), else 0.
+
+    Such an element contains a split of the impact sequence: x(t, xi) is not smooth in xi
+    there and the element's polynomial cannot follow it (a lower bound: two changes that
+    undo each other between the edges are not seen)."""
+    from opa._splits import event_sequences
+
+    edges = np.asarray(edges, dtype=float)
+    if system.sigma == 0.0:
+        return np.zeros(len(edges) - 1, dtype=np.int8)
+    centre = getattr(system.oscillator, system.uncertain)
+    sequences = event_sequences(system, options, system.uncertain,
+                                centre + system.sigma * edges, t_end)
+    return np.array([0 if a.signature(t_end) == b.signature(t_end) else 1
+                     for a, b in zip(sequences[:-1], sequences[1:])], dtype=np.int8)
+
+
 def run_element(system, options, measure, **kw) -> ElementRun:
     """One element's OPA system (see :func:`run_elements`)."""
     return run_elements(system, options, [measure], **kw)[0]
@@ -140,6 +214,39 @@ def assemble(runs: list[ElementRun]) -> dict[str, np.ndarray]:
         mean = P @ m
         out[f"{name}_mean"] = mean
         out[f"{name}_var"] = np.maximum(P @ (s + (m - mean) ** 2), 0.0)
+    return out
+
+
+def global_coefficients(x_coefs, edges, probability, measure: Measure,
+                        order: int) -> np.ndarray:
+    """The coefficients ``E[x_hat phi_i(xi)]``, i = 0..order, of the piecewise surrogate
+    ``x_hat(t, xi) = sum_j x_j^(k)(t) phi_j^(k)(xi)`` on element k, in the orthonormal
+    basis ``phi_i`` of the whole law: what a Monte Carlo ensemble estimates as ``x_coef``.
+
+    Exact (Gauss rule of each element's law with enough points for the product of the
+    two polynomials). ``x_coefs`` (K, N+1, T); ``edges`` (K+1,); returns (order+1, T).
+
+    Examples
+    --------
+    One element over the whole support gives its own coefficients back:
+
+    >>> from opa._measure import uniform
+    >>> c = np.array([[[1.0], [0.5], [0.25]]])
+    >>> np.round(global_coefficients(c, [-1, 1], [1.0], uniform(), 2).ravel(), 12)
+    array([1.  , 0.5 , 0.25])
+    """
+    x_coefs = np.asarray(x_coefs, dtype=float)
+    N = x_coefs.shape[1] - 1
+    q = (N + order) // 2 + 1  # 2q - 1 >= N + order: the products are integrated exactly
+    whole = measure.recurrence(order + 1)
+    out = np.zeros((order + 1, x_coefs.shape[2]))
+    for k, (a, b) in enumerate(zip(edges[:-1], edges[1:])):
+        element = measure.restrict(float(a), float(b))
+        nodes, weights = element.gauss(q)
+        own = element.basis(N, nodes)  # (N+1, q)
+        phi = measure.basis(order, nodes, whole)  # (order+1, q)
+        values = own.T @ x_coefs[k]  # x_hat at the nodes, (q, T)
+        out += probability[k] * (phi * weights) @ values
     return out
 
 
@@ -198,7 +305,9 @@ def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, 
     """Edges at the splits, then halving of the element with the largest variance share
     ``P_k max_t s_k(t)`` until it is below ``tolerance`` or ``max_elements`` is reached.
 
-    Returns (runs, history) where history lists (elements, largest share) per step."""
+    Returns (runs, history) where history lists, per step, (elements, largest share, RMS
+    change of the assembled mean E[x] from the step before: NaN at the first step, which
+    has none; the change is the error estimate of the step before it)."""
     if not (isinstance(max_elements, numbers.Integral) and not isinstance(max_elements, bool)
             and 1 <= max_elements <= MAX_ELEMENTS):
         raise ValueError(f"max_elements must be an integer in 1..{MAX_ELEMENTS}, got "
@@ -207,18 +316,27 @@ def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, 
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
     edges, _ = split_edges(system, options, measure, t_end=float(times[-1]),
                            max_splits=min(SPLIT_BUDGET, SPLITS_PER_ELEMENT * max_elements))
-    edges = merge_smallest(measure, edges, max(1, max_elements // SPLIT_SHARE))
+    # at least one cut at a split when there is one and the budget allows two elements:
+    # an element straddling a grazing split is where the saltation law fails (section 3.2,
+    # omega = 3.98, sigma = 0.03, uniform law: 4 elements cut in probability alone are 4x
+    # worse than one element, docs/elements.md)
+    edges = merge_smallest(measure, edges, max(min(2, max_elements), max_elements // SPLIT_SHARE))
     def run(pairs):
         return run_elements(system, options, [measure.restrict(a, b) for a, b in pairs],
                             times=times, partial=True)
 
     runs = run(list(zip(edges[:-1], edges[1:])))
     history = []
+    previous = None
     while True:
         # an element whose system diverged has an infinite share: it is halved first
         share = np.array([np.inf if r.failure else r.probability * float(r.var.max())
                           for r in runs])
-        history.append((len(runs), float(share.max())))
+        mean = None if any(r.failure for r in runs) else assemble(runs)["x_mean"]
+        change = (math.nan if mean is None or previous is None
+                  else float(np.sqrt(np.mean((mean - previous) ** 2))))
+        previous = mean
+        history.append((len(runs), float(share.max()), change))
         room = max_elements - len(runs)
         if share.max() < tolerance or room <= 0:
             break
@@ -245,14 +363,8 @@ def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, 
         if log is not None:
             log(f"  halved {len(halves)} elements (largest variance share "
                 f"{share.max():.2e}); {len(runs)} elements")
-    failed = [r.failure for r in runs if r.failure]
-    if failed:
-        from opa._run import SimulationError
-
-        raise SimulationError(f"{failed[0]} (and {len(failed) - 1} more elements), still "
-                              f"after refinement to {len(runs)} elements; raise "
-                              f"max_elements or use another impact law")
-    return runs, history
+    # what refinement could not mend is computed by collocation of the true systems
+    return replace_failed(system, options, measure, runs, times=times), history
 
 
 def collocation(system, options, measure, edges, q, *, times):
@@ -267,22 +379,10 @@ def collocation(system, options, measure, edges, q, *, times):
     xi = np.concatenate(xs)
     w = np.concatenate(ws)
     w = w / w.sum()
-    p, cfg = system.pack(options)
-    P, cfgs, rule = sampled_batch(p, cfg, xi=xi)
-    oscillator = system.oscillator
-    paths, _, counters = run_batch(np.array([oscillator.x0, oscillator.v0]), times, P, cfgs,
-                                   rule, rtol=options.rtol, atol=options.atol,
-                                   stop_on_failure=True)
-    status, n_rhs = counters[:, 0], counters[:, 4]
-    if (status != K.OK).any():
-        from opa._run import SimulationError
-
-        m = int(np.flatnonzero((status != K.OK) & (status != K.SKIPPED))[0])
-        raise SimulationError(f"collocation node xi = {xi[m]:.6g} stopped: "
-                              f"{K.STATUS_MESSAGES[int(status[m])]}")
+    paths, n_rhs = true_runs(system, options, xi, times, what="collocation node")
     x = paths[:, :, 0]
     mean = w @ x
-    return mean, np.maximum(w @ (x - mean) ** 2, 0.0), int(n_rhs.sum())
+    return mean, np.maximum(w @ (x - mean) ** 2, 0.0), n_rhs
 
 
 def timed(fn, *args, **kwargs):
@@ -297,7 +397,7 @@ def simulate_elements(system, *, options, times, elements, tolerance, max_elemen
     """The multi-element OPA dataset (see :func:`opa.simulate_opa`)."""
     import xarray as xr
 
-    from opa._dataset import provenance_attrs, time_coord
+    from opa._dataset import element_layout, provenance_attrs, time_coord
 
     oscillator, order, measure = system.oscillator, system.order, system.measure
     if system.truncation != "galerkin":
@@ -319,42 +419,52 @@ def simulate_elements(system, *, options, times, elements, tolerance, max_elemen
                     or edges[0] != measure.lo or edges[-1] != measure.hi):
                 raise ValueError(f"element edges must increase from {measure.lo} to "
                                  f"{measure.hi}, got {elements!r}")
-        runs = run_elements(system, options,
-                            [measure.restrict(a, b) for a, b in zip(edges[:-1], edges[1:])],
-                            times=times)
+        runs = replace_failed(system, options, measure, run_elements(
+            system, options, [measure.restrict(a, b) for a, b in zip(edges[:-1], edges[1:])],
+            times=times, partial=True), times=times)
     stats = assemble(runs)
     one = {"units": "1"}
     edges = np.array([r.a for r in runs] + [runs[-1].b])
+    x_coefs = np.stack([r.x_coef for r in runs])
+    v_coefs = np.stack([r.v_coef for r in runs])
+    layout, layout_coords = element_layout(
+        x_coefs, v_coefs, edges, [r.probability for r in runs], [r.impacts for r in runs],
+        [r.rhs_evaluations for r in runs])
+    data = {
+        "x_mean": ("time", stats["x_mean"], {"long_name": "E[x] assembled from the "
+                                             "elements", **one}),
+        "x_var": ("time", stats["x_var"], {"long_name": "Var[x] assembled from the "
+                                           "elements", **one}),
+        "v_mean": ("time", stats["v_mean"], {"long_name": "E[x'] assembled", **one}),
+        "v_var": ("time", stats["v_var"], {"long_name": "Var[x'] assembled", **one}),
+        **layout,
+    }
+    if len(runs) == 1:  # one element over the whole support: the coefficients of the law
+        data["x_coef"] = (("order", "time"), x_coefs[0],
+                          {"long_name": f"OPA coefficient x_i = E[x phi_i(xi)], phi_i "
+                           f"orthonormal under the {measure.name} law", **one})
+        data["v_coef"] = (("order", "time"), v_coefs[0],
+                          {"long_name": "OPA coefficient v_i = E[x' phi_i(xi)]", **one})
     ds = xr.Dataset(
-        {
-            "x_mean": ("time", stats["x_mean"], {"long_name": "E[x] assembled from the "
-                                                 "elements", **one}),
-            "x_var": ("time", stats["x_var"], {"long_name": "Var[x] assembled from the "
-                                               "elements", **one}),
-            "v_mean": ("time", stats["v_mean"], {"long_name": "E[x'] assembled", **one}),
-            "v_var": ("time", stats["v_var"], {"long_name": "Var[x'] assembled", **one}),
-            "element_x_coef": (("element", "order", "time"),
-                               np.stack([r.x_coef for r in runs]),
-                               {"long_name": "coefficients of x in each element's "
-                                "orthonormal basis", **one}),
-            "element_v_coef": (("element", "order", "time"),
-                               np.stack([r.v_coef for r in runs]),
-                               {"long_name": "coefficients of x' per element", **one}),
-            "element_edges": ("edge", edges, {"long_name": "element edges in xi", **one}),
-            "element_probability": ("element", np.array([r.probability for r in runs]),
-                                    {"long_name": "probability of each element", **one}),
-            "element_impacts": ("element", np.array([r.impacts for r in runs]),
-                                {"long_name": "impacts of each element's mean", **one}),
-            "element_rhs_evaluations": ("element",
-                                        np.array([r.rhs_evaluations for r in runs]),
-                                        {"long_name": "right-hand sides per element", **one}),
-        },
+        data,
         coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1)),
-                "element": ("element", np.arange(len(runs))),
-                "edge": ("edge", np.arange(len(runs) + 1))},
+                **layout_coords},
         attrs=provenance_attrs("opa", system, options),
     )
+    straddle = straddling(system, options, edges, float(times[-1]))
+    ds["element_straddles"] = ("element", straddle, {
+        "long_name": "1 where the element's edge systems differ in their impact sequence "
+        "over the run (a split inside: its polynomial cannot follow it)", "units": "1"})
+    P = np.array([r.probability for r in runs])
+    ds.attrs.update(straddling_elements=int(straddle.sum()),
+                    straddling_probability=float(P[straddle == 1].sum() / P.sum()))
+    method = np.array([r.method == "collocation" for r in runs], dtype=np.int8)
+    ds["element_method"] = ("element", method, {
+        "long_name": "how each element was computed", "units": "1",
+        "flag_values": np.array([0, 1], dtype=np.int8),
+        "flag_meanings": "opa collocation_after_opa_failed"})
     ds.attrs.update(
+        collocation_elements=int(method.sum()),
         distribution=measure.name, elements=len(runs),
         element_mode=("adaptive" if isinstance(elements, str) else
                       "uniform" if np.ndim(elements) == 0 else "edges"),
@@ -366,10 +476,29 @@ def simulate_elements(system, *, options, times, elements, tolerance, max_elemen
                                       **one})
         ds["refinement_share"] = ("refinement", np.array([h[1] for h in history]),
                                   {"long_name": "largest element variance share", **one})
-        ds.attrs["tolerance"] = float(tolerance)
+        ds["refinement_mean_change"] = (
+            "refinement", np.array([h[2] for h in history]),
+            {"long_name": "RMS change of the assembled E[x] from the step before "
+             "(NaN: none before, or an element failed)", **one})
+        ds.coords["refinement"] = ("refinement", np.arange(len(history)),
+                                   {"long_name": "refinement step", **one})
+        met = history[-1][1] < tolerance
+        ds.attrs.update(
+            tolerance=float(tolerance), max_elements=int(max_elements),
+            tolerance_met=int(met),
+            stopped_by=("tolerance" if met else "element budget"
+                        if len(runs) >= max_elements else "no element could be halved"),
+            error_estimate=float(history[-1][2]) if len(history) > 1 else math.nan)
+        if not met:
+            warnings.warn(
+                f"adaptive elements stopped by the {ds.attrs['stopped_by']} at {len(runs)} "
+                f"elements with the largest variance share {history[-1][1]:.3g} above the "
+                f"tolerance {tolerance:g}: raise max_elements (now {max_elements}) or the "
+                f"tolerance", ElementBudgetWarning, stacklevel=3)
     return ds
 
 
-__all__ = ["ElementRun", "adaptive_edges", "assemble", "collocation", "element_rule",
-           "merge_smallest", "run_element", "run_elements", "simulate_elements",
-           "split_edges", "uniform_edges"]
+__all__ = ["ElementBudgetWarning", "ElementRun", "adaptive_edges", "assemble", "collocation",
+           "collocate_element", "element_rule", "global_coefficients", "merge_smallest",
+           "replace_failed", "run_element", "run_elements", "simulate_elements", "split_edges",
+           "straddling", "true_runs", "uniform_edges"]

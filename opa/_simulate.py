@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from opa import _kernel as K
-from opa._dataset import provenance_attrs, time_coord
+from opa._dataset import element_layout, provenance_attrs, time_coord
 from opa._lazy import lazy
 from opa._model import (
     check_instance,
@@ -125,7 +125,19 @@ def simulate_opa(
     halving of the element with the largest variance share until it is below
     ``tolerance`` or ``max_elements`` is reached). Each element runs its own OPA system
     of order N; the result holds the assembled ``x_mean, x_var, v_mean, v_var`` and the
-    per-element coefficients, edges and probabilities.
+    per-element coefficients, edges and probabilities. With ``elements`` and the System
+    given by keywords, ``impact_law`` defaults to ``"saltation"``, the law whose elements
+    converge (the paper's ``mean`` law converges only like K^-1.2, docs/elements.md); a
+    :class:`System` keeps its own law. An adaptive run records whether its tolerance was
+    met (``attrs["tolerance_met"]``, ``attrs["stopped_by"]``), the RMS change of E[x] in
+    its last refinement step (``attrs["error_estimate"]``), and warns
+    (:class:`opa._elements.ElementBudgetWarning`) when the budget stopped it.
+
+    Every OPA dataset has the same layout (docs/datasets.md): ``x_mean, x_var, v_mean,
+    v_var`` and the element variables ``element_x_coef``, ``element_v_coef`` (element,
+    order, time), ``element_edges``, ``element_probability``; the paper's single-element
+    OPA is the case of one element. ``x_coef, v_coef`` (order, time) are there whenever
+    there is one element (in the law's orthonormal basis).
 
     ``partial``: a trajectory that cannot be completed (e.g. the OPA system diverges)
     returns the outputs reached, NaN after, with the reason in ``attrs["failure"]``,
@@ -144,6 +156,9 @@ def simulate_opa(
     (5, 11)
     """
     options = check_instance("options", options, SolverOptions, SolverOptions())
+    if elements is not None and not isinstance(system, System) \
+            and fields.get("impact_law") is None:
+        fields["impact_law"] = "saltation"  # the law whose elements converge
     system = as_system(system, options, where="simulate_opa", **fields)
     system.check_samples()
     oscillator, order = system.oscillator, system.order
@@ -179,6 +194,9 @@ def simulate_opa(
     )
     xc = out[:, : order + 1].T
     vc = out[:, order + 1 :].T
+    layout, layout_coords = element_layout(
+        xc[None], vc[None], [-1.0, 1.0], [1.0], [stats["impacts"]],
+        [stats["rhs_evaluations"]])
     ds = xr.Dataset(
         {
             "x_coef": (("order", "time"), xc,
@@ -191,12 +209,15 @@ def simulate_opa(
             "v_mean": ("time", vc[0], {"long_name": "OPA mean velocity v_0", "units": "1"}),
             "v_var": ("time", (vc[1:] ** 2).sum(axis=0),
                       {"long_name": "OPA velocity variance sum_{i>=1} v_i^2", "units": "1"}),
+            **layout,
             **event_vars(log),
         },
-        coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1))},
+        coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1)),
+                **layout_coords},
         attrs=provenance_attrs("opa", system, options),
     )
-    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"])
+    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"],
+                    distribution="semicircle", elements=1, element_mode="single")
     if "failure" in stats:
         ds.attrs["failure"] = stats["failure"]
     return ds

@@ -65,10 +65,11 @@ def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS) -> None:
     g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
                    help="galerkin: exact projection; paper: eq. (27), drops sigma/2 Y_{N+1} "
                         "(default galerkin)")
-    g.add_argument("--impact-law", choices=laws, default="mean",
+    g.add_argument("--impact-law", choices=laws, default=None,
                    help="mean: only x_0' jumps (eq. 28); ensemble: every velocity coefficient "
                         "is multiplied by -eta; saltation: the impact's saltation matrix "
-                        "maps the deviation coefficients (default mean)")
+                        "maps the deviation coefficients (default mean; saltation with "
+                        "--elements, the law whose elements converge)")
     _impulse_flags(parser)
 
 

@@ -12,6 +12,7 @@ import argparse
 import os
 import sys
 import time
+import warnings
 
 from opa.cli._args import EXIT_USAGE, Parser
 from opa.cli._flags import (
@@ -30,10 +31,13 @@ from opa.cli._flags import (
 
 def cmd_simulate(args) -> int:
     from opa._dataset import write_netcdf
+    from opa._elements import ElementBudgetWarning
     from opa.plots._diagrams import plot_run
 
     check_outputs(args)
-    system = system_from(args)
+    # with elements the default impact law is the one whose elements converge
+    law = args.impact_law or ("saltation" if args.elements is not None else "mean")
+    system = system_from(args, impact_law=law)
     opts = options_from(args)
     if args.model != "opa" and args.elements is not None:
         raise CliError(f"--elements applies to simulate opa, not simulate {args.model}")
@@ -49,12 +53,14 @@ def cmd_simulate(args) -> int:
     elif args.model == "opa":
         from opa._simulate import simulate_opa
 
-        ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
-                          options=opts, elements=args.elements, tolerance=args.tolerance,
-                          max_elements=args.max_elements)
+        with warnings.catch_warnings():  # the budget warning is said in the summary
+            warnings.simplefilter("ignore", ElementBudgetWarning)
+            ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
+                              options=opts, elements=args.elements, tolerance=args.tolerance,
+                              max_elements=args.max_elements)
         final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = "
                  f"{float(ds.x_var[-1]):.4g}")
-        if "element" in ds.dims:
+        if ds.sizes["element"] > 1:
             final += f" ({ds.sizes['element']} elements)"
     else:
         from mc import simulate_mc
@@ -65,7 +71,7 @@ def cmd_simulate(args) -> int:
         parts = f"{args.out}.parts" if args.out else None
 
         try:
-            if args.truncation != "galerkin" or args.impact_law != "mean":
+            if args.truncation != "galerkin" or args.impact_law not in (None, "mean"):
                 raise CliError("--truncation and --impact-law are closures of the OPA "
                                "system: simulate mc integrates the true sampled systems")
             ds = simulate_mc(system.replace(truncation="galerkin", impact_law="mean"),
@@ -103,11 +109,51 @@ def cmd_simulate(args) -> int:
         if "impact" in ds.dims:
             print(f"  {_summary_events(ds)}")
         print(f"  final state: {final}")
+        for line in _element_lines(ds):
+            print(f"  {line}")
         if args.out:
             print(f"  wrote {args.out}")
         if args.plot:
             print(f"  wrote {args.plot}")
     return 0
+
+
+def _share(share: float) -> str:
+    return ("an element's OPA system failed" if share == float("inf")
+            else f"largest variance share {share:.3g}")
+
+
+def _element_lines(ds) -> list[str]:
+    """What a user must know of an element run: the law, the adaptive tolerance, the
+    elements computed by collocation and those that contain a split."""
+    if ds.attrs.get("model") != "opa" or ds.attrs.get("element_mode", "single") == "single":
+        return []
+    K = ds.sizes["element"]
+    lines = [f"{K} elements ({ds.attrs['element_mode']}), {ds.attrs['distribution']} law, "
+             f"impact law {ds.attrs['impact_law']}"]
+    if ds.attrs["element_mode"] == "adaptive":
+        if ds.attrs["tolerance_met"]:
+            lines.append(f"adaptive: tolerance {ds.attrs['tolerance']:g} met")
+        else:
+            lines.append(f"warning: adaptive tolerance {ds.attrs['tolerance']:g} NOT met: "
+                         f"stopped by the {ds.attrs['stopped_by']} "
+                         f"({_share(float(ds.refinement_share[-1]))}); "
+                         f"raise --max-elements (now {ds.attrs['max_elements']})")
+        estimate = ds.attrs["error_estimate"]
+        if estimate == estimate:  # not NaN
+            lines.append(f"error estimate: E[x] changed by {estimate:.2g} (RMS over time) in "
+                         f"the last refinement step")
+    if ds.attrs.get("collocation_elements"):
+        lines.append(f"{ds.attrs['collocation_elements']} elements computed by collocation "
+                     f"of the true systems: their OPA systems could not be completed")
+    if ds.attrs.get("straddling_elements"):
+        lines.append(f"warning: {ds.attrs['straddling_elements']} of {K} elements "
+                     f"(probability {ds.attrs['straddling_probability']:.3g}) contain a change "
+                     f"of the impact sequence over the run, which their polynomials cannot "
+                     f"follow: check against `opa-mc simulate mc`, or "
+                     + ("raise --max-elements" if ds.attrs["element_mode"] == "adaptive"
+                        else "use --elements adaptive") + " or fewer --periods")
+    return lines
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import matplotlib
+import matplotlib.ticker
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -27,16 +28,64 @@ SECTION_COLOR = "tab:red"
 
 
 def _state(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray, str]:
-    if "x" in ds:
+    """x, x' and the label of what a dmr/opa/mc dataset's trajectory is: the DMR itself,
+    or the mean state E[x], E[x'] of an OPA run (any number of elements, any law of xi)
+    or of a Monte Carlo ensemble."""
+    model = ds.attrs.get("model")
+    if model == "dmr" or ("x" in ds and "x_mean" not in ds):
         return ds.x.values, ds.v.values, "DMR"
-    if "x_coef" in ds:
-        return ds.x_coef.values[0], ds.v_coef.values[0], f"EMR (OPA N={ds.attrs['N']})"
-    return ds.x_mean.values, ds.v_mean.values, f"MC mean ({ds.sizes['sample']} samples)"
+    law = ds.attrs.get("distribution", "semicircle")
+    if model == "opa":
+        K = ds.sizes.get("element", 1)
+        parts = [f"N={ds.attrs['N']}"] + ([f"{K} elements"] if K > 1 else []) \
+            + ([law] if law != "semicircle" else [])
+        return ds.x_mean.values, ds.v_mean.values, f"EMR (OPA {', '.join(parts)})"
+    if model == "mc":
+        samples = int(ds.attrs.get("samples", ds.sizes.get("sample", 0)))
+        where = "" if law == "semicircle" else f", {law}"
+        return ds.x_mean.values, ds.v_mean.values, f"MC mean ({samples} samples{where})"
+    raise ValueError(f"plot_run draws dmr, opa and mc datasets, got model = {model!r}")
+
+
+def _extra_panel(ds: xr.Dataset) -> str | None:
+    """The third panel a run deserves: the elements of a multi-element OPA run, the
+    impacts per sample of a Monte Carlo ensemble; None for the others."""
+    if ds.attrs.get("model") == "opa" and ds.sizes.get("element", 1) > 1:
+        return "elements"
+    if ds.attrs.get("model") == "mc" and "n_impacts" in ds and ds.sizes.get("sample", 0):
+        return "impacts"
+    return None
+
+
+def _draw_extra(ax, ds: xr.Dataset, kind: str) -> None:
+    if kind == "elements":
+        edges = ds.element_edges.values
+        P = ds.element_probability.values
+        ax.stairs(P / np.diff(edges), edges, fill=True, alpha=0.35, color="tab:blue",
+                  label="element probability / width")
+        ax.stairs(P / np.diff(edges), edges, color="tab:blue", lw=0.8)
+        ax.set_xlabel("ξ (element edges)")
+        ax.set_ylabel("probability density of ξ")
+        ax.set_title(f"{len(P)} elements ({ds.attrs.get('element_mode', '')})")
+        ax.legend(loc="upper right", fontsize=8)
+        return
+    counts = ds.n_impacts.values.astype(int)
+    weights = ds.weight.values if "weight" in ds else np.ones(len(counts))
+    values = np.arange(counts.min(), counts.max() + 1)
+    share = np.array([weights[counts == k].sum() for k in values]) / weights.sum()
+    ax.bar(values, share, width=0.8, color="tab:green", alpha=0.7)
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+    ax.set_xlabel("impacts of a sample over the run")
+    ax.set_ylabel("share of the samples")
+    ax.set_title("impacts per sample")
 
 
 def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> None:
     """Time history and phase portrait of a dmr/opa/mc dataset; stroboscopic points marked.
 
+    OPA runs (one element or several, any law of xi) and Monte Carlo ensembles draw their
+    mean state with a band of ± 1 standard deviation; a multi-element run adds a panel of
+    its elements, an ensemble one of the impacts per sample.
     ``per_period`` (outputs per forcing period) locates the stroboscopic samples; it is
     inferred from the time grid when omitted.
     """
@@ -45,7 +94,9 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
     T = 2 * np.pi / ds.attrs["omega"]
     if per_period is None:
         per_period = max(1, int(round(T / (t[1] - t[0])))) if len(t) > 1 else 1
-    fig, (ax_t, ax_p) = plt.subplots(1, 2, figsize=(11, 4.2))
+    extra = _extra_panel(ds)
+    fig, axes = plt.subplots(1, 3 if extra else 2, figsize=(15.5 if extra else 11, 4.2))
+    ax_t, ax_p = axes[0], axes[1]
     dense = per_period >= 8  # lines between outputs only when they resolve the motion
     style = dict(lw=0.8) if dense else dict(ls="none", marker=".", ms=3)
     ax_t.plot(t, x, label=label, **style)
@@ -54,7 +105,7 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
         ax_t.fill_between(t, x - sd, x + sd, alpha=0.25, label="± 1 std")
     ax_t.axhline(ds.attrs["delta"], color="k", lw=1, ls="--", label="wall x = Δ")
     ax_t.set_xlabel("t")
-    ax_t.set_ylabel("x")
+    ax_t.set_ylabel("x" if label == "DMR" else "E[x]")
     ax_t.legend(loc="lower left", fontsize=8)
     ax_t.set_title("time history")
     half = len(t) // 2
@@ -63,13 +114,17 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
     strobe = slice(half - half % per_period, None, per_period)
     ax_p.plot(x[strobe], v[strobe], "rs", ms=4, label="t = k 2π/ω")
     ax_p.axvline(ds.attrs["delta"], color="k", lw=1, ls="--")
-    ax_p.set_xlabel("x")
-    ax_p.set_ylabel("dx/dt")
+    ax_p.set_xlabel("x" if label == "DMR" else "E[x]")
+    ax_p.set_ylabel("dx/dt" if label == "DMR" else "E[dx/dt]")
     ax_p.legend(loc="lower left", fontsize=8)
-    ax_p.set_title("phase portrait")
+    ax_p.set_title("phase portrait" if label == "DMR" else "phase portrait of the mean")
+    if extra:
+        _draw_extra(axes[2], ds, extra)
+    uncertain = ds.attrs.get("uncertain", "mu")
     fig.suptitle(
-        f"{label}: ω = {ds.attrs['omega']:g}, c = {ds.attrs['c']:g}, σ = {ds.attrs['sigma']:g}, "
-        f"F0 = {ds.attrs['F0']:g}, impulse = {ds.attrs['impulse']}"
+        f"{label}: ω = {ds.attrs['omega']:g}, c = {ds.attrs['c']:g}, σ = {ds.attrs['sigma']:g}"
+        f"{'' if label == 'DMR' else f' ({uncertain} uncertain)'}, F0 = {ds.attrs['F0']:g}, "
+        f"impulse = {ds.attrs['impulse']}"
     )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
