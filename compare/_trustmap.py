@@ -7,7 +7,12 @@ section 3.2 range), each point runs
   standard errors of the mean and the variance), with more samples only where the verdict
   hangs on the MC noise (:func:`compare._trust.marginal`);
 * the OPA equivalent system for every N and every variant (impact law x truncation),
-  all compared with that one ensemble;
+  all compared with that one ensemble; under a law of xi other than the semicircle
+  (``distribution``) the single element runs in that law's orthonormal basis and the
+  ``paper`` truncation (eq. (27), the semicircle's) is left out;
+* with ``elements`` (K, or ``"adaptive"`` with a budget), multi-element OPA under the
+  mean, ensemble and saltation impact laws at N = Nmax, each with its own verdicts and
+  sigma* beside the single-element ones;
 
 and gives, per horizon, the RMS error of x_0 and of the variance (absolute, in MC standard
 errors, relative to the spread) with the verdict of :mod:`compare._trust`. For each q,
@@ -23,7 +28,8 @@ integrating anything. Each file name ends in a hash of everything that determine
 content, and the file stores that hash too::
 
     mc_<q><value>_sigma<sigma>_M<samples>_<key>.nc   a Monte Carlo ensemble's moments
-    opa_<q><value>_sigma<sigma>_N<order>_<key>.npz   OPA at one N, the five variants
+    opa_<q><value>_sigma<sigma>_N<order>_<key>.npz   OPA at one N, the single-element variants
+    elements_<q><value>_sigma<sigma>_N<order>_<key>.npz  multi-element OPA (N = Nmax), per law
     splits_<q><value>_<key>.npz                      the split scan at one value
     details_<q><value>_sigma<sigma>_<key>.nc         phase portraits, EMR_0 against DMR
     frontier_<run>_<key>.npz                         one run of the cost-accuracy study
@@ -51,16 +57,32 @@ import xarray as xr
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
 from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
+from opa import _kernel as K
 from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
+from opa._elements import MAX_ELEMENTS, adaptive_edges, element_rule, uniform_edges
+from opa._measure import Measure, parse as parse_law
 from opa._memory import check_memory
 from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
                         preset, time_grid)
+from opa._run import SimulationError, run_batch
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._system import IMPULSE_FIELDS, System
 from opa._splits import SPLIT_KINDS, Split, find_splits
 
+# The single-element variants (impact law, truncation) under the semicircle law. Under
+# another law of xi the `paper` truncation (eq. (27), written in the semicircle's basis)
+# does not exist: the map runs the three impact laws with the exact Galerkin projection
+# in that law's orthonormal basis (LAW_VARIANTS).
 VARIANTS = (("mean", "galerkin"), ("ensemble", "galerkin"), ("mean", "paper"),
             ("ensemble", "paper"), ("saltation", "galerkin"))
+ELEMENT_LAWS = ("mean", "ensemble", "saltation")
+LAW_VARIANTS = tuple((law, "galerkin") for law in ELEMENT_LAWS)
+# Multi-element variants: the impact laws of ELEMENT_LAWS, Galerkin truncation, run at
+# N = Nmax only (the order sigma* is read at); adaptive refinement stops when every
+# element's variance share is below ELEMENT_TOLERANCE (simulate's default) or the budget
+# is spent.
+ELEMENT_TOLERANCE = 1e-6
+DEFAULT_MAX_ELEMENTS = 64
 CRITERIA = ("mean", "variance")
 PAPER_SIGMAS = (0.01, 0.014, 0.02, 0.03)
 
@@ -111,8 +133,15 @@ class ValidateConfig:
     plots: bool = True
     scheduler: str | None = None
     frontier: bool = True
+    # the law of xi (a name of opa._measure.DISTRIBUTIONS) and the multi-element variants:
+    # None (single element only), K >= 2 equal-probability elements, or "adaptive" with a
+    # budget of max_elements (default 64; refused without "adaptive")
+    distribution: str = "semicircle"
+    elements: int | str | None = None
+    max_elements: int | None = None
 
     def __post_init__(self):
+        self._check_law()
         for name in ("samples", "max_samples", "per_period", "seed"):
             value = getattr(self, name)
             if not isinstance(value, numbers.Integral) or isinstance(value, bool):
@@ -169,6 +198,38 @@ class ValidateConfig:
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
         self._check_sizes()
 
+    def _check_law(self) -> None:
+        """The law of xi (stored under its canonical name) and the element settings."""
+        if not isinstance(self.distribution, str) or not self.distribution:
+            raise ValueError(f"distribution must be a name such as uniform or beta:2,3, got "
+                             f"{self.distribution!r}")
+        try:
+            law = parse_law(self.distribution)
+        except ValueError as err:
+            text = str(err)
+            raise ValueError(text if text.startswith("distribution") else
+                             f"distribution {self.distribution!r}: {text}") from None
+        if (law.lo, law.hi) != (-1.0, 1.0):
+            raise ValueError(f"distribution must have the support [-1, 1], got "
+                             f"[{law.lo:g}, {law.hi:g}] for {self.distribution!r}")
+        object.__setattr__(self, "distribution", law.name)
+        el = self.elements
+        if el is not None and not (el == "adaptive" if isinstance(el, str) else (
+                isinstance(el, numbers.Integral) and not isinstance(el, bool)
+                and 2 <= el <= MAX_ELEMENTS)):
+            raise ValueError(f"elements must be an integer in 2..{MAX_ELEMENTS} or 'adaptive' "
+                             f"(one element is the single-element map), got {el!r}")
+        if self.max_elements is not None:
+            if el != "adaptive":
+                raise ValueError(f"max_elements = {self.max_elements!r} is the budget of "
+                                 f"adaptive elements and has no effect without elements = "
+                                 f"'adaptive' (got elements = {el!r})")
+            m = self.max_elements
+            if not (isinstance(m, numbers.Integral) and not isinstance(m, bool)
+                    and 2 <= m <= MAX_ELEMENTS):
+                raise ValueError(f"max_elements must be an integer in 2..{MAX_ELEMENTS}, got "
+                                 f"{m!r}")
+
     def _check_sizes(self) -> None:
         """Refuse maps that cannot finish or fit: grid sizes, orders, run lengths, memory."""
         if not isinstance(self.oscillator, Oscillator):
@@ -191,7 +252,7 @@ class ValidateConfig:
                                  f"{self.parameter} = {value:g}: {err}") from None
         outputs = round(max(self.horizons) * self.per_period) + 1
         check_memory(f"horizons up to {max(self.horizons):g} periods x per_period "
-                     f"{self.per_period}", outputs * (2 * self.nmax + 8) * 8 * len(VARIANTS))
+                     f"{self.per_period}", outputs * (2 * self.nmax + 8) * 8 * len(self.variants))
         for value in self.values:  # checks the impulse model (e.g. pulse_width < 2 pi/omega1)
             self.system_at(value)
 
@@ -200,18 +261,60 @@ class ValidateConfig:
         return max(self.orders)
 
     @property
+    def semicircle(self) -> bool:
+        """Whether xi has the paper's law (the single-element variants then include the
+        paper's truncation)."""
+        return self.distribution == "semicircle"
+
+    @property
+    def single_variants(self) -> tuple[tuple[str, str], ...]:
+        """(impact law, truncation) of the single-element variants."""
+        return VARIANTS if self.semicircle else LAW_VARIANTS
+
+    @property
+    def element_laws(self) -> tuple[str, ...]:
+        """Impact laws of the multi-element variants (none without ``elements``)."""
+        return () if self.elements is None else ELEMENT_LAWS
+
+    @property
+    def budget(self) -> int:
+        """The element budget of adaptive elements."""
+        return DEFAULT_MAX_ELEMENTS if self.max_elements is None else int(self.max_elements)
+
+    @property
+    def element_label(self) -> str:
+        """'K8' or 'adaptive64' ('' without elements)."""
+        if self.elements is None:
+            return ""
+        return f"adaptive{self.budget}" if self.elements == "adaptive" else f"K{self.elements}"
+
+    @property
     def variants(self) -> list[str]:
-        return [f"{law}/{trunc}" for law, trunc in VARIANTS]
+        """Names of every variant: 'law/truncation' (one element), then 'law/ME-K8' or
+        'law/ME-adaptive64' (multi-element, Galerkin)."""
+        return ([f"{law}/{trunc}" for law, trunc in self.single_variants]
+                + [f"{law}/ME-{self.element_label}" for law in self.element_laws])
+
+    @property
+    def dropped_variants(self) -> list[str]:
+        """The single-element variants of the semicircle map this law cannot run."""
+        return [f"{law}/{trunc}" for law, trunc in VARIANTS
+                if (law, trunc) not in self.single_variants]
+
+    def measure(self) -> Measure:
+        return parse_law(self.distribution)
 
     def oscillator_at(self, value: float) -> Oscillator:
         return self.oscillator.replace(**{self.parameter: float(value)})
 
     def system_at(self, value: float, **fields) -> System:
         """The :class:`opa.System` at one swept value (samples below zero allowed: the map
-        crosses them on purpose), with ``fields`` (sigma, order, ...)."""
+        crosses them on purpose), with ``fields`` (sigma, order, ...) and the law of xi
+        (None for the semicircle, so that the default map runs as it always did)."""
         return System(self.oscillator_at(value), uncertain=self.uncertain, allow_negative=True,
                       impulse=self.impulse, pulse_width=self.pulse_width,
-                      impulse_at_zero=self.impulse_at_zero, **fields)
+                      impulse_at_zero=self.impulse_at_zero,
+                      distribution=None if self.semicircle else self.distribution, **fields)
 
     def impulse_key(self) -> list:
         """The impulse model, for the hashes of the parts (only when not the default, so
@@ -219,17 +322,32 @@ class ValidateConfig:
         model = [self.impulse, self.pulse_width, self.impulse_at_zero]
         return [] if model == ["dirac", 0.1, True] else [model]
 
+    def law_key(self) -> list:
+        """The law of xi, for the hashes of the parts (only when not the semicircle, so
+        that the default map's parts stay valid)."""
+        return [] if self.semicircle else [["distribution", self.distribution]]
+
     def key(self, value: float, sigma: float, samples: int) -> str:
         """A hash of everything one Monte Carlo run of the map depends on."""
         return digest([self.oscillator_at(value).as_dict(), dataclasses.asdict(self.options),
                        sigma, self.uncertain, samples, self.seed, max(self.horizons),
-                       self.per_period, self.nmax, *self.impulse_key()])
+                       self.per_period, self.nmax, *self.impulse_key(), *self.law_key()])
 
     def opa_key(self, value: float, sigma: float, order: int) -> str:
-        """A hash of everything the OPA runs of the map at one point and one N depend on."""
+        """A hash of everything the single-element OPA runs of the map at one point and
+        one N depend on."""
         return digest(["opa", self.oscillator_at(value).as_dict(),
                        dataclasses.asdict(self.options), float(sigma), int(order),
-                       self.uncertain, VARIANTS, max(self.horizons), self.per_period,
+                       self.uncertain, self.single_variants, max(self.horizons),
+                       self.per_period, *self.impulse_key(), *self.law_key()])
+
+    def element_key(self, value: float, sigma: float, order: int) -> str:
+        """A hash of everything the multi-element runs at one point and one N depend on."""
+        return digest(["elements", self.oscillator_at(value).as_dict(),
+                       dataclasses.asdict(self.options), float(sigma), int(order),
+                       self.uncertain, self.distribution, self.element_laws, self.elements,
+                       self.budget if self.elements == "adaptive" else None,
+                       ELEMENT_TOLERANCE, max(self.horizons), self.per_period,
                        *self.impulse_key()])
 
     def splits_key(self, value: float) -> str:
@@ -458,6 +576,8 @@ class Point:
     disagree: np.ndarray  # (variant, N, criterion) first time of disagreement [periods]
     agrees: np.ndarray  # (variant, N, horizon, criterion) bool
     seconds: float = 0.0
+    elements: np.ndarray | None = None  # (variant,) elements at N = Nmax (0: failed)
+    failure: str = ""  # why a multi-element variant could not be run
 
 
 class _Map:
@@ -473,6 +593,7 @@ class _Map:
         self.mc_runs = 0
         self.opa_runs = 0
         self.bar = None
+        self.measure = cfg.measure()  # one object: its recurrences are cached
 
     def _name(self, value, sigma=None) -> str:
         name = f"{self.cfg.parameter}{value:g}"
@@ -508,15 +629,24 @@ class _Map:
                                   cfg.key(value, sigma, samples), compute, check=check)
 
     def _opa(self, osc, value, sigma, order, times) -> dict:
-        """Every variant of OPA at one N: x_mean, x_var (variant, output), first_impact
-        (variant,) in time units, and the wall time."""
+        """Every single-element variant of OPA at one N: x_mean, x_var (variant, output),
+        first_impact (variant,) in time units, and the wall time. Under the semicircle the
+        paper's system (:func:`opa.opa_variants`); under another law one element over
+        the whole support, in that law's orthonormal basis (:func:`element_variants`)."""
         cfg = self.cfg
 
         def compute():
             start = time.perf_counter()
-            mean, var, first = opa_variants(
-                cfg.system_at(value, sigma=sigma, order=order),
-                [(law, trunc) for law, trunc in VARIANTS], times, cfg.options)
+            system = cfg.system_at(value, sigma=sigma, order=order)
+            if cfg.semicircle:
+                mean, var, first = opa_variants(system, list(cfg.single_variants), times,
+                                                cfg.options)
+            else:
+                whole = np.array([self.measure.lo, self.measure.hi])
+                run = element_variants(system, cfg.options, self.measure,
+                                       [law for law, _ in cfg.single_variants],
+                                       [whole] * len(cfg.single_variants), times)
+                mean, var, first = run["x_mean"], run["x_var"], run["first_impact"]
             self.opa_runs += 1
             return {"x_mean": mean, "x_var": var, "first_impact": first,
                     "seconds": time.perf_counter() - start}
@@ -524,26 +654,83 @@ class _Map:
         return self.parts.arrays(f"opa_{self._name(value, sigma)}_N{order}",
                                  cfg.opa_key(value, sigma, order), compute)
 
+    def _elements(self, value, sigma, order, times) -> dict:
+        """The multi-element variants at one N (one per law of ``cfg.element_laws``):
+        x_mean, x_var (law, output), first_impact (law,), elements (law,) and the wall
+        time. Adaptive edges are chosen per law (:func:`opa._elements.adaptive_edges`);
+        where refinement ends with a diverged element the variant is NaN throughout and
+        ``failure`` says why."""
+        cfg = self.cfg
+
+        def compute():
+            start = time.perf_counter()
+            system = cfg.system_at(value, sigma=sigma, order=order)
+            edges, failures = [], []
+            for law in cfg.element_laws:
+                if cfg.elements == "adaptive":
+                    try:
+                        runs, _ = adaptive_edges(system.replace(impact_law=law), cfg.options,
+                                                 self.measure, times=times,
+                                                 tolerance=ELEMENT_TOLERANCE,
+                                                 max_elements=cfg.budget)
+                    except SimulationError as err:
+                        edges.append(None)
+                        failures.append(f"{law}: {err}")
+                        continue
+                    edges.append(np.array([r.a for r in runs] + [runs[-1].b]))
+                else:
+                    edges.append(uniform_edges(self.measure, int(cfg.elements)))
+            ran = [k for k, e in enumerate(edges) if e is not None]
+            L = len(cfg.element_laws)
+            mean, var = np.full((L, len(times)), np.nan), np.full((L, len(times)), np.nan)
+            first, count = np.full(L, np.nan), np.zeros(L, np.int64)
+            if ran:
+                run = element_variants(system, cfg.options, self.measure,
+                                       [cfg.element_laws[k] for k in ran],
+                                       [edges[k] for k in ran], times)
+                mean[ran], var[ran] = run["x_mean"], run["x_var"]
+                first[ran], count[ran] = run["first_impact"], run["elements"]
+            self.opa_runs += 1
+            return {"x_mean": mean, "x_var": var, "first_impact": first, "elements": count,
+                    "failure": " | ".join(failures), "seconds": time.perf_counter() - start}
+
+        return self.parts.arrays(f"elements_{self._name(value, sigma)}_N{order}",
+                                 cfg.element_key(value, sigma, order), compute)
+
     def evaluate(self, value: float, sigma: float, orders=None) -> Point:
         """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts.
 
-        The point's wall time is that of its runs (OPA, and every Monte Carlo ensemble
-        it took), as stored in the parts: a reused point reports what it cost."""
+        The multi-element variants run at N = Nmax only (NaN at the other N). The point's
+        wall time is that of its runs (OPA, and every Monte Carlo ensemble it took), as
+        stored in the parts: a reused point reports what it cost."""
         cfg = self.cfg
         osc = cfg.oscillator_at(value)
         times = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
         orders = cfg.orders if orders is None else orders
-        V, N = len(VARIANTS), len(orders)
-        opa_mean = np.empty((V, N, len(times)))
-        opa_var = np.empty((V, N, len(times)))
-        first = np.empty((V, N))
+        S, V, N = len(cfg.single_variants), len(cfg.variants), len(orders)
+        opa_mean = np.full((V, N, len(times)), np.nan)
+        opa_var = np.full((V, N, len(times)), np.nan)
+        first = np.full((V, N), np.nan)
+        elements = np.zeros(V, np.int64)
+        elements[:S] = 1
         T = osc.forcing_period
         seconds = 0.0
+        failure = ""
         for k, order in enumerate(orders):  # the variants of one N run in parallel
             run = self._opa(osc, value, sigma, order, times)
-            opa_mean[:, k], opa_var[:, k] = run["x_mean"], run["x_var"]
-            first[:, k] = run["first_impact"] / T
+            opa_mean[:S, k], opa_var[:S, k] = run["x_mean"], run["x_var"]
+            first[:S, k] = run["first_impact"] / T
             seconds += run["seconds"]
+            if cfg.element_laws and order == cfg.nmax:
+                run = self._elements(value, sigma, order, times)
+                opa_mean[S:, k], opa_var[S:, k] = run["x_mean"], run["x_var"]
+                first[S:, k] = run["first_impact"] / T
+                elements[S:] = run["elements"]
+                failure = str(run["failure"])
+                seconds += run["seconds"]
+                if failure:
+                    self.log(f"{self._name(value, sigma)}, N = {order}: multi-element "
+                             f"variant not run ({failure})")
         samples = cfg.samples
         while True:
             mc = self._mc(osc, value, sigma, samples, times)
@@ -553,13 +740,15 @@ class _Map:
                 break
             samples *= 2
         point.seconds = seconds
+        point.elements = elements
+        point.failure = failure
         return point
 
     def _hangs_on_noise(self, point: Point) -> bool:
         cfg, k = self.cfg, -1  # the verdict that sigma* hangs on: N = Nmax
         mc = point.mc
         sd = np.sqrt(np.maximum(mc["x_var"], 0.0))
-        for v in range(len(VARIANTS)):
+        for v in range(len(cfg.variants)):
             e_mean = point.opa_mean[v, k] - mc["x_mean"]
             e_var = point.opa_var[v, k] - mc["x_var"]
             for n in self.n_h:
@@ -638,7 +827,7 @@ class _Map:
         cfg = self.cfg
         k = -1  # N = Nmax; the probes run that order only
         probes: dict[float, Point] = dict(grid)
-        V, H, C = len(VARIANTS), len(cfg.horizons), 2
+        V, H, C = len(cfg.variants), len(cfg.horizons), 2
         star = np.full((V, H, C, 2), np.nan)
         steps = np.zeros((V, H, C), dtype=np.int64)
         for v in range(V):
@@ -682,7 +871,7 @@ class _Map:
             self.bar = bar
             for value in cfg.values:
                 self.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
-                         f"{len(cfg.sigmas)} sigmas x {len(VARIANTS) * len(cfg.orders)} OPA "
+                         f"{len(cfg.sigmas)} sigmas x {len(cfg.variants) * len(cfg.orders)} OPA "
                          f"runs against Monte Carlo ...")
                 split_info = self.splits(value)
                 grid = {}
@@ -714,7 +903,7 @@ class _Map:
         key = digest(["details", cfg.oscillator_at(value).as_dict(),
                       dataclasses.asdict(cfg.options), float(sigma), cfg.nmax, cfg.uncertain,
                       cfg.horizons, cfg.per_period, cfg.seed, DENSE_PER_PERIOD,
-                      *cfg.impulse_key()])
+                      *cfg.impulse_key(), *cfg.law_key()])
         return self.parts.dataset(f"details_{self._name(value, sigma)}", key,
                                   lambda: _details(cfg, sigma))
 
@@ -726,7 +915,7 @@ FRONTIER_REFERENCE = 32768
 
 def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
     """Cost against accuracy at the first swept value, the largest sigma and the first
-    horizon: the paper's OPA (N = 0..Nmax), adaptive multi-element OPA (mean and
+    horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element OPA (mean and
     saltation laws, element budgets 8..64), multi-element collocation, single-element
     collocation, MC and scrambled Sobol, against a 2^15-sample Sobol reference
     (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``.
@@ -741,7 +930,7 @@ def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
         single_nodes=(1, 2, 4, 8), mc_samples=FRONTIER_SAMPLES,
         reference=FRONTIER_REFERENCE, seed=cfg.seed + 1, outdir=cfg.outdir,
         allow_negative=True, impulse=cfg.impulse, pulse_width=cfg.pulse_width,
-        impulse_at_zero=cfg.impulse_at_zero)
+        impulse_at_zero=cfg.impulse_at_zero, distribution=cfg.distribution)
     memo = None
     if parts is not None:
         def memo(run, spec, compute):
@@ -754,6 +943,55 @@ def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
     out.attrs["frontier_value"] = float(cfg.values[0])
     out.attrs["frontier_omega"] = float(cfg.oscillator_at(cfg.values[0]).omega)
     return out
+
+
+def element_variants(system: System, options: SolverOptions, measure: Measure, laws,
+                     edges, times: np.ndarray):
+    """Multi-element OPA (:mod:`opa._elements`) under several impact laws: law ``laws[l]``
+    on the elements cut at ``edges[l]``, each element's system in the orthonormal basis of
+    the law of xi conditioned on it (:func:`opa._elements.element_rule`), one parallel
+    batch per law. Mean and variance are assembled exactly as
+    :func:`opa._elements.assemble` does, NaN after an element that could not be
+    completed; the first impact is the earliest of any element's mean (inf: none).
+
+    Returns a dict of x_mean, x_var, v_mean (L, T), first_impact (L,), elements (L,)."""
+    order = system.order
+    dim = 2 * (order + 1)
+    y0 = np.zeros(dim)
+    y0[0] = system.oscillator.x0
+    y0[order + 1] = system.oscillator.v0
+    cap = max(64, 4 * len(times))
+    L = len(laws)
+    mean, var = np.empty((L, len(times))), np.empty((L, len(times)))
+    v_mean = np.empty((L, len(times)))
+    first, count = np.full(L, np.inf), np.zeros(L, np.int64)
+    for ell, (law, cuts) in enumerate(zip(laws, edges)):
+        p, cfg = system.replace(impact_law=law, truncation="galerkin").pack(options)
+        cells = [measure.restrict(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
+        rules = [element_rule(m, order) for m in cells]
+        E = len(cells)
+        rule = (np.stack([r[0] for r in rules]), np.stack([r[1] for r in rules]),
+                np.ascontiguousarray(np.stack([r[2].T for r in rules])))
+        out, logs, counters = run_batch(y0, times, np.repeat(p[None, :], E, axis=0),
+                                        np.repeat(cfg[None, :], E, axis=0), rule,
+                                        rtol=options.rtol, atol=options.atol, capacity=cap)
+        for e in range(E):
+            if counters[e, 0] != K.OK or not np.isfinite(out[e]).all():
+                out[e][~np.isfinite(out[e]).all(axis=1)] = np.nan
+            n = min(int(counters[e, 1]), cap)
+            hits = np.flatnonzero(np.isin(logs[e, :n, 2], (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK)))
+            if len(hits):
+                first[ell] = min(first[ell], logs[e, hits[0], 0])
+        P = np.array([m.probability() for m in cells])
+        P = P / P.sum()
+        m = out[:, :, 0]
+        s = (out[:, :, 1: order + 1] ** 2).sum(axis=2)
+        mean[ell] = P @ m
+        var[ell] = np.maximum(P @ (s + (m - mean[ell]) ** 2), 0.0)
+        v_mean[ell] = P @ out[:, :, order + 1]
+        count[ell] = E
+    return {"x_mean": mean, "x_var": var, "v_mean": v_mean, "first_impact": first,
+            "elements": count}
 
 
 def _sequence(system, cfg, cache, value):
@@ -807,10 +1045,12 @@ def _splits_from_arrays(stored: dict) -> list[HorizonSplits]:
     return scans
 
 
-def count_distribution(centre, sigma, splits, count_at_centre) -> dict[int, float]:
+def count_distribution(centre, sigma, splits, count_at_centre, cdf=None) -> dict[int, float]:
     """P(impacts up to the horizon = k) for the ensemble ``centre + sigma xi``, exact
     between the located changes of the count (``splits`` sorted by value, each with the
-    counts on its two sides)."""
+    counts on its two sides); ``cdf`` is that of the law of xi on [-1, 1] (default the
+    semicircle)."""
+    cdf = semicircle_cdf if cdf is None else cdf
     inside = [s for s in splits if abs(s.value - centre) < sigma]
     if not inside:
         return {count_at_centre: 1.0}
@@ -818,13 +1058,16 @@ def count_distribution(centre, sigma, splits, count_at_centre) -> dict[int, floa
     counts = [inside[0].left] + [s.right for s in inside]
     prob: dict[int, float] = {}
     for lo, hi, n in zip(edges[:-1], edges[1:], counts):
-        prob[n] = prob.get(n, 0.0) + float(semicircle_cdf(hi) - semicircle_cdf(lo))
+        prob[n] = prob.get(n, 0.0) + float(cdf(hi) - cdf(lo))
     return prob
 
 
 def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
-    Q, S, V, N, H = (len(cfg.values), len(cfg.sigmas), len(VARIANTS), len(cfg.orders),
+    Q, S, V, N, H = (len(cfg.values), len(cfg.sigmas), len(cfg.variants), len(cfg.orders),
                      len(cfg.horizons))
+    cdf = None if cfg.semicircle else cfg.measure().cdf
+    element_count = np.zeros((Q, S, V), np.int64)
+    failures = []
     n_out = int(round(max(cfg.horizons) * cfg.per_period)) + 1
     f = lambda *shape: np.full(shape, np.nan)  # noqa: E731
     errors, agrees, disagree = f(Q, S, V, N, H, 2, 3), np.zeros((Q, S, V, N, H, 2), np.int8), \
@@ -858,6 +1101,9 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
             for k in mc:
                 mc[k][q, s] = p.mc[k]
             samples[q, s] = p.samples
+            element_count[q, s] = p.elements
+            if p.failure:
+                failures.append(f"{cfg.parameter} = {value:g}, sigma = {sigma:g}: {p.failure}")
             imin[q, s], imax[q, s] = p.mc["impacts"]
             mc_seconds[q, s], mc_rhs[q, s], seconds[q, s] = p.mc["seconds"], p.mc["rhs"], \
                 p.seconds
@@ -879,7 +1125,7 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                 skind[q, h, j] = SPLIT_KINDS.index(sp.kind)
                 sleft[q, h, j], sright[q, h, j] = sp.left, sp.right
             for s, sigma in enumerate(cfg.sigmas):
-                counts[(q, s, h)] = count_distribution(centre, sigma, splits, scan.count)
+                counts[(q, s, h)] = count_distribution(centre, sigma, splits, scan.count, cdf)
     kmax = max(max(d) for d in counts.values())
     count_prob = np.zeros((Q, S, H, kmax + 1))
     for (q, s, h), dist in counts.items():
@@ -887,6 +1133,9 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
             count_prob[q, s, h, n] = prob
     dims = ("value", "sigma", "variant", "N")
     one = {"units": "1"}
+    ran = np.zeros((V, N), np.int8)
+    ran[: len(cfg.single_variants)] = 1
+    ran[len(cfg.single_variants):, -1] = 1
     kinds = {"flag_values": np.arange(len(SPLIT_KINDS), dtype=np.int8),
              "flag_meanings": " ".join(k.replace(" ", "_") for k in SPLIT_KINDS),
              "units": "1"}
@@ -980,7 +1229,17 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                              {"long_name": "kind of that nearest split", **kinds}),
         "count_prob": (("value", "sigma", "horizon", "count"), count_prob,
                        {"long_name": "probability of k impacts up to the horizon", **one}),
+        "variant_ran": (("variant", "N"), ran,
+                        {"long_name": "1 where the variant is run at this N (multi-element "
+                         "variants: N = Nmax only)", **one}),
+        "variant_elements": (("value", "sigma", "variant"), element_count,
+                             {"long_name": "elements of the variant at N = Nmax (0: its "
+                              "adaptive refinement ended with a diverged element)", **one}),
     }
+    if failures:  # grid points only; bisection probes say so in the log
+        attrs = {"element_failures": " | ".join(failures)}
+    else:
+        attrs = {}
     return xr.Dataset(
         data,
         coords={
@@ -995,6 +1254,7 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                          "units": "forcing periods"}),
             "count": ("count", np.arange(kmax + 1)),
         },
+        attrs=attrs,
     )
 
 
@@ -1014,23 +1274,32 @@ def _details(cfg: ValidateConfig, sig: float) -> xr.Dataset:
     osc = cfg.oscillator_at(value)
     times = time_grid(osc.omega, cfg.horizons[0], DENSE_PER_PERIOD)
     curves = {}
-    for law in ("mean", "ensemble"):
-        ds = simulate_opa(cfg.system_at(value, sigma=sig, order=cfg.nmax, impact_law=law),
-                          times=times, options=cfg.options)
-        curves[law] = (ds.x_mean.values, ds.v_mean.values)
+    laws = ("mean", "ensemble")
+    if cfg.semicircle:
+        for law in laws:
+            ds = simulate_opa(cfg.system_at(value, sigma=sig, order=cfg.nmax, impact_law=law),
+                              times=times, options=cfg.options)
+            curves[law] = (ds.x_mean.values, ds.v_mean.values)
+    else:  # one element in the law's own basis
+        measure = cfg.measure()
+        run = element_variants(cfg.system_at(value, sigma=sig, order=cfg.nmax), cfg.options,
+                               measure, laws, [np.array([measure.lo, measure.hi])] * 2, times)
+        for ell, law in enumerate(laws):
+            curves[law] = (run["x_mean"][ell], run["v_mean"][ell])
     ens = simulate_mc(cfg.system_at(value, sigma=sig, order=0), samples=256, sampler="sobol",
                       seed=cfg.seed, times=times, options=cfg.options, progress=False,
                       keep_paths=True)
     pick = np.argsort(ens.xi.values)[np.linspace(0, 255, 7).astype(int)]
     long = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
     dmr = simulate_dmr(cfg.system_at(value), times=long, options=cfg.options).x.values
-    emr0 = simulate_opa(cfg.system_at(value, sigma=0.0, order=cfg.nmax), times=long,
-                        options=cfg.options).x_mean.values
+    # sigma = 0: the law of xi plays no part (the higher coefficients stay zero)
+    emr0 = simulate_opa(cfg.system_at(value, sigma=0.0, order=cfg.nmax).replace(
+        distribution=None), times=long, options=cfg.options).x_mean.values
     diff = [float(np.max(np.abs(emr0[: int(round(h * cfg.per_period)) + 1]
                                 - dmr[: int(round(h * cfg.per_period)) + 1])))
             for h in cfg.horizons]
-    emr1 = simulate_opa(cfg.system_at(value, sigma=0.0, order=0), times=long,
-                        options=cfg.options).x_mean.values
+    emr1 = simulate_opa(cfg.system_at(value, sigma=0.0, order=0).replace(distribution=None),
+                        times=long, options=cfg.options).x_mean.values
     one = {"units": "1"}
     return xr.Dataset(
         {
@@ -1066,7 +1335,21 @@ def _attrs(cfg: ValidateConfig) -> dict:
                                                         order=cfg.nmax),
                              cfg.options, seed=cfg.seed, sampler="sobol")
     attrs.update({cfg.parameter: float(cfg.oscillator.as_dict()[cfg.parameter]),
-                  "truncation": "galerkin,paper", "impact_law": "mean,ensemble,saltation"})
+                  "truncation": ",".join(dict.fromkeys(t for _, t in cfg.single_variants)),
+                  "impact_law": "mean,ensemble,saltation"})
+    attrs.update(
+        distribution=cfg.distribution,
+        elements=("none" if cfg.elements is None else str(cfg.elements)),
+        variants_dropped=(", ".join(cfg.dropped_variants) + " (eq. (27) truncates the "
+                          "semicircle's basis; under another law only the Galerkin projection "
+                          "exists)") if cfg.dropped_variants else "none",
+    )
+    if cfg.elements is not None:
+        attrs.update(element_order=int(cfg.nmax), element_text=(
+            "Galerkin truncation, every element its own OPA system in the orthonormal basis "
+            "of the law of xi conditioned on it, run at N = Nmax only"))
+    if cfg.elements == "adaptive":
+        attrs.update(max_elements=int(cfg.budget), element_tolerance=ELEMENT_TOLERANCE)
     attrs.update(
         preset=cfg.preset, parameter=cfg.parameter, samples=int(cfg.samples),
         max_samples=int(cfg.max_samples), per_period=int(cfg.per_period),

@@ -11,9 +11,9 @@ import time
 import numpy as np
 
 from opa.cli._args import parse_sweep, positive_int, whole_number
-from opa.cli._flags import _impulse_flags, _model_flags, _solver_flags
+from opa.cli._flags import _elements_arg, _impulse_flags, _model_flags, _solver_flags
 
-from opa._model import MAX_GRID, PARAMETER_NAMES
+from opa._model import MAX_GRID, PARAMETER_NAMES, UNCERTAIN_PARAMETERS
 from opa._system import IMPULSE_FIELDS
 
 
@@ -69,8 +69,8 @@ def register_validate(sub) -> None:
         "validate",
         help="the main job: the trust map of OPA against Monte Carlo, its boundary and why",
         description="Run OPA (N = 0..8, the mean, ensemble and saltation impact laws, both "
-        "truncations) beside Monte Carlo ensembles of the true sampled impact systems over a grid of sigma and one "
-        "model parameter; locate the trust boundary sigma* by bisection and the splits of "
+        "truncations; with --elements also multi-element OPA) beside Monte Carlo ensembles of "
+        "the true sampled impact systems over a grid of sigma and one model parameter; locate the trust boundary sigma* by bisection and the splits of "
         "the sampled systems' impact sequences. With no arguments: the embedded default "
         "(section 3.2 set, omega in {3.98, 4.035, 4.09, 4.145, 4.2}, sigma from 0.005 to "
         "0.05, horizons of 10 and 50 forcing periods). Writes OUTDIR/validate.nc, "
@@ -93,6 +93,19 @@ def register_validate(sub) -> None:
                    help="OPA orders, 'A:B' inclusive or a comma list (default 0:8)")
     g.add_argument("--uncertain", choices=("mu", "a", "c"), default=None,
                    help="the uncertain parameter (default mu)")
+    g.add_argument("--distribution", default=None, metavar="LAW",
+                   help="law of xi: semicircle (the paper's), uniform, beta:A,B or "
+                        "normal-trunc:K, all on [-1, 1]; the Monte Carlo ensembles sample it "
+                        "and single-element OPA runs in its orthonormal basis (the paper "
+                        "truncation exists for the semicircle only) (default semicircle)")
+    g.add_argument("--elements", type=_elements_arg, default=None, metavar="K|adaptive",
+                   help="add multi-element variants (mean, ensemble and saltation laws, "
+                        "at N = Nmax, with their own verdicts and sigma*): K >= 2 "
+                        "equal-probability elements, or 'adaptive' (edges at the "
+                        "impact-sequence splits, then refinement) (default: single element "
+                        "only)")
+    g.add_argument("--max-elements", type=positive_int, default=None, metavar="K",
+                   help="adaptive elements: the element budget (default 64)")
     g.add_argument("--horizons", type=_float_list, default=None, metavar="H1,H2",
                    help="horizons in forcing periods (default 10,50)")
     g.add_argument("--tolerance", type=float, default=None, metavar="TOL",
@@ -155,7 +168,8 @@ def cmd_validate(args) -> int:
     cfg = load_config(
         args.config, model=model, solver=solver, parameter=parameter, values=values,
         sigmas=args.sigmas, orders=args.orders, uncertain=args.uncertain,
-        horizons=args.horizons, tolerance=args.tolerance, var_tolerance=args.var_tolerance,
+        distribution=args.distribution, elements=args.elements,
+        max_elements=args.max_elements, horizons=args.horizons, tolerance=args.tolerance, var_tolerance=args.var_tolerance,
         z=args.z, resolution=args.resolution, samples=args.samples,
         max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,
@@ -172,9 +186,14 @@ def cmd_validate(args) -> int:
     for h in range(ds.sizes["horizon"]):
         print(verdict_grid(ds, h))
         print()
+    elements = [v for v, name in enumerate(ds.variant.values) if "/ME-" in str(name)]
     for q in range(ds.sizes[ds.attrs["parameter"]]):
         for h in range(ds.sizes["horizon"]):
             print(f"* {cause(ds, q, h)}")
+            for v in elements:  # the multi-element variants' own boundaries
+                print(f"* [{ds.variant.values[v]}] {cause(ds, q, h, v)}")
+    if ds.attrs.get("variants_dropped", "none") != "none":
+        print(f"* variants left out: {ds.attrs['variants_dropped']}")
     print()
     for line in findings(ds):
         print(f"* {line}")
@@ -202,6 +221,8 @@ def register_converge(sub) -> None:
     g = p.add_argument_group("study")
     g.add_argument("--sigma", type=float, default=0.05, metavar="S",
                    help="intensity of the uncertain parameter (default 0.05)")
+    g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
+                   help="the uncertain parameter p = p_bar + sigma xi (default mu)")
     g.add_argument("--distribution", default="semicircle", metavar="LAW",
                    help="law of xi: semicircle, uniform, beta:A,B, normal-trunc:K")
     g.add_argument("--periods", type=float, default=10.0, metavar="P",
@@ -231,7 +252,8 @@ def cmd_converge(args) -> int:
     kw = {k: v for k, v in (("budgets", args.budgets), ("uniform", args.uniform))
           if v is not None}
     cfg = ConvergenceConfig(oscillator=oscillator_from(args), options=options_from(args),
-                            sigma=args.sigma, distribution=args.distribution,
+                            sigma=args.sigma, uncertain=args.uncertain,
+                            distribution=args.distribution,
                             periods=args.periods, order=args.order, reference=args.reference,
                             outdir=args.outdir, impulse=args.impulse,
                             pulse_width=args.pulse_width, impulse_at_zero=args.impulse_at_zero,

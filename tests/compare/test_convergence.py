@@ -39,7 +39,7 @@ def test_rows_match_direct_runs(study):
     i = int(np.flatnonzero((ds.method.values == "ME-OPA uniform") & (ds.law.values == "mean")
                            & (ds["size"].values == 2))[0])
     emr = simulate_opa(cfg.oscillator, sigma=cfg.sigma, order=cfg.order, elements=2,
-                       times=times, options=cfg.options)
+                       impact_law="mean", times=times, options=cfg.options)
     err = float(np.sqrt(np.mean((emr.x_mean.values - ref.x_mean.values) ** 2)))
     assert ds.error.values[i] == pytest.approx(err, rel=1e-12)
     assert ds.rhs_evaluations.values[i] == emr.attrs["rhs_evaluations"]
@@ -87,3 +87,28 @@ def test_converge_cli_refuses_bad_input(tmp_path, capsys):
     target.write_text("")
     assert main(["converge", "--outdir", str(target)]) == 2
     assert "--outdir" in capsys.readouterr().err
+
+
+def test_uncertain_c_rows_match_direct_runs(tmp_path):
+    """The study with the uncertainty on c (c = 0.05 + sigma xi): its reference and its
+    two-element OPA row against simulate_mc and simulate_opa run here with uncertain='c'."""
+    cfg = ConvergenceConfig(outdir=str(tmp_path), uncertain="c",
+                            **{**TINY, "budgets": (2,), "orders": (1,), "mc_samples": (64,),
+                               "single_nodes": (1,)})
+    ds = run_convergence(cfg, log=lambda *a: None, write=False)
+    assert ds.attrs["uncertain"] == "c"
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    ref = simulate_mc(cfg.oscillator, sigma=cfg.sigma, uncertain="c", samples=cfg.reference,
+                      sampler="sobol", seed=cfg.seed, order=0, times=times,
+                      options=cfg.options, progress=False)
+    mu = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=cfg.reference,
+                     sampler="sobol", seed=cfg.seed, order=0, times=times,
+                     options=cfg.options, progress=False)
+    assert np.abs(ref.x_var.values - mu.x_var.values).max() > 0  # c, not mu, is uncertain
+    for law in ("mean", "saltation"):
+        i = int(np.flatnonzero((ds.method.values == "ME-OPA uniform") & (ds.law.values == law)
+                               & (ds["size"].values == 2))[0])
+        emr = simulate_opa(cfg.oscillator, sigma=cfg.sigma, order=cfg.order, uncertain="c",
+                           elements=2, impact_law=law, times=times, options=cfg.options)
+        err = float(np.sqrt(np.mean((emr.x_mean.values - ref.x_mean.values) ** 2)))
+        assert ds.error.values[i] == pytest.approx(err, rel=1e-12)

@@ -24,7 +24,7 @@ RUN_ATTRS = ("history", "wall_seconds", "mc_runs_computed", "opa_runs_computed",
              "parts_computed", "parts_set_aside")
 INTEGRATORS = {
     trustmap: ("opa_variants", "simulate_mc", "simulate_opa", "simulate_dmr", "find_splits",
-               "_sequence"),
+               "_sequence", "element_variants", "adaptive_edges"),
     convergence: ("simulate_opa", "simulate_mc", "collocation"),
 }
 
@@ -221,3 +221,55 @@ def test_the_convergence_study_runs_each_run_once(tmp_path, monkeypatch):
     _same(again, first)
     assert again.attrs["wall_seconds"] == first.attrs["wall_seconds"] == pytest.approx(
         float(first.seconds.sum()) + first.attrs["reference_seconds"])
+
+
+def test_the_default_keys_are_those_of_earlier_versions():
+    """The law of xi and the elements enter the hashes only when not the default, so that
+    a rerun of the default map reuses the parts an earlier version wrote."""
+    import dataclasses
+
+    cfg = load_config(None)
+    osc, opts = cfg.oscillator_at(3.98).as_dict(), dataclasses.asdict(cfg.options)
+    assert cfg.key(3.98, 0.01, 1024) == digest([osc, opts, 0.01, "mu", 1024, 0, 50.0, 8, 8])
+    assert cfg.opa_key(3.98, 0.01, 4) == digest(["opa", osc, opts, 0.01, 4, "mu",
+                                                 trustmap.VARIANTS, 50.0, 8])
+    others = [load_config(None, distribution="uniform"),
+              load_config(None, distribution="beta:2,3"),
+              load_config(None, uncertain="c")]
+    for other in others:
+        assert other.key(3.98, 0.01, 1024) != cfg.key(3.98, 0.01, 1024)
+        assert other.opa_key(3.98, 0.01, 4) != cfg.opa_key(3.98, 0.01, 4)
+    k4, ka = load_config(None, elements=4), load_config(None, elements="adaptive")
+    kb = load_config(None, elements="adaptive", max_elements=32)
+    ku = load_config(None, distribution="uniform", elements=4)
+    assert len({c.element_key(3.98, 0.01, 8) for c in (k4, ka, kb, ku)}) == 4
+    assert k4.key(3.98, 0.01, 1024) == cfg.key(3.98, 0.01, 1024)  # elements: OPA only
+    assert k4.opa_key(3.98, 0.01, 4) == cfg.opa_key(3.98, 0.01, 4)
+
+
+def test_adding_elements_to_a_finished_map_reuses_its_parts(clean, copy, monkeypatch):
+    """The same map with elements = 2 computes the multi-element parts, and Monte Carlo
+    and single-element OPA only at the sigmas its own bisections probe: every part of the
+    finished map is reused, and its single-element verdicts and sigma* are unchanged."""
+    import re
+
+    def sigmas(names):
+        return {m.group(1) for n in names if (m := re.search(r"_sigma([0-9.e-]+)_", n))}
+
+    old = os.listdir(clean[1])
+    monkeypatch.setattr(trustmap, "find_splits", _refuse)
+    monkeypatch.setattr(trustmap, "_sequence", _refuse)
+    cfg = load_config(None, outdir=str(copy), elements=2, **SMALL)
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+    new = [p for p in os.listdir(copy / "parts") if p not in old]
+    assert any(p.startswith("elements_") for p in new)
+    assert not sigmas(p for p in new if not p.startswith("elements_")) & sigmas(old), new
+    assert ds.attrs["parts_computed"] == len(new) and ds.attrs["parts_set_aside"] == 0
+    single = ds.isel(variant=slice(0, 5))
+    np.testing.assert_array_equal(single.agrees.values, clean[0].agrees.values)
+    np.testing.assert_array_equal(single.err_mean.values, clean[0].err_mean.values)
+    np.testing.assert_array_equal(single.sigma_star.values, clean[0].sigma_star.values)
+
+
+def _refuse(*args, **kwargs):
+    raise AssertionError("integrated although the part was on disk")

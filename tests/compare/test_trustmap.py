@@ -228,3 +228,154 @@ def test_cli_refuses_an_unwritable_outdir_before_computing(tmp_path, capsys):
     target.write_text("x")
     assert main(["validate", "--outdir", str(target)]) == 2
     assert "--outdir" in capsys.readouterr().err
+
+
+# --------------------------------------------------------------------------- another law of
+# xi and multi-element variants
+
+LAW_TINY = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 2), horizons=(4, 8),
+                samples=64, max_samples=128, per_period=4, frontier=False,
+                distribution="uniform", elements="adaptive", max_elements=8)
+
+
+@pytest.fixture(scope="module")
+def tiny_law(tmp_path_factory):
+    out = tmp_path_factory.mktemp("validate_law")
+    cfg = load_config(None, outdir=str(out), **LAW_TINY)
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+    return cfg, ds, out
+
+
+def test_law_and_element_variants_are_named_and_the_paper_truncation_dropped(tiny_law):
+    cfg, ds, _ = tiny_law
+    assert list(ds.variant.values) == [
+        "mean/galerkin", "ensemble/galerkin", "saltation/galerkin", "mean/ME-adaptive8",
+        "ensemble/ME-adaptive8", "saltation/ME-adaptive8"]
+    assert ds.attrs["distribution"] == "uniform" and ds.attrs["elements"] == "adaptive"
+    assert ds.attrs["variants_dropped"].startswith("mean/paper, ensemble/paper")
+    assert ds.attrs["max_elements"] == 8 and ds.attrs["truncation"] == "galerkin"
+    # multi-element variants run at N = Nmax only
+    np.testing.assert_array_equal(ds.variant_ran.values, [[1, 1]] * 3 + [[0, 1]] * 3)
+    assert np.isnan(ds.err_mean.values[:, :, 3:, 0]).all()
+    assert not ds.agrees.values[:, :, 3:, 0].any()
+    n = ds.variant_elements.values
+    assert (n[..., :3] == 1).all() and ((n[..., 3:] >= 1) & (n[..., 3:] <= 8)).all()
+    assert (n[..., 3:] > 1).any()
+    # sigma* for every variant, the multi-element ones included
+    assert np.isfinite(ds.sigma_star.values[:, 3:]).all()
+
+
+def _opa_law(cfg, sigma, order, law, times, elements=None):
+    import warnings
+
+    osc = cfg.oscillator.replace(omega=cfg.values[0])
+    kw = {} if elements is None else dict(elements=elements, max_elements=cfg.max_elements)
+    with warnings.catch_warnings():  # the element budget may run out, as in the map
+        warnings.simplefilter("ignore")
+        return simulate_opa(osc, sigma=sigma, order=order, uncertain="mu",
+                            distribution=cfg.distribution, impact_law=law,
+                            allow_negative=True, times=times, options=cfg.options, **kw)
+
+
+@pytest.mark.parametrize("s", [0, 1])
+def test_law_and_element_verdicts_match_direct_comparisons(tiny_law, s):
+    """The uniform law's Monte Carlo ensemble, its single-element OPA (in the Legendre
+    basis) at every N and its adaptive multi-element OPA at N = Nmax, each judged here
+    from simulate_opa and simulate_mc with the documented criterion."""
+    cfg, ds, _ = tiny_law
+    value, sigma = cfg.values[0], cfg.sigmas[s]
+    osc = cfg.oscillator.replace(omega=value)
+    times = time_grid(value, max(cfg.horizons), cfg.per_period)
+    ens = simulate_mc(osc, sigma=sigma, samples=int(ds.mc_samples[0, s]), sampler="sobol",
+                      seed=cfg.seed, order=0, uncertain="mu", distribution="uniform",
+                      times=times, options=cfg.options, progress=False, keep_paths=True)
+    assert ens.attrs["distribution"] == "uniform"
+    mean, var = ens.x.values.mean(axis=0), ens.x_var.values
+    np.testing.assert_allclose(ds.mc_x_mean.values[0, s], mean, atol=1e-13)
+    sem, var_sem = ens.x_sem.values, ens.x_var_sem.values
+    floor = 10 * (cfg.options.rtol + cfg.options.atol)
+    cases = [(v, k, law, None) for v, law in enumerate(("mean", "ensemble", "saltation"))
+             for k in range(len(cfg.orders))]
+    cases += [(3 + v, len(cfg.orders) - 1, law, "adaptive")
+              for v, law in enumerate(("mean", "ensemble", "saltation"))]
+    for v, k, law, elements in cases:
+        emr = _opa_law(cfg, sigma, cfg.orders[k], law, times, elements)
+        if elements is not None:
+            assert ds.variant_elements.values[0, s, v] == emr.attrs["elements"]
+        np.testing.assert_allclose(ds.opa_x_mean.values[0, s, v, k], emr.x_mean.values,
+                                   rtol=0, atol=1e-12)
+        err = emr.x_mean.values - mean
+        verr = emr.x_var.values - var
+        for h, H in enumerate(cfg.horizons):
+            n = int(round(H * cfg.per_period)) + 1
+            assert ds.agrees.values[0, s, v, k, h, 0] == _agrees(
+                err, np.sqrt(var), sem, n, cfg.tolerance, cfg.z, floor), (v, k, h)
+            assert ds.agrees.values[0, s, v, k, h, 1] == _agrees(
+                verr, var, var_sem, n, cfg.var_tolerance, cfg.z, floor**2), (v, k, h)
+
+
+def test_the_law_map_has_both_verdicts(tiny_law):
+    _, ds, _ = tiny_law
+    a = ds.agrees.values[:, :, :, -1, :, 0]
+    assert a.any() and not a.all()
+
+
+def test_law_map_counts_use_the_law_of_xi(tiny_law):
+    """The impact-count distribution integrates the uniform law between the splits."""
+    from compare._trustmap import count_distribution
+    from opa._splits import Split
+
+    _, ds, _ = tiny_law
+    np.testing.assert_allclose(ds.count_prob.values.sum(axis=-1), 1.0, atol=1e-12)
+    split = Split(value=0.8 + 0.5 * 0.02, tol=1e-9, kind="grazing", time=1.0, speed=1e-3,
+                  left=3, right=4)
+    uniform = count_distribution(0.8, 0.02, [split], 3, cdf=lambda x: (np.asarray(x) + 1) / 2)
+    assert uniform == pytest.approx({3: 0.75, 4: 0.25})
+    semicircle = count_distribution(0.8, 0.02, [split], 3)
+    assert semicircle[4] == pytest.approx(1 / 3 - math.sqrt(3) / (4 * math.pi))
+
+
+def test_semicircle_map_with_k_elements(tmp_path):
+    """K equal-probability elements beside the paper's five variants; the K-element
+    variant's mean is simulate_opa's."""
+    cfg = load_config(None, outdir=str(tmp_path), values=(3.98,), sigmas=(0.02,),
+                      orders=(1,), horizons=(4,), samples=64, max_samples=64, per_period=4,
+                      frontier=False, elements=3)
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+    names = [f"{a}/{b}" for a, b in VARIANTS] + [f"{law}/ME-K3" for law in
+                                                 ("mean", "ensemble", "saltation")]
+    assert list(ds.variant.values) == names and ds.attrs["variants_dropped"] == "none"
+    times = time_grid(3.98, 4, 4)
+    for v, law in enumerate(("mean", "ensemble", "saltation")):
+        emr = simulate_opa(cfg.oscillator, sigma=0.02, order=1, impact_law=law, elements=3,
+                           times=times, options=cfg.options)
+        np.testing.assert_allclose(ds.opa_x_mean.values[0, 0, 5 + v, 0], emr.x_mean.values,
+                                   rtol=0, atol=1e-12)
+        np.testing.assert_allclose(ds.opa_x_var.values[0, 0, 5 + v, 0], emr.x_var.values,
+                                   rtol=0, atol=1e-12)
+    assert (ds.variant_elements.values[..., 5:] == 3).all()
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(distribution="triangle"), "distribution must be one of"),
+    (dict(distribution="beta:0,1"), "distribution 'beta:0,1'"),
+    (dict(distribution=3), "distribution must be a name"),
+    (dict(elements=1), "elements must be an integer in 2..256"),
+    (dict(elements="many"), "elements must be an integer"),
+    (dict(elements=True), "elements must be an integer"),
+    (dict(max_elements=8), "max_elements = 8 .* no effect"),
+    (dict(elements=4, max_elements=8), "no effect"),
+    (dict(elements="adaptive", max_elements=1000), "max_elements must be an integer"),
+])
+def test_law_and_element_settings_are_checked(kw, message):
+    with pytest.raises(ValueError, match=message):
+        load_config(None, **kw)
+
+
+def test_law_settings_from_toml(tmp_path):
+    path = tmp_path / "law.toml"
+    path.write_text('distribution = "beta:2,3"\nelements = "adaptive"\nmax_elements = 16\n')
+    cfg = load_config(str(path))
+    assert (cfg.distribution, cfg.elements, cfg.budget) == ("beta:2,3", "adaptive", 16)
+    assert cfg.variants[-1] == "saltation/ME-adaptive16"
+    assert load_config(None, distribution="beta:2.0,3").distribution == "beta:2,3"

@@ -424,3 +424,45 @@ def test_whole_corpus_in_real_processes(tmp_path):
         except AssertionError as exc:
             failures.append(str(exc).splitlines()[0])
     assert not failures, "\n".join(failures)
+
+
+# the law of xi and multi-element variants of validate, the uncertain parameter of converge
+BAD_LAW_CLI = [
+    (["validate", "--distribution", "triangle"], ("distribution", "triangle")),
+    (["validate", "--distribution", "beta:0,1"], ("distribution", "beta:0,1")),
+    (["validate", "--distribution", "normal-trunc:x"], ("distribution", "normal-trunc:x")),
+    (["validate", "--elements", "1"], ("elements", "1")),
+    (["validate", "--elements", "0"], ("elements", "0")),
+    (["validate", "--elements", "100000"], ("elements", "100000")),
+    (["validate", "--elements", "many"], ("--elements", "many")),
+    (["validate", "--max-elements", "8"], ("max_elements", "8")),
+    (["validate", "--elements", "4", "--max-elements", "8"], ("max_elements", "8")),
+    (["validate", "--elements", "adaptive", "--max-elements", "1000"],
+     ("max_elements", "1000")),
+    (["validate", "--elements", "adaptive", "--max-elements", "0"], ("--max-elements", "0")),
+    (["converge", "--uncertain", "eta"], ("--uncertain", "eta")),
+    (["converge", "--distribution", "triangle"], ("distribution", "triangle")),
+]
+
+
+@pytest.mark.parametrize("argv,names", BAD_LAW_CLI, ids=[" ".join(a) for a, _ in BAD_LAW_CLI])
+def test_bad_law_or_elements_get_one_line_and_exit_2(argv, names, capsys, tmp_path,
+                                                      monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, out, err, seconds = run_cli(argv, capsys)
+    assert_one_line_error(status, err, names, argv)
+    assert seconds < TIME_LIMIT
+
+
+@pytest.mark.parametrize("content, name", [
+    ('distribution = "triangle"\n', "distribution"),
+    ('distribution = 3\n', "distribution"),
+    ('elements = "many"\n', "elements"),
+    ('max_elements = 16\n', "max_elements"),
+    ('elements = "adaptive"\nmax_elements = 1.5\n', "max_elements"),
+])
+def test_bad_law_toml_gets_one_line_and_exit_2(content, name, capsys, tmp_path):
+    path = write(tmp_path, "law.toml", content)
+    status, out, err, _ = run_cli(["validate", "--config", path, "--outdir",
+                                   str(tmp_path / "r")], capsys)
+    assert_one_line_error(status, err, name, ["validate", "--config", path])

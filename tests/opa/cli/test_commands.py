@@ -387,3 +387,49 @@ def test_stability_opa_with_sigma_0_is_the_dmr_orbit_and_free_higher_modes(tmp_p
     expected = np.concatenate([np.linalg.eigvals(monodromy), free, free])
     got = ds.multiplier_real.values[0] + 1j * ds.multiplier_imag.values[0]
     assert_same_multipliers(got, expected, atol=1e-8)
+
+
+def test_validate_uniform_law_with_elements(tmp_path, capsys):
+    """``validate --distribution uniform --elements 2``: the Monte Carlo reference samples
+    the uniform law (within 4 standard errors of Gauss-Legendre collocation of the scipy
+    reference, whose variance differs from the semicircle's), the paper truncation is left
+    out, and the multi-element variants have sigma* beside the single-element ones."""
+    run(["validate", "--values", 3.98, "--sigmas", "0.01,0.03", "--orders", "0:1",
+         "--horizons", 2, "--samples", 64, "--max-samples", 64, "--per-period", 4,
+         "--distribution", "uniform", "--elements", 2, "--no-plots", "--no-frontier",
+         "--quiet", "--outdir", tmp_path])
+    out = capsys.readouterr().out
+    assert "σ* saltation/ME-K2" in out and "variants left out: mean/paper, ensemble/paper" in out
+    ds = load(tmp_path / "validate.nc")
+    assert ds.attrs["distribution"] == "uniform"
+    assert list(ds.variant.values) == ["mean/galerkin", "ensemble/galerkin",
+                                       "saltation/galerkin", "mean/ME-K2", "ensemble/ME-K2",
+                                       "saltation/ME-K2"]
+    assert np.isfinite(ds.sigma_star.values).all()
+    t = ds.periods.values * 2 * math.pi / 3.98
+    xi, w = np.polynomial.legendre.leggauss(12)
+    w = w / 2
+    for sigma in (0.01, 0.03):
+        paths = np.array([reference_trajectory(**{**SECTION_32, "mu": 0.8 + sigma * x},
+                                               t_out=t, rtol=1e-12, atol=1e-12)["x"]
+                          for x in xi])
+        mean = w @ paths
+        var = w @ paths**2 - mean**2
+        point = ds.sel(omega=3.98, sigma=sigma)
+        assert np.all(np.abs(point.mc_x_mean - mean) <= 4 * point.mc_x_sem + 1e-8)
+        assert np.all(np.abs(point.mc_x_var - var) <= 4 * point.mc_x_var_sem + 1e-10)
+
+
+def test_converge_uncertain_c(tmp_path):
+    """``converge --uncertain c`` at tiny sizes: the study's dataset says c is uncertain,
+    and with one collocation node (the nominal system) its error is that of the scipy
+    reference's nominal trajectory against the reference ensemble's mean."""
+    out = tmp_path / "c"
+    run(["converge", "--uncertain", "c", "--sigma", 0.02, "--periods", 2, "--order", 1,
+         "--budgets", 2, "--uniform", "1,2", "--reference", 1024, "--outdir", out,
+         "--quiet"])
+    ds = load(out / "convergence.nc")
+    assert ds.attrs["uncertain"] == "c" and ds.attrs["c"] == 0.05
+    rows = ds.to_dataframe()
+    assert set(rows.method) >= {"ME-OPA uniform", "ME-OPA adaptive", "QMC (Sobol)"}
+    assert np.isfinite(rows.error).all()
