@@ -30,6 +30,50 @@ a missing seed is -1 and a missing sampler is "none".
 """
 
 
+OPA_LAYOUT = """## OPA runs: one layout
+
+Every OPA run, the paper's single-element OPA and multi-element runs of any law of ξ,
+carries the same variables, so that plots, `compare.compare_runs`, `validate` and
+`converge` read one layout:
+
+- `x_mean`, `x_var`, `v_mean`, `v_var` (time): mean and variance of x and x' (for K
+  elements assembled exactly: E[x] = Σ P_k m_k, Var[x] = Σ P_k (s_k + m_k²) − E[x]²);
+- the element structure as a dimension: `element_x_coef`, `element_v_coef` (element,
+  order, time) in each element's orthonormal basis, `element_edges` (edge) in ξ,
+  `element_probability`, `element_impacts`, `element_rhs_evaluations` (element). The
+  paper's OPA is the case K = 1: one element [−1, 1] of probability 1;
+- `x_coef`, `v_coef` (order, time) whenever K = 1, in the orthonormal basis of the law
+  (Chebyshev U_i for the semicircle);
+- attributes `distribution` (the law of ξ), `elements` (K) and `element_mode`
+  (`single`: the paper's OPA; `uniform`, `edges`, `adaptive`: multi-element).
+
+Multi-element runs (`elements=` or `distribution=`) add `element_straddles` (1 where
+the true systems at an element's two edges differ in their impact sequence over the run,
+so that the element's polynomial cannot follow x(t, ξ)) with the attributes
+`straddling_elements` and `straddling_probability`, and `element_method` (0: the
+element's OPA system; 1: collocation of the true systems at its N + 1 Gauss nodes, used
+where its OPA system could not be completed) with `collocation_elements`. Adaptive runs
+add the refinement history (`refinement_elements`, `refinement_share`,
+`refinement_mean_change`) and `tolerance`, `max_elements`, `tolerance_met` (0/1),
+`stopped_by` and `error_estimate` (the RMS change of E[x] in the last refinement step).
+
+A multi-element run's coefficients in the whole law's basis, what a Monte Carlo
+ensemble's `x_coef` estimates, follow exactly from the element layout:
+
+```python
+import opa
+from opa._elements import global_coefficients
+from opa._measure import parse
+
+ds = opa.simulate_opa(opa.Oscillator(), sigma=0.05, order=1, periods=2, elements=2)
+coef = global_coefficients(ds.element_x_coef.values, ds.element_edges.values,
+                           ds.element_probability.values,
+                           parse(ds.attrs["distribution"]), 3)   # (4, time)
+assert abs(coef[0] - ds.x_mean.values).max() < 1e-12          # E[x phi_0] = E[x]
+```
+"""
+
+
 def _runs():
     import numpy as np
 
@@ -44,6 +88,11 @@ def _runs():
         ("opa, multi-element",
          "simulate_opa(Oscillator(), sigma=0.05, order=1, periods=2, elements=2)",
          simulate_opa(osc, sigma=0.05, order=1, periods=2, elements=2)),
+        ("opa, adaptive elements, uniform law",
+         'simulate_opa(Oscillator(), sigma=0.05, order=1, periods=2, elements="adaptive", '
+         'tolerance=1.0, distribution="uniform")',
+         simulate_opa(osc, sigma=0.05, order=1, periods=2, elements="adaptive", tolerance=1.0,
+                      distribution="uniform")),
         ("mc", "simulate_mc(Oscillator(), sigma=0.01, samples=64, order=2, periods=2)",
          simulate_mc(osc, sigma=0.01, samples=64, order=2, periods=2, progress=False)),
         ("bifurcation sweep",
@@ -67,6 +116,8 @@ def _table(ds) -> list[str]:
 def render() -> str:
     out = [HEADER]
     for title, call, ds in _runs():
+        if title == "opa":
+            out.append(OPA_LAYOUT)
         out.append(f"## {title}\n")
         out.append(f"`{call}` (from `opa` and `mc`):\n")
         out.extend(_table(ds))

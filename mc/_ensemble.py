@@ -746,7 +746,7 @@ def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, se
                        {"long_name": "standard error of the estimate of E[x U_i(xi)]",
                         "units": "1"}),
         "n_impacts": ("sample", n_impacts, {"long_name": "impacts of each sample", "units": "1"}),
-        "xi": ("sample", xi, {"long_name": "uncertain variable xi (semicircle on [-1, 1])",
+        "xi": ("sample", xi, {"long_name": f"uncertain variable xi ({distribution} law)",
                               "units": "1"}),
         "weight": ("sample", w, {"long_name": "sample weight", "units": "1"}),
     }

@@ -26,6 +26,17 @@ def test_datasets_page_is_what_the_code_returns():
     assert page.render() == on_disk, "docs/datasets.md is stale: run python docs/datasets.py"
 
 
+def test_datasets_page_examples_run():
+    """Every python block of docs/datasets.md runs and its assertions hold."""
+    import re
+
+    with open(os.path.join(DOCS, "datasets.md"), encoding="utf-8") as fh:
+        blocks = re.findall(r"```python\n(.*?)```", fh.read(), re.S)
+    assert blocks
+    for block in blocks:
+        exec(compile(block, "docs/datasets.md", "exec"), {})
+
+
 def _fake_run(folder, summary: str, count_prob: list[float]):
     """A results folder with a summary and the dataset variables docs/findings.py reads."""
     import numpy as np

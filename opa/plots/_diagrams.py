@@ -89,6 +89,13 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
     ``per_period`` (outputs per forcing period) locates the stroboscopic samples; it is
     inferred from the time grid when omitted.
     """
+    fig = draw_run(ds, per_period=per_period)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def draw_run(ds: xr.Dataset, *, per_period: int | None = None):
+    """The figure of :func:`plot_run`, not saved (the caller closes it)."""
     x, v, label = _state(ds)
     t = ds.time.values
     T = 2 * np.pi / ds.attrs["omega"]
@@ -127,8 +134,7 @@ def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> Non
         f"impulse = {ds.attrs['impulse']}"
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    return fig
 
 
 # --------------------------------------------------------------------------- located marks

@@ -80,3 +80,65 @@ def test_plot_bifurcation_draws_only_located_marks(tmp_path, monkeypatch):
     monkeypatch.undo()  # plt.close is pyplot's own: restore it before closing
     for f in kept:
         plt.close(f)
+
+
+# --------------------------------------------------------------------------- plot_run
+
+
+def _runs_of_every_kind():
+    """Tiny runs of every kind --plot draws: DMR, OPA (one element, K elements, adaptive,
+    laws of xi) and Monte Carlo (laws of xi)."""
+    import warnings
+
+    import mc
+    from opa import Oscillator, simulate_dmr, simulate_opa
+
+    osc = Oscillator(omega=3.98)
+    kw = dict(sigma=0.03, order=2, periods=2, per_period=8)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # an adaptive budget of 4 is meant to run out
+        return {
+            "dmr": simulate_dmr(osc, periods=2, per_period=8),
+            "opa": simulate_opa(osc, **kw),
+            "opa K=3 beta": simulate_opa(osc, elements=3, distribution="beta:2,3", **kw),
+            "opa adaptive uniform c": simulate_opa(
+                osc, elements="adaptive", max_elements=4, distribution="uniform",
+                uncertain="c", **{**kw, "sigma": 0.01}),
+            "mc": mc.simulate_mc(osc, samples=32, progress=False, **kw),
+            "mc beta": mc.simulate_mc(osc, samples=32, distribution="beta:2,3",
+                                      progress=False, **kw),
+        }
+
+
+def test_plot_run_draws_every_kind_of_run(tmp_path):
+    """Every run kind is drawn (issue 24: MC and multi-element plots crashed): the time
+    panel's line is the run's x (DMR) or E[x], the axes are labelled, the legends lie
+    inside their axes, multi-element runs show their elements and ensembles the impacts
+    per sample."""
+    for name, ds in _runs_of_every_kind().items():
+        fig = P.draw_run(ds)
+        try:
+            axes = fig.axes
+            want = ds.x.values if name == "dmr" else ds.x_mean.values
+            np.testing.assert_array_equal(axes[0].lines[0].get_ydata(), want)
+            extra = ("elements" if "K=" in name or "adaptive" in name else
+                     "impacts" if name.startswith("mc") else None)
+            assert len(axes) == (3 if extra else 2), name
+            if extra == "elements":
+                edges = ds.element_edges.values
+                assert axes[2].get_xlim()[0] <= edges[0] and axes[2].get_xlim()[1] >= edges[-1]
+            for ax in axes:
+                assert ax.get_xlabel() and ax.get_ylabel(), (name, ax.get_title())
+                legend = ax.get_legend()
+                if legend is not None:
+                    fig.canvas.draw()
+                    box, frame = legend.get_window_extent(), ax.get_window_extent()
+                    assert frame.x0 - 1 <= box.x0 and box.x1 <= frame.x1 + 1, name
+            law = ds.attrs.get("distribution", "semicircle")
+            if law != "semicircle":  # the title names any other law of xi
+                assert law in fig._suptitle.get_text(), name
+        finally:
+            plt.close(fig)
+        path = tmp_path / f"{name.replace(' ', '_')}.png"
+        P.plot_run(ds, str(path))
+        assert path.stat().st_size > 10_000
