@@ -23,6 +23,7 @@ from __future__ import annotations
 import os
 import re
 import time
+import warnings
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
@@ -31,7 +32,7 @@ import xarray as xr
 from mc._ensemble import simulate_mc
 from opa._basis import quadrature_order
 from opa._dataset import provenance_attrs, write_netcdf
-from opa._elements import collocation, uniform_edges
+from opa._elements import ElementBudgetWarning, collocation, uniform_edges
 from opa._measure import parse
 from opa._model import Oscillator, SolverOptions, preset, time_grid
 from opa._system import System
@@ -148,7 +149,10 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
         def compute():
             t = time.perf_counter()
             try:
-                ds = simulate_opa(base.replace(order=order, impact_law=law), **common, **kw)
+                with warnings.catch_warnings():  # the budget is the study's variable
+                    warnings.simplefilter("ignore", ElementBudgetWarning)
+                    ds = simulate_opa(base.replace(order=order, impact_law=law), **common,
+                                      **kw)
             except SimulationError as err:  # a diverged OPA system: no error to report
                 return {"failure": str(err), "seconds": time.perf_counter() - t}
             sec = time.perf_counter() - t
