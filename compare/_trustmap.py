@@ -12,7 +12,10 @@ section 3.2 range), each point runs
   ``paper`` truncation (eq. (27), the semicircle's) is left out;
 * with ``elements`` (K, or ``"adaptive"`` with a budget), multi-element OPA under the
   mean, ensemble and saltation impact laws at N = Nmax, each with its own verdicts and
-  sigma* beside the single-element ones;
+  sigma* beside the single-element ones. These are what ``simulate_opa`` with elements
+  gives: an element whose OPA system diverges is computed by collocation of the true
+  systems (counted in ``variant_collocated``). The single-element variants are the
+  paper's OPA: a run that cannot be completed is NaN from there on, and disagrees;
 
 and gives, per horizon, the RMS error of x_0 and of the variance (absolute, in MC standard
 errors, relative to the spread) with the verdict of :mod:`compare._trust`. For each q,
@@ -59,7 +62,8 @@ from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
 from opa import _kernel as K
 from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
-from opa._elements import MAX_ELEMENTS, adaptive_edges, element_rule, uniform_edges
+from opa._elements import (MAX_ELEMENTS, adaptive_edges, collocate_element, element_rule,
+                           uniform_edges)
 from opa._measure import Measure, parse as parse_law
 from opa._memory import check_memory
 from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
@@ -347,8 +351,8 @@ class ValidateConfig:
                        dataclasses.asdict(self.options), float(sigma), int(order),
                        self.uncertain, self.distribution, self.element_laws, self.elements,
                        self.budget if self.elements == "adaptive" else None,
-                       ELEMENT_TOLERANCE, max(self.horizons), self.per_period,
-                       *self.impulse_key()])
+                       ELEMENT_TOLERANCE, "collocation of failed elements",
+                       max(self.horizons), self.per_period, *self.impulse_key()])
 
     def splits_key(self, value: float) -> str:
         """A hash of everything the split scan at one swept value depends on."""
@@ -577,6 +581,7 @@ class Point:
     agrees: np.ndarray  # (variant, N, horizon, criterion) bool
     seconds: float = 0.0
     elements: np.ndarray | None = None  # (variant,) elements at N = Nmax (0: failed)
+    collocated: np.ndarray | None = None  # (variant,) of them computed by collocation
     failure: str = ""  # why a multi-element variant could not be run
 
 
@@ -657,42 +662,43 @@ class _Map:
     def _elements(self, value, sigma, order, times) -> dict:
         """The multi-element variants at one N (one per law of ``cfg.element_laws``):
         x_mean, x_var (law, output), first_impact (law,), elements (law,) and the wall
-        time. Adaptive edges are chosen per law (:func:`opa._elements.adaptive_edges`);
-        where refinement ends with a diverged element the variant is NaN throughout and
+        time. Adaptive edges are chosen per law (:func:`opa._elements.adaptive_edges`).
+        As in ``simulate_opa`` with elements, an element whose OPA system cannot be
+        completed is computed by collocation of the true systems (counted in
+        ``collocated``); where even that fails the variant is NaN throughout and
         ``failure`` says why."""
         cfg = self.cfg
 
         def compute():
             start = time.perf_counter()
             system = cfg.system_at(value, sigma=sigma, order=order)
-            edges, failures = [], []
-            for law in cfg.element_laws:
-                if cfg.elements == "adaptive":
-                    try:
+            L = len(cfg.element_laws)
+            mean, var = np.full((L, len(times)), np.nan), np.full((L, len(times)), np.nan)
+            first, count = np.full(L, np.nan), np.zeros(L, np.int64)
+            collocated = np.zeros(L, np.int64)
+            failures = []
+            for ell, law in enumerate(cfg.element_laws):
+                try:
+                    if cfg.elements == "adaptive":
                         runs, _ = adaptive_edges(system.replace(impact_law=law), cfg.options,
                                                  self.measure, times=times,
                                                  tolerance=ELEMENT_TOLERANCE,
                                                  max_elements=cfg.budget)
-                    except SimulationError as err:
-                        edges.append(None)
-                        failures.append(f"{law}: {err}")
-                        continue
-                    edges.append(np.array([r.a for r in runs] + [runs[-1].b]))
-                else:
-                    edges.append(uniform_edges(self.measure, int(cfg.elements)))
-            ran = [k for k, e in enumerate(edges) if e is not None]
-            L = len(cfg.element_laws)
-            mean, var = np.full((L, len(times)), np.nan), np.full((L, len(times)), np.nan)
-            first, count = np.full(L, np.nan), np.zeros(L, np.int64)
-            if ran:
-                run = element_variants(system, cfg.options, self.measure,
-                                       [cfg.element_laws[k] for k in ran],
-                                       [edges[k] for k in ran], times)
-                mean[ran], var[ran] = run["x_mean"], run["x_var"]
-                first[ran], count[ran] = run["first_impact"], run["elements"]
+                        edges = np.array([r.a for r in runs] + [runs[-1].b])
+                    else:
+                        edges = uniform_edges(self.measure, int(cfg.elements))
+                    run = element_variants(system, cfg.options, self.measure, [law], [edges],
+                                           times, fallback=True)
+                except SimulationError as err:  # even the true systems' collocation failed
+                    failures.append(f"{law}: {err}")
+                    continue
+                mean[ell], var[ell] = run["x_mean"][0], run["x_var"][0]
+                first[ell], count[ell] = run["first_impact"][0], run["elements"][0]
+                collocated[ell] = run["collocated"][0]
             self.opa_runs += 1
             return {"x_mean": mean, "x_var": var, "first_impact": first, "elements": count,
-                    "failure": " | ".join(failures), "seconds": time.perf_counter() - start}
+                    "collocated": collocated, "failure": " | ".join(failures),
+                    "seconds": time.perf_counter() - start}
 
         return self.parts.arrays(f"elements_{self._name(value, sigma)}_N{order}",
                                  cfg.element_key(value, sigma, order), compute)
@@ -713,6 +719,7 @@ class _Map:
         first = np.full((V, N), np.nan)
         elements = np.zeros(V, np.int64)
         elements[:S] = 1
+        collocated = np.zeros(V, np.int64)
         T = osc.forcing_period
         seconds = 0.0
         failure = ""
@@ -726,6 +733,7 @@ class _Map:
                 opa_mean[S:, k], opa_var[S:, k] = run["x_mean"], run["x_var"]
                 first[S:, k] = run["first_impact"] / T
                 elements[S:] = run["elements"]
+                collocated[S:] = run["collocated"]
                 failure = str(run["failure"])
                 seconds += run["seconds"]
                 if failure:
@@ -741,6 +749,7 @@ class _Map:
             samples *= 2
         point.seconds = seconds
         point.elements = elements
+        point.collocated = collocated
         point.failure = failure
         return point
 
@@ -946,15 +955,18 @@ def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
 
 
 def element_variants(system: System, options: SolverOptions, measure: Measure, laws,
-                     edges, times: np.ndarray):
+                     edges, times: np.ndarray, *, fallback: bool = False):
     """Multi-element OPA (:mod:`opa._elements`) under several impact laws: law ``laws[l]``
     on the elements cut at ``edges[l]``, each element's system in the orthonormal basis of
     the law of xi conditioned on it (:func:`opa._elements.element_rule`), one parallel
     batch per law. Mean and variance are assembled exactly as
-    :func:`opa._elements.assemble` does, NaN after an element that could not be
-    completed; the first impact is the earliest of any element's mean (inf: none).
+    :func:`opa._elements.assemble` does. An element whose OPA system cannot be completed
+    is NaN from where it stopped, or with ``fallback`` computed by collocation of the true
+    systems (:func:`opa._elements.collocate_element`, as ``simulate_opa`` does with
+    elements). The first impact is the earliest of any element's mean (inf: none).
 
-    Returns a dict of x_mean, x_var, v_mean (L, T), first_impact (L,), elements (L,)."""
+    Returns a dict of x_mean, x_var, v_mean (L, T), first_impact (L,), elements (L,) and
+    collocated (L,): the elements computed by the fallback."""
     order = system.order
     dim = 2 * (order + 1)
     y0 = np.zeros(dim)
@@ -965,8 +977,10 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
     mean, var = np.empty((L, len(times))), np.empty((L, len(times)))
     v_mean = np.empty((L, len(times)))
     first, count = np.full(L, np.inf), np.zeros(L, np.int64)
+    collocated = np.zeros(L, np.int64)
     for ell, (law, cuts) in enumerate(zip(laws, edges)):
-        p, cfg = system.replace(impact_law=law, truncation="galerkin").pack(options)
+        own = system.replace(impact_law=law, truncation="galerkin")
+        p, cfg = own.pack(options)
         cells = [measure.restrict(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
         rules = [element_rule(m, order) for m in cells]
         E = len(cells)
@@ -978,6 +992,10 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
         for e in range(E):
             if counters[e, 0] != K.OK or not np.isfinite(out[e]).all():
                 out[e][~np.isfinite(out[e]).all(axis=1)] = np.nan
+                if fallback:
+                    run = collocate_element(own, options, cells[e], times=times)
+                    out[e][:, : order + 1], out[e][:, order + 1:] = run.x_coef.T, run.v_coef.T
+                    collocated[ell] += 1
             n = min(int(counters[e, 1]), cap)
             hits = np.flatnonzero(np.isin(logs[e, :n, 2], (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK)))
             if len(hits):
@@ -991,7 +1009,7 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
         v_mean[ell] = P @ out[:, :, order + 1]
         count[ell] = E
     return {"x_mean": mean, "x_var": var, "v_mean": v_mean, "first_impact": first,
-            "elements": count}
+            "elements": count, "collocated": collocated}
 
 
 def _sequence(system, cfg, cache, value):
@@ -1067,6 +1085,7 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                      len(cfg.horizons))
     cdf = None if cfg.semicircle else cfg.measure().cdf
     element_count = np.zeros((Q, S, V), np.int64)
+    collocated = np.zeros((Q, S, V), np.int64)
     failures = []
     n_out = int(round(max(cfg.horizons) * cfg.per_period)) + 1
     f = lambda *shape: np.full(shape, np.nan)  # noqa: E731
@@ -1102,6 +1121,7 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                 mc[k][q, s] = p.mc[k]
             samples[q, s] = p.samples
             element_count[q, s] = p.elements
+            collocated[q, s] = p.collocated
             if p.failure:
                 failures.append(f"{cfg.parameter} = {value:g}, sigma = {sigma:g}: {p.failure}")
             imin[q, s], imax[q, s] = p.mc["impacts"]
@@ -1233,8 +1253,12 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                         {"long_name": "1 where the variant is run at this N (multi-element "
                          "variants: N = Nmax only)", **one}),
         "variant_elements": (("value", "sigma", "variant"), element_count,
-                             {"long_name": "elements of the variant at N = Nmax (0: its "
-                              "adaptive refinement ended with a diverged element)", **one}),
+                             {"long_name": "elements of the variant at N = Nmax (0: not "
+                              "computed, see the attribute element_failures)", **one}),
+        "variant_collocated": (("value", "sigma", "variant"), collocated,
+                               {"long_name": "elements whose OPA system could not be "
+                                "completed, computed by collocation of the true systems "
+                                "(as simulate_opa does)", **one}),
     }
     if failures:  # grid points only; bisection probes say so in the log
         attrs = {"element_failures": " | ".join(failures)}

@@ -379,3 +379,32 @@ def test_law_settings_from_toml(tmp_path):
     assert (cfg.distribution, cfg.elements, cfg.budget) == ("beta:2,3", "adaptive", 16)
     assert cfg.variants[-1] == "saltation/ME-adaptive16"
     assert load_config(None, distribution="beta:2.0,3").distribution == "beta:2,3"
+
+
+def test_failed_elements_fall_back_to_collocation_as_in_simulate_opa():
+    """At N = 8, saltation law, 4 uniform-law elements over 20 periods (sigma = 0.05) one
+    element's OPA system diverges: the map's multi-element runs compute it by collocation
+    of the true systems, as simulate_opa does, and say so; without the fallback it is NaN."""
+    import warnings
+
+    from compare._trustmap import element_variants
+    from opa._elements import uniform_edges
+    from opa._measure import parse
+    from opa._model import SolverOptions, preset
+    from opa._system import System
+
+    osc, opts, law = preset("3.2"), SolverOptions(rtol=1e-9, atol=1e-9), parse("uniform")
+    times = time_grid(osc.omega, 20, 4)
+    system = System(osc, sigma=0.05, distribution="uniform", order=8, allow_negative=True)
+    edges = [uniform_edges(law, 4)]
+    run = element_variants(system, opts, law, ["saltation"], edges, times, fallback=True)
+    assert run["collocated"][0] == 1 and run["elements"][0] == 4
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        emr = simulate_opa(osc, sigma=0.05, distribution="uniform", order=8,
+                           impact_law="saltation", allow_negative=True, elements=4,
+                           times=times, options=opts)
+    np.testing.assert_allclose(run["x_mean"][0], emr.x_mean.values, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(run["x_var"][0], emr.x_var.values, rtol=0, atol=1e-14)
+    bare = element_variants(system, opts, law, ["saltation"], edges, times)
+    assert bare["collocated"][0] == 0 and np.isnan(bare["x_mean"][0, -1])
