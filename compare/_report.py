@@ -20,7 +20,9 @@ VARIANT_MARKERS = ("o", "s", "^", "v", "D")
 # saltation/galerkin (variant indices).
 DRAWN_VARIANTS = (0, 1, 4)
 KIND_COLOURS = {"grazing": "tab:red", "extra impact": "tab:orange", "chatter": "tab:purple",
-                "impulse order": "tab:brown", "horizon": "0.6"}
+                "impulse order": "tab:brown", "horizon": "0.6", "output crossing": "tab:cyan"}
+# Kinds of the split arrays that do not change the impact sequence.
+NOT_SPLITS = ("horizon", "output crossing")
 
 
 
@@ -85,12 +87,11 @@ def nominal(ds) -> float:
 
 
 # -- the boundary and what sits there ------------------------------------------------------
-def nearest_split(ds, q: int, h: int):
-    """The split (not a horizon crossing) nearest to the nominal value, as a dict, or None."""
+def _nearest(ds, q: int, h: int, wanted):
     kinds = _kinds(ds)
     vals = ds.split_value.values[q, h]
     kind = ds.split_kind.values[q, h]
-    ok = (kind >= 0) & (kind != kinds.index("horizon"))
+    ok = np.array([k >= 0 and wanted(kinds[k]) for k in kind], dtype=bool)
     if not ok.any():
         return None
     centre = nominal(ds)
@@ -100,6 +101,48 @@ def nearest_split(ds, q: int, h: int):
                 speed=float(ds.split_speed.values[q, h, j]),
                 left=int(ds.split_left.values[q, h, j]),
                 right=int(ds.split_right.values[q, h, j]))
+
+
+def nearest_split(ds, q: int, h: int):
+    """The split (not a horizon crossing, not an output crossing) nearest to the nominal
+    value, as a dict, or None."""
+    return _nearest(ds, q, h, lambda kind: kind not in NOT_SPLITS)
+
+
+def nearest_crossing(ds, q: int, h: int):
+    """The output crossing (an impact time crossing an output time) nearest to the
+    nominal value, as a dict (``time``: the output time, ``speed``: the impact's), or
+    None."""
+    return _nearest(ds, q, h, lambda kind: kind == "output crossing")
+
+
+def complete_within(ds, q: int, h: int) -> float:
+    """The distance from the nominal value within which the split list is complete (inf:
+    the whole scan; datasets written before the limit was reported: inf where the list
+    was not cut, 0 where it was)."""
+    if "split_complete_sigma" in ds:
+        return float(ds.split_complete_sigma.values[q, h])
+    return 0.0 if int(ds.split_truncated.values[q, h]) else float("inf")
+
+
+def _crossing_cause(ds, q: int, h: int, at: float, sigma: float):
+    """The output crossing inside the ensemble at ``sigma`` whose output is the output
+    ``at`` (forcing periods) where OPA first leaves the tolerance, or None."""
+    if "crossing_complete_sigma" not in ds:
+        return None
+    half = 0.5 / float(ds.attrs["per_period"])
+    kinds = _kinds(ds)
+    best = None
+    for j in range(ds.sizes["split"]):
+        k = int(ds.split_kind.values[q, h, j])
+        if k < 0 or kinds[k] != "output crossing":
+            continue
+        d = abs(float(ds.split_value.values[q, h, j]) - nominal(ds))
+        t = float(ds.split_time.values[q, h, j])
+        if d < sigma and abs(t - at) < half and (best is None or d < best["distance"]):
+            best = dict(value=float(ds.split_value.values[q, h, j]), distance=d, time=t,
+                        speed=float(ds.split_speed.values[q, h, j]))
+    return best
 
 
 def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
@@ -113,9 +156,17 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
     sp = nearest_split(ds, q, h)
     law = str(ds.variant.values[v]).split("/")[0]
     head = f"At {par} = {_g(value)} over {H:g} periods"
+    smax = float(ds.sigma.max())
+    reach = complete_within(ds, q, h)
+    cut = ""
+    if reach < smax:
+        cut = (f"; the scan's limit of splits was reached, so splits and impact counts are "
+               f"known only for |{unc} − {_g(nominal(ds))}| < {reach:.2g}")
+    if sp is not None and sp["distance"] >= reach:
+        sp = None
     if sp is None:
         where = f"no sampled system's impact sequence changes for |{unc} − {_g(nominal(ds))}| " \
-                f"≤ {_g(float(ds.sigma.max()))}"
+                + (f"≤ {_g(smax)}" if reach >= smax else f"< {reach:.2g}") + cut
     else:
         more = "above" if sp["right"] > sp["left"] else "below"
         side = (f"{unc} > {sp['value']:.7g}" if more == "above"
@@ -126,7 +177,12 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
                  "impulse order": "an impact on the other side of an impulse"}[sp["kind"]]
         where = (f"samples with {side} (σ ≥ {sp['distance']:.5f}) make {extra} at "
                  f"t ≈ {sp['time']:.2f} periods (speed {sp['speed']:.1e}), "
-                 f"{min(sp['left'], sp['right'])} → {max(sp['left'], sp['right'])} impacts")
+                 f"{min(sp['left'], sp['right'])} → {max(sp['left'], sp['right'])} impacts"
+                 f"{cut}")
+        shape = ("x(t, ξ) is continuous in ξ there but not smooth: the new impact's speed, "
+                 "and with it the change of x after it, grows like the square root of the "
+                 "distance from the split" if sp["kind"] == "grazing" else
+                 "x(t, ξ) is not smooth in ξ there")
     if not np.isfinite(hi):
         return f"{head}, OPA ({law} law) agrees at every σ up to {_g(lo)}; {where}."
     star = star_phrase(lo, hi, float(ds.sigma.max()))
@@ -134,16 +190,27 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
             "smallest grid σ where it fails".format(*_disagree(ds, q, h, v, c))
     if sp is not None and lo == 0 and sp["distance"] <= hi:
         return (f"{head}, {star}, below the bisection's resolution, and so is the first "
-                f"split: {where}. Over this horizon x(t, ξ) is discontinuous in ξ for any σ "
+                f"split: {where}. Over this horizon x(t, ξ) is not smooth in ξ for any σ "
                 f"above {sp['distance']:.2g}; {first}.")
     if sp is not None and lo > 0 and lo - 2 * res <= sp["distance"] <= hi + 2 * res:
-        return (f"{head}, {star} sits at the first split: {where}; x(t, ξ) jumps in ξ "
-                f"there, which no polynomial in ξ and no single impact rule for the whole "
-                f"ensemble can represent.")
+        return (f"{head}, {star} sits at the first split: {where}; {shape}, which no "
+                f"polynomial in ξ and no single impact rule for the whole ensemble can "
+                f"represent.")
     if sp is not None and sp["distance"] < lo:
         return (f"{head}, {star} lies past the first split ({where}): the samples "
                 f"beyond it carry too little probability to move the error past the "
                 f"tolerance before σ*.")
+    at, sigma_fail = _disagree(ds, q, h, v, c)
+    cross = _crossing_cause(ds, q, h, at, sigma_fail)
+    if cross is not None and (sp is None or cross["distance"] < sp["distance"]):
+        return (f"{head}, {star} comes before any split ({where}), but an impact crosses "
+                f"an output time: at {unc} = {cross['value']:.7g} an impact (speed "
+                f"{cross['speed']:.2g}) falls exactly on the output at t = "
+                f"{cross['time']:.2f} periods, so for σ ≥ {cross['distance']:.2g} that output "
+                f"sees some samples just before the impact and the others just after it, and "
+                f"x({cross['time']:.2f} periods, ξ) has a kink in ξ there, which a polynomial "
+                f"in ξ smooths over; {first}: "
+                f"that very output.")
     slow = ""
     if "nominal_slowest_speed" in ds and np.isfinite(ds.nominal_slowest_speed.values[q, h]):
         slow = (f" The nominal system's slowest impact in the horizon hits the wall at speed "
@@ -184,8 +251,12 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
                 row.append(star_text(float(ds.sigma_star.values[q, v, h, 1]),
                                      float(ds.sigma_star_upper.values[q, v, h, 1]), smax))
             sp = nearest_split(ds, q, h)
+            reach = complete_within(ds, q, h)
+            if sp is not None and sp["distance"] >= reach:
+                sp = None
             row += ([f"{sp['distance']:.6f}", sp["kind"], f"{sp['time']:.2f}"] if sp else
-                    [f"none ≤ {_g(smax)}", "", ""])
+                    [f"none ≤ {_g(smax)}" if reach >= smax else
+                     f"none < {reach:.2g} (limit reached)", "", ""])
             rows.append(row)
     title = (f"Trust boundary σ*: the largest σ at which OPA (N = {int(ds.N.max())}) agrees "
              f"with Monte Carlo in the mean, bisected to {ds.attrs['resolution']:g}; the first "
@@ -232,17 +303,24 @@ def count_table(ds: xr.Dataset, h: int, *, markdown: bool = True) -> str:
     for q, value in enumerate(_vals(ds).values):
         for s, sigma in enumerate(ds.sigma.values):
             p = ds.count_prob.values[q, s, h]
+            unknown = float(ds.count_unknown.values[q, s, h]) if "count_unknown" in ds \
+                else 0.0
             nz = np.flatnonzero(p > 0)
-            if len(nz) > 1:
+            if len(nz) > 1 or unknown > 0:
                 big = [k for k in nz if p[k] >= 1e-3]
                 rest = [k for k in nz if p[k] < 1e-3]
                 cell = ", ".join(f"{k}: {p[k]:.3f}" for k in big)
                 if rest:
                     cell += (f", {len(rest)} other counts ({rest[0]}–{rest[-1]}) "
                              f"together: {p[rest].sum():.1e}")
+                if unknown > 0:
+                    cell += (f"; INCOMPLETE: {unknown:.3g} of the samples lie beyond the "
+                             f"located splits (|{_unc(ds)} − {_g(nominal(ds))}| ≥ "
+                             f"{complete_within(ds, q, h):.2g}, the split limit was reached)")
                 rows.append([_g(float(value)), _g(float(sigma)), cell])
-    title = (f"Impact counts up to {float(ds.horizon[h]):g} periods (exact between the "
-             f"located splits; points where every sample makes the same count are left out)")
+    title = (f"Impact counts up to {float(ds.horizon[h]):g} periods (exact where the split "
+             f"list is complete, else marked INCOMPLETE; points where every sample makes the "
+             f"same count are left out)")
     if not rows:
         return f"{title}: every grid point's samples make the same number of impacts."
     return _table(title, head, rows, markdown)
@@ -398,7 +476,8 @@ def plot_map(ds, path):
                 d = abs(float(ds.split_value.values[q, h, j]) - centre)
                 if k < 0 or kinds[k] == "horizon" or d > smax:
                     continue
-                ax.scatter(x[q] + 0.004 * (x[-1] - x[0] + 1e-9), d, marker="D", s=22,
+                ax.scatter(x[q] + 0.004 * (x[-1] - x[0] + 1e-9), d,
+                           marker="v" if kinds[k] == "output crossing" else "D", s=22,
                            color=KIND_COLOURS[kinds[k]], edgecolor="k", lw=0.4, zorder=6,
                            label=f"split: {kinds[k]}")
         ax.set_xlabel(ds.attrs["parameter"])
@@ -673,6 +752,6 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     return [md] + paths
 
 
-__all__ = ["boundary_table", "cause", "count_table", "findings", "frontier_dataset",
-           "frontier_lines", "nearest_split",
+__all__ = ["boundary_table", "cause", "complete_within", "count_table", "findings",
+           "frontier_dataset", "frontier_lines", "nearest_crossing", "nearest_split",
            "star_text", "verdict_grid", "write_report"]

@@ -121,3 +121,88 @@ def test_count_distribution_is_the_semicircle_mass_between_splits():
     assert sum(got.values()) == pytest.approx(1.0, abs=1e-14)
     # a sigma that does not reach either split: every sample makes the centre's count
     assert count_distribution(centre, 0.01, splits, count_at_centre=3) == {3: 1.0}
+
+
+# -- the causes in words: output crossings, the split limit (issue 24) --------------------
+def _map(kinds, values, times, *, star=(0.0215, 0.0219), disagree=9.75, complete=np.inf,
+         unknown=0.0):
+    """A one-point map dataset (omega = 4.09, 10 periods, N = 8, mean/galerkin) with the
+    given split arrays; OPA fails first at sigma = 0.025 at t = ``disagree`` periods."""
+    import xarray as xr
+
+    from opa._splits import SPLIT_KINDS
+
+    n = max(1, len(kinds))
+    sigma = np.array([0.005, 0.01, 0.014, 0.02, 0.025, 0.03, 0.04, 0.05])
+    agrees = np.zeros((1, 8, 1, 1, 1, 2), np.int8)
+    agrees[0, :4] = 1
+    disagree_time = np.full((1, 8, 1, 1, 2), np.inf)
+    disagree_time[0, 4:] = disagree
+    kind = np.full((1, 1, n), -1, np.int8)
+    kind[0, 0, : len(kinds)] = [SPLIT_KINDS.index(k) for k in kinds]
+    pad = lambda a, fill: np.array(list(a) + [fill] * (n - len(a)), float)[None, None]  # noqa: E731
+    count_prob = np.zeros((1, 8, 1, 6))
+    count_prob[0, :, 0, 4] = 1.0 - unknown
+    flags = {"flag_values": np.arange(len(SPLIT_KINDS), dtype=np.int8),
+             "flag_meanings": " ".join(k.replace(" ", "_") for k in SPLIT_KINDS)}
+    return xr.Dataset(
+        {"sigma_star": (("omega", "variant", "horizon", "criterion"),
+                        np.full((1, 1, 1, 2), star[0])),
+         "sigma_star_upper": (("omega", "variant", "horizon", "criterion"),
+                              np.full((1, 1, 1, 2), star[1])),
+         "agrees": (("omega", "sigma", "variant", "N", "horizon", "criterion"), agrees),
+         "disagree_time": (("omega", "sigma", "variant", "N", "criterion"), disagree_time),
+         "split_value": (("omega", "horizon", "split"), pad(values, np.nan)),
+         "split_kind": (("omega", "horizon", "split"), kind, flags),
+         "split_time": (("omega", "horizon", "split"), pad(times, np.nan)),
+         "split_speed": (("omega", "horizon", "split"), pad([0.64] * len(kinds), np.nan)),
+         "split_left": (("omega", "horizon", "split"), pad([4] * len(kinds), -1).astype(int)),
+         "split_right": (("omega", "horizon", "split"), pad([4] * len(kinds), -1).astype(int)),
+         "split_truncated": (("omega", "horizon"), np.array([[int(complete < np.inf)]])),
+         "split_complete_sigma": (("omega", "horizon"), np.array([[complete]])),
+         "crossing_complete_sigma": (("omega", "horizon"), np.array([[complete]])),
+         "count_prob": (("omega", "sigma", "horizon", "count"), count_prob),
+         "count_unknown": (("omega", "sigma", "horizon"), np.full((1, 8, 1), unknown))},
+        coords={"omega": [4.09], "sigma": sigma, "variant": ["mean/galerkin"],
+                "N": [8], "horizon": [10.0], "criterion": ["mean", "variance"]},
+        attrs={"parameter": "omega", "uncertain": "mu", "mu": 0.8, "resolution": 1e-3,
+               "per_period": 8})
+
+
+def test_the_cause_at_4_09_is_an_impact_crossing_the_output_where_opa_fails():
+    from compare._report import cause
+
+    ds = _map(["output crossing", "output crossing"], [0.8019001, 0.8346],
+              [9.75, 7.0])
+    text = cause(ds, 0, 0)
+    assert "comes before any split" in text and "an impact crosses an output time" in text
+    assert "μ = 0.8019001" in text and "t = 9.75 periods" in text
+    assert "σ ≥ 0.0019" in text and "kink in ξ" in text
+    # OPA failing at another output: the crossing is not named as the cause
+    other = cause(_map(["output crossing"], [0.8019001], [9.75], disagree=8.5), 0, 0)
+    assert "crosses an output" not in other and "OPA's own" in other
+    # a crossing outside the failing ensemble (sigma = 0.025) is not the cause either
+    far = cause(_map(["output crossing"], [0.8346], [9.75]), 0, 0)
+    assert "crosses an output" not in far
+
+
+def test_a_grazing_at_the_boundary_is_continuous_with_a_square_root():
+    from compare._report import cause
+
+    ds = _map(["grazing"], [0.777563], [5.57], star=(0.0225, 0.0231))
+    ds["split_left"][:] = 5
+    text = cause(ds, 0, 0)
+    assert "sits at the first split" in text and "jumps" not in text
+    assert "continuous in ξ" in text and "square root" in text
+
+
+def test_a_reached_split_limit_is_said_and_the_counts_marked_incomplete():
+    from compare._report import boundary_table, cause, count_table
+
+    ds = _map([], [], [], complete=0.0042, unknown=0.3)
+    text = cause(ds, 0, 0)
+    assert "limit of splits was reached" in text and "< 0.0042" in text
+    assert "≤ 0.05" not in text
+    assert "limit reached" in boundary_table(ds)
+    table = count_table(ds, 0)
+    assert "INCOMPLETE: 0.3 of the samples" in table
