@@ -26,8 +26,8 @@ def _check_same_grid(a: xr.Dataset, b: xr.Dataset) -> None:
 
 #: what makes two runs runs of the same system (besides the time grid): every model
 #: parameter, the uncertainty and its law, the impulse model
-SYSTEM_ATTRS = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n",
-                "x0", "v0", "sigma", "uncertain", "distribution", "impulse", "pulse_width",
+SYSTEM_ATTRS = ("uncertain", "distribution", "sigma", "mu", "a", "c", "f", "omega", "eta",
+                "delta", "F0", "a1", "omega1", "n", "x0", "v0", "impulse", "pulse_width",
                 "impulse_at_zero")
 
 
@@ -44,8 +44,12 @@ def _check_same_system(a: xr.Dataset, b: xr.Dataset) -> None:
                 else va is not None and vb is not None
                 and np.isclose(float(va), float(vb), rtol=1e-12, atol=0.0))
         if not same:
-            raise ValueError(f"the runs are of different systems: {name} = {va!r} in the "
-                             f"opa dataset, {vb!r} in the mc dataset")
+            def shown(value):
+                return repr(value) if isinstance(value, str) or value is None \
+                    else f"{float(value):g}"
+
+            raise ValueError(f"the runs are of different systems: {name} = {shown(va)} in "
+                             f"the opa dataset, {shown(vb)} in the mc dataset")
 
 
 def _check_models(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
