@@ -3,6 +3,7 @@
     opa-mc validate --outdir results                         # writes results/validate.nc
     python docs/findings.py results                          # the numbers a run gives
     python docs/findings.py results --check docs/findings.md # exit 1 on a stale number
+    python docs/findings.py grazing    # x(t, xi) across the omega = 3.98 grazing (section 2)
 
 The same check for the convergence study of docs/elements.md (its section "Convergence
 against Monte Carlo", against ``convergence.md`` of ``opa-mc converge``):
@@ -102,7 +103,10 @@ def stale(document: Path, results: Path, *, summary: str = "summary.md", start: 
     text = document.read_text()
     body = text[text.index(start):] if start else text
     body = body.split(stop)[0] if stop else body
-    found = np.array(sorted(set(run_numbers(results, summary))))
+    values = run_numbers(results, summary)
+    if GRAZING_COMMAND in body:  # the section quotes the grazing measurement: its numbers
+        values += [v for line in grazing_lines(results) for _, v in numbers(line)]
+    found = np.array(sorted(set(values)))
     bad = []
     for line in body.splitlines():
         if line.startswith("    ") or "`" in line and line.strip().startswith("`"):
@@ -116,10 +120,59 @@ def stale(document: Path, results: Path, *, summary: str = "summary.md", start: 
     return bad
 
 
+GRAZING_STEPS = (1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
+GRAZING_COMMAND = "python docs/findings.py grazing"
+
+
+def grazing_lines(results: Path) -> list[str]:
+    """The lines of ``python docs/findings.py grazing``: read from ``results/grazing.txt``
+    when a run left it there, else measured now (about 10 s) and written there."""
+    path = results / "grazing.txt"
+    if path.exists():
+        return path.read_text().splitlines()
+    lines = grazing()
+    if results.is_dir():
+        path.write_text("\n".join(lines) + "\n")
+    return lines
+
+
+def grazing(omega: float = 3.98, periods: int = 10, per_period: int = 256) -> list[str]:
+    """How x(t, mu) behaves across the grazing split of the default map at ``omega``
+    (section 3.2 set): the split located to 1e-13 in mu with rtol = atol = 1e-12, then the
+    largest change of x over the window, max_t |x(t, mu_s + d) - x(t, mu_s - d)| on
+    ``per_period`` outputs per forcing period, for each d of ``GRAZING_STEPS``, and the
+    exponent fitted to it (1/2: continuous with a square-root singularity; 0: a jump)."""
+    from opa import SolverOptions, preset, simulate_dmr
+    from opa._splits import scan_splits
+
+    osc = preset("3.2", omega=omega)
+    options = SolverOptions(rtol=1e-12, atol=1e-12)
+    T = osc.forcing_period
+    scan = scan_splits(osc, options, "mu", 0.7775, 0.7776, periods * T, scan=9, tol=1e-13,
+                       center=0.7775630)
+    (split,) = [s for s in scan.splits if s.kind == "grazing"]
+    lines = [f"omega = {omega:g}, {periods} periods, rtol = atol = {options.rtol:g}: grazing "
+             f"split at mu_s = {split.value:.10f} (bracket {split.tol:.1e}), new impact at "
+             f"t = {split.time / T:.2f} periods, speed there {abs(split.speed):.1e}"]
+    change = []
+    for d in GRAZING_STEPS:
+        xs = [simulate_dmr(osc.replace(mu=split.value + sign * d), periods=periods,
+                           per_period=per_period, options=options).x.values
+              for sign in (-1.0, 1.0)]
+        change.append(float(np.max(np.abs(xs[1] - xs[0]))))
+        lines.append(f"d = {d:.0e}: max_t |x(t, mu_s + d) - x(t, mu_s - d)| = {change[-1]:.2e}")
+    slope = np.polyfit(np.log(GRAZING_STEPS), np.log(change), 1)[0]
+    lines.append(f"fitted exponent: change ~ d^{slope:.3f}")
+    return lines
+
+
 def main(argv: list[str]) -> int:
     if not argv or argv[0] in ("-h", "--help"):
         print(__doc__)
         return 0 if argv else 2
+    if argv[0] == "grazing":
+        print("\n".join(grazing()))
+        return 0
     results = Path(argv[0])
     def option(name, default):
         return argv[argv.index(name) + 1] if name in argv else default
