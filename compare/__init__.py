@@ -3,6 +3,7 @@
 from compare._metrics import compare_runs, error_metrics
 from compare._report import boundary_table, findings, verdict_grid, write_report
 from compare._trustmap import ValidateConfig, count_distribution, load_config, run_validation
+from compare._verify import verify
 
 
 
@@ -28,5 +29,6 @@ __all__ = [
     "load_config",
     "run_validation",
     "verdict_grid",
+    "verify",
     "write_report",
 ]

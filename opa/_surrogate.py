@@ -11,7 +11,7 @@ coefficients: ``E[x_hat] = sum_k P_k x_0^(k)`` (the run's ``x_mean``) and
 ``E[x_hat^2] = sum_k P_k sum_j (x_j^(k))^2`` (``x_var + x_mean^2``).
 
 Evaluated at the same xi as a true sampled system, the surrogate gives the paired
-difference ``x(t, xi) - x_hat(t, xi)`` that certifies the run (``mc.verify``).
+difference ``x(t, xi) - x_hat(t, xi)`` that certifies the run (``compare.verify``).
 """
 
 from __future__ import annotations

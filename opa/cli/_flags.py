@@ -30,6 +30,8 @@ from opa._system import DEFAULT_ORDER, DEFAULT_SIGMA, SYSTEM_FIELDS, System
 from opa.cli._args import positive_int, whole_number
 
 EXIT_SIMULATION = 3
+#: a result that failed its own verification under --strict
+EXIT_UNVERIFIED = 4
 MAX_WORKERS = 4 * (os.cpu_count() or 1)
 
 
@@ -142,6 +144,21 @@ def _element_flags(parser: argparse.ArgumentParser) -> None:
                         "P_k max_t Var_k exceeds TOL (default 1e-6)")
     g.add_argument("--max-elements", type=positive_int, default=64, metavar="K",
                    help="adaptive elements: the element budget (default 64)")
+
+
+def _verify_flags(parser: argparse.ArgumentParser) -> None:
+    """The paired Monte Carlo certificate of an OPA run (simulate opa only)."""
+    g = parser.add_argument_group("certificate (simulate opa)")
+    g.add_argument("--verify", type=positive_int, default=None, metavar="M",
+                   help="run M true sampled systems at scrambled Sobol' points of the run's "
+                        "law of xi, paired with the OPA surrogate: the errors of the mean "
+                        "and the variance with standard errors, a verdict, and "
+                        "control-variate estimates of E[x] and Var[x]; doubled while the "
+                        "verdict hangs on the noise (M a power of two >= 8)")
+    g.add_argument("--verify-max", type=positive_int, default=4096, metavar="M",
+                   help="the most --verify doubles to (default 4096)")
+    g.add_argument("--strict", action="store_true",
+                   help="with --verify: exit with status 4 when the run disagrees")
 
 
 def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,

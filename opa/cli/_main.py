@@ -14,12 +14,16 @@ import sys
 import time
 import warnings
 
+import numpy as np
+
 from opa.cli._args import EXIT_USAGE, Parser
 from opa.cli._flags import (
     EXIT_SIMULATION,
+    EXIT_UNVERIFIED,
     CliError,
     _common_flags,
     _element_flags,
+    _verify_flags,
     _model_flags,
     _output_flags,
     _summary_events,
@@ -43,6 +47,16 @@ def cmd_simulate(args) -> int:
         raise CliError(f"--elements applies to simulate opa, not simulate {args.model}")
     if args.model == "dmr" and args.distribution is not None:
         raise CliError("--distribution applies to simulate opa and mc, not simulate dmr")
+    if args.verify is not None and args.model != "opa":
+        raise CliError(f"--verify certifies an OPA run: it applies to simulate opa, not "
+                       f"simulate {args.model}")
+    if args.verify is None and (args.strict or args.verify_max != 4096):
+        raise CliError(f"{'--strict' if args.strict else '--verify-max'} applies with "
+                       f"--verify M only")
+    if args.verify is not None:
+        from compare._verify import check_counts
+
+        check_counts(args.verify, max(args.verify, args.verify_max), flags=True)
     start = time.perf_counter()
     if args.model == "dmr":
         from opa._simulate import simulate_dmr
@@ -62,6 +76,13 @@ def cmd_simulate(args) -> int:
                  f"{float(ds.x_var[-1]):.4g}")
         if ds.sizes["element"] > 1:
             final += f" ({ds.sizes['element']} elements)"
+        if args.verify is not None:
+            from compare._verify import verify
+
+            ds = verify(ds, samples=args.verify, max_samples=max(args.verify,
+                                                                  args.verify_max),
+                        seed=args.seed, log=None if args.quiet else
+                        (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
     else:
         from mc import simulate_mc
 
@@ -109,13 +130,45 @@ def cmd_simulate(args) -> int:
         if "impact" in ds.dims:
             print(f"  {_summary_events(ds)}")
         print(f"  final state: {final}")
-        for line in _element_lines(ds):
+        for line in _element_lines(ds) + _verify_lines(ds):
             print(f"  {line}")
         if args.out:
             print(f"  wrote {args.out}")
         if args.plot:
             print(f"  wrote {args.plot}")
+    if args.strict and ds.attrs["verdict"] != "agrees":
+        print(f"opa-mc: the OPA run disagrees with its Monte Carlo certificate (mean: "
+              f"{ds.attrs['verdict_mean']}, variance: {ds.attrs['verdict_var']}); --strict",
+              file=sys.stderr)
+        return EXIT_UNVERIFIED
     return 0
+
+
+def _verify_lines(ds) -> list[str]:
+    """The certificate in three lines: verdict, errors with standard errors, estimates."""
+    if "verdict" not in ds.attrs:
+        return []
+    a = ds.attrs
+
+    def rms(name):
+        return float(np.sqrt(np.mean(ds[name].values ** 2)))
+
+    def when(periods):
+        return "" if periods == float("inf") else f", first disagreement at {periods:.4g} periods"
+
+    return [
+        f"certificate ({a['verify_samples']} true systems, {a['verify_replicates']} "
+        f"scrambled Sobol' replicates): {a['verdict'].upper()} (mean {a['verdict_mean']}"
+        f"{when(a['first_disagreement_mean'])}; variance {a['verdict_var']}"
+        f"{when(a['first_disagreement_var'])})",
+        f"error of E[x]: RMS {rms('verify_err_mean'):.3g} ± {rms('verify_err_mean_sem'):.2g}; "
+        f"of Var[x]: RMS {rms('verify_err_var'):.3g} ± {rms('verify_err_var_sem'):.2g} "
+        f"(paired estimates ± standard errors)",
+        f"control variate: E[x] = {float(ds.cv_x_mean[-1]):.8g} ± "
+        f"{float(ds.cv_x_mean_sem[-1]):.2g}, Var[x] = {float(ds.cv_x_var[-1]):.4g} ± "
+        f"{float(ds.cv_x_var_sem[-1]):.2g} at the end; variance reduction "
+        f"{a['variance_reduction']:.3g}x",
+    ]
 
 
 def _share(share: float) -> str:
@@ -175,6 +228,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help="simulate mc: seconds to wait for the Dask scheduler to answer "
                           "(default 5)")
     _element_flags(sim)
+    _verify_flags(sim)
     _output_flags(sim)
     sim.set_defaults(func=cmd_simulate)
 

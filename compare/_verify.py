@@ -1,0 +1,237 @@
+"""Paired Monte Carlo certificates of OPA runs, and control-variate estimates.
+
+An OPA run of any K and any law of xi defines the surrogate x_hat(t, xi)
+(:mod:`opa._surrogate`) whose moments E[x_hat], E[x_hat^2] are exact. At M points xi_m
+drawn from the run's own law the true sampled systems give x(t, xi_m), and the paired
+differences ``d_m = x(t, xi_m) - x_hat(t, xi_m)`` estimate, without bias,
+
+    E[x] - E[x_hat] = E[d],      E[x^2] - E[x_hat^2] = E[x^2 - x_hat^2],
+
+with a variance Var(d) that shrinks as OPA gets better: the surrogate is a control
+variate (Glasserman 2004, ch. 4; multi-fidelity Monte Carlo: Peherstorfer, Willcox &
+Gunzburger 2016). So the same runs give
+
+* the **error of the run**: ``err_mean = E[x_hat] - (E[x_hat] + mean d) = -mean d`` and
+  ``err_var = Var[x_hat] - Var_cv[x]``, with standard errors, and a verdict under the trust
+  map's criterion (:mod:`compare._trust`: running RMS error <= tol x running RMS spread +
+  z x running RMS SE + floor);
+* **control-variate estimates** ``E_cv[x] = E[x_hat] + mean d`` and ``Var_cv[x] =
+  E[x_hat^2] + mean(x^2 - x_hat^2) - E_cv[x]^2`` with standard errors, and the variance
+  reduction factor Var(x) / Var(d).
+
+The points are scrambled Sobol' in R independent replicates (``mc.sample_xi``); every
+estimate is formed per replicate and its standard error is the spread of the R replicate
+estimates over sqrt(R), the honest error of randomised QMC. Sequential: start at
+``samples`` points and double while a verdict hangs on the noise (it differs between no
+allowance and twice the allowance for the standard errors), up to ``max_samples``.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+
+import numpy as np
+import xarray as xr
+
+from compare._trust import first_disagreement, marginal
+from mc._sampling import sample_xi
+from opa._dataset import check_opa_layout
+from opa._elements import true_runs
+from opa._memory import check_memory
+from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions
+from opa._surrogate import run_measure, surrogate, surrogate_moments
+from opa._system import System
+
+#: the trust map's criterion (README, "The main job")
+MEAN_TOLERANCE = 0.1
+VAR_TOLERANCE = 0.25
+Z = 3.0
+
+
+def system_of(run: xr.Dataset) -> tuple[System, SolverOptions]:
+    """The System and solver options an OPA run was computed with, from its attributes."""
+    attrs = run.attrs
+    oscillator = Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES})
+    distribution = attrs.get("distribution", "semicircle")
+    system = System(oscillator, sigma=float(attrs["sigma"]), order=0,
+                    uncertain=str(attrs["uncertain"]),
+                    distribution=None if distribution == "semicircle" else distribution,
+                    allow_negative=bool(attrs.get("allow_negative", 0)),
+                    impulse=str(attrs["impulse"]), pulse_width=float(attrs["pulse_width"]),
+                    impulse_at_zero=bool(attrs["impulse_at_zero"]))
+    options = SolverOptions(rtol=float(attrs["rtol"]), atol=float(attrs["atol"]),
+                            method=str(attrs.get("method", "dop853")),
+                            chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))
+    return system, options
+
+
+def _check_count(name: str, value, least: int) -> int:
+    if not (isinstance(value, numbers.Integral) and not isinstance(value, bool)
+            and value >= least and value & (value - 1) == 0):
+        raise ValueError(f"{name} must be a power of two >= {least} (scrambled Sobol' "
+                         f"points in up to 16 replicates), got {value!r}")
+    return int(value)
+
+
+def check_counts(samples, max_samples, *, flags: bool = False) -> tuple[int, int]:
+    """``samples`` and ``max_samples`` checked (``flags``: named as the CLI's flags)."""
+    first, most = ("--verify", "--verify-max") if flags else ("samples", "max_samples")
+    samples = _check_count(first, samples, 8)
+    return samples, _check_count(most, max_samples, samples)
+
+
+def paired_estimates(x: np.ndarray, x_hat: np.ndarray, replicates: int,
+                     surrogate_mean: np.ndarray, surrogate_second: np.ndarray) -> dict:
+    """Control-variate estimates from paired values, formed per replicate.
+
+    ``x``, ``x_hat``: (M, T) true and surrogate values at M points, replicate r holding
+    rows ``r M/R .. (r+1) M/R - 1``; ``surrogate_mean``, ``surrogate_second``: the exact
+    E[x_hat], E[x_hat^2] (T,). Returns the estimates and their standard errors (the
+    spread of the R replicate estimates over sqrt(R)): ``d`` = E[x - x_hat],
+    ``mean`` = E_cv[x], ``var`` = Var_cv[x]; and ``variance_reduction`` =
+    sum_t Var(x) / sum_t Var(x - x_hat) over the points.
+
+    Examples
+    --------
+    A perfect surrogate leaves no error and no noise:
+
+    >>> x = np.linspace(-1, 1, 16)[:, None] ** 2
+    >>> est = paired_estimates(x, x, 4, np.array([x.mean()]), np.array([(x**2).mean()]))
+    >>> float(est["d"][0]), float(est["d_se"][0])
+    (0.0, 0.0)
+    """
+    M, T = x.shape
+    if M % replicates or replicates < 2:
+        raise ValueError(f"{M} points cannot form {replicates} replicates of equal size")
+    d = (x - x_hat).reshape(replicates, -1, T).mean(axis=1)
+    q = (x**2 - x_hat**2).reshape(replicates, -1, T).mean(axis=1)
+    mean_r = surrogate_mean + d
+    var_r = surrogate_second + q - mean_r**2
+    out = {}
+    for name, per_replicate in (("d", d), ("mean", mean_r), ("var", var_r)):
+        out[name] = per_replicate.mean(axis=0)
+        out[f"{name}_se"] = per_replicate.std(axis=0, ddof=1) / math.sqrt(replicates)
+    var_d = float(np.var(x - x_hat, axis=0).sum())
+    out["variance_reduction"] = float(np.var(x, axis=0).sum()) / var_d if var_d > 0 \
+        else math.inf
+    return out
+
+
+def interval_halfwidth(se, replicates: int, level: float = 0.95):
+    """Half-width of a two-sided ``level`` confidence interval from a replicate standard
+    error: Student's t with R - 1 degrees of freedom (R = 16: 2.13 SE)."""
+    from scipy import stats
+
+    return stats.t.ppf(0.5 + level / 2, replicates - 1) * np.asarray(se)
+
+
+def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed: int = 0,
+           tolerance: float = MEAN_TOLERANCE, var_tolerance: float = VAR_TOLERANCE,
+           z: float = Z, sequential: bool = True, log=None) -> xr.Dataset:
+    """The run with its paired Monte Carlo certificate and control-variate estimates.
+
+    Parameters
+    ----------
+    run : an OPA dataset (any number of elements, any law of xi, any uncertain parameter).
+    samples : true systems of the first round (a power of two >= 8).
+    max_samples : the most a sequential certificate doubles to (a power of two).
+    seed : seed of the scrambled Sobol' points.
+    tolerance, var_tolerance, z : the verdict's criterion for the mean and the variance
+        (the trust map's defaults 0.1, 0.25 and 3).
+    sequential : double the samples while a verdict hangs on the noise; False: one round.
+    log : callable taking a line of progress, or None.
+
+    Returns
+    -------
+    A copy of ``run`` with ``verify_err_mean``, ``verify_err_var`` (OPA minus truth) and
+    their standard errors, the control-variate estimates ``cv_x_mean``, ``cv_x_var`` and
+    their standard errors (time), and the attributes ``verdict`` (``agrees`` |
+    ``disagrees``), ``verdict_mean``, ``verdict_var``, ``first_disagreement_mean`` and
+    ``_var`` (forcing periods; inf: none), ``verify_samples``, ``verify_replicates``,
+    ``verify_rounds``, ``variance_reduction`` and ``verify_rhs_evaluations``.
+    """
+    check_opa_layout(run, "run")
+    samples, max_samples = check_counts(samples, max_samples)
+    for name, value in (("tolerance", tolerance), ("var_tolerance", var_tolerance), ("z", z)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+                or not (math.isfinite(value) and value >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+    if "failure" in run.attrs:
+        raise ValueError(f"the run did not complete ({run.attrs['failure']}): nothing to "
+                         f"verify")
+    system, options = system_of(run)
+    measure = run_measure(run)
+    times = run.time.values
+    check_memory("verification paths", max_samples * len(times) * 8 * 5,
+                 f"max_samples {max_samples} x {len(times)} outputs x 5 arrays")
+    moments = surrogate_moments(run)
+    floor = 10 * (options.rtol + options.atol)
+    T = 2 * math.pi / system.oscillator.omega
+    M, rounds, rhs = samples, 0, 0
+    while True:
+        rounds += 1
+        replicates = min(16, M // 4)
+        xi, _ = sample_xi("sobol", M, seed, replicates, distribution=measure)
+        paths, n_rhs = true_runs(system, options, xi, times, what="verification sample")
+        rhs += n_rhs
+        est = paired_estimates(paths[:, :, 0], surrogate(run, xi, measure=measure)[0],
+                               replicates, moments["x_mean"], moments["x_second"])
+        d_se = est["d_se"]
+        cv_mean, cv_mean_se, cv_var, cv_var_se = (est["mean"], est["mean_se"], est["var"],
+                                                  est["var_se"])
+        err_mean, err_var = -est["d"], run.x_var.values - cv_var
+        spread = np.sqrt(np.maximum(cv_var, 0.0))
+        hangs = [marginal(err_mean, spread, d_se, tol=tolerance, z=z, floor=floor,
+                          upto=len(times)),
+                 marginal(err_var, cv_var, cv_var_se, tol=var_tolerance, z=z, floor=floor,
+                          upto=len(times))]
+        if log is not None:
+            log(f"verify: {M} true systems, error of E[x] RMS "
+                f"{float(np.sqrt(np.mean(err_mean**2))):.3g} ± "
+                f"{float(np.sqrt(np.mean(d_se**2))):.2g}"
+                + (" (verdict hangs on the noise: doubling)" if any(hangs)
+                   and sequential and M < max_samples else ""))
+        if not (sequential and any(hangs) and M < max_samples):
+            break
+        M *= 2
+    first_mean = first_disagreement(times, err_mean, spread, d_se, tol=tolerance, z=z,
+                                    floor=floor)
+    first_var = first_disagreement(times, err_var, cv_var, cv_var_se, tol=var_tolerance,
+                                   z=z, floor=floor)
+    one = {"units": "1"}
+    out = run.copy()
+    out["verify_err_mean"] = ("time", err_mean, {
+        "long_name": "paired estimate of the error of E[x]: E[x_hat] - E[x]", **one})
+    out["verify_err_mean_sem"] = ("time", d_se, {
+        "long_name": "standard error of verify_err_mean (spread of the replicates)", **one})
+    out["verify_err_var"] = ("time", err_var, {
+        "long_name": "paired estimate of the error of Var[x]: Var[x_hat] - Var[x]", **one})
+    out["verify_err_var_sem"] = ("time", cv_var_se, {
+        "long_name": "standard error of verify_err_var", **one})
+    out["cv_x_mean"] = ("time", cv_mean, {
+        "long_name": "control-variate estimate of E[x] (surrogate + paired differences)",
+        **one})
+    out["cv_x_mean_sem"] = ("time", cv_mean_se, {"long_name": "standard error of cv_x_mean",
+                                                 **one})
+    out["cv_x_var"] = ("time", cv_var, {"long_name": "control-variate estimate of Var[x]",
+                                        **one})
+    out["cv_x_var_sem"] = ("time", cv_var_se, {"long_name": "standard error of cv_x_var",
+                                               **one})
+    verdict_mean = "agrees" if math.isinf(first_mean) else "disagrees"
+    verdict_var = "agrees" if math.isinf(first_var) else "disagrees"
+    out.attrs.update(
+        verdict="agrees" if verdict_mean == verdict_var == "agrees" else "disagrees",
+        verdict_mean=verdict_mean, verdict_var=verdict_var,
+        first_disagreement_mean=first_mean / T, first_disagreement_var=first_var / T,
+        verify_samples=int(M), verify_replicates=int(replicates),
+        verify_rounds=int(rounds), verify_seed=int(seed), verify_tolerance=float(tolerance),
+        verify_var_tolerance=float(var_tolerance), verify_z=float(z),
+        variance_reduction=est["variance_reduction"],
+        verify_rhs_evaluations=int(rhs),
+    )
+    return out
+
+
+__all__ = ["MEAN_TOLERANCE", "VAR_TOLERANCE", "Z", "check_counts", "interval_halfwidth",
+           "paired_estimates", "system_of", "verify"]
