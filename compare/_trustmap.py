@@ -22,7 +22,7 @@ errors, relative to the spread) with the verdict of :mod:`compare._trust`. For e
 ``sigma*`` -- the largest sigma at which OPA at the highest N still agrees -- is located by
 bisection in sigma between the last agreeing and the first failing grid value. The sampled
 systems' impact sequences are scanned along the uncertain parameter
-(:func:`opa._splits.find_splits`): their splits, what happens there, and the distribution
+(:func:`opa._splits.scan_splits`): their splits, what happens there, and the distribution
 of impact counts at every grid point say *why* the boundary is where it is.
 
 Every piece of work is written to ``OUTDIR/parts/`` as it finishes (:class:`Parts`) and
@@ -71,7 +71,7 @@ from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, ch
 from opa._run import SimulationError, run_batch
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._system import IMPULSE_FIELDS, System
-from opa._splits import SPLIT_KINDS, Split, find_splits
+from opa._splits import SPLIT_KINDS, Split, count_probabilities, scan_splits
 
 # The single-element variants (impact law, truncation) under the semicircle law. Under
 # another law of xi the `paper` truncation (eq. (27), written in the semicircle's basis)
@@ -359,7 +359,7 @@ class ValidateConfig:
         return digest(["splits", self.oscillator_at(value).as_dict(),
                        dataclasses.asdict(self.options), self.uncertain, max(self.sigmas),
                        min(self.sigmas), self.horizons, self.split_resolution,
-                       *self.impulse_key()])
+                       *self.impulse_key(), "complete", self.per_period])
 
 
 def digest(payload) -> str:
@@ -815,16 +815,20 @@ class _Map:
             cache: dict = {"t_end": max(cfg.horizons) * T}
             found = {}
             for h in sorted(cfg.horizons, reverse=True):
-                found[h] = find_splits(
+                found[h] = scan_splits(
                     cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax, centre + smax, h * T,
-                    tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache)
+                    tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache,
+                    outputs=time_grid(osc.omega, h, cfg.per_period))
             seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache,
                                                         centre)
             scans = []
             for h in cfg.horizons:
                 speed, when = seq_centre.slowest_impact(h * T)
-                scans.append(HorizonSplits(h, found[h][0], bool(found[h][1]), speed, when / T,
-                                           seq_centre.count(h * T)))
+                scan = found[h]
+                scans.append(HorizonSplits(
+                    h, sorted(scan.splits + scan.crossings, key=lambda sp: sp.value),
+                    scan.truncated, speed, when / T, seq_centre.count(h * T),
+                    scan.complete_within, scan.crossings_within))
             return _splits_to_arrays(scans)
 
         stored = self.parts.arrays(f"splits_{self._name(value)}", cfg.splits_key(value),
@@ -1027,10 +1031,12 @@ class HorizonSplits:
 
     horizon: float  # forcing periods
     splits: list[Split]  # sorted by value
-    truncated: bool  # more splits exist than were located
+    truncated: bool  # the split limit left changes unlocated
     slowest_speed: float  # the nominal system's slowest impact within the horizon (NaN: none)
     slowest_time: float  # its time, forcing periods
     count: int  # the nominal system's impacts up to the horizon
+    complete_within: float = math.inf  # every split with |value - centre| below it is listed
+    crossings_within: float = math.inf  # the same for the output crossings
 
 
 _SPLIT_FIELDS = ("value", "tol", "kind", "time", "speed", "left", "right")
@@ -1043,6 +1049,8 @@ def _splits_to_arrays(scans: list[HorizonSplits]) -> dict:
            "slowest_speed": np.array([s.slowest_speed for s in scans], float),
            "slowest_time": np.array([s.slowest_time for s in scans], float),
            "count": np.array([s.count for s in scans], np.int64),
+           "complete_within": np.array([s.complete_within for s in scans], float),
+           "crossings_within": np.array([s.crossings_within for s in scans], float),
            "split_horizon": np.array([h for h, _ in every], np.int64)}
     for name in _SPLIT_FIELDS:
         dtype = str if name == "kind" else (np.int64 if name in ("left", "right") else float)
@@ -1059,25 +1067,22 @@ def _splits_from_arrays(stored: dict) -> list[HorizonSplits]:
         scans.append(HorizonSplits(float(stored["horizon"][h]), splits,
                                    bool(stored["truncated"][h]),
                                    float(stored["slowest_speed"][h]),
-                                   float(stored["slowest_time"][h]), int(stored["count"][h])))
+                                   float(stored["slowest_time"][h]), int(stored["count"][h]),
+                                   float(stored["complete_within"][h]),
+                                   float(stored["crossings_within"][h])))
     return scans
 
 
-def count_distribution(centre, sigma, splits, count_at_centre, cdf=None) -> dict[int, float]:
+def count_distribution(centre, sigma, splits, count_at_centre, cdf=None,
+                       complete_within=math.inf) -> dict[int, float]:
     """P(impacts up to the horizon = k) for the ensemble ``centre + sigma xi``, exact
     between the located changes of the count (``splits`` sorted by value, each with the
     counts on its two sides); ``cdf`` is that of the law of xi on [-1, 1] (default the
-    semicircle)."""
+    semicircle). Only the samples with ``|value - centre| < complete_within`` (where the
+    split list is complete) are counted: the probabilities then sum to less than 1
+    (:func:`opa._splits.count_probabilities`)."""
     cdf = semicircle_cdf if cdf is None else cdf
-    inside = [s for s in splits if abs(s.value - centre) < sigma]
-    if not inside:
-        return {count_at_centre: 1.0}
-    edges = [-1.0] + [(s.value - centre) / sigma for s in inside] + [1.0]
-    counts = [inside[0].left] + [s.right for s in inside]
-    prob: dict[int, float] = {}
-    for lo, hi, n in zip(edges[:-1], edges[1:], counts):
-        prob[n] = prob.get(n, 0.0) + float(cdf(hi) - cdf(lo))
-    return prob
+    return count_probabilities(splits, centre, sigma, count_at_centre, cdf, complete_within)[0]
 
 
 def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
@@ -1103,6 +1108,8 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         f(Q, H, max_split), f(Q, H, max_split)
     sleft, sright = (np.full((Q, H, max_split), -1, np.int64) for _ in range(2))
     struncated = np.zeros((Q, H), np.int8)
+    complete, crossing_complete = np.full((Q, H), np.inf), np.full((Q, H), np.inf)
+    unknown = np.zeros((Q, S, H))
     slow_speed, slow_time = f(Q, H), f(Q, H)
     sigma_split = f(Q, H)
     split_kind_nearest = np.full((Q, H), -1, np.int8)
@@ -1134,8 +1141,10 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         for h, scan in enumerate(scans):
             splits = scan.splits
             struncated[q, h] = scan.truncated
+            complete[q, h], crossing_complete[q, h] = scan.complete_within, \
+                scan.crossings_within
             slow_speed[q, h], slow_time[q, h] = scan.slowest_speed, scan.slowest_time
-            real = [sp for sp in splits if sp.kind != "horizon"]
+            real = [sp for sp in splits if sp.kind not in ("horizon", "output crossing")]
             if real:
                 near = min(real, key=lambda sp: abs(sp.value - centre))
                 sigma_split[q, h] = abs(near.value - centre)
@@ -1145,8 +1154,11 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                 skind[q, h, j] = SPLIT_KINDS.index(sp.kind)
                 sleft[q, h, j], sright[q, h, j] = sp.left, sp.right
             for s, sigma in enumerate(cfg.sigmas):
-                counts[(q, s, h)] = count_distribution(centre, sigma, splits, scan.count, cdf)
-    kmax = max(max(d) for d in counts.values())
+                counts[(q, s, h)] = count_distribution(centre, sigma, splits, scan.count, cdf,
+                                                       scan.complete_within)
+                if scan.complete_within < sigma:
+                    unknown[q, s, h] = 1.0 - sum(counts[(q, s, h)].values())
+    kmax = max(max(d, default=0) for d in counts.values())
     count_prob = np.zeros((Q, S, H, kmax + 1))
     for (q, s, h), dist in counts.items():
         for n, prob in dist.items():
@@ -1225,17 +1237,25 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         "split_kind": (("value", "horizon", "split"), skind,
                        {"long_name": "what happens at the split (-1: none)", **kinds}),
         "split_time": (("value", "horizon", "split"), stime,
-                       {"long_name": "time of the first differing event",
-                        "units": "forcing periods"}),
+                       {"long_name": "time of the first differing event (output "
+                        "crossing: the output time)", "units": "forcing periods"}),
         "split_speed": (("value", "horizon", "split"), sspeed,
-                        {"long_name": "speed of the first differing event", **one}),
+                        {"long_name": "speed of the first differing event (output "
+                         "crossing: of the impact)", **one}),
         "split_left": (("value", "horizon", "split"), sleft,
                        {"long_name": "impacts up to the horizon just below the split", **one}),
         "split_right": (("value", "horizon", "split"), sright,
                         {"long_name": "impacts up to the horizon just above the split", **one}),
         "split_truncated": (("value", "horizon"), struncated,
-                            {"long_name": "1 where more splits exist than were located "
-                             "(the nearest to the nominal value were kept)", **one}),
+                            {"long_name": "1 where the split limit left changes unlocated "
+                             "(the list is complete within split_complete_sigma)", **one}),
+        "split_complete_sigma": (("value", "horizon"), complete,
+                                 {"long_name": "every split with |value - nominal| below "
+                                  "this is listed (inf: the whole scan)", **one}),
+        "crossing_complete_sigma": (("value", "horizon"), crossing_complete,
+                                    {"long_name": "every output crossing with |value - "
+                                     "nominal| below this is listed (inf: the whole scan)",
+                                     **one}),
         "nominal_slowest_speed": (("value", "horizon"), slow_speed,
                                   {"long_name": "slowest impact of the nominal system within "
                                    "the horizon: its speed (NaN: no impact)", **one}),
@@ -1248,7 +1268,12 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         "sigma_split_kind": (("value", "horizon"), split_kind_nearest,
                              {"long_name": "kind of that nearest split", **kinds}),
         "count_prob": (("value", "sigma", "horizon", "count"), count_prob,
-                       {"long_name": "probability of k impacts up to the horizon", **one}),
+                       {"long_name": "probability of k impacts up to the horizon (exact "
+                        "where the split list is complete)", **one}),
+        "count_unknown": (("value", "sigma", "horizon"), unknown,
+                          {"long_name": "probability of the samples beyond "
+                           "split_complete_sigma, whose count is not known (0: complete)",
+                           **one}),
         "variant_ran": (("variant", "N"), ran,
                         {"long_name": "1 where the variant is run at this N (multi-element "
                          "variants: N = Nmax only)", **one}),

@@ -23,7 +23,7 @@ SMALL = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1), horizons=(4,), 
 RUN_ATTRS = ("history", "wall_seconds", "mc_runs_computed", "opa_runs_computed",
              "parts_computed", "parts_set_aside")
 INTEGRATORS = {
-    trustmap: ("opa_variants", "simulate_mc", "simulate_opa", "simulate_dmr", "find_splits",
+    trustmap: ("opa_variants", "simulate_mc", "simulate_opa", "simulate_dmr", "scan_splits",
                "_sequence", "element_variants", "adaptive_edges"),
     convergence: ("simulate_opa", "simulate_mc", "collocation"),
 }
@@ -257,7 +257,7 @@ def test_adding_elements_to_a_finished_map_reuses_its_parts(clean, copy, monkeyp
         return {m.group(1) for n in names if (m := re.search(r"_sigma([0-9.e-]+)_", n))}
 
     old = os.listdir(clean[1])
-    monkeypatch.setattr(trustmap, "find_splits", _refuse)
+    monkeypatch.setattr(trustmap, "scan_splits", _refuse)
     monkeypatch.setattr(trustmap, "_sequence", _refuse)
     cfg = load_config(None, outdir=str(copy), elements=2, **SMALL)
     ds = run_validation(cfg, progress=False, log=lambda *a: None)
