@@ -77,6 +77,7 @@ assert abs(coef[0] - ds.x_mean.values).max() < 1e-12          # E[x phi_0] = E[x
 def _runs():
     import numpy as np
 
+    from compare import verify
     from mc import simulate_mc
     from opa import Oscillator, preset, simulate_dmr, simulate_opa, sweep
 
@@ -93,6 +94,11 @@ def _runs():
          'tolerance=1.0, distribution="uniform")',
          simulate_opa(osc, sigma=0.05, order=1, periods=2, elements="adaptive", tolerance=1.0,
                       distribution="uniform")),
+        ("opa with its certificate",
+         "compare.verify(simulate_opa(Oscillator(), sigma=0.01, order=2, periods=2), "
+         "samples=16, sequential=False)",
+         verify(simulate_opa(osc, sigma=0.01, order=2, periods=2), samples=16,
+                sequential=False)),
         ("mc", "simulate_mc(Oscillator(), sigma=0.01, samples=64, order=2, periods=2)",
          simulate_mc(osc, sigma=0.01, samples=64, order=2, periods=2, progress=False)),
         ("bifurcation sweep",
