@@ -16,9 +16,10 @@ import xarray as xr
 # exact Galerkin truncation.
 HEADLINE = 0
 VARIANT_MARKERS = ("o", "s", "^", "v", "D")
-# The impact laws drawn and summarised side by side: mean/galerkin, ensemble/galerkin,
-# saltation/galerkin (variant indices).
-DRAWN_VARIANTS = (0, 1, 4)
+# The impact laws drawn and summarised side by side (by name: under a law of xi other than
+# the semicircle the paper-truncation variants are left out, and multi-element variants
+# named "<law>/ME-<K8|adaptive64>" follow the single-element ones).
+DRAWN_VARIANTS = ("mean/galerkin", "ensemble/galerkin", "saltation/galerkin")
 KIND_COLOURS = {"grazing": "tab:red", "extra impact": "tab:orange", "chatter": "tab:purple",
                 "impulse order": "tab:brown", "horizon": "0.6", "output crossing": "tab:cyan"}
 # Kinds of the split arrays that do not change the impact sequence.
@@ -66,7 +67,20 @@ def star_phrase(lo: float, hi: float, smax: float) -> str:
 
 def _laws(ds) -> list[int]:
     """Indices of the variants compared across impact laws (those in the dataset)."""
-    return [v for v in DRAWN_VARIANTS if v < ds.sizes["variant"]]
+    names = [str(v) for v in ds.variant.values]
+    return [names.index(n) for n in DRAWN_VARIANTS if n in names]
+
+
+def _element_variants(ds) -> list[int]:
+    """Indices of the multi-element variants (run at N = Nmax only)."""
+    return [v for v, name in enumerate(ds.variant.values) if "/ME-" in str(name)]
+
+
+def _single_of(ds, v: int) -> int | None:
+    """The single-element Galerkin variant of the same impact law as variant v."""
+    names = [str(n) for n in ds.variant.values]
+    name = names[v].split("/")[0] + "/galerkin"
+    return names.index(name) if name in names else None
 
 
 def _vals(ds):
@@ -154,7 +168,8 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
               float(ds.sigma_star_upper.values[q, v, h, c]))
     res = float(ds.attrs["resolution"])
     sp = nearest_split(ds, q, h)
-    law = str(ds.variant.values[v]).split("/")[0]
+    law, _, kind = str(ds.variant.values[v]).partition("/")
+    law = f"{law} law, {kind}" if kind.startswith("ME-") else law
     head = f"At {par} = {_g(value)} over {H:g} periods"
     smax = float(ds.sigma.max())
     reach = complete_within(ds, q, h)
@@ -184,7 +199,10 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
                  "distance from the split" if sp["kind"] == "grazing" else
                  "x(t, ξ) is not smooth in ξ there")
     if not np.isfinite(hi):
-        return f"{head}, OPA ({law} law) agrees at every σ up to {_g(lo)}; {where}."
+        return f"{head}, OPA ({law}{'' if ', ME-' in law else ' law'}) agrees at every σ up " \
+               f"to {_g(lo)}; {where}."
+    if kind.startswith("ME-"):
+        head += f" ({law})"
     star = star_phrase(lo, hi, float(ds.sigma.max()))
     first = "OPA first leaves the tolerance at t ≈ {:.2f} periods at σ = {:g}, the " \
             "smallest grid σ where it fails".format(*_disagree(ds, q, h, v, c))
@@ -236,8 +254,9 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
     par, unc = _par(ds), _unc(ds)
     variants = [str(v) for v in ds.variant.values]
     smax = float(ds.sigma.max())
+    drawn = _laws(ds) + _element_variants(ds)
     head = [par, "H [periods]"] + [f"σ* {v}" for v in variants] + [
-        f"σ* variance {variants[v]}" for v in _laws(ds)] + [
+        f"σ* variance {variants[v]}" for v in drawn] + [
         "first split at σ", "kind", "at t [periods]"]
     rows = []
     for q, value in enumerate(_vals(ds).values):
@@ -247,7 +266,7 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
                 row.append(star_text(float(ds.sigma_star.values[q, v, h, criterion]),
                                      float(ds.sigma_star_upper.values[q, v, h, criterion]),
                                      smax))
-            for v in _laws(ds):
+            for v in drawn:
                 row.append(star_text(float(ds.sigma_star.values[q, v, h, 1]),
                                      float(ds.sigma_star_upper.values[q, v, h, 1]), smax))
             sp = nearest_split(ds, q, h)
@@ -356,6 +375,26 @@ def findings(ds: xr.Dataset) -> list[str]:
         txt = ", ".join(f"{par} = {_g(float(v))}: {star_text(a, b, float(sig.max()))}"
                         for v, a, b in zip(_vals(ds).values, lo, hi))
         out.append(f"Over {float(H):g} periods, σ* ({variants[HEADLINE]}, N = {nmax}) is {txt}.")
+        for v in _element_variants(ds):  # multi-element sigma* beside the single element's
+            one = _single_of(ds, v)
+            cells = []
+            for q, value in enumerate(_vals(ds).values):
+                cell = star_text(float(ds.sigma_star.values[q, v, h, 0]),
+                                 float(ds.sigma_star_upper.values[q, v, h, 0]), float(sig.max()))
+                if one is not None:
+                    cell += " (one element: " + star_text(
+                        float(ds.sigma_star.values[q, one, h, 0]),
+                        float(ds.sigma_star_upper.values[q, one, h, 0]), float(sig.max())) + ")"
+                cells.append(f"{par} = {_g(float(value))}: {cell}")
+            text = (f"Over {float(H):g} periods, σ* of multi-element OPA {variants[v]} "
+                    f"(N = {nmax}) is {', '.join(cells)}.")
+            if "variant_collocated" in ds:
+                hit = ds.variant_collocated.values[:, :, v]
+                if hit.any():
+                    text += (f" At {int((hit > 0).sum())} of the {hit.size} grid points some "
+                             f"elements' OPA systems diverged and were computed by collocation "
+                             f"of the true systems (at most {int(hit.max())} elements).")
+            out.append(text)
         res = float(ds.attrs["resolution"])
         at_split = []
         for q in range(len(_vals(ds))):
@@ -418,9 +457,12 @@ def findings(ds: xr.Dataset) -> list[str]:
                f"periods): the ratio of their errors of x_0 ranges over "
                f"{np.nanmin(ratio):.2g}…{np.nanmax(ratio):.2g} on the grid (median "
                f"{np.nanmedian(ratio):.2g}).")
-    trunc = np.abs(ds.err_mean.values[..., 2, -1, 0] - e_mean) / np.maximum(e_mean, 1e-300)
-    out.append(f"The paper's truncation (eq. (27)) against the Galerkin projection changes "
-               f"that error by at most {np.nanmax(trunc):.1e} relative on the grid.")
+    if "mean/paper" in variants:  # the paper's truncation exists under the semicircle only
+        paper = variants.index("mean/paper")
+        trunc = np.abs(ds.err_mean.values[..., paper, -1, 0] - e_mean) / np.maximum(e_mean,
+                                                                                     1e-300)
+        out.append(f"The paper's truncation (eq. (27)) against the Galerkin projection "
+                   f"changes that error by at most {np.nanmax(trunc):.1e} relative on the grid.")
     # variance
     for v in _laws(ds):
         frac = ds.agrees.values[:, :, v, -1, :, 1].mean(axis=(0, 1))
@@ -544,7 +586,7 @@ def plot_error_vs_order(ds, path, q=0):
             ax = axes[r, c]
             for v, name in enumerate(ds.variant.values):
                 ax.semilogy(N + 0.07 * (v - 2), np.maximum(err[v], 1e-16),
-                            VARIANT_MARKERS[v] + "-", ms=5, mfc="none" if v % 2 else None, lw=0.8,
+                            VARIANT_MARKERS[v % len(VARIANT_MARKERS)] + "-", ms=5, mfc="none" if v % 2 else None, lw=0.8,
                             label=str(name))
             ax.axhline(_window_sem(ds, q, s, n), color="k", ls="--", lw=1,
                        label="MC noise floor (RMS SE)")
@@ -714,19 +756,30 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
         f"f = {a['f']:g}, eta = {a['eta']:g}, delta = {a['delta']:g}, F0 = {a['F0']:g}, "
         f"{a['impulse']} impulses), {a['parameter']} swept over "
         f"{', '.join(_g(float(v)) for v in _vals(ds).values)}, uncertain {a['uncertain']} "
-        f"= {_g(nominal(ds))} + σ ξ, σ in {', '.join(_g(float(s)) for s in ds.sigma.values)}; "
+        f"= {_g(nominal(ds))} + σ ξ, ξ ~ {a.get('distribution', 'semicircle')}, σ in "
+        f"{', '.join(_g(float(s)) for s in ds.sigma.values)}; "
         f"N = {int(ds.N.min())}..{int(ds.N.max())}; rtol = {a['rtol']:g}, atol = "
         f"{a['atol']:g}; Monte "
         f"Carlo: scrambled Sobol, {a['samples']} samples, doubled up to {a['max_samples']} "
         f"where the verdict hangs on the MC noise, seed {a['seed']}.", "",
         f"Criterion: {a['criterion_text']}; tol = {a['tolerance']:g} (mean), "
         f"{a['var_tolerance']:g} (variance), z = {a['z']:g}.", "",
+    ]
+    if a.get("variants_dropped", "none") != "none":
+        lines += [f"Variants left out: {a['variants_dropped']}.", ""]
+    if _element_variants(ds):
+        lines += [f"Multi-element variants ({a.get('elements')} elements"
+                  + (f", budget {a['max_elements']}" if "max_elements" in a else "")
+                  + f"): {a.get('element_text', '')}.", ""]
+    lines += [
         "## Trust boundary", "", boundary_table(ds, markdown=True), "",
         "## Why it breaks", "",
     ]
     for q in range(len(_vals(ds))):
         for h in range(len(ds.horizon)):
             lines.append(f"- {cause(ds, q, h)}")
+            for v in _element_variants(ds):
+                lines.append(f"- {cause(ds, q, h, v)}")
     lines += ["", "## Findings", ""] + [f"- {f}" for f in findings(ds)] + [""]
     front = frontier_lines(ds)
     if front:

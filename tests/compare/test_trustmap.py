@@ -408,3 +408,18 @@ def test_failed_elements_fall_back_to_collocation_as_in_simulate_opa():
     np.testing.assert_allclose(run["x_var"][0], emr.x_var.values, rtol=0, atol=1e-14)
     bare = element_variants(system, opts, law, ["saltation"], edges, times)
     assert bare["collocated"][0] == 0 and np.isnan(bare["x_mean"][0, -1])
+
+
+def test_report_of_a_law_map_with_elements(tiny_law):
+    """The report names variants, not indices: the law map has no paper truncation, and
+    its multi-element variants get variance columns, sigma* beside the single element's
+    and causes of their own."""
+    _, ds, out = tiny_law
+    written = write_report(ds, str(out), plots=True, command="opa-mc validate (law test)")
+    assert str(out / "error_vs_N.png") in written
+    text = (out / "summary.md").read_text()
+    assert "ξ ~ uniform" in text and "Variants left out: mean/paper, ensemble/paper" in text
+    assert "σ* variance saltation/ME-adaptive8" in text
+    assert "σ* of multi-element OPA saltation/ME-adaptive8 (N = 2) is ω = 3.98:" in text
+    assert "(one element: " in text and "paper's truncation (eq. (27))" not in text
+    assert "(saltation law, ME-adaptive8)" in text
