@@ -11,6 +11,8 @@ forcing periods:
   true impact system), on the same edges;
 * single-element OPA for N = 0..8, single-element collocation, and plain Monte Carlo and
   scrambled Sobol at increasing M (seeds other than the reference's);
+* control variates (:func:`compare.verify`): M true systems paired with the adaptive
+  ME-OPA of ``order_budget`` elements (saltation law) as the control, at the same M;
 
 each with its RMS error of the mean x_0 (and of the standard deviation) over the window,
 its right-hand-side evaluations (for OPA also times the Q nodes each one evaluates) and
@@ -32,6 +34,7 @@ import xarray as xr
 from mc._ensemble import simulate_mc
 from opa._basis import quadrature_order
 from opa._dataset import provenance_attrs, write_netcdf
+from compare._verify import verify
 from opa._elements import ElementBudgetWarning, collocation, uniform_edges
 from opa._measure import parse
 from opa._model import Oscillator, SolverOptions, preset, time_grid
@@ -242,6 +245,43 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
             seconds.append(result["seconds"])
             rows.append((name, "true system", int(m), 0, result["error"], result["sd_error"],
                          result["rhs"], result["rhs"], result["seconds"]))
+    log("control variates on the adaptive ME-OPA (saltation law) ...")
+    controls = []  # the control run, computed once when a row needs it
+
+    def control_run():
+        if not controls:
+            t = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ElementBudgetWarning)
+                controls.append(simulate_opa(
+                    base.replace(order=cfg.order, impact_law="saltation"),
+                    elements="adaptive", tolerance=1e-14, max_elements=cfg.order_budget,
+                    **common))
+            controls.append(time.perf_counter() - t)
+        return controls
+
+    for m in cfg.mc_samples:
+        if m < 8 or m & (m - 1):  # the certificate draws powers of two
+            continue
+
+        def compute(m=m):
+            control, control_seconds = control_run()
+            t = time.perf_counter() - control_seconds  # each row pays for its control
+            cv = verify(control, samples=int(m), max_samples=int(m), sequential=False,
+                        seed=cfg.seed + 1)
+            e, s = errors(cv.cv_x_mean.values, cv.cv_x_var.values)
+            return {"error": e, "sd_error": s, "seconds": time.perf_counter() - t,
+                    "rhs": int(control.attrs["rhs_evaluations"])
+                    + int(cv.attrs["verify_rhs_evaluations"])}
+
+        result = run(_slug(f"CV-K{cfg.order_budget}-M{int(m)}"),
+                     {"method": "control variate", "samples": int(m),
+                      "budget": int(cfg.order_budget), "order": int(cfg.order),
+                      "ladder_seed": cfg.seed + 1}, compute)
+        seconds.append(result["seconds"])
+        rows.append((f"control variate (ME-OPA K={cfg.order_budget})", "true system",
+                     int(m), 0, result["error"], result["sd_error"], result["rhs"],
+                     result["rhs"], result["seconds"]))
     cols = list(zip(*rows))
     one = {"units": "1"}
     ds = xr.Dataset(

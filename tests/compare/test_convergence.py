@@ -51,6 +51,31 @@ def test_rows_match_direct_runs(study):
                                      "OPA (one element), N", "collocation (one element), Q"}
 
 
+def test_control_variate_rows_match_a_direct_certificate(study):
+    """The control-variate rows are compare.verify of the adaptive ME-OPA control at the
+    same M and seed: their error against the reference is that certificate's."""
+    from compare import verify
+
+    cfg, ds, _ = study
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    ref = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=cfg.reference,
+                      sampler="sobol", seed=cfg.seed, order=0, times=times,
+                      options=cfg.options, progress=False)
+    with pytest.warns(UserWarning):  # tolerance 1e-14: the element budget stops it
+        control = simulate_opa(cfg.oscillator, sigma=cfg.sigma, order=cfg.order,
+                               elements="adaptive", tolerance=1e-14,
+                               max_elements=cfg.order_budget, impact_law="saltation",
+                               times=times, options=cfg.options)
+    rows = np.flatnonzero(ds.method.values == f"control variate (ME-OPA K={cfg.order_budget})")
+    assert list(ds["size"].values[rows]) == list(cfg.mc_samples)
+    for i in rows:
+        cv = verify(control, samples=int(ds["size"].values[i]),
+                    max_samples=int(ds["size"].values[i]), sequential=False,
+                    seed=cfg.seed + 1)
+        err = float(np.sqrt(np.mean((cv.cv_x_mean.values - ref.x_mean.values) ** 2)))
+        assert ds.error.values[i] == pytest.approx(err, rel=1e-12)
+
+
 def test_round_trip_and_report(study):
     _, ds, out = study
     with xr.open_dataset(out / "convergence.nc") as back:
