@@ -133,3 +133,44 @@ def test_bad_arguments_are_named(kw, message):
         verify(run, **kw)
     with pytest.raises(ValueError, match="run must be an OPA run"):
         verify(run.assign_attrs(model="mc"))
+
+
+EDGES = np.array([-1.0, -0.5, 0.1, 0.35, 1.0])
+
+
+def test_stratified_estimates_are_unbiased_and_their_intervals_cover_95_percent():
+    """Strata = elements of the semicircle law with a kink of g inside one: 1000 seeds of
+    a pilot of 2 points per element that sets the allocation of 120 fresh points (2 per
+    element, half the rest Neyman, half proportional, as compare.verify draws them); the
+    normal 95 % intervals cover the true mean and variance (scipy quad) in 93-97 % of
+    the seeds."""
+    from compare._verify import neyman_allocation, stratified_estimates
+    from opa._measure import semicircle
+
+    mean, var = _truth()
+    law = semicircle()
+    elements = [law.restrict(a, b) for a, b in zip(EDGES[:-1], EDGES[1:])]
+    P = np.array([e.probability() for e in elements])
+    hits = {"mean": [], "var": []}
+    for seed in range(1000):  # the coverage's own noise at 400 seeds is 1.1 %
+        rng = np.random.default_rng(seed)
+        pts = [e.ppf(rng.random(2)) for e in elements]
+        spread = [float(np.sqrt(np.mean(np.var(g(p) - g_hat(p), axis=0, ddof=1))))
+                  for p in pts]
+        counts = 2 + neyman_allocation(56, P, spread) + neyman_allocation(56, P, np.ones(4))
+        pts = [e.ppf(rng.random(n)) for e, n in zip(elements, counts)]
+        est = stratified_estimates([g(p) for p in pts], [g_hat(p) for p in pts], P,
+                                   HAT_MEAN, HAT_SECOND)
+        for name, truth in (("mean", mean), ("var", var)):
+            hits[name].append(np.abs(est[name] - truth) <= 1.96 * est[f"{name}_se"])
+    for name in hits:
+        coverage = np.mean(hits[name], axis=0)
+        assert np.all((coverage >= 0.93) & (coverage <= 0.97)), (name, coverage)
+
+
+def test_neyman_allocation_follows_p_times_s():
+    from compare._verify import neyman_allocation
+
+    n = neyman_allocation(100, [0.5, 0.25, 0.25], [0.0, 1.0, 3.0])
+    assert n.sum() == 100 and list(n) == [0, 25, 75]
+    assert list(neyman_allocation(4, [0.5, 0.5], [0.0, 0.0])) == [2, 2]
