@@ -233,6 +233,17 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     system, options = system_of(run)
     measure = run_measure(run)
     times = run.time.values
+    # at t = 0 every sample is at x0 (x' may have jumped by an impulse at t = 0, by the
+    # same amount for every sample): x_0 = x0 and no higher coefficient
+    start = np.zeros(run.sizes["order"])
+    start[0] = system.oscillator.x0
+    first_x = run.element_x_coef.values[:, :, 0]
+    first_v = run.element_v_coef.values[:, 1:, 0]
+    if times[0] == 0.0 and not (np.allclose(first_x, start, rtol=0.0, atol=1e-12)
+                                and np.allclose(first_v, 0.0, rtol=0.0, atol=1e-12)):
+        raise ValueError("the run does not start from the x0, v0 of its attributes (an "
+                         "OPA run continued with initial=...): the true systems it "
+                         "describes are not known, so it cannot be verified")
     check_memory("verification paths", max_samples * len(times) * 8 * 5,
                  f"max_samples {max_samples} x {len(times)} outputs x 5 arrays")
     moments = surrogate_moments(run)

@@ -135,6 +135,15 @@ def test_bad_arguments_are_named(kw, message):
         verify(run.assign_attrs(model="mc"))
 
 
+def test_a_continued_run_is_refused():
+    osc = Oscillator()
+    first = simulate_opa(osc, sigma=0.01, order=1, periods=1)
+    state = np.stack([first.x_coef.values[:, -1], first.v_coef.values[:, -1]])
+    continued = simulate_opa(osc, sigma=0.01, order=1, periods=1, initial=state)
+    with pytest.raises(ValueError, match="does not start from the x0, v0"):
+        verify(continued)
+
+
 EDGES = np.array([-1.0, -0.5, 0.1, 0.35, 1.0])
 
 
