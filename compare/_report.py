@@ -83,6 +83,12 @@ def _single_of(ds, v: int) -> int | None:
     return names.index(name) if name in names else None
 
 
+def _time(ds):
+    """Output times in forcing periods: the coordinate ``time`` (``periods`` in files
+    written before issue 26, still read)."""
+    return ds["time"] if "time" in ds.dims else ds["periods"]
+
+
 def _vals(ds):
     """The swept parameter's coordinate (named after the parameter, docs/datasets.md)."""
     return ds[ds.attrs["parameter"]]
@@ -128,6 +134,12 @@ def nearest_crossing(ds, q: int, h: int):
     nominal value, as a dict (``time``: the output time, ``speed``: the impact's), or
     None."""
     return _nearest(ds, q, h, lambda kind: kind == "output crossing")
+
+
+def nearest_horizon(ds, q: int, h: int):
+    """The 'horizon' split nearest to the nominal value (an impact that crosses the end of
+    the horizon: it changes the impact count up to H but no output within H), or None."""
+    return _nearest(ds, q, h, lambda kind: kind == "horizon")
 
 
 def complete_within(ds, q: int, h: int) -> float:
@@ -234,10 +246,156 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
         slow = (f" The nominal system's slowest impact in the horizon hits the wall at speed "
                 f"{float(ds.nominal_slowest_speed.values[q, h]):.2g} at t ≈ "
                 f"{float(ds.nominal_slowest_time.values[q, h]):.2f} periods.")
-    return (f"{head}, {star} comes before any split ({where}): below σ* every sample makes "
-            f"the same impacts, so the error is OPA's own — the equivalent system's single "
+    edge = nearest_horizon(ds, q, h)
+    if edge is not None and edge["distance"] < min(lo, reach):
+        same = (f"below σ* the samples make the same impacts within the horizon, except that "
+                f"for σ ≥ {edge['distance']:.2g} some of them ({unc} "
+                f"{'>' if edge['right'] > edge['left'] else '<'} {edge['value']:.7g}) make "
+                f"one more impact within 1e-4 time units of the horizon's end (t = "
+                f"{edge['time']:.2f} periods; {min(edge['left'], edge['right'])} → "
+                f"{max(edge['left'], edge['right'])} impacts in the count table), which "
+                f"moves x at the last output by at most its speed ({abs(edge['speed']):.2g}) "
+                f"× 1e-4")
+    else:
+        same = "below σ* every sample makes the same impacts"
+    return (f"{head}, {star} comes before any split ({where}): {same}, so the error is OPA's "
+            f"own — the equivalent system's single "
             f"impact rule and its own dynamics between impacts — and not a discontinuity in "
             f"ξ; {first}.{slow}")
+
+
+def short_cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
+    """The cause of :func:`cause` in a few words (the first screen)."""
+    lo, hi = (float(ds.sigma_star.values[q, v, h, c]),
+              float(ds.sigma_star_upper.values[q, v, h, c]))
+    res = float(ds.attrs["resolution"])
+    sp = nearest_split(ds, q, h)
+    reach = complete_within(ds, q, h)
+    if sp is not None and sp["distance"] >= reach:
+        sp = None
+    split = "" if sp is None else f"{sp['kind']} at σ {sp['distance']:.2g}, t ≈ {sp['time']:.1f}"
+    if not np.isfinite(hi):
+        return "agrees at every σ of the grid" + (f"; first split: {split}" if split else "")
+    if sp is not None and lo == 0 and sp["distance"] <= hi:
+        return f"a split at once: {split}"
+    if sp is not None and lo > 0 and lo - 2 * res <= sp["distance"] <= hi + 2 * res:
+        return f"the first split: {split}"
+    if sp is not None and sp["distance"] < lo:
+        return f"past the first split ({split}), which carries too little probability"
+    at, sigma_fail = _disagree(ds, q, h, v, c)
+    cross = _crossing_cause(ds, q, h, at, sigma_fail)
+    if cross is not None and (sp is None or cross["distance"] < sp["distance"]):
+        return (f"an impact crosses the output at t = {cross['time']:.2f} "
+                f"(σ ≥ {cross['distance']:.2g}): a kink in ξ")
+    return f"OPA's own error, no split below σ* (fails first at t ≈ {at:.1f})"
+
+
+def _star(ds, q, v, h, c) -> str:
+    return star_text(float(ds.sigma_star.values[q, v, h, c]),
+                     float(ds.sigma_star_upper.values[q, v, h, c]), float(ds.sigma.max()))
+
+
+def best_variant(ds, q: int, h: int) -> int:
+    """The variant with the largest sigma* of the mean (ties: of the variance, then the
+    first listed)."""
+    def key(v):
+        out = []
+        for c in (0, 1):
+            lo, hi = ds.sigma_star.values[q, v, h, c], ds.sigma_star_upper.values[q, v, h, c]
+            out.append(np.inf if not np.isfinite(hi) else float(lo))
+        return tuple(out)
+    return max(range(ds.sizes["variant"]), key=lambda v: (key(v), -v))
+
+
+def run_failures(ds) -> list[str]:
+    """Runs whose error is NaN (the OPA trajectory stopped before the horizon): counted per
+    variant and horizon, with the times at which they stop. They count as 'does not
+    agree'."""
+    out = []
+    ran = ds.variant_ran.values.astype(bool) if "variant_ran" in ds else \
+        np.ones((ds.sizes["variant"], ds.sizes["N"]), bool)
+    t = _time(ds).values
+    for v, name in enumerate(ds.variant.values):
+        for h, H in enumerate(ds.horizon.values):
+            err = ds.err_mean.values[:, :, v, :, h][:, :, ran[v]]
+            bad = ~np.isfinite(err)
+            if not bad.any():
+                continue
+            n = int(round(float(H) * ds.attrs["per_period"])) + 1
+            x = ds.opa_x_mean.values[:, :, v, :, :n][:, :, ran[v]][bad]
+            stops = [t[np.flatnonzero(~np.isfinite(row))[0]] for row in x
+                     if (~np.isfinite(row)).any()]
+            when = (f"x_0 is NaN from t = {min(stops):.3g}–{max(stops):.3g} periods on"
+                    if stops else "no finite error")
+            out.append(f"{int(bad.sum())} of {bad.size} {name} runs over {float(H):g} periods "
+                       f"did not finish: the OPA system's integration stopped before the "
+                       f"horizon ({when}); counted as 'does not agree'")
+    return out
+
+
+SCREEN_WIDTH = 100
+
+
+def bullet(text: str, mark: str = "* ") -> str:
+    """A paragraph wrapped to SCREEN_WIDTH characters, with a hanging indent."""
+    import textwrap
+
+    return "\n".join(textwrap.wrap(text, SCREEN_WIDTH, initial_indent=mark,
+                                    subsequent_indent=" " * len(mark),
+                                    break_on_hyphens=False)) or mark.rstrip()
+
+
+def process_started() -> float:
+    """The ``time.perf_counter()`` reading at which this process started (Linux: from
+    /proc; elsewhere: now), so that a command's wall time includes its imports."""
+    import time
+
+    now = time.perf_counter()
+    try:
+        with open("/proc/self/stat") as fh:
+            ticks = int(fh.read().rsplit(")", 1)[1].split()[19])
+        with open("/proc/uptime") as fh:
+            uptime = float(fh.read().split()[0])
+        age = uptime - ticks / os.sysconf("SC_CLK_TCK")
+        return now - age if 0 <= age < 1e6 else now
+    except (OSError, ValueError, IndexError):
+        return now
+
+
+def first_screen(ds) -> list[str]:
+    """The answer at a glance, lines of at most 100 characters: per swept value and horizon,
+    sigma* of the mean and of the variance (the paper's OPA), the best variant with its
+    sigma*, and the cause in one line; then the runs that did not finish."""
+    par, unc = _par(ds), _unc(ds)
+    smax = float(ds.sigma.max())
+    head = str(ds.variant.values[HEADLINE])
+    lines = [f"Where OPA (N = {int(ds.N.max())}) agrees with Monte Carlo: {unc} = "
+             f"{_g(nominal(ds))} + σ ξ, ξ ~ {ds.attrs.get('distribution', 'semicircle')}, "
+             f"σ ≤ {_g(smax)}",
+             f"σ*: largest σ at which {head} agrees; mean: error ≤ "
+             f"{ds.attrs['tolerance']:g} spread, variance: ≤ {ds.attrs['var_tolerance']:g} Var",
+             ""]
+    rows = []
+    for q, value in enumerate(_vals(ds).values):
+        for h, H in enumerate(ds.horizon.values):
+            b = best_variant(ds, q, h)
+            rows.append(([_g(float(value)), f"{float(H):g}", _star(ds, q, HEADLINE, h, 0),
+                          _star(ds, q, HEADLINE, h, 1),
+                          f"{ds.variant.values[b]}: {_star(ds, q, b, h, 0)} / "
+                          f"{_star(ds, q, b, h, 1)}"], short_cause(ds, q, h)))
+    cols = [par, "H", "σ* mean", "σ* variance", "best variant: σ* mean / variance"]
+    widths = [max(len(cols[i]), *(len(r[0][i]) for r in rows)) for i in range(len(cols))]
+    lines.append("  ".join(c.ljust(w) for c, w in zip(cols, widths)).rstrip())
+    for cells, why in rows:
+        lines.append("  ".join(c.ljust(w) for c, w in zip(cells, widths)).rstrip())
+        lines += bullet(why, mark="    why: ").split("\n")
+    fails = run_failures(ds)
+    if fails:
+        lines.append("")
+        for f in fails:
+            lines += bullet(f, mark="! ").split("\n")
+    return [out for line in lines for out in (bullet(line, mark="").split("\n")
+                                              if len(line) > SCREEN_WIDTH else [line])]
 
 
 def _disagree(ds, q, h, v, c) -> tuple[float, float]:
@@ -249,43 +407,44 @@ def _disagree(ds, q, h, v, c) -> tuple[float, float]:
 
 
 def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0) -> str:
-    """sigma* (at N = Nmax, per variant) for every swept value and horizon, beside the
-    nearest split of the impact sequence."""
+    """sigma* (at N = Nmax, per variant) of the mean (``criterion=0``, beside the nearest
+    split of the impact sequence) or of the variance (``criterion=1``) for every swept
+    value and horizon."""
     par, unc = _par(ds), _unc(ds)
     variants = [str(v) for v in ds.variant.values]
     smax = float(ds.sigma.max())
-    drawn = _laws(ds) + _element_variants(ds)
-    head = [par, "H [periods]"] + [f"σ* {v}" for v in variants] + [
-        f"σ* variance {variants[v]}" for v in drawn] + [
-        "first split at σ", "kind", "at t [periods]"]
+    head = [par, "H [periods]"] + [f"σ* {v}" for v in variants]
+    if criterion == 0:
+        head += ["first split at σ", "kind", "at t [periods]"]
     rows = []
     for q, value in enumerate(_vals(ds).values):
         for h, H in enumerate(ds.horizon.values):
             row = [_g(float(value)), f"{float(H):g}"]
             for v in range(len(variants)):
-                row.append(star_text(float(ds.sigma_star.values[q, v, h, criterion]),
-                                     float(ds.sigma_star_upper.values[q, v, h, criterion]),
-                                     smax))
-            for v in drawn:
-                row.append(star_text(float(ds.sigma_star.values[q, v, h, 1]),
-                                     float(ds.sigma_star_upper.values[q, v, h, 1]), smax))
-            sp = nearest_split(ds, q, h)
-            reach = complete_within(ds, q, h)
-            if sp is not None and sp["distance"] >= reach:
-                sp = None
-            row += ([f"{sp['distance']:.6f}", sp["kind"], f"{sp['time']:.2f}"] if sp else
-                    [f"none ≤ {_g(smax)}" if reach >= smax else
-                     f"none < {reach:.2g} (limit reached)", "", ""])
+                row.append(_star(ds, q, v, h, criterion))
+            if criterion == 0:
+                sp = nearest_split(ds, q, h)
+                reach = complete_within(ds, q, h)
+                if sp is not None and sp["distance"] >= reach:
+                    sp = None
+                row += ([f"{sp['distance']:.6f}", sp["kind"], f"{sp['time']:.2f}"] if sp else
+                        [f"none ≤ {_g(smax)}" if reach >= smax else
+                         f"none < {reach:.2g} (limit reached)", "", ""])
             rows.append(row)
-    title = (f"Trust boundary σ*: the largest σ at which OPA (N = {int(ds.N.max())}) agrees "
-             f"with Monte Carlo in the mean, bisected to {ds.attrs['resolution']:g}; the first "
-             f"split: the smallest σ whose ensemble {unc} ± σ contains a change of the "
-             f"impact sequence")
+    if criterion == 0:
+        title = (f"Trust boundary σ*: the largest σ at which OPA (N = {int(ds.N.max())}) agrees "
+                 f"with Monte Carlo in the mean, bisected to {ds.attrs['resolution']:g}; the "
+                 f"first split: the smallest σ whose ensemble {unc} ± σ contains a change of "
+                 f"the impact sequence")
+    else:
+        title = (f"σ* of the variance: the largest σ at which the OPA variance (N = "
+                 f"{int(ds.N.max())}) agrees with the Monte Carlo variance, bisected to "
+                 f"{ds.attrs['resolution']:g}")
     return _table(title, head, rows, markdown)
 
 
 def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 0,
-                 markdown: bool = False) -> str:
+                 markdown: bool = False, compact: bool = False) -> str:
     """Rows: swept values; columns: sigma; cell: the smallest N from which OPA agrees
     at every larger N of the map, or '✗' where N = Nmax does not."""
     par = _par(ds)
@@ -301,7 +460,7 @@ def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 
             first = 0 if not len(tail) else tail[-1] + 1
             if first < len(orders):
                 row.append(f"N ≥ {orders[first]}")
-            elif a.any():
+            elif a.any() and not compact:
                 row.append("✗ (N = " + ", ".join(str(orders[k]) for k in np.flatnonzero(a))
                            + " agree)")
             else:
@@ -309,8 +468,10 @@ def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 
         rows.append(row)
     title = (f"Verdict over {float(ds.horizon[h]):g} periods ({ds.variant.values[v]}, "
              f"{ds.criterion.values[criterion]}): N ≥ k: OPA agrees with Monte Carlo for "
-             f"every N of the map from k to {orders[-1]}; ✗: N = {orders[-1]} does not "
-             f"(the lower N that do are listed)")
+             f"every N of the map from k to {orders[-1]}; ✗: N = {orders[-1]} does not"
+             + ("" if compact else " (the lower N that do are listed)"))
+    if compact:
+        title = bullet(title, mark="")
     return _table(title, head, rows, markdown)
 
 
@@ -421,11 +582,18 @@ def findings(ds: xr.Dataset) -> list[str]:
     above = np.flatnonzero(sig > lo)
     if below.any() and len(above):
         s0, s1 = np.flatnonzero(below)[-1], above[0]
+        factor, ratio = err[s1] / err[s0], sig[s1] / sig[s0]
+        if below.sum() >= 3:
+            law = f"the law fitted below σ* predicts {ratio ** slope:.1f}"
+            expected = ratio ** slope
+        else:  # too few points below sigma* to fit: compare with the sigma^1 and sigma^2 laws
+            law = (f"an error ∝ σ would grow by {ratio:.1f} and one ∝ σ² by {ratio ** 2:.1f} "
+                   f"(too few grid σ below σ* to fit a law)")
+            expected = ratio ** 2
+        verb = "jumps" if factor > 1.5 * expected else "grows, without a jump,"
         out.append(
-            f"Across σ* it jumps from {_e(err[s0])} (σ = {_g(float(sig[s0]))}) to "
-            f"{_e(err[s1])} (σ = {_g(float(sig[s1]))}), a factor {err[s1] / err[s0]:.1f}"
-            + (f", where the law fitted below σ* predicts "
-               f"{(sig[s1] / sig[s0]) ** slope:.1f}." if below.sum() >= 3 else "."))
+            f"Across σ* it {verb} from {_e(err[s0])} (σ = {_g(float(sig[s0]))}) to "
+            f"{_e(err[s1])} (σ = {_g(float(sig[s1]))}), a factor {factor:.1f}, where {law}.")
     # does N matter for the verdict?
     for h, H in enumerate(ds.horizon.values):
         a = ds.agrees.values[:, :, HEADLINE, :, h, 0].astype(bool)  # value, sigma, N
@@ -441,7 +609,7 @@ def findings(ds: xr.Dataset) -> list[str]:
     # before the first impact
     pre = ds.pre_impact_err.values[q, :, HEADLINE, :]  # sigma, N
     first = ds.first_impact.values[q, 0, HEADLINE, -1]
-    n_pre = int(np.sum(ds.periods.values < first))
+    n_pre = int(np.sum(_time(ds).values < first))
     if n_pre > 1:
         floor = np.array([_window_sem(ds, q, s, n_pre) for s in range(len(sig))])
         ok = [f"σ = {_g(float(s))}: {_e(pre[i, -1])} (MC SE {_e(floor[i])})"
@@ -481,62 +649,122 @@ def findings(ds: xr.Dataset) -> list[str]:
 
 
 # -- figures --------------------------------------------------------------------------------
-def plot_map(ds, path):
-    """Per horizon: log10 of the relative error of x_0 at every grid point, the verdicts,
-    sigma* (mean and ensemble law), every sigma probed, and the splits."""
+STAR_STYLES = (("k", "-", "o"), ("tab:green", "--", "s"), ("tab:purple", ":", "^"),
+               ("tab:orange", "-.", "v"), ("tab:brown", (0, (5, 1, 1, 1)), "D"),
+               ("tab:pink", (0, (1, 1)), "P"))
+
+
+def _xlim(ax, x):
+    """Limits of the swept axis: the grid with a margin, or +-2 % around a single value."""
+    x = np.asarray(x, float)
+    if len(x) == 1:
+        half = 0.02 * max(abs(float(x[0])), 1e-3)
+        ax.set_xlim(x[0] - half, x[0] + half)
+        ax.set_xticks([float(x[0])])
+    else:
+        pad = 0.06 * (x[-1] - x[0])
+        ax.set_xlim(x[0] - pad, x[-1] + pad)
+
+
+def _fig_legend(fig, handles, labels, ncol):
+    """One legend below the panels, inside the figure."""
+    uniq = dict(zip(labels, handles))
+    renderer = fig.canvas.get_renderer()
+    for n in range(min(ncol, len(uniq)) or 1, 0, -1):  # as many columns as the width holds
+        legend = fig.legend(uniq.values(), uniq.keys(), loc="outside lower center", ncol=n,
+                            fontsize=7, frameon=False)
+        if n == 1 or legend.get_window_extent(renderer).width <= 0.98 * fig.bbox.width:
+            return legend
+        legend.remove()
+    return legend
+
+
+def plot_map(ds, path, *, size=None):
+    """Per horizon (rows) the mean and the variance (columns): the error at every grid point
+    against the tolerance (diverging colours centred on it), the verdicts of the paper's
+    OPA, sigma* of every impact law drawn (lines), every sigma probed, the runs that did not
+    finish and the splits (the sigma at which each enters the ensemble)."""
     plt = _pyplot()
+    from matplotlib.colors import TwoSlopeNorm
+
     H = len(ds.horizon)
-    fig, axes = plt.subplots(1, H, figsize=(5.6 * H, 4.6), squeeze=False, sharey=True)
-    x = _vals(ds).values
+    fig, axes = plt.subplots(H, 2, figsize=size or (11, 3.9 * H + 1.2), squeeze=False,
+                             sharex=True, sharey=True, layout="constrained")
+    x = _vals(ds).values.astype(float)
     y = ds.sigma.values
     kinds = _kinds(ds)
     smax = float(y.max())
-    for h, ax in enumerate(axes[0]):
-        rel = ds.err_mean_rel.values[:, :, HEADLINE, -1, h]
-        mesh = ax.pcolormesh(*_edges(x, y), np.log10(np.maximum(rel.T, 1e-12)),
-                             cmap="viridis", vmin=-4, vmax=1, shading="flat")
-        a = ds.agrees.values[:, :, HEADLINE, -1, h, 0].astype(bool)
-        X, Y = np.meshgrid(x, y, indexing="ij")
-        ax.scatter(X[a], Y[a], marker="o", facecolor="white", edgecolor="k", s=30,
-                   label="agrees", zorder=4)
-        ax.scatter(X[~a], Y[~a], marker="x", color="red", s=30, label="does not", zorder=4)
-        ps = ds.probe_sigma.values
-        for q in range(len(x)):
-            pr = ps[q][np.isfinite(ps[q])]
-            ax.scatter(np.full(len(pr), x[q]), pr, marker="_", color="0.85", s=40, zorder=3,
-                       label="σ probed" if q == 0 else None)
-        for v, style, colour in zip(_laws(ds), ("-", "--", ":"), ("white", "gold", "cyan")):
-            lo = ds.sigma_star.values[:, v, h, 0]
-            hi = ds.sigma_star_upper.values[:, v, h, 0]
-            top = np.where(np.isfinite(hi), lo, smax)
-            ax.plot(x, top, style, color=colour, lw=2, zorder=5,
-                    label=f"σ* {ds.variant.values[v]}")
-        centre = nominal(ds)
-        for q in range(len(x)):
-            for j in range(ds.sizes["split"]):
-                k = int(ds.split_kind.values[q, h, j])
-                d = abs(float(ds.split_value.values[q, h, j]) - centre)
-                if k < 0 or kinds[k] == "horizon" or d > smax:
+    drawn = _laws(ds) + _element_variants(ds)
+    head = str(ds.variant.values[HEADLINE])
+    centre = nominal(ds)
+    X, Y = np.meshgrid(x, y, indexing="ij")
+    norm = TwoSlopeNorm(vcenter=0.0, vmin=-3.0, vmax=2.0)
+    handles, labels = [], []
+    for h in range(H):
+        for c, (what, rel, tol) in enumerate((
+                ("mean", ds.err_mean_rel, float(ds.attrs["tolerance"])),
+                ("variance", ds.err_var_rel, float(ds.attrs["var_tolerance"])))):
+            ax = axes[h, c]
+            r = rel.values[:, :, HEADLINE, -1, h] / tol
+            mesh = ax.pcolormesh(*_edges(x, y), np.log10(np.maximum(r.T, 1e-12)),
+                                 cmap="RdBu_r", norm=norm, shading="flat")
+            a = ds.agrees.values[:, :, HEADLINE, -1, h, c].astype(bool)
+            bad = ~np.isfinite(r)
+            ax.scatter(X[a], Y[a], marker="o", facecolor="white", edgecolor="k", s=26,
+                       label=f"{head} agrees", zorder=4)
+            ax.scatter(X[~a & ~bad], Y[~a & ~bad], marker="x", color="k", s=26,
+                       label=f"{head} does not", zorder=4)
+            if bad.any():
+                ax.scatter(X[bad], Y[bad], marker="$?$", color="k", s=40, zorder=4,
+                           label="run did not finish (NaN)")
+            ps = ds.probe_sigma.values
+            px = np.broadcast_to(x[:, None], ps.shape)
+            ok = np.isfinite(ps)
+            ax.scatter(px[ok], ps[ok], marker="_", color="0.3", s=30, lw=0.8, zorder=3,
+                       label="σ evaluated")
+            span = (x[-1] - x[0]) / max(1, len(x) - 1) if len(x) > 1 else 0.02 * abs(x[0])
+            for j, (v, (colour, style, mark)) in enumerate(zip(drawn, STAR_STYLES)):
+                lo = ds.sigma_star.values[:, v, h, c]
+                hi = ds.sigma_star_upper.values[:, v, h, c]
+                top = np.where(np.isfinite(hi), lo, smax)
+                shift = (j - (len(drawn) - 1) / 2) * 0.04 * span  # coinciding lines show
+                ax.plot(x + shift, top, color=colour, ls=style, marker=mark, ms=5, lw=1.6,
+                        zorder=5, mfc="white", label=f"σ* {ds.variant.values[v]}")
+            kind = ds.split_kind.values[:, h]
+            dist = np.abs(ds.split_value.values[:, h] - centre)
+            sx = np.broadcast_to(x[:, None], kind.shape)
+            for k, name in enumerate(kinds):
+                sel = (kind == k) & (dist <= smax)
+                if name == "horizon" or not sel.any():
                     continue
-                ax.scatter(x[q] + 0.004 * (x[-1] - x[0] + 1e-9), d,
-                           marker="v" if kinds[k] == "output crossing" else "D", s=22,
-                           color=KIND_COLOURS[kinds[k]], edgecolor="k", lw=0.4, zorder=6,
-                           label=f"split: {kinds[k]}")
-        ax.set_xlabel(ds.attrs["parameter"])
-        ax.set_title(f"H = {float(ds.horizon[h]):g} forcing periods")
-        ax.set_ylim(0, smax * 1.04)
-        if h == 0:
-            ax.set_ylabel(f"σ (distance of the split from {_unc(ds)} = {_g(centre)})")
-        fig.colorbar(mesh, ax=ax, label="log10 RMS error of x_0 / RMS spread")
-    handles, labels = axes[0, -1].get_legend_handles_labels()
-    for ax in axes[0][:-1]:
-        hh, ll = ax.get_legend_handles_labels()
-        handles, labels = handles + hh, labels + ll
-    uniq = dict(zip(labels, handles))
-    fig.legend(uniq.values(), uniq.keys(), loc="lower center", ncol=4, fontsize=8)
-    fig.suptitle(f"Where OPA (N = {int(ds.N.max())}, {ds.variant.values[HEADLINE]}) agrees with "
-                 f"Monte Carlo")
-    fig.tight_layout(rect=(0, 0.12, 1, 1))
+                crossing = name == "output crossing"
+                ax.scatter(sx[sel], dist[sel], marker="v" if crossing else "D", s=18,
+                           color=KIND_COLOURS[name], edgecolor="k", lw=0.4, zorder=6,
+                           label=f"{name} enters at this σ" if crossing
+                           else f"split ({name}) enters at this σ")
+            ax.set_ylim(-0.04 * smax, smax * 1.04)
+            _xlim(ax, x)
+            ax.set_title(f"{what}, H = {float(ds.horizon[h]):g} forcing periods", fontsize=9)
+            if h == H - 1:
+                ax.set_xlabel(ds.attrs["parameter"])
+            if c == 0:
+                ax.set_ylabel("σ")
+            cb = fig.colorbar(mesh, ax=ax, extend="both")
+            cb.set_label(f"RMS error of the {what} / its tolerance", fontsize=8)
+            cb.set_ticks([-3, -2, -1, 0, 1, 2],
+                         labels=["0.001", "0.01", "0.1", "1 = tol", "10", "100"])
+            cb.ax.tick_params(labelsize=7)
+            cb.ax.axhline(0.0, color="k", lw=2)
+            hh, ll = ax.get_legend_handles_labels()
+            handles, labels = handles + hh, labels + ll
+    _fig_legend(fig, handles, labels, 3)
+    import textwrap
+
+    width = int(fig.get_size_inches()[0] * 72 / (9 * 0.6))  # characters of 9 pt that fit
+    fig.suptitle("\n".join(textwrap.wrap(
+        f"Where OPA (N = {int(ds.N.max())}) agrees with Monte Carlo. Colours and marks: "
+        f"{head} (blue: within the tolerance); lines: σ* of each variant (set a little apart "
+        f"sideways)", width)), fontsize=9)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
@@ -566,18 +794,22 @@ def _pick_sigmas(ds, q=0, h=0):
     return picks or [0]
 
 
-def plot_error_vs_order(ds, path, q=0):
+LINE_STYLES = ("-", "--", ":", "-.", (0, (5, 1, 1, 1)), (0, (1, 1)), (0, (3, 1, 1, 1, 1, 1)))
+
+
+def plot_error_vs_order(ds, path, q=0, *, size=None):
     """RMS error of x_0 against N, before OPA's first impact and over each horizon, for
     every variant (distinct markers, offset in N), with the MC noise floor."""
     plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     H = len(ds.horizon)
-    fig, axes = plt.subplots(len(picks), 1 + H, figsize=(4.2 * (1 + H), 3.4 * len(picks)),
-                             squeeze=False, sharex=True)
+    fig, axes = plt.subplots(len(picks), 1 + H, figsize=size or (4.2 * (1 + H),
+                                                                  3.4 * len(picks) + 1),
+                             squeeze=False, sharex=True, layout="constrained")
     N = ds.N.values.astype(float)
     for r, s in enumerate(picks):
         first = ds.first_impact.values[q, s, HEADLINE, -1]
-        n_pre = max(2, int(np.sum(ds.periods.values < first)))
+        n_pre = max(2, int(np.sum(_time(ds).values < first)))
         windows = [("before OPA's first impact", ds.pre_impact_err.values[q, s], n_pre)]
         for h, Hh in enumerate(ds.horizon.values):
             windows.append((f"first {float(Hh):g} periods", ds.err_mean.values[q, s, :, :, h],
@@ -585,91 +817,112 @@ def plot_error_vs_order(ds, path, q=0):
         for c, (title, err, n) in enumerate(windows):
             ax = axes[r, c]
             for v, name in enumerate(ds.variant.values):
-                ax.semilogy(N + 0.07 * (v - 2), np.maximum(err[v], 1e-16),
-                            VARIANT_MARKERS[v % len(VARIANT_MARKERS)] + "-", ms=5, mfc="none" if v % 2 else None, lw=0.8,
-                            label=str(name))
+                xs = N + 0.07 * (v - 2)
+                line, = ax.semilogy(xs, np.maximum(err[v], 1e-16),
+                                    marker=VARIANT_MARKERS[v % len(VARIANT_MARKERS)],
+                                    ls=LINE_STYLES[v % len(LINE_STYLES)], ms=5,
+                                    mfc="none" if v % 2 else None, lw=0.8, label=str(name))
+                ran = ds.variant_ran.values[v].astype(bool) if "variant_ran" in ds else True
+                nan = ~np.isfinite(err[v]) & ran
+                if nan.any():  # a run that did not finish: marked at the top, not a gap
+                    ax.scatter(xs[nan], np.full(nan.sum(), 0.93), marker="$?$", s=30,
+                               color=line.get_color(), transform=ax.get_xaxis_transform(),
+                               label="run did not finish (NaN)")
             ax.axhline(_window_sem(ds, q, s, n), color="k", ls="--", lw=1,
                        label="MC noise floor (RMS SE)")
             ax.set_title(f"σ = {float(ds.sigma[s]):g}: {title}", fontsize=9)
             if r == len(picks) - 1:
                 ax.set_xlabel("N")
         axes[r, 0].set_ylabel("RMS error of x_0")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}")
-    fig.tight_layout()
+    handles, labels = [], []
+    for ax in axes.flat:
+        hh, ll = ax.get_legend_handles_labels()
+        handles, labels = handles + hh, labels + ll
+    _fig_legend(fig, handles, labels, 4)
+    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}: RMS error of x_0 against N "
+                 f"(variants offset in N)", fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
 
 
-def plot_mean(ds, path, q=0):
-    """x_0 for several N beside the MC mean with its 2-SE band, and the error, at a sigma
-    that agrees and one that does not, over the first horizon."""
+def plot_mean(ds, path, q=0, *, size=None):
+    """x_0 for several N beside the MC mean with its 2-SE band, and |x_0 - E_MC[x]| against
+    2 SE, at a sigma that agrees and one that does not, over the first horizon."""
     plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     orders = [int(n) for n in ds.N.values]
     show = [k for k, n in enumerate(orders) if n in (0, 1, 2, 4, 8) or k == len(orders) - 1]
     n = int(round(float(ds.horizon[0]) * ds.attrs["per_period"])) + 1
-    t = ds.periods.values[:n]
-    fig, axes = plt.subplots(2, len(picks), figsize=(6.5 * len(picks), 6.4), squeeze=False,
-                             sharex=True)
+    t = _time(ds).values[:n]
+    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(show)))
+    fig, axes = plt.subplots(2, len(picks), figsize=size or (6.5 * len(picks), 7.0),
+                             squeeze=False, sharex=True, layout="constrained")
+    every = max(1, n // 12)
     for c, s in enumerate(picks):
         m = ds.mc_x_mean.values[q, s, :n]
         se = ds.mc_x_sem.values[q, s, :n]
         ax, ax2 = axes[0, c], axes[1, c]
-        ax.fill_between(t, m - 2 * se, m + 2 * se, color="0.7", label="MC mean ± 2 SE")
-        ax.plot(t, m, "k-", lw=1.6, label="MC mean")
-        ax2.fill_between(t, -2 * se, 2 * se, color="0.7")
+        ax.fill_between(t, m - 2 * se, m + 2 * se, color="0.8", label="MC mean ± 2 SE")
+        ax.plot(t, m, "k-", lw=2.2, label="MC mean")
+        ax2.semilogy(t, np.maximum(2 * se, 1e-16), "k-", lw=2.2, label="2 MC SE")
         for i, k in enumerate(show):
             x0 = ds.opa_x_mean.values[q, s, HEADLINE, k, :n]
-            ax.plot(t, x0, lw=0.9, ls=("-", "--", ":", "-.")[i % 4], label=f"OPA N = {orders[k]}")
-            ax2.plot(t, x0 - m, lw=0.9, ls=("-", "--", ":", "-.")[i % 4])
-        ax.set_title(f"σ = {float(ds.sigma[s]):g}")
+            style = dict(color=colours[i], ls=LINE_STYLES[i % len(LINE_STYLES)], lw=1.1,
+                         marker=VARIANT_MARKERS[i % len(VARIANT_MARKERS)], ms=3.5,
+                         markevery=(i * every // max(1, len(show)), every))
+            ax.plot(t, x0, label=f"OPA N = {orders[k]}", **style)
+            ax2.semilogy(t, np.maximum(np.abs(x0 - m), 1e-16), **style)
+        ax.set_title(f"σ = {float(ds.sigma[s]):g}", fontsize=9)
         ax2.set_xlabel("t [forcing periods]")
-        ax2.set_yscale("symlog", linthresh=max(1e-8, float(np.nanmax(2 * se))))
     axes[0, 0].set_ylabel("E[x]")
-    axes[1, 0].set_ylabel("x_0 − E_MC[x]")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}, {ds.variant.values[HEADLINE]}")
-    fig.tight_layout()
+    axes[1, 0].set_ylabel("|x_0 − E_MC[x]|")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    hh, ll = axes[1, 0].get_legend_handles_labels()
+    _fig_legend(fig, handles + hh, labels + ll, 4)
+    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}, {ds.variant.values[HEADLINE]}",
+                 fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
 
 
-def plot_variance(ds, path, q=0):
+def plot_variance(ds, path, q=0, *, size=None):
     plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     n = int(round(float(ds.horizon[0]) * ds.attrs["per_period"])) + 1
-    t = ds.periods.values[:n]
-    fig, axes = plt.subplots(1, len(picks), figsize=(6 * len(picks), 3.8), squeeze=False)
+    t = _time(ds).values[:n]
+    fig, axes = plt.subplots(1, len(picks), figsize=size or (6 * len(picks), 4.6),
+                             squeeze=False, layout="constrained")
     for c, s in enumerate(picks):
         ax = axes[0, c]
         var = ds.mc_x_var.values[q, s, :n]
         se = ds.mc_x_var_sem.values[q, s, :n]
         ax.fill_between(t, np.maximum(var - 2 * se, 1e-16), var + 2 * se, color="0.75")
-        ax.semilogy(t, np.maximum(var, 1e-16), "k-", lw=1.6, label="MC Var[x] ± 2 SE")
-        for j, v in enumerate(_laws(ds)):
+        ax.semilogy(t, np.maximum(var, 1e-16), "k-", lw=2.2, label="MC Var[x] ± 2 SE")
+        for j, v in enumerate(_laws(ds) + _element_variants(ds)):
+            colour, style, mark = STAR_STYLES[(j + 1) % len(STAR_STYLES)]
             ax.semilogy(t, np.maximum(ds.opa_x_var.values[q, s, v, -1, :n], 1e-16),
-                        ("-", "--", ":")[j], lw=1.2, label=f"OPA {ds.variant.values[v]}, N = "
-                        f"{int(ds.N.max())}")
+                        color=colour, ls=style, marker=mark, ms=3, markevery=max(1, n // 10),
+                        lw=1.2, label=f"OPA {ds.variant.values[v]}, N = {int(ds.N.max())}")
         positive = var[1:][var[1:] > 0]
         if len(positive):
             ax.set_ylim(bottom=0.1 * float(positive.min()))
-        ax.set_title(f"σ = {float(ds.sigma[s]):g}")
+        ax.set_title(f"σ = {float(ds.sigma[s]):g}", fontsize=9)
         ax.set_xlabel("t [forcing periods]")
-    axes[0, 0].legend(fontsize=7)
-    fig.suptitle(f"Variance, {_par(ds)} = {_g(float(_vals(ds)[q]))}")
-    fig.tight_layout()
+    axes[0, 0].set_ylabel("Var[x]")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    _fig_legend(fig, handles, labels, 3)
+    fig.suptitle(f"Variance of x, {_par(ds)} = {_g(float(_vals(ds)[q]))}", fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
 
 
-def plot_phase(ds, path):
+def plot_phase(ds, path, *, size=None):
     """Dense-output phase portraits: OPA (both laws) against the MC mean and samples."""
     plt = _pyplot()
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.6))
+    fig, axes = plt.subplots(1, 2, figsize=size or (11, 5.0), layout="constrained")
     ax = axes[0]
     for j in range(ds.sizes["phase_sample"]):
         ax.plot(ds.phase_sample_x[j], ds.phase_sample_v[j], lw=0.5, color="0.7",
@@ -681,7 +934,7 @@ def plot_phase(ds, path):
     ax.axvline(float(ds.attrs["delta"]), color="r", lw=1, label="wall")
     ax.set_xlabel("x")
     ax.set_ylabel("x'")
-    ax.legend(fontsize=7)
+    _fig_legend(fig, *ax.get_legend_handles_labels(), 5)
     ax = axes[1]
     t = ds.phase_time.values
     for j in range(ds.sizes["phase_sample"]):
@@ -693,14 +946,83 @@ def plot_phase(ds, path):
     ax.set_ylabel("x")
     fig.suptitle(f"{_par(ds)} = {_g(ds.attrs['phase_value'])}, σ = "
                  f"{_g(ds.attrs['phase_sigma'])}, N = {int(ds.N.max())} "
-                 f"({ds.sizes['phase_time']} dense outputs)")
-    fig.tight_layout()
+                 f"({ds.sizes['phase_time']} dense outputs)", fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
 
 
 # -- the cost-accuracy frontier -------------------------------------------------------------
+def plot_frontier(conv, path, *, size=None):
+    """The cost-accuracy study of the map (``frontier_dataset``): error against elements K,
+    against N (one line per element count, so that K and N are never joined) and against
+    cost; every line its own colour, dash and marker; one legend below the panels."""
+    plt = _pyplot()
+    from compare._convergence import STUDY_LAWS, _select
+
+    fig, axes = plt.subplots(1, 3, figsize=size or (16, 6.2), layout="constrained")
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    seen: dict = {}
+
+    def style(label):
+        if label not in seen:
+            k = len(seen)
+            seen[label] = dict(color=colours[k % len(colours)],
+                               ls=LINE_STYLES[k % len(LINE_STYLES)],
+                               marker=VARIANT_MARKERS[(k // 2) % len(VARIANT_MARKERS)],
+                               mfc="none" if k % 2 else None, ms=4, lw=1.1)
+        return seen[label]
+
+    ax = axes[0]
+    for method in ("ME-OPA uniform", "ME-OPA adaptive", "ME-collocation uniform",
+                   "ME-collocation adaptive"):
+        for law in (*STUDY_LAWS, "true system"):
+            idx = _select(conv, method, law)
+            if len(idx):
+                label = f"{method} ({law})"
+                ax.loglog(conv["size"].values[idx], conv.error.values[idx], label=label,
+                          **style(label))
+    ax.set_xlabel("elements K")
+    ax.set_ylabel("RMS error of E[x]")
+    ax = axes[1]
+    for method in ("ME-OPA adaptive, N", "OPA (one element), N"):
+        for law in STUDY_LAWS:
+            idx = _select(conv, method, law)
+            for K in np.unique(conv["size"].values[idx]):
+                sub = idx[conv["size"].values[idx] == K]
+                label = f"{method.removesuffix(', N')} ({law}), K = {int(K)}"
+                ax.semilogy(conv.order.values[sub], conv.error.values[sub], label=label,
+                            **style(label))
+    ax.set_xlabel("N")
+    ax.set_ylabel("RMS error of E[x]")
+    ax = axes[2]
+    for method in np.unique(conv.method.values):
+        if method.endswith(", N"):
+            continue
+        for law in np.unique(conv.law.values):
+            idx = _select(conv, method, law)
+            if len(idx):
+                label = f"{method} ({law})"
+                ax.loglog(conv.rhs_evaluations.values[idx], conv.error.values[idx],
+                          label=label, **style(label))
+    ax.set_xlabel("right-hand-side evaluations")
+    ax.set_ylabel("RMS error of E[x]")
+    for ax in axes:
+        ax.axhline(conv.attrs["reference_sem"], color="k", ls=":", lw=1,
+                   label="reference SE")
+    handles, labels = [], []
+    for ax in axes:
+        hh, ll = ax.get_legend_handles_labels()
+        handles, labels = handles + hh, labels + ll
+    _fig_legend(fig, handles, labels, 4)
+    fig.suptitle(f"σ = {conv.attrs['sigma']:g}, ω = {conv.attrs['omega']:g}, "
+                 f"{conv.attrs['periods']:g} periods: error against K, N and cost", fontsize=10)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+
 def frontier_dataset(ds):
     """The frontier part of a trust-map dataset in the shape of an ``opa-mc converge``
     dataset (None if the map was run without it)."""
@@ -711,7 +1033,8 @@ def frontier_dataset(ds):
                            | {"frontier_run": "run"})
     out.attrs = {k[len("frontier_"):]: v for k, v in ds.attrs.items()
                  if k.startswith("frontier_")}
-    out.attrs.setdefault("omega", ds.attrs["omega"])
+    if "omega" in ds.attrs:  # files written before frontier_omega
+        out.attrs.setdefault("omega", ds.attrs["omega"])
     return out
 
 
@@ -728,9 +1051,24 @@ def frontier_lines(ds) -> list[str]:
 
 
 # -- summary.md -----------------------------------------------------------------------------
+def wall_text(seconds: dict) -> str:
+    """'12.4 s (map 10.1 s, report 2.3 s)': the wall times of one run, read off one clock."""
+    parts = ", ".join(f"{k} {v:.1f} s" for k, v in seconds.items() if k != "total")
+    return f"{seconds['total']:.1f} s" + (f" ({parts})" if parts else "")
+
+
 def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
-                 command: str = "opa-mc validate") -> list[str]:
-    """Write summary.md and the figures; returns the written paths."""
+                 command: str = "opa-mc validate", started: float | None = None,
+                 timing: dict | None = None) -> list[str]:
+    """Write summary.md and the figures; returns the written paths.
+
+    ``started``: the ``time.perf_counter()`` reading at which the command started, the
+    same clock as ``run_validation(started=...)``: summary.md then gives the time from it
+    to the finished report, split into the map (the dataset's ``wall_seconds``) and the
+    report. Without it summary.md gives the map's time only. ``timing``, a dict, receives
+    those times (keys total, map, report), for the caller to print the same numbers."""
+    import time
+
     os.makedirs(outdir, exist_ok=True)
     paths = []
     if plots:
@@ -741,21 +1079,25 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
         paths += plot_phase(ds, os.path.join(outdir, "phase.png"))
         conv = frontier_dataset(ds)
         if conv is not None:
-            from compare._convergence import plot as plot_frontier
-
             paths.append(plot_frontier(conv, os.path.join(outdir, "frontier.png")))
     a = ds.attrs
+    seconds = {"total": float(a["wall_seconds"])}
+    if started is not None:
+        seconds = {"total": time.perf_counter() - started, "map": float(a["wall_seconds"])}
+        seconds["report"] = seconds["total"] - seconds["map"]
     md = os.path.join(outdir, "summary.md")
+    value_text = ", ".join(_g(float(v)) for v in _vals(ds).values)
     lines = [
         "# opa-mc validate: where OPA agrees with Monte Carlo", "",
-        f"Command: `{command}` ({a['wall_seconds']:.0f} s; computed: "
+        "```text", *first_screen(ds), "```", "",
+        f"Command: `{command}` (wall time {wall_text(seconds)}; computed: "
         f"{a['mc_runs_computed']} Monte Carlo runs, {a['opa_runs_computed']} OPA runs, "
         f"{a['parts_computed']} parts in all (splits and the frontier included); the rest "
         f"reused from parts/).", "",
-        f"Model: preset {a['preset']} (mu = {a['mu']:g}, a = {a['a']:g}, c = {a['c']:g}, "
-        f"f = {a['f']:g}, eta = {a['eta']:g}, delta = {a['delta']:g}, F0 = {a['F0']:g}, "
-        f"{a['impulse']} impulses), {a['parameter']} swept over "
-        f"{', '.join(_g(float(v)) for v in _vals(ds).values)}, uncertain {a['uncertain']} "
+        f"Model: preset {a['preset']} (" + ", ".join(
+            f"{k} = {a[k]:g}" for k in ("mu", "a", "c", "f", "omega", "eta", "delta", "F0")
+            if k in a) + f", {a['impulse']} impulses), {a['parameter']} swept over "
+        f"{value_text}, uncertain {a['uncertain']} "
         f"= {_g(nominal(ds))} + σ ξ, ξ ~ {a.get('distribution', 'semicircle')}, σ in "
         f"{', '.join(_g(float(s)) for s in ds.sigma.values)}; "
         f"N = {int(ds.N.min())}..{int(ds.N.max())}; rtol = {a['rtol']:g}, atol = "
@@ -771,8 +1113,12 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
         lines += [f"Multi-element variants ({a.get('elements')} elements"
                   + (f", budget {a['max_elements']}" if "max_elements" in a else "")
                   + f"): {a.get('element_text', '')}.", ""]
+    fails = run_failures(ds)
+    if fails:
+        lines += ["## Runs that did not finish", ""] + [f"- {f}." for f in fails] + [""]
     lines += [
         "## Trust boundary", "", boundary_table(ds, markdown=True), "",
+        boundary_table(ds, markdown=True, criterion=1), "",
         "## Why it breaks", "",
     ]
     for q in range(len(_vals(ds))):
@@ -802,9 +1148,12 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
                                        for p in paths] + [""]
     with open(md, "w") as fh:
         fh.write("\n".join(lines))
+    if timing is not None:
+        timing.update(seconds)
     return [md] + paths
 
 
-__all__ = ["boundary_table", "cause", "complete_within", "count_table", "findings",
+__all__ = ["best_variant", "boundary_table", "cause", "first_screen", "run_failures",
+           "short_cause", "wall_text", "bullet", "process_started", "complete_within", "count_table", "findings",
            "frontier_dataset", "frontier_lines", "nearest_crossing", "nearest_split",
            "star_text", "verdict_grid", "write_report"]

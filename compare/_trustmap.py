@@ -1195,15 +1195,15 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
                                        "impact", **one}),
         "first_impact": (dims, first, {"long_name": "time of OPA's first impact",
                                        "units": "forcing periods"}),
-        "opa_x_mean": (dims + ("periods",), opa_mean, {"long_name": "OPA mean x_0", **one}),
-        "opa_x_var": (dims + ("periods",), opa_var, {"long_name": "OPA variance", **one}),
-        "mc_x_mean": (("value", "sigma", "periods"), mc["x_mean"],
+        "opa_x_mean": (dims + ("time",), opa_mean, {"long_name": "OPA mean x_0", **one}),
+        "opa_x_var": (dims + ("time",), opa_var, {"long_name": "OPA variance", **one}),
+        "mc_x_mean": (("value", "sigma", "time"), mc["x_mean"],
                       {"long_name": "MC mean E[x]", **one}),
-        "mc_x_var": (("value", "sigma", "periods"), mc["x_var"],
+        "mc_x_var": (("value", "sigma", "time"), mc["x_var"],
                      {"long_name": "MC variance Var[x]", **one}),
-        "mc_x_sem": (("value", "sigma", "periods"), mc["x_sem"],
+        "mc_x_sem": (("value", "sigma", "time"), mc["x_sem"],
                      {"long_name": "MC standard error of E[x]", **one}),
-        "mc_x_var_sem": (("value", "sigma", "periods"), mc["x_var_sem"],
+        "mc_x_var_sem": (("value", "sigma", "time"), mc["x_var_sem"],
                          {"long_name": "MC standard error of Var[x]", **one}),
         "mc_samples": (("value", "sigma"), samples, {"long_name": "MC samples used", **one}),
         "mc_impacts_min": (("value", "sigma"), imin,
@@ -1289,19 +1289,34 @@ def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
         attrs = {"element_failures": " | ".join(failures)}
     else:
         attrs = {}
+    unc = cfg.uncertain
+    index = lambda dim, text: (dim, np.arange(sizes[dim]), {"long_name": text, **one})  # noqa: E731
+    sizes = {"probe": max_probes, "split": max_split}
     return xr.Dataset(
         data,
         coords={
-            "value": ("value", np.array(cfg.values, float), {"long_name": cfg.parameter}),
-            "sigma": ("sigma", np.array(cfg.sigmas, float)),
-            "variant": ("variant", np.array(cfg.variants, dtype=object)),
-            "N": ("N", np.array(cfg.orders)),
-            "horizon": ("horizon", np.array(cfg.horizons, float), {"units": "forcing periods"}),
-            "criterion": ("criterion", np.array(CRITERIA, dtype=object)),
-            "periods": ("periods", np.arange(n_out) / cfg.per_period,
-                        {"long_name": "time in forcing periods t omega / (2 pi)",
+            "value": ("value", np.array(cfg.values, float),
+                      {"long_name": f"swept parameter {cfg.parameter}", **one}),
+            "sigma": ("sigma", np.array(cfg.sigmas, float),
+                      {"long_name": f"intensity of the uncertainty: {unc} = nominal {unc} + "
+                       "sigma xi", **one}),
+            "variant": ("variant", np.array(cfg.variants, dtype=object),
+                        {"long_name": "OPA variant: impact law/truncation, or impact "
+                         "law/ME-<elements> for multi-element OPA"}),
+            "N": ("N", np.array(cfg.orders), {"long_name": "order of the OPA expansion",
+                                               **one}),
+            "horizon": ("horizon", np.array(cfg.horizons, float),
+                        {"long_name": "length of the comparison window",
                          "units": "forcing periods"}),
-            "count": ("count", np.arange(kmax + 1)),
+            "criterion": ("criterion", np.array(CRITERIA, dtype=object),
+                          {"long_name": "quantity compared with Monte Carlo"}),
+            "time": ("time", np.arange(n_out) / cfg.per_period,
+                     {"long_name": "time in forcing periods t omega / (2 pi) (the forcing "
+                      "period differs along the sweep)", "units": "forcing periods"}),
+            "count": ("count", np.arange(kmax + 1),
+                      {"long_name": "number of impacts up to the horizon", **one}),
+            "probe": index("probe", "index of an evaluated sigma (ascending; NaN-padded)"),
+            "split": index("split", "index of a located split (kind -1: padding)"),
         },
         attrs=attrs,
     )
@@ -1364,7 +1379,8 @@ def _details(cfg: ValidateConfig, sig: float) -> xr.Dataset:
                                {"long_name": "sample paths x", **one}),
             "phase_sample_v": (("phase_sample", "phase_time"), ens.v.values[pick],
                                {"long_name": "sample paths x'", **one}),
-            "phase_sample_xi": ("phase_sample", ens.xi.values[pick], {"long_name": "xi", **one}),
+            "phase_sample_xi": ("phase_sample", ens.xi.values[pick],
+                                {"long_name": "xi of the sample path", **one}),
             "emr0_dmr_difference": ("horizon", np.array(diff),
                                     {"long_name": "max |x_0 - x_DMR| with sigma = 0, N = Nmax",
                                      **one}),
@@ -1372,9 +1388,14 @@ def _details(cfg: ValidateConfig, sig: float) -> xr.Dataset:
                                        {"long_name": "max |x_0 - x_DMR| with sigma = 0, N = 0, "
                                         "longest horizon", **one}),
         },
-        coords={"law": ("law", np.array(["mean", "ensemble"], dtype=object)),
+        coords={"law": ("law", np.array(["mean", "ensemble"], dtype=object),
+                        {"long_name": "impact law of the phase portrait's OPA run"}),
                 "phase_time": ("phase_time", times / osc.forcing_period,
-                               {"units": "forcing periods"})},
+                               {"long_name": "dense-output time in forcing periods",
+                                "units": "forcing periods"}),
+                "phase_sample": ("phase_sample", np.arange(len(pick)),
+                                 {"long_name": "index of a drawn sample path (ascending xi)",
+                                  **one})},
         attrs={"phase_value": float(value), "phase_sigma": float(sig)},
     )
 
@@ -1383,8 +1404,11 @@ def _attrs(cfg: ValidateConfig) -> dict:
     attrs = provenance_attrs("validate", cfg.system_at(cfg.values[0], sigma=max(cfg.sigmas),
                                                         order=cfg.nmax),
                              cfg.options, seed=cfg.seed, sampler="sobol")
-    attrs.update({cfg.parameter: float(cfg.oscillator.as_dict()[cfg.parameter]),
-                  "truncation": ",".join(dict.fromkeys(t for _, t in cfg.single_variants)),
+    # a grid dataset: sigma, N and the swept parameter are coordinates, not one value
+    for name in ("sigma", "N", cfg.parameter):
+        if name != cfg.uncertain:
+            attrs.pop(name, None)
+    attrs.update({"truncation": ",".join(dict.fromkeys(t for _, t in cfg.single_variants)),
                   "impact_law": "mean,ensemble,saltation"})
     attrs.update(
         distribution=cfg.distribution,
@@ -1413,9 +1437,27 @@ def _attrs(cfg: ValidateConfig) -> dict:
     return attrs
 
 
-def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print) -> xr.Dataset:
-    """Run the trust map and return its dataset (also written to OUTDIR/validate.nc)."""
+def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
+                   started: float | None = None) -> xr.Dataset:
+    """Run the trust map and return its dataset (also written to OUTDIR/validate.nc).
+
+    ``started``: the ``time.perf_counter()`` reading at which the command started (the
+    one clock of a run); the attribute ``wall_seconds`` is the time from it to the
+    finished dataset (default: from the call)."""
+    started = time.perf_counter() if started is None else started
     ds = _Map(cfg, progress=progress, log=log).run()
+    for dim in ds.dims:  # every dimension has a coordinate (parts of older versions)
+        if dim not in ds.coords:
+            ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
+                                         {"long_name": f"index along {dim}", "units": "1"})})
+    if "frontier_run" in ds.dims:
+        ds["frontier_run"].attrs.update(long_name="index of a run of the cost-accuracy study",
+                                        units="1")
+        for name, text in (("frontier_method", "method of the run"),
+                           ("frontier_law", "impact law of the run (true system: none)")):
+            if name in ds and "long_name" not in ds[name].attrs:
+                ds[name].attrs["long_name"] = text
+    ds.attrs["wall_seconds"] = time.perf_counter() - started
     write_netcdf(ds, os.path.join(cfg.outdir, "validate.nc"))
     return ds
 

@@ -120,10 +120,30 @@ def test_netcdf_round_trip(tiny):
             np.testing.assert_array_equal(a, b, err_msg=name)
         else:
             assert (a == b).all(), name
-    for name in ("parameter", "uncertain", "tolerance", "z", "resolution", "floor", "omega",
+    for name in ("parameter", "uncertain", "tolerance", "z", "resolution", "floor", "mu",
                  "rtol", "seed", "criterion_text"):
         assert back.attrs[name] == ds.attrs[name], name
     assert list(back.variant.values) == [f"{a}/{b}" for a, b in VARIANTS]
+
+
+def test_the_map_dataset_explains_itself(tiny):
+    """A grid dataset: no global sigma, N or swept-parameter value (they are coordinates);
+    every dimension has a coordinate with a long_name, the time coordinate is called `time`
+    as in the simulate datasets, and its values are the output times in forcing periods."""
+    cfg, _, out = tiny
+    with xr.open_dataset(out / "validate.nc") as back:
+        back = back.load()
+    for name in ("sigma", "N", "omega"):
+        assert name not in back.attrs, name
+    assert "periods" not in back.dims and "time" in back.dims
+    for dim in back.dims:
+        assert dim in back.coords, dim
+        assert back[dim].attrs.get("long_name"), dim
+    for name in ("sigma", "N", "omega", "time", "count", "probe", "split"):
+        assert "units" in back[name].attrs, name
+    np.testing.assert_allclose(back.time.values,
+                               np.arange(back.sizes["time"]) / cfg.per_period)
+    assert back.time.size == int(max(cfg.horizons) * cfg.per_period) + 1
 
 
 def test_rerun_resumes_from_parts(tiny, monkeypatch):
@@ -419,7 +439,150 @@ def test_report_of_a_law_map_with_elements(tiny_law):
     assert str(out / "error_vs_N.png") in written
     text = (out / "summary.md").read_text()
     assert "ξ ~ uniform" in text and "Variants left out: mean/paper, ensemble/paper" in text
-    assert "σ* variance saltation/ME-adaptive8" in text
+    assert "σ* of the variance" in text and "| σ* saltation/ME-adaptive8 |" in text
     assert "σ* of multi-element OPA saltation/ME-adaptive8 (N = 2) is ω = 3.98:" in text
     assert "(one element: " in text and "paper's truncation (eq. (27))" not in text
     assert "(saltation law, ME-adaptive8)" in text
+
+
+# -- figures: checked by their text extents, not by eye alone ------------------------------
+def _drawn(monkeypatch, draw):
+    """The figures a drawing function makes (pyplot.close held back), rendered."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+    monkeypatch.setattr(plt, "close", lambda *a, **k: None)
+    draw()
+    figs = [plt.figure(n) for n in plt.get_fignums()]
+    for fig in figs:
+        fig.canvas.draw()
+    monkeypatch.undo()
+    return figs
+
+
+def _boxes(texts, renderer):
+    return [(t.get_text(), t.get_window_extent(renderer)) for t in texts
+            if t.get_visible() and t.get_text().strip()]
+
+
+def _overlaps(boxes):
+    return [(a, b) for i, (a, ba) in enumerate(boxes) for b, bb in boxes[i + 1:]
+            if ba.overlaps(bb) and ba.intersection(ba, bb).width > 0.5
+            and ba.intersection(ba, bb).height > 0.5]
+
+
+def _check_figure(fig, name):
+    renderer = fig.canvas.get_renderer()
+    page = fig.bbox
+    plots = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    for ax in fig.axes:
+        for axis in (ax.xaxis, ax.yaxis):
+            ticks = _boxes(axis.get_ticklabels(), renderer)
+            assert not _overlaps(ticks), f"{name}: tick labels overlap: {_overlaps(ticks)}"
+    for legend in fig.legends + [ax.get_legend() for ax in fig.axes if ax.get_legend()]:
+        box = legend.get_window_extent(renderer)
+        assert (box.x0 >= page.x0 - 1 and box.x1 <= page.x1 + 1 and box.y0 >= page.y0 - 1
+                and box.y1 <= page.y1 + 1), f"{name}: a legend leaves the figure"
+        for ax in plots:  # no legend covers a panel
+            inter = box.intersection(box, ax.get_window_extent(renderer))
+            assert inter is None or inter.width * inter.height < 1, \
+                f"{name}: a legend covers the panel {ax.get_title()!r}"
+    # every row of panels has a y label, every column an x label
+    rows, cols = {}, {}
+    for ax in plots:
+        spec = ax.get_subplotspec()
+        rows.setdefault(spec.rowspan.start, []).append(ax.get_ylabel())
+        cols.setdefault(spec.colspan.start, []).append(ax.get_xlabel())
+    assert all(any(labels) for labels in rows.values()), f"{name}: a row has no y label"
+    assert all(any(labels) for labels in cols.values()), f"{name}: a column has no x label"
+    # lines told apart by more than colour: (colour, dash, marker) differ per label
+    for ax in plots:
+        seen = {}
+        for line in ax.get_lines():
+            label = line.get_label()
+            if label.startswith("_"):
+                continue
+            key = (str(line.get_color()), str(line.get_linestyle()), str(line.get_marker()),
+                   str(line.get_dashes() if hasattr(line, "get_dashes") else ""))
+            seen.setdefault(key, set()).add(label)
+        same = [labels for labels in seen.values() if len(labels) > 1]
+        assert not same, f"{name}: lines drawn alike: {same}"
+        # and different labels are not drawn the same line style and marker in black
+    # the panels' texts (titles, suptitle) do not run into each other
+    titles = _boxes([ax.title for ax in plots] + ([fig._suptitle] if fig._suptitle else []),
+                    renderer)
+    assert not _overlaps(titles), f"{name}: titles overlap: {_overlaps(titles)}"
+    texts = titles + _boxes([ax.xaxis.label for ax in fig.axes]
+                            + [ax.yaxis.label for ax in fig.axes], renderer)
+    for text, box in texts:  # nothing is cut off at the figure's edge
+        assert (box.x0 >= page.x0 - 1 and box.x1 <= page.x1 + 1 and box.y0 >= page.y0 - 1
+                and box.y1 <= page.y1 + 1), f"{name}: {text!r} leaves the figure"
+
+
+FIGURES = ("plot_map", "plot_error_vs_order", "plot_mean", "plot_variance", "plot_phase")
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.6])
+@pytest.mark.parametrize("name", FIGURES)
+def test_figures_read_at_any_size(tiny, tmp_path, monkeypatch, name, scale):
+    """Each figure, at its size and at 60 % of it: no tick labels overprint, legends stay in
+    the figure and off the panels, every panel row and column is labelled, and no two
+    labelled lines share colour, dash and marker."""
+    from compare import _report
+
+    _, ds, _ = tiny
+    draw = getattr(_report, name)
+    figs = _drawn(monkeypatch, lambda: draw(ds, str(tmp_path / f"{name}.png")))
+    assert len(figs) == 1
+    fig = figs[0]
+    if scale != 1.0:
+        w, h = fig.get_size_inches()
+        figs = _drawn(monkeypatch, lambda: draw(ds, str(tmp_path / f"{name}.png"),
+                                                size=(w * scale, h * scale)))
+        fig = figs[0]
+    _check_figure(fig, f"{name} at {scale:g}")
+
+
+def test_trust_map_draws_both_verdicts_and_every_sigma_star(tiny, tmp_path, monkeypatch):
+    """The map has a mean and a variance panel per horizon; each draws sigma* of every impact
+    law as a visible (not white) line, and its colour bar marks the tolerance at 0."""
+    from compare._report import plot_map
+
+    _, ds, _ = tiny
+    fig, = _drawn(monkeypatch, lambda: plot_map(ds, str(tmp_path / "m.png")))
+    plots = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    assert len(plots) == 2 * ds.sizes["horizon"]
+    titles = [ax.get_title() for ax in plots]
+    assert sum(t.startswith("mean") for t in titles) == ds.sizes["horizon"]
+    assert sum(t.startswith("variance") for t in titles) == ds.sizes["horizon"]
+    from matplotlib.colors import to_rgb
+
+    for ax in plots:
+        stars = [ln for ln in ax.get_lines() if ln.get_label().startswith("σ* ")]
+        assert {ln.get_label() for ln in stars} == {
+            f"σ* {v}" for v in ("mean/galerkin", "ensemble/galerkin", "saltation/galerkin")}
+        assert all(to_rgb(ln.get_color()) != (1.0, 1.0, 1.0) for ln in stars)
+        assert ax.get_ylabel() in ("σ", "")
+    bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert bars and all(any(np.allclose(ln.get_ydata(), 0) for ln in ax.get_lines())
+                        for ax in bars)
+
+
+def test_single_value_map_has_sensible_limits(tiny, tmp_path, monkeypatch):
+    """With one value of the swept parameter the x axis spans a few per cent around it and
+    sigma* is still drawn (as a marker)."""
+    from compare._report import plot_map
+
+    _, ds, _ = tiny
+    one = ds.isel(omega=[0])
+    fig, = _drawn(monkeypatch, lambda: plot_map(one, str(tmp_path / "m.png")))
+    value = float(one.omega[0])
+    for ax in [a for a in fig.axes if a.get_label() != "<colorbar>"]:
+        lo, hi = ax.get_xlim()
+        assert lo < value < hi and hi - lo < 0.05 * value
+        stars = [ln for ln in ax.get_lines() if ln.get_label().startswith("σ* ")]
+        assert stars and all(ln.get_marker() not in ("", "None", None) for ln in stars)
+    _check_figure(fig, "single-value map")
