@@ -108,6 +108,38 @@ def _runs():
     ]
 
 
+VALIDATE_CALL = ('run_validation(load_config(None, values=(3.98,), sigmas=(0.01, 0.03), '
+                 'orders=(0, 1), horizons=(2,), samples=64, max_samples=64, per_period=4, '
+                 'frontier=False, plots=False, outdir=tmp), progress=False)')
+
+VALIDATE_TEXT = """## validate.nc (`opa-mc validate`, the trust map)
+
+A grid dataset: the swept parameter (here `omega`), `sigma`, `variant`, `N`, `horizon` and
+`criterion` are coordinates, so the global attributes carry no single `sigma`, `N` or value
+of the swept parameter; the other model parameters are attributes as everywhere. `time` is
+the output time in forcing periods (the forcing period differs along the sweep; files
+written before issue 26 called it `periods`). Reading σ* and the runs that did not finish:
+
+```python
+import tempfile
+import numpy as np
+from compare import load_config, run_validation
+
+with tempfile.TemporaryDirectory() as tmp:
+    cfg = load_config(None, values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1),
+                      horizons=(2,), samples=64, max_samples=64, per_period=4,
+                      frontier=False, plots=False, outdir=tmp)
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+star = ds.sigma_star.sel(variant="mean/galerkin", criterion="mean")     # (omega, horizon)
+assert star.dims == ("omega", "horizon")
+nan_runs = int(np.isnan(ds.err_mean.where(ds.variant_ran == 1)).sum())  # did not finish
+x0 = ds.opa_x_mean.sel(omega=3.98, sigma=0.01, variant="mean/galerkin", N=1)
+assert x0.dims == ("time",) and float(x0.time[-1]) == 2.0             # forcing periods
+assert "sigma" not in ds.attrs and "N" not in ds.attrs
+```
+"""
+
+
 def _table(ds) -> list[str]:
     lines = ["| variable | dimensions | long_name | units |", "|---|---|---|---|"]
     for name in [*ds.coords, *ds.data_vars]:
@@ -119,9 +151,31 @@ def _table(ds) -> list[str]:
     return lines
 
 
+def _validate():
+    import tempfile
+
+    from compare import load_config, run_validation
+
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = load_config(None, values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1),
+                          horizons=(2,), samples=64, max_samples=64, per_period=4,
+                          frontier=False, plots=False, outdir=tmp)
+        return run_validation(cfg, progress=False, log=lambda *a: None)
+
+
 def render() -> str:
     out = [HEADER]
-    for title, call, ds in _runs():
+    runs = _runs()
+    runs.append(("validate", VALIDATE_CALL, _validate()))
+    for title, call, ds in runs:
+        if title == "validate":
+            out.append(VALIDATE_TEXT)
+            out.append(f"`{call}` (from `compare`):\n")
+            out.extend(_table(ds))
+            out.append("")
+            out.append("Attributes: " + ", ".join(f"`{k}`" for k in sorted(ds.attrs)
+                                                  if k != "history") + ".\n")
+            continue
         if title == "opa":
             out.append(OPA_LAYOUT)
         out.append(f"## {title}\n")
