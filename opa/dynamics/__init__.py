@@ -30,6 +30,7 @@ from opa.dynamics._sections import (
     identify_motion,
     phase_section,
 )
+from opa.dynamics._stochastic import stochastic_diagram
 from opa.dynamics._sweep import summary_lines, sweep
 
 __all__ = [
@@ -49,6 +50,7 @@ __all__ = [
     "periodic_orbit",
     "phase_section",
     "poincare_map",
+    "stochastic_diagram",
     "summary_lines",
     "sweep",
     "transverse_lyapunov_exponent",
