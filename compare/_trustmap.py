@@ -150,6 +150,16 @@ class ValidateConfig:
             value = getattr(self, name)
             if not isinstance(value, numbers.Integral) or isinstance(value, bool):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
+            if not -2**53 <= value <= 2**53:
+                raise ValueError(f"{name} must be at most 2^53, got {value}")
+        if self.scheduler is not None and (not isinstance(self.scheduler, str)
+                                           or not self.scheduler.strip()):
+            raise ValueError(f"scheduler must be an address such as tcp://host:8786, got "
+                             f"{self.scheduler!r:.60}")
+        if not isinstance(self.orders, tuple) or not all(
+                isinstance(n, numbers.Integral) and not isinstance(n, bool)
+                for n in self.orders):
+            raise ValueError(f"orders must be a list of integers, got {self.orders!r:.80}")
         for name in ("tolerance", "var_tolerance", "z", "resolution", "split_resolution"):
             value = getattr(self, name)
             if not isinstance(value, numbers.Real) or isinstance(value, bool):
@@ -195,6 +205,13 @@ class ValidateConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
+        # bisections that doubles cannot finish are refused, not run for ever
+        if self.resolution < 1e-12 * max(self.sigmas):
+            raise ValueError(f"resolution must be >= 1e-12 x the largest sigma (sigma* cannot "
+                             f"be bisected finer in floating point), got {self.resolution:g}")
+        if not 1e-12 <= self.split_resolution <= 1.0:
+            raise ValueError(f"split_resolution must be in [1e-12, 1] (in xi, whose support "
+                             f"is [-1, 1]), got {self.split_resolution:g}")
         if not (math.isfinite(self.z) and self.z >= 0):
             raise ValueError(f"z must be >= 0, got {self.z}")
         for name in ("plots", "frontier"):
@@ -372,6 +389,56 @@ def digest(payload) -> str:
 MAX_SAMPLES = 2**20
 
 
+#: the largest config file read (a validate config is a few hundred bytes)
+MAX_CONFIG_BYTES = 1 << 20
+#: the deepest nesting of arrays and tables a config may have ([model] holds numbers)
+MAX_CONFIG_DEPTH = 4
+
+
+def _read_toml(path) -> dict:
+    """A config file's TOML: a regular file (not a FIFO, device or folder) of at most
+    MAX_CONFIG_BYTES, nested at most MAX_CONFIG_DEPTH deep."""
+    import stat
+
+    try:
+        info = os.stat(path)
+    except OSError as err:
+        raise ValueError(f"config file {path}: {err.strerror}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"config file {path}: not a regular file")
+    if info.st_size > MAX_CONFIG_BYTES:
+        raise ValueError(f"config file {path}: {info.st_size} bytes, more than the "
+                         f"{MAX_CONFIG_BYTES} a config may have")
+    try:
+        with open(path, "rb") as fh:
+            blob = fh.read(MAX_CONFIG_BYTES + 1)
+    except OSError as err:
+        raise ValueError(f"config file {path}: {err.strerror}") from None
+    if len(blob) > MAX_CONFIG_BYTES:
+        raise ValueError(f"config file {path}: more than the {MAX_CONFIG_BYTES} bytes a "
+                         f"config may have")
+    try:
+        data = tomllib.loads(blob.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"config file {path} is not valid TOML: {err}") from None
+    except RecursionError:
+        raise ValueError(f"config file {path}: arrays or tables nested too deeply (at most "
+                         f"{MAX_CONFIG_DEPTH} levels)") from None
+
+    def depth(value) -> int:
+        if isinstance(value, dict):
+            return 1 + max(map(depth, value.values()), default=0)
+        if isinstance(value, list):
+            return 1 + max(map(depth, value), default=0)
+        return 0
+
+    for key, value in data.items():
+        if depth(value) > MAX_CONFIG_DEPTH - 1:
+            raise ValueError(f"config file {path}: key {key!r} is nested too deeply (at most "
+                             f"{MAX_CONFIG_DEPTH} levels)")
+    return data
+
+
 def load_config(path: str | None, **overrides) -> ValidateConfig:
     """A configuration from a TOML file (all keys optional) and keyword overrides.
 
@@ -389,13 +456,7 @@ def load_config(path: str | None, **overrides) -> ValidateConfig:
     """
     data: dict = {}
     if path is not None:
-        try:
-            with open(path, "rb") as fh:
-                data = tomllib.load(fh)
-        except (FileNotFoundError, IsADirectoryError, PermissionError) as err:
-            raise ValueError(f"config file {path}: {err.strerror}") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-            raise ValueError(f"config file {path} is not valid TOML: {err}") from None
+        data = _read_toml(path)
     model = data.pop("model", {})
     solver = data.pop("solver", {})
     for name, table in (("model", model), ("solver", solver)):

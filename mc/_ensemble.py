@@ -198,9 +198,13 @@ def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep
 
 def _chunk_size(n_times: int, requested: int | None) -> int:
     if requested is not None:
-        if int(requested) != requested or requested < 1:
-            raise ValueError(f"chunk_size must be a positive integer, got {requested}")
-        return int(requested)
+        from opa._model import check_count
+
+        try:
+            return check_count("chunk_size", requested)
+        except ValueError as err:
+            raise ValueError(str(err) if "at most" in str(err) else
+                             f"chunk_size must be a positive integer, got {requested}") from None
     return int(min(4096, max(64, CHUNK_BYTES // (16 * n_times))))
 
 

@@ -118,16 +118,25 @@ def _check_sampler(sampler: str, samples: int, seed: int | None) -> None:
     if sampler not in SAMPLERS:
         allowed = ", ".join(repr(s) for s in SAMPLERS)
         raise ValueError(f"sampler must be one of {allowed}, got {sampler!r}")
-    if (
-        isinstance(samples, bool)
-        or not isinstance(samples, numbers.Integral)
-        or samples < 1
-    ):
+    from opa._model import check_count
+
+    if isinstance(samples, float) or not isinstance(samples, (numbers.Integral, np.ndarray,
+                                                              np.generic)):
         raise ValueError(f"samples must be a positive integer, got {samples!r}")
-    if seed is not None and (
-        isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0
-    ):
-        raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+    try:
+        check_count("samples", samples, 1)
+    except ValueError as err:
+        raise ValueError(f"samples must be a positive integer, got {samples!r}"
+                         + (" (at most 2^53)" if "most" in str(err) else "")) from None
+    if seed is not None:
+        if isinstance(seed, float):
+            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+        try:
+            check_count("seed", seed, 0)
+        except ValueError as err:
+            raise ValueError(str(err) if "at most" in str(err) else
+                             f"seed must be a non-negative integer or None, got "
+                             f"{seed!r}") from None
 
 
 def sample_xi(

@@ -33,7 +33,8 @@ import numpy as np
 
 from opa import _kernel as K
 from opa._basis import quadrature_order
-from opa._measure import Measure
+from opa._measure import MAX_GAUSS, Measure
+from opa._model import check_count
 from opa._model import SolverOptions
 from opa._run import quadrature, run_batch, sampled_batch
 from opa._system import System
@@ -85,6 +86,10 @@ def element_rule(measure: Measure, order: int):
     if measure.name == "semicircle" and measure.is_whole:
         return quadrature(order)
     q = 1 if order == 0 else quadrature_order(order)
+    if q > MAX_GAUSS:
+        raise ValueError(f"order N = {order} with elements or a law other than the whole "
+                         f"semicircle needs a Gauss rule of 2N + 1 = {q} nodes, more than "
+                         f"the {MAX_GAUSS} computed: use N <= {(MAX_GAUSS - 1) // 2}")
     coefficients = measure.recurrence(max(order + 2, q))
     nodes, weights = measure.gauss(q, coefficients)
     basis = measure.basis(order + 1, nodes, coefficients)
@@ -252,9 +257,11 @@ def global_coefficients(x_coefs, edges, probability, measure: Measure,
 
 def uniform_edges(measure: Measure, count: int) -> np.ndarray:
     """``count`` elements of equal probability."""
-    if int(count) != count or count < 1:
+    try:
+        count = check_count("elements", count, 1)
+    except ValueError:
         raise ValueError(f"elements must be a positive integer, 'adaptive' or a list of "
-                         f"edges, got {count!r}")
+                         f"edges, got {count!r}") from None
     if count > MAX_ELEMENTS:
         raise ValueError(f"elements must be at most {MAX_ELEMENTS}, got {count}")
     edges = measure.ppf(np.linspace(0.0, 1.0, int(count) + 1))
@@ -309,10 +316,12 @@ def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, 
     change of the assembled mean E[x] from the step before: NaN at the first step, which
     has none; the change is the error estimate of the step before it)."""
     if not (isinstance(max_elements, numbers.Integral) and not isinstance(max_elements, bool)
+            and not type(max_elements).__name__ in ("bool_", "bool")
             and 1 <= max_elements <= MAX_ELEMENTS):
         raise ValueError(f"max_elements must be an integer in 1..{MAX_ELEMENTS}, got "
                          f"{max_elements!r}")
-    if not (tolerance > 0 and math.isfinite(tolerance)):
+    if isinstance(tolerance, (bool, str, bytes)) or not (
+            isinstance(tolerance, numbers.Real) and tolerance > 0 and math.isfinite(tolerance)):
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
     edges, _ = split_edges(system, options, measure, t_end=float(times[-1]),
                            max_splits=min(SPLIT_BUDGET, SPLITS_PER_ELEMENT * max_elements))

@@ -124,7 +124,13 @@ class Measure:
         m = max(DISCRETISATION, 2 * n + 8) if m is None else m
         key = (self.a, self.b, n, m)
         if key not in self._cache:
-            self._cache[key] = self._lanczos(n, m)
+            with np.errstate(all="ignore"):
+                found = self._lanczos(n, m)
+            if not (np.isfinite(found[0]).all() and np.isfinite(found[1]).all()):
+                raise ValueError(f"distribution {self.name}: its orthonormal polynomials up to "
+                                 f"degree {n - 1} are not finite in double precision; use a "
+                                 f"lower order N or a milder law")
+            self._cache[key] = found
         alpha, bcoef = self._cache[key]
         return alpha.copy(), bcoef.copy()
 
@@ -132,6 +138,9 @@ class Measure:
         if n > m:
             raise ValueError(f"n = {n} exceeds the discretisation m = {m}")
         x, w = self.discretise(m)
+        if not (np.isfinite(x).all() and np.isfinite(w).all()):
+            raise ValueError(f"distribution {self.name}: the discretisation of its density is "
+                             f"not finite in double precision")
         Q = np.zeros((m, n))
         alpha = np.zeros(n)
         bcoef = np.zeros(n)
@@ -163,7 +172,13 @@ class Measure:
         alpha, b = alpha[:q], b[:q]
         if q == 1:
             return alpha.copy(), np.ones(1)
-        vals, vecs = np.linalg.eigh(np.diag(alpha) + np.diag(b[1:], 1) + np.diag(b[1:], -1))
+        try:
+            vals, vecs = np.linalg.eigh(np.diag(alpha) + np.diag(b[1:], 1)
+                                        + np.diag(b[1:], -1))
+        except np.linalg.LinAlgError:
+            raise ValueError(f"distribution {self.name}: its {q}-point Gauss rule cannot be "
+                             f"computed (the eigenvalues of the Jacobi matrix did not "
+                             f"converge); use a lower order N or a milder law") from None
         w = vecs[0] ** 2
         return vals, w / w.sum()
 
@@ -228,11 +243,43 @@ def parse(spec) -> Measure:
         if name == "uniform" and not values:
             return uniform()
         if name == "beta" and len(values) == 2:
-            return beta(*values)
+            return _usable(spec, beta, values)
         if name == "normal-trunc" and len(values) == 1:
-            return normal_trunc(values[0])
+            return _usable(spec, normal_trunc, values)
         raise ValueError(f"distribution must be one of {', '.join(DISTRIBUTIONS)}, got {spec!r}")
     return from_chaospy(spec)
+
+
+def _works(make, values) -> bool:
+    try:
+        with np.errstate(all="ignore"):
+            x, w = make(*values).discretise()
+    except (ValueError, FloatingPointError, ArithmeticError):
+        return False
+    return bool(np.isfinite(x).all() and np.isfinite(w).all() and w.sum() > 0)
+
+
+def _usable(spec: str, make, values) -> Measure:
+    """``make(*values)`` if its discretisation is finite in double precision; otherwise a
+    ValueError naming the parameters and the largest multiple of them that works."""
+    law = make(*values)
+    if _works(make, values):
+        return law
+    lo, hi = 0.0, 1.0  # scale the parameters down until the law can be discretised
+    if not _works(make, [v * 1e-3 for v in values]):
+        raise ValueError(f"distribution {spec!r}: its density cannot be discretised in double "
+                         f"precision (parameters {', '.join(f'{v:g}' for v in values)})")
+    lo = 1e-3
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _works(make, [v * mid for v in values]) else (lo, mid)
+    name = spec.partition(":")[0]
+    ok = ",".join(f"{math.floor(v * lo * 100) / 100:g}" for v in values)
+    what = ("shape parameters A, B = " if name == "beta" else "truncation K = ") + \
+        ", ".join(f"{v:g}" for v in values)
+    raise ValueError(f"distribution {spec!r}: {what} too large for the discretisation of "
+                     f"the density in double precision (its Gauss-Jacobi weights overflow or "
+                     f"vanish); this law works up to {name}:{ok}")
 
 
 def from_chaospy(dist) -> Measure:
@@ -240,11 +287,15 @@ def from_chaospy(dist) -> Measure:
     density are measured numerically and factored out, so that Beta-type laws
     (Wigner, Beta) keep a spectrally accurate discretisation."""
     try:
-        lo, hi = float(np.ravel(dist.lower)[0]), float(np.ravel(dist.upper)[0])
+        lower, upper = np.ravel(dist.lower), np.ravel(dist.upper)
         pdf, cdf, inv = dist.pdf, dist.cdf, dist.inv
     except AttributeError:
         raise ValueError(f"distribution must be a name or a chaospy distribution, got "
-                         f"{dist!r}") from None
+                         f"{dist!r:.80}") from None
+    if len(lower) != 1 or len(upper) != 1:
+        raise ValueError(f"distribution must be the law of one variable xi, got a joint law "
+                         f"of {len(lower)} ({type(dist).__name__})")
+    lo, hi = float(lower[0]), float(upper[0])
     if (not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo > 1e6
             or float(cdf(lo)) > 0.0 or float(cdf(hi)) < 1.0):  # chaospy cuts tails at ~8 sd
         raise ValueError(f"the distribution of xi must have a bounded support, got "

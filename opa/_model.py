@@ -76,17 +76,38 @@ def check_order(order, maximum: int = MAX_ORDER) -> int:
     return check_count("order (N)", order, minimum=0, maximum=maximum)
 
 
+#: largest whole number a count, a seed or a step limit may be: floats are exact to here
+MAX_WHOLE = 2**53
+
+
+def _is_bool(value) -> bool:
+    return isinstance(value, bool) or (type(value).__module__ == "numpy"
+                                       and type(value).__name__ in ("bool_", "bool"))
+
+
 def check_count(name: str, value, minimum: int = 1, maximum: int | None = None) -> int:
-    """A whole number in [minimum, maximum] (bools, strings and fractions refused)."""
-    try:
-        whole = (not isinstance(value, (bool, str, bytes))
-                 and math.isfinite(float(value)) and float(value) == int(value))
-    except (TypeError, ValueError, OverflowError):
-        whole = False
+    """A whole number in [minimum, maximum] (and at most 2^53): bools (numpy's too),
+    strings, fractions, inf and NaN refused; a 0-d array is its element."""
+    if type(value).__module__ == "numpy" and getattr(value, "ndim", None) == 0:
+        value = value.item() if hasattr(value, "item") else value
+    whole = False
+    if not _is_bool(value) and not isinstance(value, (str, bytes)):
+        if isinstance(value, numbers.Integral):
+            whole = True
+        else:
+            try:
+                f = float(value)
+                whole = math.isfinite(f) and f.is_integer()
+            except (TypeError, ValueError, OverflowError):
+                whole = False
     if not whole or int(value) < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    if maximum is not None and int(value) > maximum:
-        raise ValueError(f"{name} must be at most {maximum}, got {value!r}")
+    top = MAX_WHOLE if maximum is None else min(maximum, MAX_WHOLE)
+    if int(value) > top or (not isinstance(value, numbers.Integral) and abs(value) >= MAX_WHOLE
+                            and top == MAX_WHOLE):
+        raise ValueError(f"{name} must be at most {top}"
+                         + (" (2^53, where floats stop being exact)" if top == MAX_WHOLE
+                            else "") + f", got {value!r}")
     return int(value)
 
 
@@ -98,6 +119,13 @@ def check_instance(name: str, value, kind, default=None):
         raise ValueError(f"{name} must be a {kind.__name__}, got {type(value).__name__} "
                          f"{value!r:.60}")
     return value
+
+
+def check_flag(name: str, value) -> bool:
+    """``value`` if it is True or False (numpy's bools too); 1, 0.0 and "no" refused."""
+    if not _is_bool(value):
+        raise ValueError(f"{name} must be True or False, got {value!r:.60}")
+    return bool(value)
 
 
 def _choice(name: str, value: str, options: tuple[str, ...]) -> str:
@@ -227,10 +255,8 @@ class SolverOptions:
                 _choice("impulse", impulse, IMPULSE_MODELS)
             if "pulse_width" in legacy and not _finite("pulse_width", pulse_width) > 0.0:
                 raise ValueError(f"pulse_width must be > 0, got {pulse_width}")
-            if "impulse_at_zero" in legacy and (isinstance(impulse_at_zero, str) or
-                                                impulse_at_zero not in (True, False)):
-                raise ValueError(f"impulse_at_zero must be True or False, got "
-                                 f"{impulse_at_zero!r}")
+            if "impulse_at_zero" in legacy:
+                check_flag("impulse_at_zero", impulse_at_zero)
         # read by opa._system.as_system, which hands it to the System it builds
         object.__setattr__(self, "legacy_impulse", legacy)
         _choice("method", self.method, METHODS)
@@ -239,13 +265,7 @@ class SolverOptions:
             if not 1e-15 <= value < 1.0:
                 raise ValueError(f"{name} must be in [1e-15, 1), got {value}")
             object.__setattr__(self, name, value)
-        steps = self.max_steps
-        whole = isinstance(steps, numbers.Integral) or (
-            isinstance(steps, float) and steps.is_integer()
-        )
-        if isinstance(steps, bool) or not whole or steps < 1:
-            raise ValueError(f"max_steps must be an integer >= 1, got {steps!r}")
-        object.__setattr__(self, "max_steps", int(steps))
+        object.__setattr__(self, "max_steps", check_count("max_steps", self.max_steps))
         chatter = _finite("chatter_velocity", self.chatter_velocity)
         if not chatter > 0.0:
             raise ValueError(f"chatter_velocity must be > 0, got {chatter}")
@@ -291,8 +311,7 @@ class Uncertainty:
             raise ValueError(f"sigma must be >= 0, got {sigma}")
         object.__setattr__(self, "sigma", sigma)
         _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS)
-        if self.allow_negative not in (True, False) or isinstance(self.allow_negative, str):
-            raise ValueError(f"allow_negative must be True or False, got {self.allow_negative!r}")
+        check_flag("allow_negative", self.allow_negative)
 
     def check(self, oscillator: Oscillator) -> None:
         """Refuse ``p_bar - sigma < 0`` unless allowed."""
@@ -302,6 +321,14 @@ class Uncertainty:
                 f"sigma = {self.sigma} makes {self.parameter} = {mean} - sigma negative for some "
                 f"samples; pass allow_negative=True (--allow-negative) if that is intended"
             )
+
+
+def _denominator(value: float) -> int:
+    """The smallest K <= 1000 with K x value whole (1000 if none)."""
+    for k in range(1, 1001):
+        if abs(k * value - round(k * value)) <= 1e-9 * max(1.0, abs(k * value)):
+            return k
+    return 1000
 
 
 def time_grid(omega: float, periods: float, per_period: int):
@@ -315,6 +342,13 @@ def time_grid(omega: float, periods: float, per_period: int):
     count = round(periods * per_period)
     if count < 1:
         raise ValueError(f"periods * per_period must be >= 1, got {periods} * {per_period}")
+    # the run ends on its last output time: a fraction of an output interval would be cut
+    if abs(periods * per_period - count) > 1e-9 * max(1.0, count):
+        raise ValueError(f"periods = {periods:g} with per_period = {per_period} is "
+                         f"{periods * per_period:g} output intervals: the run ends on an "
+                         f"output time, so periods x per_period must be a whole number "
+                         f"(e.g. periods = {max(count, 1)}, or per_period a multiple of "
+                         f"{_denominator(periods)})")
     span = periods * 2.0 * math.pi / omega
     if span > MAX_TIME:
         raise ValueError(f"periods = {periods:g} forcing periods of 2 pi/omega = "

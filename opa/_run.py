@@ -250,6 +250,26 @@ def run_batch(y0, times, P, cfgs, rule, *, rtol, atol, capacity=0, stop_on_failu
     return out, logs, counters
 
 
+#: the default SolverOptions.max_steps; a run under it also has the runaway guard below
+DEFAULT_MAX_STEPS = 50_000_000
+# The runaway guard: a trajectory whose options keep the default max_steps may take at most
+# max(GUARD_FLOOR, GUARD_PER_PERIOD x forcing periods, GUARD_PER_TIME x time units) steps.
+# The paper's motions take 20 to 40 steps per forcing period (OPA of N = 8 and N = 20, the
+# DMR); a state that runs away in finite time (c < 0) takes ever smaller steps and would
+# otherwise use up the 50 million steps in silence (OPA of N = 8: about 200 s).
+GUARD_FLOOR = 200_000
+GUARD_PER_PERIOD = 20_000
+GUARD_PER_TIME = 1_000
+
+
+def step_guard(times, p) -> int:
+    """Steps the runaway guard allows over ``times`` (module constants above)."""
+    span = float(times[-1] - times[0]) if len(times) else 0.0
+    periods = span * p[K.P_OMEGA] / (2.0 * np.pi)
+    return int(min(DEFAULT_MAX_STEPS, max(GUARD_FLOOR, GUARD_PER_PERIOD * periods,
+                                          GUARD_PER_TIME * span)))
+
+
 def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", partial=False,
                include_start=True):
     """Integrate and return (states (n_out, dim), event log (n, 3), counters dict).
@@ -261,6 +281,10 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", parti
     outputs reached (NaN after) and the reason in ``counters["failure"]``."""
     nodes, weights, basis = kernel_quadrature(quad)
     capacity = max(64, 4 * len(times))
+    guard = step_guard(times, p) if cfg[K.C_MAXSTEPS] == DEFAULT_MAX_STEPS else None
+    if guard is not None:
+        cfg = cfg.copy()
+        cfg[K.C_MAXSTEPS] = guard
     while True:
         out = np.empty((len(times), len(y0)))
         log = np.empty((capacity, 3))
@@ -280,8 +304,18 @@ def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", parti
         message = (f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
                    f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} "
                    f"impacts)")
+        hint = advice(status)
+        if status == K.MAX_STEPS and guard is not None:
+            size = float(np.max(np.abs(z))) if np.isfinite(z).all() else float("inf")
+            message = (f"{label} stopped by the runaway guard: {n_steps} steps by t = "
+                       f"{t_last:.6g} of {times[-1]:.6g} (at most {GUARD_PER_PERIOD} per "
+                       f"forcing period, {GUARD_PER_TIME} per unit time, {GUARD_FLOOR} in "
+                       f"all), the state's largest component {size:.3g}, {n_impacts} impacts")
+            hint = ("The step size collapsed, as when the state runs away in finite time: "
+                    "check the parameters (e.g. the signs of a and c); a run that truly "
+                    "needs more steps can give SolverOptions(max_steps=...) explicitly.")
         if not partial:
-            raise SimulationError(f"{message}. {advice(status)}")
+            raise SimulationError(f"{message}. {hint}")
         out[~np.isfinite(out).all(axis=1)] = np.nan
         counters["failure"] = message
     return out, log[:min(n_events, len(log))], counters

@@ -95,8 +95,8 @@ def simulate_opa(
     times: np.ndarray | None = None,
     initial: np.ndarray | None = None,
     elements=None,
-    tolerance: float = 1e-6,
-    max_elements: int = 64,
+    tolerance: float | None = None,
+    max_elements: int | None = None,
     partial: bool = False,
     **fields,
 ) -> xr.Dataset:
@@ -123,7 +123,8 @@ def simulate_opa(
     its support: ``K`` equal-probability elements, an increasing array of edges, or
     ``"adaptive"`` (edges at the splits of the sampled systems' impact sequences, then
     halving of the element with the largest variance share until it is below
-    ``tolerance`` or ``max_elements`` is reached). Each element runs its own OPA system
+    ``tolerance``, default 1e-6, or ``max_elements``, default 64, is reached; both are
+    refused without ``"adaptive"``, where they would have no effect). Each element runs its own OPA system
     of order N; the result holds the assembled ``x_mean, x_var, v_mean, v_var`` and the
     per-element coefficients, edges and probabilities. With ``elements`` and the System
     given by keywords, ``impact_law`` defaults to ``"saltation"``, the law whose elements
@@ -156,6 +157,13 @@ def simulate_opa(
     (5, 11)
     """
     options = check_instance("options", options, SolverOptions, SolverOptions())
+    adaptive = isinstance(elements, str) and elements == "adaptive"
+    for name, value in (("tolerance", tolerance), ("max_elements", max_elements)):
+        if value is not None and not adaptive:
+            raise ValueError(f"{name} = {value!r} applies with elements='adaptive' only (the "
+                             f"refinement of adaptive elements), got elements={elements!r:.40}")
+    tolerance = 1e-6 if tolerance is None else tolerance
+    max_elements = 64 if max_elements is None else max_elements
     if elements is not None and not isinstance(system, System) \
             and fields.get("impact_law") is None:
         fields["impact_law"] = "saltation"  # the law whose elements converge

@@ -330,8 +330,15 @@ def scan_splits(
     oscillator = system.oscillator
     if not (isinstance(scan, numbers.Integral) and scan >= 2):
         raise ValueError(f"scan must be an integer >= 2, got {scan!r}")
-    if not (isinstance(tol, numbers.Real) and tol > 0):
-        raise ValueError(f"tol must be > 0, got {tol}")
+    if isinstance(tol, bool) or not (isinstance(tol, numbers.Real) and tol > 0
+                                     and math.isfinite(tol)):
+        raise ValueError(f"tol must be a finite number > 0, got {tol!r}")
+    # a bracket cannot shrink below a few ulps of its ends: such a tol would bisect for
+    # ever; above it the bisection takes at most log2((hi - lo) / tol) < 53 halvings
+    reach = 4.0 * np.finfo(float).eps * max(abs(lo), abs(hi))
+    if tol < reach:
+        raise ValueError(f"tol = {tol:g} is below what doubles resolve near "
+                         f"{parameter} = {max(abs(lo), abs(hi)):g}: use tol >= {reach:.3g}")
     if not (isinstance(max_splits, numbers.Integral) and not isinstance(max_splits, bool)
             and max_splits >= 1):
         raise ValueError(f"max_splits must be an integer >= 1, got {max_splits!r}")

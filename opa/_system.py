@@ -27,6 +27,7 @@ from opa._model import (
     Uncertainty,
     _choice,
     _finite,
+    check_flag,
     check_order,
 )
 
@@ -121,9 +122,7 @@ class System:
         _choice("truncation", self.truncation, TRUNCATIONS)
         _choice("impact_law", self.impact_law, IMPACT_LAWS)
         _choice("impulse", self.impulse, IMPULSE_MODELS)
-        if isinstance(self.impulse_at_zero, str) or self.impulse_at_zero not in (True, False):
-            raise ValueError(f"impulse_at_zero must be True or False, got "
-                             f"{self.impulse_at_zero!r}")
+        check_flag("impulse_at_zero", self.impulse_at_zero)
         object.__setattr__(self, "impulse_at_zero", bool(self.impulse_at_zero))
         tau = _finite("pulse_width", self.pulse_width)
         if tau <= 0.0:

@@ -21,24 +21,64 @@ _NEGATIVE_NUMBER = re.compile(rf"^-{_NUMBER}(,-?{_NUMBER})*$|^-(inf|infinity|nan
 MAX_WHOLE = 2**53
 
 
-class Parser(argparse.ArgumentParser):
-    """argparse with negative numbers in any notation as values, and one-line errors."""
+_TRACKED: dict[type, type] = {}
 
-    def __init__(self, *args, **kwargs):
+
+def _tracked(cls: type) -> type:
+    """``cls`` whose calls (argparse calls an action only for a flag on the command line,
+    never for a default) record the flag as typed in ``namespace.given_flags``."""
+    if cls not in _TRACKED:
+        def __call__(self, parser, namespace, values, option_string=None):
+            if option_string:
+                vars(namespace).setdefault("given_flags", {})[self.dest] = option_string
+            cls.__call__(self, parser, namespace, values, option_string)
+
+        _TRACKED[cls] = type(cls.__name__, (cls,), {"__call__": __call__})
+    return _TRACKED[cls]
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with negative numbers in any notation as values, and one-line errors.
+
+    The flags given on the command line (not their defaults) are recorded in
+    ``args.given_flags`` (dest -> the flag as typed), so that a flag that has no effect
+    in the given combination can be refused (``opa.cli._flags.given``). ``foreign`` maps
+    flags of sibling subcommands to why they do not apply here: such a flag is refused
+    with that reason instead of argparse's "unrecognized arguments"."""
+
+    def __init__(self, *args, foreign: dict[str, str] | None = None, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = _NEGATIVE_NUMBER
+        self.foreign = dict(foreign or {})
+
+    def parse_known_args(self, args=None, namespace=None):
+        for action in self._actions:
+            if action.option_strings and not isinstance(action, argparse._HelpAction):
+                action.__class__ = _tracked(type(action))
+        namespace, extras = super().parse_known_args(args, namespace)
+        for token in extras:
+            flag = token.split("=", 1)[0]
+            if flag in self.foreign:
+                self.error(f"{flag} {self.foreign[flag]}")
+        return namespace, extras
 
     def error(self, message: str):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _whole(text: str, minimum: int) -> int:
-    """``text`` as a whole number in [minimum, 2^53], also written as 1e3."""
+    """``text`` as a whole number in [minimum, 2^53], also written as 1e3 (digits are
+    read exactly: 2^53 + 1 is refused, not rounded to 2^53)."""
     try:
-        value = float(text)
-        if not (math.isfinite(value) and value == int(value) and minimum <= value <= MAX_WHOLE):
+        if re.fullmatch(r"\s*[-+]?\d+\s*", text):
+            value = int(text.strip())
+        else:  # a float at 2^53 may be a rounded larger number: floats stay below it
+            value = float(text)
+            if not (math.isfinite(value) and abs(value) < MAX_WHOLE):
+                raise ValueError
+        if not (value == int(value) and minimum <= value <= MAX_WHOLE):
             raise ValueError
-    except ValueError:
+    except (ValueError, OverflowError):
         raise argparse.ArgumentTypeError(f"expected a whole number in {minimum}..2^53, got "
                                          f"{text!r}") from None
     return int(value)

@@ -58,6 +58,11 @@ def cmd_bifurcation(args) -> int:
     from opa.cli._flags import check_outputs, options_from, system_from
 
     check_outputs(args)
+    if args.model != "mc":
+        from opa.cli._flags import refuse_given
+
+        refuse_given(args, ["samples", "sampler", "seed"],
+                     f"applies to bifurcation mc, not bifurcation {args.model}")
     if args.periods is not None:
         raise ValueError("--periods does not apply to bifurcation sweeps; use --transient P "
                          "and --record P")

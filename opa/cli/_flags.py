@@ -50,10 +50,13 @@ def _model_flags(parser: argparse.ArgumentParser) -> None:
                            help=f"{PARAMETER_DOCS[name]} (default {getattr(defaults, name):g})")
 
 
-def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS) -> None:
-    """The uncertainty, the OPA order and its closures, and the impulse model: the fields
+def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS,
+                  closures: bool = True) -> None:
+    """The uncertainty, the OPA order and its closures (not with ``closures=False``: a
+    Monte Carlo ensemble integrates the true systems), and the impulse model: the fields
     of ``opa.System`` (defaults from there)."""
-    g = parser.add_argument_group("system: uncertainty, OPA order and closures")
+    g = parser.add_argument_group("system: uncertainty, OPA order and closures" if closures
+                                  else "system: uncertainty and Chebyshev coefficients")
     g.add_argument("--sigma", type=float, default=DEFAULT_SIGMA, metavar="S",
                    help=f"intensity of the uncertain parameter p = p_bar + S xi "
                         f"(default {DEFAULT_SIGMA:g})")
@@ -62,8 +65,12 @@ def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS) -> None:
     g.add_argument("--allow-negative", action="store_true",
                    help="allow p_bar - sigma < 0 for the uncertain parameter")
     g.add_argument("--order", type=whole_number, default=DEFAULT_ORDER, metavar="N",
-                   help=f"OPA truncation order / highest MC Chebyshev coefficient "
-                        f"(default {DEFAULT_ORDER})")
+                   help=(f"OPA truncation order (default {DEFAULT_ORDER})" if closures else
+                         f"highest Chebyshev coefficient E[x U_i(xi)] estimated "
+                         f"(default {DEFAULT_ORDER})"))
+    if not closures:
+        _impulse_flags(parser)
+        return
     g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
                    help="galerkin: exact projection; paper: eq. (27), drops sigma/2 Y_{N+1} "
                         "(default galerkin)")
@@ -98,7 +105,7 @@ def _run_flags(parser: argparse.ArgumentParser) -> None:
                         "K = 1 gives the stroboscopic samples (default 1)")
 
 
-def _mc_flags(parser: argparse.ArgumentParser) -> None:
+def _mc_flags(parser: argparse.ArgumentParser, *, connect_timeout: bool = False) -> None:
     g = parser.add_argument_group("Monte Carlo")
     g.add_argument("--samples", type=positive_int, default=1024, metavar="M",
                    help="Monte Carlo samples (default 1024)")
@@ -108,6 +115,10 @@ def _mc_flags(parser: argparse.ArgumentParser) -> None:
                    help="random seed (default 0)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask distributed scheduler address (default: local threads)")
+    if connect_timeout:
+        g.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
+                       help="with --scheduler: seconds to wait for the Dask scheduler to "
+                            "answer (default 5)")
 
 
 def _common_flags(parser: argparse.ArgumentParser, *, mc: bool = True) -> None:
@@ -129,21 +140,30 @@ def _elements_arg(text: str):
                                          f"{text!r}") from None
 
 
-def _element_flags(parser: argparse.ArgumentParser) -> None:
-    """The law of xi and multi-element OPA (simulate only)."""
-    g = parser.add_argument_group("law of xi and multi-element OPA")
+def _law_flag(parser: argparse.ArgumentParser, *, elements: bool = True) -> None:
+    """The law of xi (simulate opa and mc) and, with ``elements``, multi-element OPA
+    (simulate opa)."""
+    g = parser.add_argument_group("law of xi and multi-element OPA" if elements
+                                  else "law of xi")
     g.add_argument("--distribution", default=None, metavar="LAW",
                    help="law of xi: semicircle (the paper's), uniform, beta:A,B or "
                         "normal-trunc:K, all on [-1, 1] (default semicircle)")
+    if not elements:
+        return
     g.add_argument("--elements", type=_elements_arg, default=None, metavar="K|adaptive",
                    help="multi-element OPA: K equal-probability elements, or 'adaptive' "
                         "(edges at the impact-sequence splits, then refinement) "
                         "(default: one element, the paper's OPA)")
-    g.add_argument("--tolerance", type=float, default=1e-6, metavar="TOL",
-                   help="adaptive elements: refine while an element's variance share "
-                        "P_k max_t Var_k exceeds TOL (default 1e-6)")
+    g.add_argument("--element-tolerance", type=float, default=1e-6, metavar="TOL",
+                   help="with --elements adaptive: refine while an element's variance share "
+                        "P_k max_t Var_k exceeds TOL (default 1e-6; API: tolerance=)")
     g.add_argument("--max-elements", type=positive_int, default=64, metavar="K",
-                   help="adaptive elements: the element budget (default 64)")
+                   help="with --elements adaptive: the element budget (default 64)")
+
+
+def _element_flags(parser: argparse.ArgumentParser) -> None:
+    """The law of xi and multi-element OPA (simulate opa)."""
+    _law_flag(parser)
 
 
 def _verify_flags(parser: argparse.ArgumentParser) -> None:
@@ -159,6 +179,8 @@ def _verify_flags(parser: argparse.ArgumentParser) -> None:
                    help="the most --verify doubles to (default 4096)")
     g.add_argument("--strict", action="store_true",
                    help="with --verify: exit with status 4 when the run disagrees")
+    g.add_argument("--seed", type=whole_number, default=0, metavar="K",
+                   help="with --verify: seed of the scrambled Sobol' points (default 0)")
 
 
 def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,
@@ -184,14 +206,46 @@ def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,
                         "sequence: rest on the wall at the accumulation point (default 1e-6)")
 
 
-def _output_flags(parser: argparse.ArgumentParser) -> None:
+def _output_flags(parser: argparse.ArgumentParser, *, parts: bool = False) -> None:
     o = parser.add_argument_group("output")
     o.add_argument("--out", default=None, metavar="FILE.nc", help="write the dataset here")
     o.add_argument("--plot", default=None, metavar="FILE.png", help="write a figure here")
     o.add_argument("--quiet", action="store_true", help="no progress bars or summaries")
-    o.add_argument("--keep-parts", action="store_true",
-                   help="simulate mc: keep OUT.parts/ (the finished chunks, from which a "
-                        "killed run resumes) after writing OUT")
+    if parts:
+        o.add_argument("--keep-parts", action="store_true",
+                       help="with --out: keep OUT.parts/ (the finished chunks, from which a "
+                            "killed run resumes) after writing OUT")
+
+
+def given(args, dest: str) -> str | None:
+    """The flag of ``dest`` as typed on the command line, or None where it was not given
+    (its default then stands)."""
+    return getattr(args, "given_flags", {}).get(dest)
+
+
+def refuse_given(args, dests, why: str) -> None:
+    """Refuse the first of ``dests`` given on the command line: "FLAG VALUE why"."""
+    for dest in dests:
+        flag = given(args, dest)
+        if flag:
+            value = getattr(args, dest, None)
+            shown = "" if isinstance(value, bool) or value is None else f" {value}"
+            raise CliError(f"{flag}{shown} {why}")
+
+
+def check_combinations(args) -> None:
+    """Refuse flags that have no effect in the given combination (shared rules)."""
+    if getattr(args, "impulse", "pulse") != "pulse":
+        refuse_given(args, ["pulse_width"], "has no effect without --impulse pulse")
+    if getattr(args, "out", None) is None:
+        refuse_given(args, ["keep_parts"], "has no effect without --out (only a run that "
+                                           "writes OUT keeps OUT.parts/)")
+    if getattr(args, "scheduler", None) is None:
+        refuse_given(args, ["connect_timeout"], "has no effect without --scheduler")
+    out, plot = getattr(args, "out", None), getattr(args, "plot", None)
+    if out and plot and os.path.realpath(out) == os.path.realpath(plot):
+        raise CliError(f"--out {out} and --plot {plot} name the same file: the figure would "
+                       f"overwrite the dataset")
 
 
 def oscillator_from(args) -> Oscillator:
@@ -234,6 +288,7 @@ def check_outputs(args) -> None:
     """Refuse --out, --plot and --outdir that could not be written, before computing."""
     from opa.cli._paths import FIGURE_SUFFIXES, check_output_dir, check_output_file
 
+    check_combinations(args)
     check_output_file("--out", getattr(args, "out", None))
     check_output_file("--plot", getattr(args, "plot", None), suffixes=FIGURE_SUFFIXES)
     if getattr(args, "outdir", None) is not None:

@@ -21,13 +21,19 @@ from opa.cli._flags import (
     EXIT_SIMULATION,
     EXIT_UNVERIFIED,
     CliError,
-    _common_flags,
-    _element_flags,
-    _verify_flags,
+    _impulse_flags,
+    _law_flag,
+    _mc_flags,
     _model_flags,
     _output_flags,
+    _run_flags,
+    _solver_flags,
+    _system_flags,
+    _verify_flags,
     _summary_events,
     check_outputs,
+    given,
+    refuse_given,
     options_from,
     system_from,
 )
@@ -39,21 +45,24 @@ def cmd_simulate(args) -> int:
     from opa.plots._diagrams import plot_run
 
     check_outputs(args)
+    if args.model == "opa":
+        if args.elements != "adaptive":
+            refuse_given(args, ["element_tolerance", "max_elements"],
+                         "applies with --elements adaptive only (the refinement of "
+                         "adaptive elements)")
+        if args.verify is None:
+            refuse_given(args, ["strict", "verify_max", "seed"],
+                         "applies with --verify M only")
+    if args.model == "mc" and args.sampler == "gauss":
+        refuse_given(args, ["seed"], "has no effect with --sampler gauss (a quadrature "
+                                     "draws nothing)")
     # with elements the default impact law is the one whose elements converge
-    law = args.impact_law or ("saltation" if args.elements is not None else "mean")
-    system = system_from(args, impact_law=law)
+    law = getattr(args, "impact_law", None) or (
+        "saltation" if getattr(args, "elements", None) is not None else "mean")
+    system = (system_from(args, impact_law=law) if args.model == "opa" else
+              system_from(args, **({"sigma": 0.0} if args.model == "dmr" else {})))
     opts = options_from(args)
-    if args.model != "opa" and args.elements is not None:
-        raise CliError(f"--elements applies to simulate opa, not simulate {args.model}")
-    if args.model == "dmr" and args.distribution is not None:
-        raise CliError("--distribution applies to simulate opa and mc, not simulate dmr")
-    if args.verify is not None and args.model != "opa":
-        raise CliError(f"--verify certifies an OPA run: it applies to simulate opa, not "
-                       f"simulate {args.model}")
-    if args.verify is None and (args.strict or args.verify_max != 4096):
-        raise CliError(f"{'--strict' if args.strict else '--verify-max'} applies with "
-                       f"--verify M only")
-    if args.verify is not None:
+    if args.model == "opa" and args.verify is not None:
         from compare._verify import check_counts
 
         check_counts(args.verify, max(args.verify, args.verify_max), flags=True)
@@ -70,8 +79,10 @@ def cmd_simulate(args) -> int:
         with warnings.catch_warnings():  # the budget warning is said in the summary
             warnings.simplefilter("ignore", ElementBudgetWarning)
             ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
-                              options=opts, elements=args.elements, tolerance=args.tolerance,
-                              max_elements=args.max_elements)
+                              options=opts, elements=args.elements,
+                              **({"tolerance": args.element_tolerance,
+                                  "max_elements": args.max_elements}
+                                 if args.elements == "adaptive" else {}))
         final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = "
                  f"{float(ds.x_var[-1]):.4g}")
         if ds.sizes["element"] > 1:
@@ -92,10 +103,7 @@ def cmd_simulate(args) -> int:
         parts = f"{args.out}.parts" if args.out else None
 
         try:
-            if args.truncation != "galerkin" or args.impact_law not in (None, "mean"):
-                raise CliError("--truncation and --impact-law are closures of the OPA "
-                               "system: simulate mc integrates the true sampled systems")
-            ds = simulate_mc(system.replace(truncation="galerkin", impact_law="mean"),
+            ds = simulate_mc(system,
                              samples=args.samples, sampler=args.sampler, seed=args.seed,
                              periods=args.periods, per_period=args.per_period, options=opts,
                              scheduler=args.scheduler, progress=not args.quiet,
@@ -116,6 +124,14 @@ def cmd_simulate(args) -> int:
                  f"{float(ds.x_var[-1]):.4g}; impacts per sample "
                  f"{int(ds.n_impacts.min())}..{int(ds.n_impacts.max())}")
     elapsed = time.perf_counter() - start
+    try:
+        _refuse_non_finite(ds, args)
+    except Exception:
+        if args.model == "mc" and args.out:
+            from mc import remove_checkpoint
+
+            remove_checkpoint(f"{args.out}.parts")  # a failed run keeps no checkpoint
+        raise
     if args.out:
         write_netcdf(ds, args.out)
         if args.model == "mc" and not args.keep_parts:
@@ -136,12 +152,38 @@ def cmd_simulate(args) -> int:
             print(f"  wrote {args.out}")
         if args.plot:
             print(f"  wrote {args.plot}")
-    if args.strict and ds.attrs["verdict"] != "agrees":
+    if getattr(args, "strict", False) and ds.attrs["verdict"] != "agrees":
         print(f"opa-mc: the OPA run disagrees with its Monte Carlo certificate (mean: "
               f"{ds.attrs['verdict_mean']}, variance: {ds.attrs['verdict_var']}); --strict",
               file=sys.stderr)
         return EXIT_UNVERIFIED
     return 0
+
+
+# variables whose NaN or inf is documented (docs/datasets.md), not a failure
+_MAY_BE_NON_FINITE = ("refinement_mean_change", "refinement_share")
+
+
+def _refuse_non_finite(ds, args) -> None:
+    """A result with a non-finite number (other than the documented ones: the standard
+    errors of a Gauss quadrature, which has no sampling error, and the refinement history)
+    is a run that could not be completed: nothing is written, exit status 3."""
+    from opa._run import SimulationError
+
+    gauss = ds.attrs.get("sampler") == "gauss"
+    for name, var in ds.data_vars.items():
+        if var.dtype.kind != "f" or name in _MAY_BE_NON_FINITE or (
+                gauss and name.endswith("_sem")):
+            continue
+        values = var.values
+        if not np.isfinite(values).all():
+            bad = int((~np.isfinite(values)).sum())
+            law = ds.attrs.get("distribution", "")
+            raise SimulationError(
+                f"simulate {args.model}: {bad} of {values.size} values of {name} are not "
+                f"finite" + (f" (law of xi {law}, N = {ds.attrs.get('N', '?')})" if law else "")
+                + "; nothing written: try a lower --order, a milder --distribution or "
+                  "smaller --sigma")
 
 
 def _verify_lines(ds) -> list[str]:
@@ -209,6 +251,60 @@ def _element_lines(ds) -> list[str]:
     return lines
 
 
+SIMULATE_MODELS = {
+    "dmr": ("the deterministic system (eq. 29): the mean parameters",
+            "One run of the deterministic impact system (eq. 29) at the given parameters: "
+            "the states at the output times and every impact."),
+    "opa": ("the OPA equivalent system (EMR): E[x], Var[x] from N + 1 coefficients",
+            "One run of the OPA equivalent system of order N (the paper's EMR), on one "
+            "element or several (--elements), optionally certified against true sampled "
+            "systems (--verify)."),
+    "mc": ("a Monte Carlo ensemble of the true sampled systems",
+           "One Monte Carlo ensemble of the sampled impact systems p = p_bar + sigma xi: "
+           "mean, variance and Chebyshev coefficients with standard errors; with --out, "
+           "finished chunks are kept in OUT.parts/ and a rerun resumes."),
+}
+
+# which simulate models take a flag the others do not (the reason given when refused)
+_ONLY = {
+    "--sigma": ("opa", "mc"), "--uncertain": ("opa", "mc"), "--allow-negative": ("opa", "mc"),
+    "--order": ("opa", "mc"), "--distribution": ("opa", "mc"),
+    "--truncation": ("opa",), "--impact-law": ("opa",), "--elements": ("opa",),
+    "--element-tolerance": ("opa",), "--max-elements": ("opa",), "--verify": ("opa",),
+    "--verify-max": ("opa",), "--strict": ("opa",),
+    "--samples": ("mc",), "--sampler": ("mc",), "--scheduler": ("mc",),
+    "--connect-timeout": ("mc",), "--keep-parts": ("mc",), "--seed": ("opa", "mc"),
+}
+_WHY = {
+    "--truncation": "closures of the OPA system: simulate mc integrates the true sampled "
+                    "systems",
+    "--impact-law": "closures of the OPA system: simulate mc integrates the true sampled "
+                    "systems",
+    "--sigma": "the deterministic system has no uncertain parameter",
+    "--uncertain": "the deterministic system has no uncertain parameter",
+    "--allow-negative": "the deterministic system has no uncertain parameter",
+    "--seed": "the deterministic system draws nothing",
+}
+
+
+def _foreign(model: str) -> dict[str, str]:
+    """The flags of the other simulate models, each with why it does not apply to
+    ``model``."""
+    out = {}
+    for flag, models in _ONLY.items():
+        if model not in models:
+            where = " and ".join(f"simulate {m}" for m in models)
+            why = _WHY.get(flag) if flag not in ("--truncation", "--impact-law") or \
+                model == "mc" else None
+            out[flag] = f"applies to {where}, not simulate {model}" + (f" ({why})" if why
+                                                                       else "")
+    if model == "opa":
+        out["--tolerance"] = ("is not a flag of simulate opa: the refinement tolerance of "
+                              "adaptive elements is --element-tolerance (--tolerance is "
+                              "validate's verdict tolerance)")
+    return out
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="opa-mc",
@@ -220,17 +316,27 @@ def build_parser() -> argparse.ArgumentParser:
 
     sim = sub.add_parser("simulate", help="one run: dmr (deterministic), opa (EMR), mc (ensemble)",
                          description="One run of the deterministic system (dmr), the OPA "
-                         "equivalent system (opa) or a Monte Carlo ensemble (mc).")
-    sim.add_argument("model", choices=("dmr", "opa", "mc"))
-    _model_flags(sim)
-    _common_flags(sim)
-    sim.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
-                     help="simulate mc: seconds to wait for the Dask scheduler to answer "
-                          "(default 5)")
-    _element_flags(sim)
-    _verify_flags(sim)
-    _output_flags(sim)
-    sim.set_defaults(func=cmd_simulate)
+                         "equivalent system (opa) or a Monte Carlo ensemble (mc); "
+                         "`opa-mc simulate MODEL --help` lists the flags of each.")
+    models = sim.add_subparsers(dest="model", required=True, metavar="MODEL")
+    for name, (helptext, description) in SIMULATE_MODELS.items():
+        p = models.add_parser(name, help=helptext, description=description,
+                              foreign=_foreign(name))
+        _model_flags(p)
+        _run_flags(p)
+        if name == "dmr":
+            _impulse_flags(p)
+        else:
+            _system_flags(p, closures=name == "opa")
+            if name == "mc":
+                _mc_flags(p, connect_timeout=True)
+        _solver_flags(p)
+        if name != "dmr":
+            _law_flag(p, elements=name == "opa")
+        if name == "opa":
+            _verify_flags(p)
+        _output_flags(p, parts=name == "mc")
+        p.set_defaults(func=cmd_simulate)
 
     from opa.cli._validate import register_converge, register_validate
     from opa.cli._bifurcation import register as register_bifurcation

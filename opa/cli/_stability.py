@@ -51,9 +51,18 @@ def _format_multipliers(mu: np.ndarray, count: int = 4) -> str:
 
 
 def cmd_stability(args) -> int:
-    from opa.cli._flags import check_outputs
+    from opa.cli._flags import check_outputs, refuse_given
 
     check_outputs(args)
+    if args.model == "dmr":
+        refuse_given(args, ["sigma", "uncertain", "allow_negative", "order", "truncation",
+                            "impact_law"], "applies to stability opa, not stability dmr (the "
+                                           "deterministic system has no uncertain parameter)")
+    if not args.lyapunov:
+        refuse_given(args, ["benettin", "lyapunov_periods"], "applies with --lyapunov only")
+    if not args.sweep:
+        refuse_given(args, ["seed_value", "depth", "max_points"],
+                     "applies with --sweep only (the continuation of a branch)")
     from opa.dynamics._continuation import (  # noqa: E402 -- the paths are checked first, cheaply
         BIFURCATION_KINDS,
         Branch,

@@ -10,6 +10,7 @@ naming the argument. Runs that integrate and fail exit 3 with a reason, never Na
 from __future__ import annotations
 
 import contextlib
+import os
 import math
 import signal
 import time
@@ -306,7 +307,7 @@ def test_failed_output_path_costs_no_computing(capsys, tmp_path, monkeypatch):
 def _api_cases():
     from compare import ValidateConfig
     from mc import simulate_mc
-    from opa import Oscillator, SolverOptions, simulate_dmr, simulate_opa
+    from opa import Oscillator, SolverOptions, System, simulate_dmr, simulate_opa
     from opa._model import Uncertainty
 
     return [
@@ -339,7 +340,36 @@ def _api_cases():
         (lambda: simulate_mc(Oscillator(), keep_paths="no"), "keep_paths"),
         (lambda: simulate_dmr(Oscillator(), times=[-1e9, 0.0]), "start"),
         (lambda: Oscillator(n=np.True_), "n"),
+        # issue 31: wrongly accepted, overflow, silently rounded, unnamed culprits
+        (lambda: System(Oscillator(), allow_negative=1), "allow_negative"),
+        (lambda: System(Oscillator(), impulse_at_zero=0.0), "impulse_at_zero"),
+        (lambda: simulate_opa(Oscillator(), order=np.bool_(True), periods=2), "order"),
+        (lambda: ValidateConfig(scheduler=5), "scheduler"),
+        (lambda: simulate_opa(Oscillator(), periods=2, tolerance=1e-3), "tolerance"),
+        (lambda: simulate_opa(Oscillator(), periods=2, max_elements=8), "max_elements"),
+        (lambda: simulate_opa(Oscillator(), periods=2, elements=4, max_elements=8),
+         "max_elements"),
+        (lambda: simulate_mc(Oscillator(), periods=2, samples=64, seed=2**53 + 1), "seed"),
+        (lambda: SolverOptions(max_steps=math.inf), "max_steps"),
+        (lambda: SolverOptions(max_steps=10**400), "max_steps"),
+        (lambda: simulate_mc(Oscillator(), periods=2, samples=64, chunk_size=math.inf),
+         "chunk_size"),
+        (lambda: ValidateConfig(orders=(0, math.inf)), "orders"),
+        (lambda: simulate_opa(Oscillator(), periods=2, elements=math.inf), "elements"),
+        (lambda: simulate_dmr(Oscillator(), periods=2.5), "periods"),
+        (lambda: simulate_mc(Oscillator(), periods=2.5, samples=64), "periods"),
+        (lambda: simulate_opa(Oscillator(), periods=2, sigma=0.01,
+                              distribution="beta:1000,1000"), "beta:1000,1000"),
+        (lambda: simulate_opa(Oscillator(), periods=2, order=500, elements=2), "order"),
+        (lambda: _find_splits_to(1e-300), "tol"),
     ]
+
+
+def _find_splits_to(tol):
+    from opa import Oscillator, SolverOptions
+    from opa._splits import find_splits
+
+    return find_splits(Oscillator(), SolverOptions(), "mu", 0.7, 0.9, 8.0, tol=tol)
 
 
 def test_api_bad_arguments_raise_value_error_naming_them():
@@ -466,3 +496,295 @@ def test_bad_law_toml_gets_one_line_and_exit_2(content, name, capsys, tmp_path):
     status, out, err, _ = run_cli(["validate", "--config", path, "--outdir",
                                    str(tmp_path / "r")], capsys)
     assert_one_line_error(status, err, name, ["validate", "--config", path])
+
+
+# --- issue 31: every flag means something where it is accepted -------------------------
+
+RUNAWAY = ["simulate", "opa", "--a", "-0.005", "--c", "-0.01", "--mu", "0.001", "--omega", "0.1",
+           "--F0", "2", "--a1", "-3", "--omega1", "0.1", "--n", "0.5", "--periods", "1",
+           "--order", "8", "--sigma", "0.0005"]
+
+# (category, argv, what the one line must name)
+BAD_CLI_31 = [
+    # silently wrong: a fraction of an output interval, a figure over the dataset
+    ("silently wrong", ["simulate", "dmr", "--periods", "2.5", "--out", "p.nc"], ("periods", "2.5")),
+    ("silently wrong", ["simulate", "opa", "--periods", "2.5", "--out", "p.nc"], ("periods", "2.5")),
+    ("silently wrong", ["simulate", "mc", "--periods", "2.5", "--samples", "64", "--out", "p.nc"],
+     ("periods", "2.5")),
+    ("silently wrong", DMR + ["--out", "same.png", "--plot", "same.png"], ("--out", "--plot")),
+    ("silently wrong", DMR + ["--out", "same.nc", "--plot", "./same.nc"], ("--out", "--plot")),
+    # wrongly accepted: a flag with no effect in the given combination
+    ("wrongly accepted", DMR + ["--samples", "3"], ("--samples", "simulate mc")),
+    ("wrongly accepted", DMR + ["--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),
+    ("wrongly accepted", DMR + ["--keep-parts"], "--keep-parts"),
+    ("wrongly accepted", DMR + ["--connect-timeout", "3"], "--connect-timeout"),
+    ("wrongly accepted", DMR + ["--sigma", "0.02"], ("--sigma", "deterministic")),
+    ("wrongly accepted", DMR + ["--order", "3"], "--order"),
+    ("wrongly accepted", DMR + ["--seed", "3"], "--seed"),
+    ("wrongly accepted", DMR + ["--verify", "8"], "--verify"),
+    ("wrongly accepted", DMR + ["--pulse-width", "0.2"], ("--pulse-width", "--impulse pulse")),
+    ("wrongly accepted", OPA + ["--tolerance", "1e-3"], ("--tolerance", "--element-tolerance")),
+    ("wrongly accepted", OPA + ["--element-tolerance", "1e-3"], ("--element-tolerance", "adaptive")),
+    ("wrongly accepted", OPA + ["--max-elements", "8"], ("--max-elements", "adaptive")),
+    ("wrongly accepted", OPA + ["--elements", "4", "--max-elements", "8"], "--max-elements"),
+    ("wrongly accepted", OPA + ["--samples", "64"], ("--samples", "simulate mc")),
+    ("wrongly accepted", OPA + ["--seed", "3"], ("--seed", "--verify")),
+    ("wrongly accepted", OPA + ["--keep-parts"], "--keep-parts"),
+    ("wrongly accepted", MC + ["--keep-parts"], ("--keep-parts", "--out")),
+    ("wrongly accepted", MC + ["--connect-timeout", "3"], ("--connect-timeout", "--scheduler")),
+    ("wrongly accepted", MC + ["--sampler", "gauss", "--seed", "3"], ("--seed", "gauss")),
+    ("wrongly accepted", MC + ["--seed", "9007199254740993"], ("--seed", "9007199254740993")),
+    ("wrongly accepted", MC + ["--seed", "9007199254740993.0"], "--seed"),
+    ("wrongly accepted", MC + ["--truncation", "paper"], ("--truncation", "simulate opa")),
+    ("wrongly accepted", MC + ["--elements", "2"], "--elements"),
+    ("wrongly accepted", MC + ["--verify", "8"], "--verify"),
+    ("wrongly accepted", ["stability", "dmr", "--benettin"], ("--benettin", "--lyapunov")),
+    ("wrongly accepted", ["stability", "dmr", "--lyapunov-periods", "20"], "--lyapunov-periods"),
+    ("wrongly accepted", ["stability", "dmr", "--sigma", "0.1"], ("--sigma", "stability opa")),
+    ("wrongly accepted", ["stability", "dmr", "--depth", "2"], ("--depth", "--sweep")),
+    ("wrongly accepted", ["stability", "opa", "--max-points", "9"], ("--max-points", "--sweep")),
+    ("wrongly accepted", ["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--samples", "8"],
+     ("--samples", "bifurcation mc")),
+    ("wrongly accepted", ["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--keep-parts"],
+     ("--keep-parts", "--out")),
+    # tracebacks and internal errors: ranges refused before they are built
+    ("traceback", ["validate", "--orders", "0:1000000000"], ("--orders", "1000000001")),
+    ("traceback", ["converge", "--budgets", "1:1000000000"], "--budgets"),
+    ("traceback", ["converge", "--uniform", "1:1000000000"], "--uniform"),
+    ("traceback", MC + ["--seed", "1" * 5000], "--seed"),
+    # refused without naming the culprit
+    ("unnamed culprit", OPA + ["--distribution", "beta:1000,1000", "--order", "20"],
+     ("beta:1000,1000", "works up to")),
+    ("unnamed culprit", MC + ["--distribution", "normal-trunc:1e6"], ("normal-trunc:1e6",
+                                                                     "works up to")),
+    ("unnamed culprit", OPA + ["--order", "500", "--elements", "2"], ("order", "500")),
+    # silent NaN: a law the Chebyshev coefficients cannot be formed for is refused up front
+    ("silent NaN", MC + ["--distribution", "beta:1000,1000", "--order", "20", "--out", "r.nc"],
+     "beta:1000,1000"),
+]
+
+
+@pytest.mark.parametrize("category,argv,names", BAD_CLI_31,
+                         ids=[f"{c}: {' '.join(a)}"[:120] for c, a, _ in BAD_CLI_31])
+def test_issue31_bad_input_gets_one_line_and_exit_2(category, argv, names, capsys, tmp_path,
+                                                     monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, out, err, seconds = run_cli(argv, capsys)
+    assert_one_line_error(status, err, names, argv)
+    assert seconds < TIME_LIMIT
+    assert not any(tmp_path.iterdir()), "a refused run wrote something"
+
+
+BAD_TOML_31 = [
+    ("impulse_at_zero = 1\n", "impulse_at_zero"),
+    ("plots = 1\n", "plots"),
+    ("scheduler = 5\n", "scheduler"),
+    ("seed = 9223372036854775807\n", "seed"),
+    ("orders = [0, 1.5]\n", "orders"),
+    ("split_resolution = 1e-300\n", "split_resolution"),
+    ("resolution = 1e-300\n", "resolution"),
+    ("a = " + "[" * 1000 + "]" * 1000 + "\n", "nested"),
+    ("values = [[[[[1.0]]]]]\n", "nested"),
+    ("#" + "x" * (1 << 20) + "\n", "bytes"),
+]
+
+
+@pytest.mark.parametrize("content,name", BAD_TOML_31, ids=[c[:40] for c, _ in BAD_TOML_31])
+def test_issue31_bad_config_file(content, name, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    path = write(tmp_path, "bad.toml", content)
+    status, out, err, seconds = run_cli(["validate", "--config", path], capsys)
+    assert_one_line_error(status, err, name, ["validate", "--config", path])
+    assert seconds < TIME_LIMIT
+
+
+def test_a_fifo_as_config_is_refused_at_once(capsys, tmp_path, monkeypatch):
+    """Reading a FIFO would wait for a writer for ever."""
+    monkeypatch.chdir(tmp_path)
+    path = str(tmp_path / "fifo.toml")
+    os.mkfifo(path)
+    status, out, err, seconds = run_cli(["validate", "--config", path], capsys)
+    assert_one_line_error(status, err, (path, "regular file"), ["validate", "--config", path])
+    assert seconds < 10
+
+
+def test_a_runaway_opa_system_stops_within_seconds(capsys, tmp_path, monkeypatch):
+    """c < 0 blows up in finite time: the steps collapse; the runaway guard ends it (it
+    used to run ~200 s in silence before the 50-million-step limit)."""
+    monkeypatch.chdir(tmp_path)
+    status, out, err, seconds = run_cli(RUNAWAY + ["--out", "run.nc"], capsys)
+    assert status == 3, err
+    assert "runaway guard" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "run.nc").exists()
+    assert seconds < 30
+
+
+def test_the_runaway_guard_is_lifted_by_an_explicit_max_steps():
+    """The guard applies under the default max_steps only: given explicitly, the limit is
+    the user's (here smaller than the guard: the plain step-limit message)."""
+    from opa import Oscillator, SolverOptions, simulate_dmr
+    from opa._run import SimulationError
+
+    osc = Oscillator(c=-1.0)
+    with pytest.raises(SimulationError, match="runaway guard"):
+        simulate_dmr(osc, periods=50)
+    with pytest.raises(SimulationError, match="maximum number of steps") as raised:
+        simulate_dmr(osc, periods=50, options=SolverOptions(max_steps=100_000))
+    assert "runaway guard" not in str(raised.value)
+
+
+def test_whole_periods_and_fractions_that_land_on_outputs_are_accepted(capsys, tmp_path,
+                                                                        monkeypatch):
+    """--periods 2.5 with --per-period 2 is 5 whole output intervals: it runs to exactly
+    2.5 forcing periods."""
+    monkeypatch.chdir(tmp_path)
+    status, out, err, _ = run_cli(["simulate", "dmr", "--periods", "2.5", "--per-period", "2",
+                                   "--out", "p.nc", "--quiet"], capsys)
+    assert status == 0, err
+    import xarray as xr
+
+    with xr.open_dataset(tmp_path / "p.nc") as ds:
+        assert ds.sizes["time"] == 6
+        assert float(ds.time[-1]) == pytest.approx(2.5 * 2 * math.pi / 3.98, rel=1e-14)
+
+
+@pytest.mark.parametrize("model,own,others", [
+    ("dmr", ["--omega", "--periods", "--impulse", "--rtol", "--out"],
+     ["--sigma", "--order", "--samples", "--elements", "--verify", "--keep-parts", "--seed"]),
+    ("opa", ["--sigma", "--order", "--elements", "--element-tolerance", "--verify", "--seed"],
+     ["--samples", "--sampler", "--scheduler", "--keep-parts", "--connect-timeout",
+      "--tolerance "]),
+    ("mc", ["--samples", "--sampler", "--seed", "--scheduler", "--connect-timeout",
+            "--keep-parts", "--order", "--distribution"],
+     ["--elements", "--verify", "--truncation", "--impact-law", "--strict"]),
+])
+def test_simulate_help_lists_only_the_models_flags(model, own, others, capsys):
+    """Issue 26, item 5: `opa-mc simulate MODEL --help` lists the flags of MODEL only."""
+    with pytest.raises(SystemExit) as done:
+        main(["simulate", model, "--help"])
+    assert done.value.code == 0
+    text = capsys.readouterr().out
+    for flag in own:
+        assert flag in text, f"{flag} missing from simulate {model} --help"
+    for flag in others:
+        assert flag not in text, f"{flag} in simulate {model} --help"
+
+
+def test_adaptive_element_flags_act_under_their_new_name(capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    status, out, err, _ = run_cli(OPA + ["--sigma", "0.05", "--order", "1", "--elements",
+                                         "adaptive", "--element-tolerance", "0.5",
+                                         "--max-elements", "4", "--out", "me.nc",
+                                         "--quiet"], capsys)
+    assert status == 0, err
+    import xarray as xr
+
+    with xr.open_dataset(tmp_path / "me.nc") as ds:
+        assert ds.attrs["tolerance"] == 0.5 and ds.attrs["max_elements"] == 4
+
+
+# --- property: random flag combinations -------------------------------------------------
+
+_VALUES = ["0", "1", "2", "2.5", "-1", "1e-300", "1e300", "nan", "inf", "-inf", "x", "",
+           "9007199254740993", "0.5", "8", "3.98", "adaptive", "beta:2,3", "gauss",
+           "tcp://127.0.0.1:1"]
+_FLAGS = {
+    "simulate dmr": ["--periods", "--per-period", "--omega", "--c", "--eta", "--x0", "--F0",
+                     "--impulse", "--pulse-width", "--rtol", "--max-step", "--sigma",
+                     "--samples", "--seed", "--keep-parts", "--quiet"],
+    "simulate opa": ["--periods", "--per-period", "--sigma", "--order", "--mu", "--elements",
+                     "--element-tolerance", "--max-elements", "--distribution", "--verify",
+                     "--seed", "--strict", "--truncation", "--impact-law", "--samples",
+                     "--quiet"],
+    "simulate mc": ["--periods", "--samples", "--sampler", "--seed", "--sigma", "--order",
+                    "--distribution", "--scheduler", "--connect-timeout", "--keep-parts",
+                    "--elements", "--quiet"],
+    "stability dmr": ["--benettin", "--lyapunov", "--depth", "--sigma", "--t0", "--transient",
+                      "--orbit-periods", "--quiet"],
+    "bifurcation dmr": ["--sweep", "--samples", "--record", "--transient", "--workers",
+                        "--keep-parts", "--periods", "--quiet"],
+    "validate": ["--orders", "--sigmas", "--horizons", "--samples", "--resolution",
+                 "--max-elements", "--elements", "--seed", "--quiet"],
+    "converge": ["--budgets", "--uniform", "--sigma", "--order", "--reference", "--quiet"],
+}
+_SWITCHES = {"--keep-parts", "--quiet", "--strict", "--benettin", "--lyapunov"}
+
+
+def _cheap(argv) -> list[str]:
+    """Keep a generated run small: short runs, few samples, no long validate or converge
+    jobs (a refusal is what the property is after; work that is accepted must be quick)."""
+    head = argv[:2] if argv[0] in ("simulate", "stability", "bifurcation") else argv[:1]
+    if head[0] == "simulate":
+        return argv + ["--periods", "1", "--per-period", "1"] + (
+            ["--samples", "16"] if head[1] == "mc" else [])
+    if head[0] == "stability":
+        return argv + ["--transient", "5", "--orbit-periods", "1"]
+    if head[0] == "bifurcation":
+        return argv + ["--sweep", "c=0.05:0.06:2", "--transient", "2", "--record", "2",
+                       "--workers", "1", "--no-locate"]
+    return argv + ["--sigma", "-1"] if head[0] == "converge" else argv + ["--sigmas", "-1"]
+
+
+def _property(data, budget):
+    from hypothesis import strategies as st
+
+    command = data.draw(st.sampled_from(sorted(_FLAGS)))
+    argv = command.split()
+    for flag in data.draw(st.lists(st.sampled_from(_FLAGS[command]), max_size=4, unique=True)):
+        argv += [flag] if flag in _SWITCHES else [flag, data.draw(st.sampled_from(_VALUES))]
+    return _cheap(argv)
+
+
+def _check_property(argv, tmp_path, capsys):
+    import glob
+    import shutil
+
+    import xarray as xr
+
+    work = tmp_path / "prop"
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir()
+    os.chdir(work)
+    argv = argv + ["--out", "r.nc"] if argv[0] in ("simulate", "stability") and \
+        "--out" not in argv else argv
+    status, out, err, seconds = run_cli(argv, capsys)
+    assert status in (0, 2, 3), f"opa-mc {' '.join(argv)}: exit {status}: {err}"
+    assert "Traceback" not in err and "internal error" not in err, err
+    if status in (2, 3):
+        assert len([line for line in err.splitlines() if line.strip()]) == 1, err
+    if status == 0:
+        for path in glob.glob(str(work / "**" / "*.nc"), recursive=True):
+            with xr.open_dataset(path) as ds:
+                gauss = ds.attrs.get("sampler") == "gauss"
+                for name, var in ds.data_vars.items():
+                    if var.dtype.kind == "f" and not (gauss and name.endswith("_sem")) and \
+                            not name.startswith("refinement_"):
+                        assert np.isfinite(var.values).all(), f"{name} non-finite: {argv}"
+    assert seconds < TIME_LIMIT
+
+
+def _property_test(examples):
+    from hypothesis import HealthCheck, given, settings
+    from hypothesis import strategies as st
+
+    @settings(max_examples=examples, deadline=None, database=None,
+              suppress_health_check=list(HealthCheck))
+    @given(st.data())
+    def prop(tmp_path, capsys, data):
+        _check_property(_property(data, examples), tmp_path, capsys)
+
+    return prop
+
+
+def test_random_flag_combinations_exit_0_2_or_3_without_tracebacks(tmp_path, capsys,
+                                                                    monkeypatch):
+    """Random flags and values thrown at every subcommand: exit 0, 2 or 3, one line on a
+    refusal, no traceback, nothing non-finite written with exit 0, in bounded time."""
+    monkeypatch.chdir(tmp_path)
+    _property_test(25)(tmp_path, capsys)
+
+
+@pytest.mark.slow
+def test_random_flag_combinations_many(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _property_test(400)(tmp_path, capsys)
