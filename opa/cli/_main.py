@@ -342,11 +342,13 @@ def build_parser() -> argparse.ArgumentParser:
     from opa.cli._bifurcation import register as register_bifurcation
 
     from opa.cli._stability import register_stability
+    from opa.cli._stochastic import register_stochastic
 
     register_validate(sub)
     register_converge(sub)
     register_bifurcation(sub)
     register_stability(sub)
+    register_stochastic(sub)
 
     return parser
 

@@ -198,7 +198,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
         slices.append(piece)
         if log is not None:
             shown = ", ".join(f"{k} {p:.3f}" for k, p in sorted(piece.probability.items()))
-            log(f"{parameter} = {value:g}: {shown} ({piece.method})")
+            log(f"{i + 1}/{len(values)} {parameter} = {value:g}: {shown} ({piece.method})")
     kinds = sorted({k for s in slices for k in (*s.probability, *s.mc_probability)},
                    key=_type_order)
     P = np.array([[s.probability.get(k, 0.0) for k in kinds] for s in slices])

@@ -477,3 +477,21 @@ def test_simulate_opa_verify_strict_catches_the_beta_case(tmp_path, capsys):
     noise = 4 * math.hypot(float(ds.cv_x_mean_sem[-1]), float(ens.x_sem[-1]))
     assert abs(float(ds.cv_x_mean[-1]) - float(ens.x_mean[-1])) <= noise
     assert abs(float(ds.x_mean[-1]) - float(ens.x_mean[-1])) > 0.08  # the OPA run is off
+
+
+def test_stochastic_diagram_through_the_deterministic_doubling(tmp_path, capsys):
+    """``opa-mc stochastic`` at c = 0.0396996668 (section 3.1, F0 = 0), where the
+    deterministic doubling 2/2 -> 4/4 sits at mu = 0.8: the boundary is at xi = 0 and
+    each type has half the semicircle's mass; the Monte Carlo samples agree
+    (tests/opa/dynamics/test_stochastic.py checks boundaries against long brute-force runs
+    and the scipy reference)."""
+    out, fig = tmp_path / "s.nc", tmp_path / "s.png"
+    run(["stochastic", "--preset", "3.1", "--F0", "0", "--sweep", "c=0.0396996668,0.05",
+         "--samples", "32", "--transient", "800", "--out", out, "--plot", fig])
+    text = capsys.readouterr().out
+    assert "c = 0.0396997: 2/2 0.500, 4/4 0.500 (continuation)" in text
+    assert "c = 0.05: 2/2 1.000 (continuation)" in text
+    ds = load(out)
+    assert abs(float(ds.boundary_xi.sel(c=0.0396996668, boundary=0))) < 1e-6
+    assert list(ds.agree.values) == [1, 1]
+    assert fig.stat().st_size > 10_000
