@@ -147,8 +147,8 @@ def stratified_estimates(x: list, x_hat: list, probability, surrogate_mean: np.n
     >>> x = [np.array([[1.0], [3.0]]), np.array([[5.0], [7.0]])]
     >>> est = stratified_estimates(x, [0 * a for a in x], [0.5, 0.5], np.zeros(1),
     ...                            np.zeros(1))
-    >>> float(est["mean"][0]), float(est["mean_se"][0])   # 4 and sqrt(2 * 0.25 * 2 / 2)
-    (4.0, 1.0)
+    >>> float(est["mean"][0]), round(float(est["mean_se"][0]) ** 2, 12)  # 2 x 0.25 x 2 / 2
+    (4.0, 0.5)
     """
     P = np.asarray(probability, dtype=float)
     if any(len(a) < 2 for a in x):

@@ -44,6 +44,7 @@ TESTED_IN = {
     "opa/cli/_args.py": ("tests/opa/cli/test_bad_inputs.py",),
     "opa/cli/_paths.py": ("tests/opa/cli/test_bad_inputs.py",),
     "opa/cli/_validate.py": ("tests/opa/cli/test_bad_inputs.py",),
+    "opa/cli/_stochastic.py": ("tests/opa/cli/test_commands.py",),
     "mc/_source.py": ("tests/opa/test_shims.py",),
     "compare/_report.py": ("tests/compare/test_trustmap.py",),
 }
@@ -57,6 +58,7 @@ NAMED_AS = {
     "opa/cli/_args.py": "opa-mc",
     "opa/cli/_paths.py": "--out",
     "opa/cli/_validate.py": "opa.cli._validate",
+    "opa/cli/_stochastic.py": "opa-mc stochastic",
     "mc/_source.py": "sweep_source",
     "compare/_report.py": "write_report",
 }

@@ -8,6 +8,8 @@ import re
 
 import numpy as np
 
+from opa._model import MAX_WHOLE  # whole numbers above 2^53 are not exact as floats
+
 EXIT_USAGE = 2
 # A sweep of more values than this is refused: at the paper's 600 periods per value it
 # would run for days on two cores (the paper's diagrams use 200 values).
@@ -17,8 +19,6 @@ MAX_SWEEP_VALUES = 100_000
 _NUMBER = r"(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?"
 _NEGATIVE_NUMBER = re.compile(rf"^-{_NUMBER}(,-?{_NUMBER})*$|^-(inf|infinity|nan)$",
                               re.IGNORECASE)
-# Whole numbers above 2^53 are not exact as floats, and no count or seed needs them.
-MAX_WHOLE = 2**53
 
 
 _TRACKED: dict[type, type] = {}

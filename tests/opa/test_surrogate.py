@@ -20,9 +20,10 @@ DENSITY = {"semicircle": stats.beta(1.5, 1.5, loc=-1, scale=2).pdf,
 @pytest.mark.parametrize("law, elements", [("semicircle", None), ("uniform", None),
                                            ("beta:2,3", 3), ("semicircle", "adaptive")])
 def test_moments_of_the_surrogate_are_the_runs_against_quadrature(law, elements):
+    budget = {"max_elements": 6} if elements == "adaptive" else {}
     ds = simulate_opa(Oscillator(omega=3.98), sigma=0.05, order=3, periods=2, per_period=2,
-                      elements=elements, max_elements=6,
-                      distribution=None if law == "semicircle" else law)
+                      elements=elements, distribution=None if law == "semicircle" else law,
+                      **budget)
     edges = ds.element_edges.values
     pdf = DENSITY[law]
 
