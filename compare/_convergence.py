@@ -286,8 +286,11 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     one = {"units": "1"}
     ds = xr.Dataset(
         {
-            "method": ("run", np.array(cols[0], dtype=object)),
-            "law": ("run", np.array(cols[1], dtype=object)),
+            "method": ("run", np.array(cols[0], dtype=object),
+                       {"long_name": "method of the run (ME-OPA uniform or adaptive, "
+                        "collocation, MC, QMC (Sobol), control variate, ...)"}),
+            "law": ("run", np.array(cols[1], dtype=object),
+                    {"long_name": "impact law of the OPA system, or 'true system'"}),
             "size": ("run", np.array(cols[2], dtype=np.int64),
                      {"long_name": "elements (OPA, collocation) or samples (MC)", **one}),
             "order": ("run", np.array(cols[3], dtype=np.int64),
@@ -303,7 +306,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
                                       "evaluates (OPA: Q = 2N + 1)", **one}),
             "seconds": ("run", np.array(cols[8]), {"long_name": "wall time", "units": "s"}),
         },
-        coords={"run": np.arange(len(rows))},
+        coords={"run": ("run", np.arange(len(rows)), {"long_name": "run index", **one})},
         attrs=provenance_attrs("convergence", base, opts, seed=cfg.seed, sampler="sobol"),
     )
     ds.attrs.update(

@@ -78,8 +78,9 @@ def _runs():
     import numpy as np
 
     from compare import verify
+    from compare._convergence import ConvergenceConfig, run_convergence
     from mc import simulate_mc
-    from opa import Oscillator, preset, simulate_dmr, simulate_opa, sweep
+    from opa import Oscillator, preset, simulate_dmr, simulate_opa, stochastic_diagram, sweep
 
     osc = Oscillator()
     return [
@@ -101,6 +102,20 @@ def _runs():
                 sequential=False)),
         ("mc", "simulate_mc(Oscillator(), sigma=0.01, samples=64, order=2, periods=2)",
          simulate_mc(osc, sigma=0.01, samples=64, order=2, periods=2, progress=False)),
+        ("stochastic bifurcation diagram",
+         'stochastic_diagram(preset("3.1", F0=0.0), "c", [0.0396996668, 0.05], sigma=0.03, '
+         'samples=8, transient=200)',
+         stochastic_diagram(preset("3.1", F0=0.0), "c", [0.0396996668, 0.05], sigma=0.03,
+                            samples=8, transient=200)),
+        ("converge",
+         "run_convergence(ConvergenceConfig(sigma=0.02, periods=2, per_period=4, "
+         "orders=(0, 1), uniform=(1, 2), budgets=(2, 4), order_budget=4, "
+         "single_nodes=(1, 2), mc_samples=(64, 128), reference=1024), write=False)",
+         run_convergence(ConvergenceConfig(sigma=0.02, periods=2, per_period=4,
+                                           orders=(0, 1), uniform=(1, 2), budgets=(2, 4),
+                                           order_budget=4, single_nodes=(1, 2),
+                                           mc_samples=(64, 128), reference=1024),
+                         log=lambda *a: None, write=False)),
         ("bifurcation sweep",
          'sweep("dmr", "c", [0.02, 0.05], preset("3.1"), transient=2, record=2, workers=1)',
          sweep("dmr", "c", np.array([0.02, 0.05]), preset("3.1"), transient=2, record=2,
@@ -179,10 +194,12 @@ def render() -> str:
         if title == "opa":
             out.append(OPA_LAYOUT)
         out.append(f"## {title}\n")
-        out.append(f"`{call}` (from `opa` and `mc`):\n")
+        source = "compare" if title == "converge" else "opa` and `mc"
+        out.append(f"`{call}` (from `{source}`):\n")
         out.extend(_table(ds))
         out.append("")
-        out.append("Attributes: " + ", ".join(f"`{k}`" for k in sorted(ds.attrs)) + ".\n")
+        out.append("Attributes: " + ", ".join(f"`{k}`" for k in sorted(ds.attrs)
+                                              if k != "history") + ".\n")
     return "\n".join(out)
 
 
