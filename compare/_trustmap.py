@@ -71,7 +71,8 @@ from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, ch
 from opa._run import SimulationError, run_batch
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._system import IMPULSE_FIELDS, System
-from opa._splits import SPLIT_KINDS, Split, count_probabilities, scan_splits
+from opa._splits import (MAX_CROSSINGS, MAX_SPLITS, SPLIT_KINDS, Split, count_probabilities,
+                         scan_splits)
 
 # The single-element variants (impact law, truncation) under the semicircle law. Under
 # another law of xi the `paper` truncation (eq. (27), written in the semicircle's basis)
@@ -376,7 +377,8 @@ class ValidateConfig:
         return digest(["splits", self.oscillator_at(value).as_dict(),
                        dataclasses.asdict(self.options), self.uncertain, max(self.sigmas),
                        min(self.sigmas), self.horizons, self.split_resolution,
-                       *self.impulse_key(), "complete", self.per_period])
+                       *self.impulse_key(), "complete", self.per_period,
+                       MAX_SPLITS, MAX_CROSSINGS])
 
 
 def digest(payload) -> str:
