@@ -206,3 +206,17 @@ def test_a_reached_split_limit_is_said_and_the_counts_marked_incomplete():
     assert "limit reached" in boundary_table(ds)
     table = count_table(ds, 0)
     assert "INCOMPLETE: 0.3 of the samples" in table
+
+
+def test_a_horizon_split_in_the_grid_is_named_even_below_sigma_star():
+    """omega = 4.035 (10 periods): sigma* < 0.000625, yet the count table at sigma = 0.005
+    shows an extra impact: a "horizon" split (an impact sliding across the end) at
+    sigma >= 0.0045. The cause must name it, not say every sample makes the same impacts."""
+    from compare._report import cause
+
+    ds = _map(["horizon"], [0.7955337], [10.0], star=(0.0, 0.000625), disagree=7.38)
+    ds["split_right"][:] = 5
+    text = cause(ds, 0, 0)
+    assert "every sample makes the same impacts" not in text
+    assert "one more impact within 1e-4 time units of the horizon's end" in text
+    assert "σ ≥ 0.0045" in text and "4 → 5 impacts" in text
