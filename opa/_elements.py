@@ -11,8 +11,9 @@ variances ``s_k = sum_{i>=1} (x_i^(k))^2`` the whole is assembled exactly:
     E[x] = sum_k P_k m_k,       Var[x] = sum_k P_k (s_k + m_k^2) - E[x]^2.
 
 Where the edges go (:func:`adaptive_edges`): first at the splits of the sampled systems'
-impact sequences (:func:`opa._splits.find_splits`: there x(t, xi) jumps, and no element
-should straddle a jump), keeping at most a quarter of the element budget by merging the
+impact sequences (:func:`opa._splits.find_splits`: there x(t, xi) is not smooth in xi,
+a kink or a square-root singularity at a grazing, and no element should straddle one),
+keeping at most a quarter of the element budget (two elements at least) by merging the
 neighbours of least joint probability (cascades of splits in tiny intervals); then the
 element with the largest share of the variance, ``P_k max_t s_k(t)``, is halved in
 probability until that share is below ``tolerance`` or the budget is spent.
