@@ -206,7 +206,7 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     run : an OPA dataset (any number of elements, any law of xi, any uncertain parameter).
     samples : true systems of the first round (a power of two >= 8).
     max_samples : the most a sequential certificate doubles to (a power of two).
-    seed : seed of the scrambled Sobol' points.
+    seed : seed of the points (scrambled Sobol', or the random points of the strata).
     tolerance, var_tolerance, z : the verdict's criterion for the mean and the variance
         (the trust map's defaults 0.1, 0.25 and 3).
     sequential : double the samples while a verdict hangs on the noise; False: one round.
@@ -218,8 +218,9 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     their standard errors, the control-variate estimates ``cv_x_mean``, ``cv_x_var`` and
     their standard errors (time), and the attributes ``verdict`` (``agrees`` |
     ``disagrees``), ``verdict_mean``, ``verdict_var``, ``first_disagreement_mean`` and
-    ``_var`` (forcing periods; inf: none), ``verify_samples``, ``verify_replicates``,
-    ``verify_rounds``, ``variance_reduction`` and ``verify_rhs_evaluations``.
+    ``_var`` (forcing periods; inf: none), ``verify_samples`` (true runs of the last
+    round, pilot included), ``verify_replicates`` (0 when stratified), ``verify_sampling``
+    (in words), ``verify_rounds``, ``variance_reduction`` and ``verify_rhs_evaluations``.
     """
     check_opa_layout(run, "run")
     samples, max_samples = check_counts(samples, max_samples)
