@@ -43,7 +43,7 @@ def register_stochastic(sub) -> None:
     g.add_argument("--record", type=positive_int, default=64, metavar="P",
                    help="forcing periods recorded to find the period (default 64)")
     _solver_flags(p)
-    _output_flags(p)
+    _output_flags(p, parts=True)
     p.set_defaults(func=cmd_stochastic)
 
 
@@ -52,6 +52,8 @@ def cmd_stochastic(args) -> int:
     from opa.dynamics._stochastic import stochastic_diagram
 
     check_outputs(args)
+    if args.keep_parts and not args.out:
+        raise ValueError("--keep-parts applies with --out only (the parts are OUT.parts/)")
     name, values, _ = parse_sweep(
         args.sweep, names=tuple(n for n in PARAMETER_NAMES
                                 if n not in (args.uncertain, "x0", "v0")))
@@ -61,12 +63,17 @@ def cmd_stochastic(args) -> int:
     ds = stochastic_diagram(osc, name, values, sigma=args.sigma, uncertain=args.uncertain,
                             distribution=args.distribution, samples=args.samples,
                             seed=args.seed, options=options_from(args),
-                            transient=args.transient, record=args.record, log=log)
+                            transient=args.transient, record=args.record,
+                            parts=f"{args.out}.parts" if args.out else None, log=log)
     elapsed = time.perf_counter() - start
     if args.out:
+        import shutil
+
         from opa._dataset import write_netcdf
 
         write_netcdf(ds, args.out)
+        if not args.keep_parts:  # each value was kept as it finished: a killed run resumes
+            shutil.rmtree(f"{args.out}.parts", ignore_errors=True)
     if args.plot:
         from opa.plots._stochastic import plot_stochastic
 

@@ -116,6 +116,55 @@ def stochastic_slice(oscillator: Oscillator, uncertain: str, sigma: float,
     return out
 
 
+def _slice_key(oscillator: Oscillator, uncertain, sigma, measure, samples, seed, options,
+               transient, record, xtol) -> str:
+    """A hash of everything one slice depends on (its file name in the parts folder)."""
+    import dataclasses
+    import hashlib
+    import json
+
+    from opa._dataset import package_version
+
+    payload = [oscillator.as_dict(), uncertain, float(sigma), measure.name, measure.lo,
+               measure.hi, int(samples), int(seed), dataclasses.asdict(options),
+               int(transient), int(record), float(xtol), package_version()]
+    text = json.dumps(payload, sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _load_slice(path: str) -> Slice | None:
+    """A finished slice from its part, or None (absent or damaged: computed again)."""
+    import json
+
+    try:
+        with open(path, encoding="utf-8") as fh:
+            data = json.load(fh)
+        return Slice(value=float(data["value"]),
+                     boundaries=[tuple(b) for b in data["boundaries"]],
+                     intervals=[tuple(i) for i in data["intervals"]],
+                     probability=dict(data["probability"]),
+                     mc_probability=dict(data["mc_probability"]),
+                     samples=int(data["samples"]), method=str(data["method"]),
+                     located=[tuple(b) for b in data["located"]])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _save_slice(path: str, piece: Slice) -> None:
+    import dataclasses
+    import json
+
+    from opa._dataset import atomic_write
+
+    text = json.dumps(dataclasses.asdict(piece))
+
+    def write(tmp: str) -> None:
+        with open(tmp, "w", encoding="utf-8") as fh:
+            fh.write(text)
+
+    atomic_write(path, write, suffix=".json")
+
+
 def _periodic(kind: str) -> bool:
     return kind not in ("none", "failed")
 
@@ -125,7 +174,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                        samples: int = 256, seed: int = 0,
                        options: SolverOptions | None = None, transient: int = 300,
                        record: int = 64, xtol: float = 1e-10, workers: int = 1,
-                       log=None):
+                       parts: str | None = None, log=None):
     """Attractor types and their probabilities along ``parameter`` (module docstring).
 
     Parameters
@@ -138,6 +187,10 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     transient, record : forcing periods dropped, then recorded, by each classification.
     xtol : tolerance of the located boundaries in xi.
     workers : processes of the classification sweeps.
+    parts : a folder where each finished control value is kept as it finishes (a file
+        named by a hash of everything it depends on); a rerun with the same folder reads
+        them back instead of computing them again (an interrupted diagram resumes), and
+        a damaged file is computed again. None: nothing is kept.
     log : callable taking a progress line, or None.
 
     Returns
@@ -189,16 +242,30 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                     distribution=distribution)
     system.check_samples()
     slices = []
+    if parts is not None:
+        import os
+
+        os.makedirs(parts, exist_ok=True)
     for i, value in enumerate(values):
         osc = oscillator.replace(**{parameter: float(value)})
-        piece = stochastic_slice(osc, uncertain, float(sigma), measure, samples=int(samples),
-                                 seed=seed + i, options=options, transient=transient,
-                                 record=record, xtol=xtol, workers=workers)
-        piece.value = float(value)
+        path = None if parts is None else os.path.join(parts, "slice-" + _slice_key(
+            osc, uncertain, sigma, measure, samples, seed + i, options, transient, record,
+            xtol) + ".json")
+        piece = None if path is None else _load_slice(path)
+        reused = piece is not None
+        if piece is None:
+            piece = stochastic_slice(osc, uncertain, float(sigma), measure,
+                                     samples=int(samples), seed=seed + i, options=options,
+                                     transient=transient, record=record, xtol=xtol,
+                                     workers=workers)
+            piece.value = float(value)
+            if path is not None:
+                _save_slice(path, piece)
         slices.append(piece)
         if log is not None:
             shown = ", ".join(f"{k} {p:.3f}" for k, p in sorted(piece.probability.items()))
-            log(f"{i + 1}/{len(values)} {parameter} = {value:g}: {shown} ({piece.method})")
+            log(f"{i + 1}/{len(values)} {parameter} = {value:g}: {shown} ({piece.method}"
+                f"{', read back' if reused else ''})")
     kinds = sorted({k for s in slices for k in (*s.probability, *s.mc_probability)},
                    key=_type_order)
     P = np.array([[s.probability.get(k, 0.0) for k in kinds] for s in slices])

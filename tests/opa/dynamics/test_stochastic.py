@@ -91,3 +91,25 @@ def test_the_boundary_against_the_scipy_reference():
         x = reference_trajectory(mu=mu, c=0.04, t_out=t, **model)["x"][-16:]
         assert np.abs(x[repeat:] - x[:-repeat]).max() < 1e-6
         assert np.abs(x[repeat // 2:] - x[:-(repeat // 2)]).max() > 1e-3
+
+
+def test_an_interrupted_diagram_resumes_from_its_parts(tmp_path, monkeypatch):
+    """Each finished value is kept; a rerun computes only what is missing, and gives the
+    same dataset. A damaged part is computed again."""
+    import opa.dynamics._stochastic as S
+
+    kw = dict(sigma=0.03, samples=8, transient=200, parts=str(tmp_path / "parts"))
+    first = stochastic_diagram(SECTION_31, "c", [0.04], **kw)
+    calls = []
+    original = S.stochastic_slice
+    monkeypatch.setattr(S, "stochastic_slice",
+                        lambda *a, **k: calls.append(1) or original(*a, **k))
+    both = stochastic_diagram(SECTION_31, "c", [0.04, 0.05], **kw)
+    assert len(calls) == 1  # 0.04 was read back
+    np.testing.assert_array_equal(both.probability.sel(c=0.04).values,
+                                  first.probability.sel(c=0.04).values)
+    for path in (tmp_path / "parts").iterdir():
+        path.write_text("{not json")
+    again = stochastic_diagram(SECTION_31, "c", [0.04, 0.05], **kw)
+    assert len(calls) == 3
+    np.testing.assert_array_equal(again.probability.values, both.probability.values)
