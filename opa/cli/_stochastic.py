@@ -51,9 +51,7 @@ def cmd_stochastic(args) -> int:
     from opa.cli._flags import check_outputs, options_from, oscillator_from
     from opa.dynamics._stochastic import stochastic_diagram
 
-    check_outputs(args)
-    if args.keep_parts and not args.out:
-        raise ValueError("--keep-parts applies with --out only (the parts are OUT.parts/)")
+    check_outputs(args)  # refuses --keep-parts without --out too
     name, values, _ = parse_sweep(
         args.sweep, names=tuple(n for n in PARAMETER_NAMES
                                 if n not in (args.uncertain, "x0", "v0")))

@@ -498,4 +498,4 @@ def test_stochastic_diagram_through_the_deterministic_doubling(tmp_path, capsys)
     assert fig.stat().st_size > 10_000
     assert not (tmp_path / "s.nc.parts").exists()  # kept only until the final write
     assert main(["stochastic", "--preset", "3.1", "--sweep", "c=0.04", "--keep-parts"]) == 2
-    assert "--keep-parts applies with --out only" in capsys.readouterr().err
+    assert "--keep-parts has no effect without --out" in capsys.readouterr().err
