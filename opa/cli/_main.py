@@ -199,8 +199,10 @@ def _verify_lines(ds) -> list[str]:
         return "" if periods == float("inf") else f", first disagreement at {periods:.4g} periods"
 
     return [
-        f"certificate ({a['verify_samples']} true systems, {a['verify_replicates']} "
-        f"scrambled Sobol' replicates): {a['verdict'].upper()} (mean {a['verdict_mean']}"
+        f"certificate ({a['verify_samples']} true systems, "
+        + (f"{a['verify_replicates']} scrambled Sobol' replicates" if a["verify_replicates"]
+           else "stratified by element")
+        + f"): {a['verdict'].upper()} (mean {a['verdict_mean']}"
         f"{when(a['first_disagreement_mean'])}; variance {a['verdict_var']}"
         f"{when(a['first_disagreement_var'])})",
         f"error of E[x]: RMS {rms('verify_err_mean'):.3g} ± {rms('verify_err_mean_sem'):.2g}; "
