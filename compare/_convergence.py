@@ -407,57 +407,12 @@ def summary_lines(ds) -> list[str]:
     return out
 
 
-def plot(ds, path):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.6))
-    ax = axes[0]
-    for method, style in (("ME-OPA uniform", "o-"), ("ME-OPA adaptive", "s-"),
-                          ("ME-collocation uniform", "^--"), ("ME-collocation adaptive", "v--")):
-        for law in (*STUDY_LAWS, "true system"):
-            idx = _select(ds, method, law)
-            if len(idx):
-                ax.loglog(ds["size"].values[idx], ds.error.values[idx], style, ms=4,
-                          label=f"{method} ({law})")
-    ax.axhline(ds.attrs["reference_sem"], color="k", ls=":", label="reference SE")
-    ax.set_xlabel("elements K")
-    ax.set_ylabel("RMS error of E[x]")
-    ax.legend(fontsize=6)
-    ax = axes[1]
-    for method in ("ME-OPA adaptive, N", "OPA (one element), N"):
-        for law in STUDY_LAWS:
-            idx = _select(ds, method, law)
-            ax.semilogy(ds.order.values[idx], ds.error.values[idx], "o-", ms=4,
-                        label=f"{method} ({law})")
-    ax.axhline(ds.attrs["reference_sem"], color="k", ls=":")
-    ax.set_xlabel("N")
-    ax.legend(fontsize=6)
-    ax = axes[2]
-    for method in np.unique(ds.method.values):
-        if method.endswith(", N"):
-            continue
-        for law in np.unique(ds.law.values):
-            idx = _select(ds, method, law)
-            if len(idx):
-                ax.loglog(ds.rhs_evaluations.values[idx], ds.error.values[idx], "o-", ms=3,
-                          label=f"{method} ({law})")
-    ax.axhline(ds.attrs["reference_sem"], color="k", ls=":")
-    ax.set_xlabel("right-hand-side evaluations")
-    ax.legend(fontsize=6)
-    fig.suptitle(f"σ = {ds.attrs['sigma']:g}, ω = {ds.attrs['omega']:g}, "
-                 f"{ds.attrs['periods']:g} periods: error against K, N and cost")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
-
-
-def write_report(ds, outdir, command="opa-mc converge") -> list[str]:
+def write_report(ds, outdir, *, draw, command="opa-mc converge") -> list[str]:
+    """convergence.md and convergence.png in ``outdir``; ``draw(ds, path)`` draws the
+    figure (``compare._report.plot_frontier``, the trust map's frontier figure: the study
+    is the same)."""
     os.makedirs(outdir, exist_ok=True)
-    png = plot(ds, os.path.join(outdir, "convergence.png"))
+    png = draw(ds, os.path.join(outdir, "convergence.png"))
     md = os.path.join(outdir, "convergence.md")
     with open(md, "w") as fh:
         fh.write(f"# Multi-element OPA against Monte Carlo\n\nCommand: `{command}` "

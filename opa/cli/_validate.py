@@ -265,8 +265,10 @@ def cmd_converge(args) -> int:
                             **kw)
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     ds = run_convergence(cfg, log=log)
-    written = write_report(ds, args.outdir, command="opa-mc " + shlex.join(
-        getattr(args, "argv", ["converge"])))
+    from compare._report import plot_frontier
+
+    command = "opa-mc " + shlex.join(getattr(args, "argv", ["converge"]))
+    written = write_report(ds, args.outdir, draw=plot_frontier, command=command)
     for line in summary_lines(ds):
         print(f"* {line}")
     print(f"\nwrote {os.path.join(args.outdir, 'convergence.nc')}, " + ", ".join(written))

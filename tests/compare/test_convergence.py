@@ -81,7 +81,9 @@ def test_round_trip_and_report(study):
     with xr.open_dataset(out / "convergence.nc") as back:
         np.testing.assert_array_equal(back.error.values, ds.error.values)
         assert list(back.method.values) == list(ds.method.values)
-    written = write_report(ds, str(out), command="opa-mc converge (test)")
+    from compare._report import plot_frontier
+
+    written = write_report(ds, str(out), draw=plot_frontier, command="opa-mc converge (test)")
     assert all((out / p.split("/")[-1]).exists() for p in written)
     assert summary_lines(ds)[0].startswith("Reference: 1024 Sobol samples")
 
