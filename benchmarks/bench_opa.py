@@ -28,7 +28,7 @@ from scipy.integrate import solve_ivp
 
 import opa
 from opa import _kernel
-from opa._run import kernel_quadrature, quadrature, run_kernel
+from opa._run import quadrature, run
 from opa._system import System
 
 RHS_ORDERS = [2, 4, 8, 16, 32, 64]
@@ -51,8 +51,9 @@ def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, work):
 
 def _rhs_inputs(order):
     oscillator = opa.preset("3.2")
-    p, cfg = System(oscillator, sigma=0.01, order=order).pack(opa.SolverOptions())
-    nodes, weights, basis = kernel_quadrature(quadrature(order))
+    inputs = System(oscillator, sigma=0.01, order=order).kernel_inputs(opa.SolverOptions())
+    p, cfg, nodes, weights, basis = (inputs.p, inputs.cfg, inputs.nodes, inputs.weights,
+                                     inputs.basis)
     y = np.random.default_rng(order).normal(scale=0.3, size=2 * (order + 1))
     out = np.empty_like(y)
     return (y, p, cfg, nodes, weights, basis, out, np.empty((6, len(nodes))))
@@ -202,23 +203,22 @@ def test_long_run_vs_scipy(benchmark):
     periods = 20 if benchmark.disabled else 1000
     options = opa.SolverOptions(rtol=LONG_TOL, atol=LONG_TOL)
     t_out = np.arange(periods + 1) * (2.0 * math.pi / oscillator.omega)
-    p, cfg = System(oscillator, sigma=LONG_SIGMA, order=LONG_ORDER).pack(options)
-    quad = quadrature(LONG_ORDER)
-    y0 = np.zeros(2 * (LONG_ORDER + 1))
-    y0[0], y0[LONG_ORDER + 1] = oscillator.x0, oscillator.v0
+    system = System(oscillator, sigma=LONG_SIGMA, order=LONG_ORDER)
+    inputs, y0 = system.kernel_inputs(options), system.initial_state()
 
     kernel_seconds = []
 
     def kernel_run():
         start = time.perf_counter()
-        result = run_kernel(y0, t_out, p, cfg, quad, rtol=LONG_TOL, atol=LONG_TOL)
+        result = run(inputs, y0, t_out, rtol=LONG_TOL, atol=LONG_TOL)
         kernel_seconds.append(time.perf_counter() - start)
         return result
 
     kernel_run()  # load the compiled kernel before timing
     kernel_seconds.clear()
     benchmark.group = f"opa N={LONG_ORDER} {periods} periods"
-    states, _, stats = benchmark.pedantic(kernel_run, rounds=1 if benchmark.disabled else 5)
+    record = benchmark.pedantic(kernel_run, rounds=1 if benchmark.disabled else 5)
+    states = record.states
 
     # The scipy run needs the same outputs: reuse the kernel's time grid. One round.
     scipy_system = ScipyOPA(oscillator, LONG_SIGMA, LONG_ORDER)
@@ -233,13 +233,13 @@ def test_long_run_vs_scipy(benchmark):
     agreement = np.abs(states[early, 0] - scipy_states[early, 0]).max()
     benchmark.extra_info.update(
         periods=periods, rtol=LONG_TOL, kernel_seconds=kernel_best,
-        scipy_seconds=scipy_seconds, scipy_over_kernel=ratio, kernel_steps=stats["steps"],
-        kernel_impacts=stats["impacts"], scipy_impacts=scipy_impacts,
+        scipy_seconds=scipy_seconds, scipy_over_kernel=ratio, kernel_steps=record.steps,
+        kernel_impacts=record.impacts, scipy_impacts=scipy_impacts,
         x0_difference_first_10_periods=agreement,
     )  # fmt: skip
     print(
         f"\nN={LONG_ORDER}, {periods} periods, rtol=atol={LONG_TOL:g}: kernel {kernel_best:.3f} s "
-        f"({stats['steps']} steps, {stats['impacts']} impacts), scipy RK45 "
+        f"({record.steps} steps, {record.impacts} impacts), scipy RK45 "
         f"{scipy_seconds:.2f} s ({scipy_impacts} impacts): ratio {ratio:.0f}x; "
         f"max |x_0 difference| over the first 10 periods {agreement:.1e}"
     )

@@ -60,15 +60,14 @@ import xarray as xr
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
 from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
-from opa import _kernel as K
 from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
-from opa._elements import (MAX_ELEMENTS, adaptive_edges, collocate_element, element_rule,
+from opa._elements import (MAX_ELEMENTS, adaptive_edges, collocate_element, run_elements,
                            uniform_edges)
 from opa._measure import Measure, parse as parse_law
 from opa._memory import check_memory
 from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
                         preset, time_grid)
-from opa._run import SimulationError, run_batch
+from opa._run import SimulationError
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._system import IMPULSE_FIELDS, System
 from opa._splits import (MAX_CROSSINGS, MAX_SPLITS, SPLIT_KINDS, Split, count_probabilities,
@@ -1035,11 +1034,6 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
     Returns a dict of x_mean, x_var, v_mean (L, T), first_impact (L,), elements (L,) and
     collocated (L,): the elements computed by the fallback."""
     order = system.order
-    dim = 2 * (order + 1)
-    y0 = np.zeros(dim)
-    y0[0] = system.oscillator.x0
-    y0[order + 1] = system.oscillator.v0
-    cap = max(64, 4 * len(times))
     L = len(laws)
     mean, var = np.empty((L, len(times))), np.empty((L, len(times)))
     v_mean = np.empty((L, len(times)))
@@ -1047,26 +1041,16 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
     collocated = np.zeros(L, np.int64)
     for ell, (law, cuts) in enumerate(zip(laws, edges)):
         own = system.replace(impact_law=law, truncation="galerkin")
-        p, cfg = own.pack(options)
         cells = [measure.restrict(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
-        rules = [element_rule(m, order) for m in cells]
+        runs = run_elements(own, options, cells, times=times, partial=True, events=True)
+        out = np.stack([np.concatenate([r.x_coef, r.v_coef]).T for r in runs])
+        for e, run in enumerate(runs):
+            if run.failure and fallback:
+                run = collocate_element(own, options, cells[e], times=times)
+                out[e][:, : order + 1], out[e][:, order + 1:] = run.x_coef.T, run.v_coef.T
+                collocated[ell] += 1
+            first[ell] = min(first[ell], runs[e].first_impact)
         E = len(cells)
-        rule = (np.stack([r[0] for r in rules]), np.stack([r[1] for r in rules]),
-                np.ascontiguousarray(np.stack([r[2].T for r in rules])))
-        out, logs, counters = run_batch(y0, times, np.repeat(p[None, :], E, axis=0),
-                                        np.repeat(cfg[None, :], E, axis=0), rule,
-                                        rtol=options.rtol, atol=options.atol, capacity=cap)
-        for e in range(E):
-            if counters[e, 0] != K.OK or not np.isfinite(out[e]).all():
-                out[e][~np.isfinite(out[e]).all(axis=1)] = np.nan
-                if fallback:
-                    run = collocate_element(own, options, cells[e], times=times)
-                    out[e][:, : order + 1], out[e][:, order + 1:] = run.x_coef.T, run.v_coef.T
-                    collocated[ell] += 1
-            n = min(int(counters[e, 1]), cap)
-            hits = np.flatnonzero(np.isin(logs[e, :n, 2], (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK)))
-            if len(hits):
-                first[ell] = min(first[ell], logs[e, hits[0], 0])
         P = np.array([m.probability() for m in cells])
         P = P / P.sum()
         m = out[:, :, 0]

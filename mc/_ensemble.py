@@ -36,12 +36,11 @@ import xarray as xr
 
 from mc._checkpoint import Checkpoint, digest, stats_arrays
 from mc._sampling import _check_sampler, sample_xi
-from opa import _kernel as K
 from opa._basis import chebyshev_u, orthonormal
 from opa._dataset import package_version, provenance_attrs, time_coord
 from opa._memory import check_memory
 from opa._model import Oscillator, SolverOptions, check_instance
-from opa._run import SimulationError, output_times, run_batch, sampled_batch
+from opa._run import SimulationError, output_times, run_batch
 from opa._system import IMPULSE_FIELDS, System, as_system
 
 #: the System fields a Monte Carlo ensemble takes (it has no closures: each sample is the
@@ -172,28 +171,28 @@ class ChunkStats:
         )
 
 
-def run_chunk(y0, xi, w, rep, replicates, times, p, cfg, rtol, atol, order, keep_paths,
+def run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_paths,
               recurrence=None, single_thread=False):
-    """Integrate one chunk of samples and reduce it: (ChunkStats, n_impacts, status, paths)."""
+    """Integrate one chunk of samples of ``system``'s law and reduce it: (ChunkStats,
+    n_impacts, finished (a mask), paths), or (None, n_impacts, finished, (m, xi_m,
+    why)) for the first sample m that failed."""
     if single_thread:
         import numba
 
         numba.set_num_threads(1)
-    P, cfgs, rule = sampled_batch(p, cfg, xi=xi)
-    paths, _, counters = run_batch(y0, times, P, cfgs, rule, rtol=rtol, atol=atol,
-                                   stop_on_failure=True)
-    status, n_impacts, n_rhs = counters[:, 0], counters[:, 2], counters[:, 4]
+    batch = run_batch(system.sampled_inputs(options, xi=xi), y0, times, rtol=options.rtol,
+                      atol=options.atol, stop_on_failure=True)
     # the first sample that failed (the others may have been skipped after it)
-    bad = np.flatnonzero((status != K.OK) & (status != K.SKIPPED))
+    bad = np.flatnonzero(batch.failed)
     if len(bad):
         m = bad[0]
-        return None, n_impacts, status, (m, xi[m], int(status[m]))
+        return None, batch.impacts, batch.ok, (m, xi[m], batch.message(m))
     # C-ordered copies: the reductions' order then depends on nothing but the shape
-    x = np.ascontiguousarray(paths[:, :, 0])
-    v = np.ascontiguousarray(paths[:, :, 1])
+    x = np.ascontiguousarray(batch.states[:, :, 0])
+    v = np.ascontiguousarray(batch.states[:, :, 1])
     stats = ChunkStats.of(x, v, xi, w, order, rep, replicates, recurrence)
-    stats.rhs_evaluations = int(n_rhs.sum())
-    return stats, n_impacts, status, (paths if keep_paths else None)
+    stats.rhs_evaluations = int(batch.rhs_evaluations.sum())
+    return stats, batch.impacts, batch.ok, (batch.states if keep_paths else None)
 
 
 def _chunk_size(n_times: int, requested: int | None) -> int:
@@ -343,10 +342,9 @@ def simulate_mc(
                  f"{T} outputs, running sums and a chunk's")
     recurrence = None if measure is None else measure.recurrence(order + 1)
     rep = np.arange(len(xi)) // (len(xi) // replicates)
-    p, cfg = system.replace(order=0).pack(options)
-    y0 = np.array([oscillator.x0, oscillator.v0])
+    y0 = system.deterministic().initial_state()
     bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
-    args = (times, p, cfg, options.rtol, options.atol, int(order), keep_paths, recurrence)
+    args = (times, system, options, int(order), keep_paths, recurrence)
 
     # connect before the checkpoint is made: a wrong address leaves nothing behind
     client, own = (None, False) if scheduler is None else _connect(scheduler, connect_timeout)
@@ -375,11 +373,11 @@ def simulate_mc(
             # chunks arrive in order and are merged at once: memory does not grow with M
             for (lo, hi), (stats, imp, status, extra) in results:
                 if stats is None:
-                    m, xi_m, code = extra
+                    m, xi_m, why = extra
                     raise SimulationError(
                         f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {uncertain} = "
                         f"{getattr(oscillator, uncertain) + system.sigma * xi_m:.6g}) stopped: "
-                        f"{K.STATUS_MESSAGES[code]}"
+                        f"{why}"
                     )
                 n_impacts[lo:hi] = imp
                 if keep_paths:
@@ -478,8 +476,8 @@ def _from_arrays(a: dict, keep_paths: bool):
         rhs_evaluations=int(a["rhs_evaluations"]),
     )
     n_impacts = a["n_impacts"].astype(np.int64)
-    status = np.full(len(n_impacts), K.OK, dtype=np.int64)
-    return stats, n_impacts, status, (a["paths"] if keep_paths else None)
+    return stats, n_impacts, np.ones(len(n_impacts), bool), (a["paths"] if keep_paths
+                                                               else None)
 
 
 @dataclass
@@ -500,7 +498,7 @@ class _Chunks:
 
     @property
     def keep_paths(self) -> bool:
-        return bool(self.args[6])  # (times, p, cfg, rtol, atol, order, keep_paths, recurrence)
+        return bool(self.args[4])  # (times, system, options, order, keep_paths, recurrence)
 
     def task(self, i: int) -> tuple:
         lo, hi = self.bounds[i]

@@ -26,18 +26,16 @@ from __future__ import annotations
 
 import math
 import numbers
-import time as _time
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from opa import _kernel as K
 from opa._basis import quadrature_order
 from opa._measure import MAX_GAUSS, Measure
 from opa._model import check_count
 from opa._model import SolverOptions
-from opa._run import quadrature, run_batch, sampled_batch
+from opa._run import SimulationError, quadrature, run_batch, stack
 from opa._system import System
 
 MAX_ELEMENTS = 256
@@ -72,6 +70,7 @@ class ElementRun:
     impacts: int
     failure: str = ""  # why the element's system stopped early ("" if it did not)
     method: str = "opa"  # or "collocation": its OPA system failed (see collocate_element)
+    first_impact: float = np.inf  # of the element's mean (inf: none, or not logged)
 
     @property
     def var(self) -> np.ndarray:
@@ -98,42 +97,34 @@ def element_rule(measure: Measure, order: int):
 
 
 def run_elements(system: System, options: SolverOptions, measures: list[Measure], *,
-                 times: np.ndarray, partial: bool = False) -> list[ElementRun]:
+                 times: np.ndarray, partial: bool = False,
+                 events: bool = False) -> list[ElementRun]:
     """The OPA systems of several elements over ``times``, in parallel (compiled kernel).
 
     An element whose system cannot be completed raises :class:`SimulationError`, or with
-    ``partial`` comes back with NaN after the failure and the reason in ``failure``."""
-    p, cfg = system.replace(truncation="galerkin").pack(options)
-    oscillator, order = system.oscillator, system.order
-    dim = 2 * (order + 1)
-    y0 = np.zeros(dim)
-    y0[0] = oscillator.x0
-    y0[order + 1] = oscillator.v0
-    rules = [element_rule(m, order) for m in measures]
-    nodes = np.stack([r[0] for r in rules])
-    weights = np.stack([r[1] for r in rules])
-    basis = np.ascontiguousarray(np.stack([r[2].T for r in rules]))  # (E, Q, N+2)
-    E = len(measures)
-    out, _, counters = run_batch(y0, times, np.repeat(p[None, :], E, axis=0),
-                                 np.repeat(cfg[None, :], E, axis=0), (nodes, weights, basis),
-                                 rtol=options.rtol, atol=options.atol)
+    ``partial`` comes back with NaN after the failure and the reason in ``failure``.
+    With ``events`` each element's first impact is logged."""
+    own, order = system.replace(truncation="galerkin"), system.order
+    inputs = stack([own.kernel_inputs(options, element_rule(m, order)) for m in measures])
+    batch = run_batch(inputs, system.initial_state(), times, rtol=options.rtol,
+                      atol=options.atol, capacity=max(64, 4 * len(times)) if events else 0)
+    out = batch.states
     # a run the kernel calls complete but whose state is not finite (a jump that produced
     # NaN, which the kernel does not check yet) is a failure too
-    reasons = [K.STATUS_MESSAGES[int(counters[e, 0])] if counters[e, 0] != K.OK else
+    reasons = [batch.message(e) if not batch.ok[e] else
                "" if np.isfinite(out[e]).all() else "the state became non-finite"
                for e in range(len(measures))]
     failures = [f"element [{m.a:.6g}, {m.b:.6g}] of the OPA (N={order}) system stopped: "
                 f"{why}" if why else "" for m, why in zip(measures, reasons)]
     if not partial and any(failures):
-        from opa._run import SimulationError
-
         raise SimulationError(next(f for f in failures if f))
     for e, failure in enumerate(failures):
         if failure:
             out[e][~np.isfinite(out[e]).all(axis=1)] = np.nan
     return [ElementRun(m.a, m.b, m.probability(), out[e, :, : order + 1].T,
-                       out[e, :, order + 1:].T, int(counters[e, 4]), int(counters[e, 2]),
-                       failures[e])
+                       out[e, :, order + 1:].T, int(batch.rhs_evaluations[e]),
+                       int(batch.impacts[e]), failures[e],
+                       first_impact=batch.events(e).first_impact() if events else np.inf)
             for e, m in enumerate(measures)]
 
 
@@ -142,20 +133,13 @@ def true_runs(system: System, options: SolverOptions, xi, times, *, what: str):
     paths (M, T, 2) of x and x' and the right-hand sides used. A system that cannot be
     completed raises :class:`SimulationError` naming ``what`` and its xi."""
     xi = np.asarray(xi, dtype=float)
-    p, cfg = system.pack(options)
-    P, cfgs, rule = sampled_batch(p, cfg, xi=xi)
-    oscillator = system.oscillator
-    paths, _, counters = run_batch(np.array([oscillator.x0, oscillator.v0]), times, P, cfgs,
-                                   rule, rtol=options.rtol, atol=options.atol,
-                                   stop_on_failure=True)
-    status = counters[:, 0]
-    if (status != K.OK).any():
-        from opa._run import SimulationError
-
-        m = int(np.flatnonzero((status != K.OK) & (status != K.SKIPPED))[0])
-        raise SimulationError(f"{what} xi = {xi[m]:.6g} stopped: "
-                              f"{K.STATUS_MESSAGES[int(status[m])]}")
-    return paths, int(counters[:, 4].sum())
+    batch = run_batch(system.sampled_inputs(options, xi=xi), system.deterministic()
+                      .initial_state(), times, rtol=options.rtol, atol=options.atol,
+                      stop_on_failure=True)
+    if not batch.ok.all():
+        m = int(np.flatnonzero(batch.failed)[0])
+        raise SimulationError(f"{what} xi = {xi[m]:.6g} stopped: {batch.message(m)}")
+    return batch.states, int(batch.rhs_evaluations.sum())
 
 
 def collocate_element(system: System, options: SolverOptions, measure: Measure, *,
@@ -393,14 +377,6 @@ def collocation(system, options, measure, edges, q, *, times):
     x = paths[:, :, 0]
     mean = w @ x
     return mean, np.maximum(w @ (x - mean) ** 2, 0.0), n_rhs
-
-
-def timed(fn, *args, **kwargs):
-    start = _time.perf_counter()
-    out = fn(*args, **kwargs)
-    return out, _time.perf_counter() - start
-
-
 
 
 def simulate_elements(system, *, options, times, elements, tolerance, max_elements, log=None):

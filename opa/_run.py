@@ -9,6 +9,7 @@ import os
 import subprocess
 import sys
 import threading
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,7 +20,12 @@ from opa._model import check_span, time_grid
 
 
 class SimulationError(RuntimeError):
-    """A trajectory could not be completed (divergence, step collapse, step limit)."""
+    """A trajectory could not be completed (divergence, step collapse, step limit); its
+    ``status`` is the kernel's code (None where no single run is to blame)."""
+
+    def __init__(self, message: str, *, status: int | None = None):
+        super().__init__(message)
+        self.status = status
 
 
 def quadrature(order: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -203,53 +209,6 @@ def _end_helper(helper: subprocess.Popen, timeout: float = 10.0) -> None:
         helper.wait()
 
 
-def sampled_batch(p: np.ndarray, cfg: np.ndarray, *, xi=None, values=None):
-    """Kernel inputs of M sampled deterministic systems (N = 0) for :func:`run_batch`.
-
-    System m has the uncertain parameter (``cfg``'s) at ``values[m]`` (absolute) or at
-    ``p_bar + sigma xi[m]`` (computed as the kernel always has, so the results are the
-    same bit for bit). Returns (P (M, N_PARAMS), cfgs (M, N_CFG), rule) with the one-node
-    rule at xi = 0 for every system."""
-    idx = (K.P_MU, K.P_A, K.P_C)[int(cfg[K.C_UNCERTAIN])]
-    if values is None:
-        values = p[idx] + p[K.P_SIGMA] * np.asarray(xi, dtype=float)
-    values = np.asarray(values, dtype=float)
-    M = len(values)
-    P = np.repeat(p[None, :], M, axis=0)
-    P[:, idx] = values
-    P[:, K.P_SIGMA] = 0.0
-    one = cfg.copy()
-    one[K.C_NCOEF] = 1
-    one[K.C_TRUNC] = K.TRUNC_GALERKIN
-    one[K.C_LAW] = K.LAW_MEAN
-    cfgs = np.repeat(one[None, :], M, axis=0)
-    U = np.zeros((M, 1, 2))
-    U[:, 0, 0] = 1.0
-    return P, cfgs, (np.zeros((M, 1)), np.ones((M, 1)), U)
-
-
-def run_batch(y0, times, P, cfgs, rule, *, rtol, atol, capacity=0, stop_on_failure=False):
-    """B independent plain runs in parallel (``opa._kernel.run_batch``).
-
-    Run b starts from ``y0`` with parameters ``P[b]``, configuration ``cfgs[b]`` and
-    the node-major rule ``(nodes[b], weights[b], U[b])`` of ``rule``. Returns (out
-    (B, n_out, dim), logs (B, capacity, 3), counters (B, 5): status, events, impacts,
-    steps, right-hand sides). With ``stop_on_failure`` the runs not started after the
-    first failure are marked ``SKIPPED``."""
-    nodes, weights, U = (np.ascontiguousarray(a, dtype=float) for a in rule)
-    y0 = np.ascontiguousarray(y0, dtype=float)
-    B = len(P)
-    out = np.empty((B, len(times), len(y0)))
-    logs = np.empty((B, capacity, 3))
-    counters = np.zeros((B, 5), dtype=np.int64)
-    abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
-    prepare_kernels(K.run_batch)
-    K.run_batch(y0, np.ascontiguousarray(times, dtype=float), np.ascontiguousarray(P),
-                np.ascontiguousarray(cfgs, dtype=np.int64), nodes, weights, U, rtol, atol, out,
-                logs, counters, abort)
-    return out, logs, counters
-
-
 #: the default SolverOptions.max_steps; a run under it also has the runaway guard below
 DEFAULT_MAX_STEPS = 50_000_000
 # The runaway guard: a trajectory whose options keep the default max_steps may take at most
@@ -268,57 +227,6 @@ def step_guard(times, p) -> int:
     periods = span * p[K.P_OMEGA] / (2.0 * np.pi)
     return int(min(DEFAULT_MAX_STEPS, max(GUARD_FLOOR, GUARD_PER_PERIOD * periods,
                                           GUARD_PER_TIME * span)))
-
-
-def run_kernel(y0, times, p, cfg, quad, *, rtol, atol, label="trajectory", partial=False,
-               include_start=True):
-    """Integrate and return (states (n_out, dim), event log (n, 3), counters dict).
-
-    ``quad`` is :func:`quadrature`'s (nodes, weights, basis (N+2, Q)). With
-    ``include_start`` an impulse at ``times[0]`` is applied (a run from the start of the
-    train); without, it belongs to the previous interval (a run resumed mid-way). A trajectory that
-    cannot be completed raises :class:`SimulationError`, or with ``partial`` returns the
-    outputs reached (NaN after) and the reason in ``counters["failure"]``."""
-    nodes, weights, basis = kernel_quadrature(quad)
-    capacity = max(64, 4 * len(times))
-    guard = step_guard(times, p) if cfg[K.C_MAXSTEPS] == DEFAULT_MAX_STEPS else None
-    if guard is not None:
-        cfg = cfg.copy()
-        cfg[K.C_MAXSTEPS] = guard
-    while True:
-        out = np.empty((len(times), len(y0)))
-        log = np.empty((capacity, 3))
-        z = np.array(y0, dtype=float)
-        prepare_kernels(K.integrate)
-        status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
-            z, 0, np.ascontiguousarray(times, dtype=float), include_start, False, p, cfg, nodes,
-            weights, basis, rtol, atol, out, np.empty((0, K.N_STATS)), np.empty(0), log
-        )
-        if n_events <= capacity:
-            break
-        capacity = int(n_events * 1.2) + 16
-    counters = {"steps": n_steps, "rhs_evaluations": n_rhs, "impacts": n_impacts}
-    if status != K.OK:
-        reached = np.isfinite(out[:, 0])
-        t_last = times[reached][-1] if reached.any() else times[0]
-        message = (f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
-                   f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} "
-                   f"impacts)")
-        hint = advice(status)
-        if status == K.MAX_STEPS and guard is not None:
-            size = float(np.max(np.abs(z))) if np.isfinite(z).all() else float("inf")
-            message = (f"{label} stopped by the runaway guard: {n_steps} steps by t = "
-                       f"{t_last:.6g} of {times[-1]:.6g} (at most {GUARD_PER_PERIOD} per "
-                       f"forcing period, {GUARD_PER_TIME} per unit time, {GUARD_FLOOR} in "
-                       f"all), the state's largest component {size:.3g}, {n_impacts} impacts")
-            hint = ("The step size collapsed, as when the state runs away in finite time: "
-                    "check the parameters (e.g. the signs of a and c); a run that truly "
-                    "needs more steps can give SolverOptions(max_steps=...) explicitly.")
-        if not partial:
-            raise SimulationError(f"{message}. {hint}")
-        out[~np.isfinite(out).all(axis=1)] = np.nan
-        counters["failure"] = message
-    return out, log[:min(n_events, len(log))], counters
 
 
 def advice(status: int) -> str:
@@ -358,34 +266,337 @@ def output_times(oscillator, periods, per_period, times, dim: int = 2):
     return times
 
 
-def event_vars(log: np.ndarray) -> dict:
-    kinds = log[:, 2].astype(np.int8) if len(log) else np.zeros(0, np.int8)
-    impact = np.isin(kinds, (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK))
-    return {
-        "impact_time": (
-            "impact",
-            log[impact, 0],
-            {"long_name": "time of impact with the wall", "units": "1"},
-        ),
-        "impact_velocity": (
-            "impact",
-            log[impact, 1],
-            {"long_name": "pre-impact velocity of the (mean) coordinate", "units": "1"},
-        ),
-        "impact_graze": (
-            "impact",
-            (kinds[impact] == K.EV_GRAZE).astype(np.int8),
-            {"long_name": f"1 where the impact velocity is below {K.EVENT_GRAZE_VELOCITY} (graze)",
-             "units": "1"},
-        ),
-        "stick_time": (
-            "stick",
-            log[kinds == K.EV_STICK, 0],
-            {"long_name": "chatter accumulation time, start of sticking", "units": "1"},
-        ),
-        "release_time": (
-            "release",
-            log[kinds == K.EV_RELEASE, 0],
-            {"long_name": "time of release from the wall after sticking", "units": "1"},
-        ),
-    }
+# ---------------------------------------------------------------------------- the inputs
+#: the names of the kernel's float parameters, in the slots of its parameter vector
+PARAMETER_SLOTS = {
+    "mu": K.P_MU, "a": K.P_A, "c": K.P_C, "f": K.P_F, "omega": K.P_OMEGA, "eta": K.P_ETA,
+    "delta": K.P_DELTA, "F0": K.P_F0, "a1": K.P_A1, "omega1": K.P_OMEGA1, "n": K.P_N,
+    "pulse_width": K.P_TAU, "sigma": K.P_SIGMA, "chatter_velocity": K.P_CHATTER_V,
+    "max_step": K.P_HMAX,
+}
+#: the kernel's codes of each named choice
+CHOICE_CODES = {
+    "uncertain": {"mu": K.UNCERTAIN_MU, "a": K.UNCERTAIN_A, "c": K.UNCERTAIN_C},
+    "impulse": {"dirac": K.IMPULSE_DIRAC, "pulse": K.IMPULSE_PULSE},
+    "truncation": {"galerkin": K.TRUNC_GALERKIN, "paper": K.TRUNC_PAPER},
+    "impact_law": {"mean": K.LAW_MEAN, "ensemble": K.LAW_ENSEMBLE,
+                   "saltation": K.LAW_SALTATION},
+    "method": {"dop853": K.METHOD_DOP853, "dp5": K.METHOD_DP5},
+}
+
+
+@dataclass(frozen=True)
+class Inputs:
+    """What the kernel integrates: the parameter vector ``p``, the configuration ``cfg``
+    and the Gauss rule (nodes, weights, basis node-major (Q, N + 2)) of one system, or
+    of B systems with a leading axis on each (:func:`stack`). Built by
+    ``opa.System.kernel_inputs`` and :func:`sampled`, read only here."""
+
+    p: np.ndarray
+    cfg: np.ndarray
+    nodes: np.ndarray
+    weights: np.ndarray
+    basis: np.ndarray
+
+    @property
+    def coefficients(self) -> int:
+        """N + 1: the number of coefficients of x (and of v)."""
+        return int(np.asarray(self.cfg)[..., K.C_NCOEF].flat[0])
+
+    @property
+    def dim(self) -> int:
+        return 2 * self.coefficients
+
+
+def pack(values: dict, *, order: int, max_steps: int, impulse_at_zero: bool,
+         rule, **choices) -> Inputs:
+    """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
+    order N, the step limit, the impulse train's start, the named choices of
+    :data:`CHOICE_CODES` and ``rule``, :func:`quadrature`'s (nodes, weights, basis)."""
+    p = np.zeros(K.N_PARAMS)
+    for name, value in values.items():
+        p[PARAMETER_SLOTS[name]] = value
+    cfg = np.zeros(K.N_CFG, dtype=np.int64)
+    cfg[K.C_NCOEF] = order + 1
+    cfg[K.C_AT_ZERO] = int(impulse_at_zero)
+    cfg[K.C_MAXSTEPS] = int(max_steps)
+    slots = {"uncertain": K.C_UNCERTAIN, "impulse": K.C_IMPULSE, "truncation": K.C_TRUNC,
+             "impact_law": K.C_LAW, "method": K.C_METHOD}
+    for name, value in choices.items():
+        cfg[slots[name]] = CHOICE_CODES[name][value]
+    nodes, weights, basis = kernel_quadrature(rule)
+    return Inputs(p, cfg, nodes, weights, basis)
+
+
+def stack(inputs) -> Inputs:
+    """B systems' inputs as one batch (each must have the same rule size)."""
+    return Inputs(*(np.ascontiguousarray(np.stack([getattr(i, f) for i in inputs]))
+                    for f in ("p", "cfg", "nodes", "weights", "basis")))
+
+
+def sampled(inputs: Inputs, parameter: str, values) -> Inputs:
+    """B sampled deterministic systems (N = 0, the one-node rule at xi = 0) that are
+    ``inputs`` (a deterministic system's) with ``parameter`` at each of ``values``."""
+    values = np.asarray(values, dtype=float)
+    B = len(values)
+    P = np.repeat(np.asarray(inputs.p)[None, :], B, axis=0)
+    P[:, PARAMETER_SLOTS[parameter]] = values
+    cfgs = np.repeat(np.asarray(inputs.cfg)[None, :], B, axis=0)
+    U = np.zeros((B, 1, 2))
+    U[:, 0, 0] = 1.0
+    return Inputs(P, cfgs, np.zeros((B, 1)), np.ones((B, 1)), U)
+
+
+# ---------------------------------------------------------------------------- the record
+@dataclass(frozen=True)
+class Events:
+    """One run's event log, decoded: rows in time order with their time, velocity (the
+    pre-impact velocity of x_0 for impacts and kicks, 0 for sticking and release) and
+    kind."""
+
+    time: np.ndarray
+    velocity: np.ndarray
+    kind: np.ndarray
+
+    #: the kinds, by name
+    IMPACT, GRAZE, STICK, RELEASE, KICK = (K.EV_IMPACT, K.EV_GRAZE, K.EV_STICK, K.EV_RELEASE,
+                                           K.EV_KICK)
+
+    @classmethod
+    def of(cls, log: np.ndarray) -> Events:
+        log = np.asarray(log, dtype=float).reshape(-1, 3)
+        return cls(log[:, 0].copy(), log[:, 1].copy(), log[:, 2].astype(np.int8))
+
+    def __len__(self) -> int:
+        return len(self.time)
+
+    @property
+    def impacts(self) -> np.ndarray:
+        """Mask of the impacts: located ones (impact, graze) and kicks into the wall."""
+        return np.isin(self.kind, (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK))
+
+    @property
+    def located(self) -> np.ndarray:
+        """Mask of the impacts located on the dense output (not kicks)."""
+        return np.isin(self.kind, (K.EV_IMPACT, K.EV_GRAZE))
+
+    def first_impact(self) -> float:
+        """The time of the first impact, inf when there is none."""
+        hits = np.flatnonzero(self.impacts)
+        return float(self.time[hits[0]]) if len(hits) else np.inf
+
+    def names(self, impact: str, stick: str, release: str) -> list[str]:
+        """Each event's name, impacts of every kind under ``impact``."""
+        table = {K.EV_IMPACT: impact, K.EV_GRAZE: impact, K.EV_KICK: impact,
+                 K.EV_STICK: stick, K.EV_RELEASE: release}
+        return [table[int(k)] for k in self.kind]
+
+    def dataset_vars(self) -> dict:
+        """The event variables of a trajectory dataset (docs/datasets.md)."""
+        impact = self.impacts
+        return {
+            "impact_time": ("impact", self.time[impact],
+                            {"long_name": "time of impact with the wall", "units": "1"}),
+            "impact_velocity": ("impact", self.velocity[impact],
+                                {"long_name": "pre-impact velocity of the (mean) coordinate",
+                                 "units": "1"}),
+            "impact_graze": ("impact", (self.kind[impact] == K.EV_GRAZE).astype(np.int8),
+                             {"long_name": f"1 where the impact velocity is below "
+                                           f"{K.EVENT_GRAZE_VELOCITY} (graze)", "units": "1"}),
+            "stick_time": ("stick", self.time[self.kind == K.EV_STICK],
+                           {"long_name": "chatter accumulation time, start of sticking",
+                            "units": "1"}),
+            "release_time": ("release", self.time[self.kind == K.EV_RELEASE],
+                             {"long_name": "time of release from the wall after sticking",
+                              "units": "1"}),
+        }
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """Per output interval: impacts, smallest pre-impact velocity, sticking episodes,
+    steps, sticking at its end (0/1) and smallest free-flight gap delta - x_0."""
+
+    impacts: np.ndarray
+    min_velocity: np.ndarray
+    sticks: np.ndarray
+    steps: np.ndarray
+    sticking: np.ndarray
+    gap: np.ndarray
+
+    @classmethod
+    def of(cls, stats: np.ndarray) -> Statistics:
+        return cls(*(stats[:, j].copy() for j in (K.S_IMPACTS, K.S_MIN_VELOCITY, K.S_STICKS,
+                                                   K.S_STEPS, K.S_STICKING, K.S_GAP)))
+
+
+@dataclass(frozen=True)
+class Record:
+    """One run, decoded: the states at the output times (rows not reached are NaN), the
+    events, the counters, the status and, when asked for, the tangent matrix W at the end,
+    the per-interval statistics and the log growth of W per interval."""
+
+    states: np.ndarray
+    events: Events
+    steps: int
+    rhs_evaluations: int
+    impacts: int
+    status: int = K.OK
+    failure: str | None = None
+    tangent: np.ndarray | None = None
+    statistics: Statistics | None = None
+    log_growth: np.ndarray | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.status == K.OK
+
+
+class Batch:
+    """B runs made together (:func:`run_batch`): states (B, n_out, dim), each run's
+    events, counters and status."""
+
+    def __init__(self, states, logs, counters):
+        self.states = states
+        self._logs = logs
+        self._counters = counters
+        self.status = counters[:, 0].copy()
+        self.steps = counters[:, 3].copy()
+        self.rhs_evaluations = counters[:, 4].copy()
+        self.impacts = counters[:, 2].copy()
+
+    def __len__(self) -> int:
+        return len(self.status)
+
+    def events(self, b: int) -> Events:
+        """Run b's events (as many as the log's capacity holds)."""
+        return Events.of(self._logs[b, :min(int(self._counters[b, 1]), self._logs.shape[1])])
+
+    def log_complete(self, b: int) -> bool:
+        """Whether run b's events all fit in the log."""
+        return int(self._counters[b, 1]) <= self._logs.shape[1]
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.status == K.OK
+
+    @property
+    def failed(self) -> np.ndarray:
+        """Runs that failed themselves (not the ones skipped after a failure)."""
+        return (self.status != K.OK) & (self.status != K.SKIPPED)
+
+    def message(self, b: int) -> str:
+        """What became of run b, in words ("ok" when it finished)."""
+        return status_message(int(self.status[b]))
+
+    def blank_failures(self) -> None:
+        """Rows of a failed run that are not finite become NaN throughout."""
+        for b in np.flatnonzero(~self.ok):
+            rows = self.states[b]
+            rows[~np.isfinite(rows).all(axis=1)] = np.nan
+
+
+def status_message(status: int) -> str:
+    return K.STATUS_MESSAGES[int(status)]
+
+
+# ---------------------------------------------------------------------------- the runs
+def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "trajectory",
+        tangent=None, statistics: bool = False, renormalise: bool = False,
+        events: bool = True, include_start: bool = True, partial: bool = False,
+        guard: bool = True) -> Record:
+    """Integrate one system from ``y0`` through ``times`` and return its :class:`Record`.
+
+    ``tangent`` (D, m) are tangent vectors carried with the variational equation and the
+    saltation matrices (the record's ``tangent`` is W at the end); ``renormalise`` scales
+    W to unit norm at every output time and records its log growth (Benettin's loop);
+    ``statistics`` records the per-interval :class:`Statistics`; without ``events`` no
+    event log is kept. With ``include_start`` an impulse at ``times[0]`` is applied (a run
+    from the start of the train); without, it belongs to the previous interval (a run
+    resumed mid-way). ``guard``: the runaway guard (:func:`step_guard`) when the step
+    limit is the default one.
+
+    A run that cannot be completed raises :class:`SimulationError` (with its status), or
+    with ``partial`` returns the outputs reached (NaN after) and the reason in
+    ``failure``."""
+    y0 = np.asarray(y0, dtype=float)
+    times = np.ascontiguousarray(times, dtype=float)
+    cfg = inputs.cfg
+    limit = step_guard(times, inputs.p) if guard and cfg[K.C_MAXSTEPS] == DEFAULT_MAX_STEPS \
+        else None
+    if limit is not None:
+        cfg = cfg.copy()
+        cfg[K.C_MAXSTEPS] = limit
+    W = np.zeros((len(y0), 0)) if tangent is None else np.asarray(tangent, dtype=float)
+    m = W.shape[1]
+    capacity = max(64, 4 * len(times)) if events else 0
+    stats = np.empty((len(times) - 1 if statistics else 0, K.N_STATS))
+    growth = np.empty(len(times) - 1 if renormalise else 0)
+    for _ in range(2):  # a log cut at its capacity is rerun once, large enough
+        out = np.empty((len(times), len(y0)))
+        log = np.empty((capacity, 3))
+        z = np.concatenate([y0, W.ravel()])
+        prepare_kernels(K.integrate)
+        status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
+            z, m, times, include_start, renormalise, inputs.p, cfg, inputs.nodes,
+            inputs.weights, inputs.basis, rtol, atol, out, stats, growth, log)
+        if not events or n_events <= capacity:
+            break
+        capacity = int(n_events * 1.2) + 16
+    else:
+        raise SimulationError(f"{label}: the event count changed between two identical runs "
+                              f"({n_events} events)", status=status)
+    failure = None
+    if status != K.OK:
+        failure = _failure(label, status, out, times, z, n_steps, n_impacts, limit)
+        if not partial:
+            raise SimulationError(failure, status=status)
+        out[~np.isfinite(out).all(axis=1)] = np.nan
+    D = len(y0)
+    return Record(
+        states=out, events=Events.of(log[:min(n_events, capacity)]), steps=int(n_steps),
+        rhs_evaluations=int(n_rhs), impacts=int(n_impacts), status=int(status),
+        failure=failure, tangent=z[D:].reshape(D, m).copy() if m else None,
+        statistics=Statistics.of(stats) if statistics else None,
+        log_growth=growth if renormalise else None)
+
+
+def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
+    """The message of a run that stopped: what happened, where, and what to try."""
+    reached = np.isfinite(out[:, 0])
+    t_last = times[reached][-1] if reached.any() else times[0]
+    if status == K.MAX_STEPS and limit is not None:
+        size = float(np.max(np.abs(z))) if np.isfinite(z).all() else float("inf")
+        return (f"{label} stopped by the runaway guard: {n_steps} steps by t = {t_last:.6g} "
+                f"of {times[-1]:.6g} (at most {GUARD_PER_PERIOD} per forcing period, "
+                f"{GUARD_PER_TIME} per unit time, {GUARD_FLOOR} in all), the state's largest "
+                f"component {size:.3g}, {n_impacts} impacts. The step size collapsed, as "
+                f"when the state runs away in finite time: check the parameters (e.g. the "
+                f"signs of a and c); a run that truly needs more steps can give "
+                f"SolverOptions(max_steps=...) explicitly.")
+    return (f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
+            f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} impacts). "
+            f"{advice(status)}")
+
+
+def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: int = 0,
+              stop_on_failure: bool = False) -> Batch:
+    """B independent plain runs in parallel: run b starts from ``y0`` with the b-th
+    system of ``inputs`` (:func:`stack`, :func:`sampled`). Each log keeps ``capacity``
+    events. With ``stop_on_failure`` the runs not started after the first failure are
+    marked skipped. Each run depends on nothing but its own inputs, so the results do
+    not depend on the threads."""
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    times = np.ascontiguousarray(times, dtype=float)
+    B = len(inputs.p)
+    out = np.empty((B, len(times), len(y0)))
+    logs = np.empty((B, capacity, 3))
+    counters = np.zeros((B, 5), dtype=np.int64)
+    abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
+    prepare_kernels(K.run_batch)
+    K.run_batch(y0, times, np.ascontiguousarray(inputs.p),
+                np.ascontiguousarray(inputs.cfg, dtype=np.int64),
+                *(np.ascontiguousarray(a, dtype=float)
+                  for a in (inputs.nodes, inputs.weights, inputs.basis)),
+                rtol, atol, out, logs, counters, abort)
+    return Batch(out, logs, counters)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from opa import _kernel as K
 from opa._dataset import element_layout, provenance_attrs, time_coord
 from opa._lazy import lazy
 from opa._model import (
@@ -17,14 +16,7 @@ from opa._model import (
     Oscillator,
     SolverOptions,
 )
-from opa._run import (
-    event_vars,
-    kernel_quadrature,
-    output_times,
-    quadrature,
-    run_batch,
-    run_kernel,
-)
+from opa._run import output_times, run, run_batch, stack
 from opa._system import IMPULSE_FIELDS, System, as_system
 
 xr = lazy("xarray")
@@ -68,21 +60,18 @@ def simulate_dmr(
                        **impulse_model).deterministic()
     oscillator = system.oscillator
     times = output_times(oscillator, periods, per_period, times)
-    p, cfg = system.pack(options)
-    out, log, stats = run_kernel(
-        [oscillator.x0, oscillator.v0], times, p, cfg, quadrature(0),
-        rtol=options.rtol, atol=options.atol, label="DMR trajectory",
-    )
+    rec = run(system.kernel_inputs(options), system.initial_state(), times,
+              rtol=options.rtol, atol=options.atol, label="DMR trajectory")
     ds = xr.Dataset(
         {
-            "x": ("time", out[:, 0], {"long_name": "displacement x", "units": "1"}),
-            "v": ("time", out[:, 1], {"long_name": "velocity dx/dt", "units": "1"}),
-            **event_vars(log),
+            "x": ("time", rec.states[:, 0], {"long_name": "displacement x", "units": "1"}),
+            "v": ("time", rec.states[:, 1], {"long_name": "velocity dx/dt", "units": "1"}),
+            **rec.events.dataset_vars(),
         },
         coords=time_coord(times, oscillator.omega),
         attrs=provenance_attrs("dmr", system, options),
     )
-    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"])
+    ds.attrs.update(steps=rec.steps, rhs_evaluations=rec.rhs_evaluations)
     return ds
 
 
@@ -181,30 +170,13 @@ def simulate_opa(
             elements=1 if elements is None else elements, tolerance=tolerance,
             max_elements=max_elements)
     times = output_times(oscillator, periods, per_period, times, dim=2 * (order + 1))
-    p, cfg = system.pack(options)
-    y0 = np.zeros(2 * (order + 1))
-    if initial is None:
-        y0[0] = oscillator.x0
-        y0[order + 1] = oscillator.v0
-    else:
-        initial = np.asarray(initial, dtype=float)
-        if initial.shape != (2, order + 1) or not np.all(np.isfinite(initial)):
-            raise ValueError(
-                f"initial must be a finite array of shape (2, {order + 1}), got shape "
-                f"{initial.shape}"
-            )
-        if initial[0, 0] > oscillator.delta:
-            raise ValueError(f"initial x_0 must not be beyond the wall, got {initial[0, 0]}")
-        y0[:] = initial.ravel()
-    out, log, stats = run_kernel(
-        y0, times, p, cfg, quadrature(order), rtol=options.rtol, atol=options.atol,
-        label=f"OPA (N={order}) trajectory", partial=partial,
-    )
-    xc = out[:, : order + 1].T
-    vc = out[:, order + 1 :].T
+    rec = run(system.kernel_inputs(options), system.initial_state(initial), times,
+              rtol=options.rtol, atol=options.atol, label=f"OPA (N={order}) trajectory",
+              partial=partial)
+    xc = rec.states[:, : order + 1].T
+    vc = rec.states[:, order + 1 :].T
     layout, layout_coords = element_layout(
-        xc[None], vc[None], [-1.0, 1.0], [1.0], [stats["impacts"]],
-        [stats["rhs_evaluations"]])
+        xc[None], vc[None], [-1.0, 1.0], [1.0], [rec.impacts], [rec.rhs_evaluations])
     ds = xr.Dataset(
         {
             "x_coef": (("order", "time"), xc,
@@ -218,16 +190,16 @@ def simulate_opa(
             "v_var": ("time", (vc[1:] ** 2).sum(axis=0),
                       {"long_name": "OPA velocity variance sum_{i>=1} v_i^2", "units": "1"}),
             **layout,
-            **event_vars(log),
+            **rec.events.dataset_vars(),
         },
         coords={**time_coord(times, oscillator.omega), "order": ("order", np.arange(order + 1)),
                 **layout_coords},
         attrs=provenance_attrs("opa", system, options),
     )
-    ds.attrs.update(steps=stats["steps"], rhs_evaluations=stats["rhs_evaluations"],
+    ds.attrs.update(steps=rec.steps, rhs_evaluations=rec.rhs_evaluations,
                     distribution="semicircle", elements=1, element_mode="single")
-    if "failure" in stats:
-        ds.attrs["failure"] = stats["failure"]
+    if rec.failure is not None:
+        ds.attrs["failure"] = rec.failure
     return ds
 
 
@@ -238,27 +210,12 @@ def opa_variants(system: System, variants, times: np.ndarray, options: SolverOpt
 
     Returns (x_mean (V, T), x_var (V, T), first_impact (V,))."""
     order = system.order
-    packed = [system.replace(impact_law=law, truncation=trunc).pack(options)
-              for law, trunc in variants]
-    P = np.stack([p for p, _ in packed])
-    cfgs = np.stack([cfg for _, cfg in packed])
-    nodes, weights, basis = kernel_quadrature(quadrature(order))
-    dim = 2 * (order + 1)
-    y0 = np.zeros(dim)
-    y0[0] = system.oscillator.x0
-    y0[order + 1] = system.oscillator.v0
-    V = len(cfgs)
-    cap = max(64, 4 * len(times))
-    rule = tuple(np.repeat(a[None], V, axis=0) for a in (nodes, weights, basis))
-    out, logs, counters = run_batch(y0, times, P, cfgs, rule, rtol=options.rtol,
-                                    atol=options.atol, capacity=cap)
-    first = np.full(V, np.inf)
-    for v in range(V):
-        if counters[v, 0] != K.OK:
-            out[v][~np.isfinite(out[v]).all(axis=1)] = np.nan
-        n = min(int(counters[v, 1]), cap)
-        hits = np.flatnonzero(np.isin(logs[v, :n, 2], (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK)))
-        if len(hits):
-            first[v] = logs[v, hits[0], 0]
+    inputs = stack([system.replace(impact_law=law, truncation=trunc).kernel_inputs(options)
+                    for law, trunc in variants])
+    batch = run_batch(inputs, system.initial_state(), times, rtol=options.rtol,
+                      atol=options.atol, capacity=max(64, 4 * len(times)))
+    batch.blank_failures()
+    first = np.array([batch.events(v).first_impact() for v in range(len(batch))])
+    out = batch.states
     x = out[:, :, : order + 1]
     return x[:, :, 0], (x[:, :, 1:] ** 2).sum(axis=2), first

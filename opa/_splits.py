@@ -44,9 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opa import _kernel as K
 from opa._model import Oscillator, SolverOptions
-from opa._run import quadrature, run_batch, run_kernel, sampled_batch
+from opa._run import Events, run, run_batch
 from opa._system import System, as_system
 
 SPLIT_KINDS = ("grazing", "extra impact", "chatter", "impulse order", "horizon",
@@ -120,12 +119,9 @@ def event_sequence(system: System | Oscillator, options: SolverOptions,
                    t_end: float) -> EventSequence:
     """Run the deterministic system to ``t_end`` and return its events."""
     system = as_system(system, options).deterministic()
-    p, cfg = system.pack(options)
-    oscillator = system.oscillator
-    _, log, _ = run_kernel([oscillator.x0, oscillator.v0], np.array([0.0, t_end]), p, cfg,
-                           quadrature(0), rtol=options.rtol, atol=options.atol,
-                           label="sampled system")
-    return _sequence_from_log(system, log)
+    rec = run(system.kernel_inputs(options), system.initial_state(), np.array([0.0, t_end]),
+              rtol=options.rtol, atol=options.atol, label="sampled system")
+    return _sequence(system, rec.events)
 
 
 def event_sequences(system: System | Oscillator, options: SolverOptions, parameter: str,
@@ -137,30 +133,23 @@ def event_sequences(system: System | Oscillator, options: SolverOptions, paramet
     if parameter not in ("mu", "a", "c"):  # not a kernel-side uncertain parameter
         return [event_sequence(system.replace(**{parameter: float(v)}), options, t_end)
                 for v in values]
-    p, cfg = system.replace(uncertain=parameter).pack(options)
-    cap = 256
-    P, cfgs, rule = sampled_batch(p, cfg, values=values)
-    oscillator = system.oscillator
-    _, logs, counters = run_batch(np.array([oscillator.x0, oscillator.v0]),
-                                  np.array([0.0, t_end]), P, cfgs, rule, rtol=options.rtol,
-                                  atol=options.atol, capacity=cap)
-    status, n_events = counters[:, 0], counters[:, 1]
+    batch = run_batch(system.replace(uncertain=parameter).sampled_inputs(options, values=values),
+                      system.initial_state(), np.array([0.0, t_end]), rtol=options.rtol,
+                      atol=options.atol, capacity=256)
     out = []
     for m, value in enumerate(values):
-        if status[m] != K.OK or n_events[m] > cap:  # the single run raises or has room
+        if not batch.ok[m] or not batch.log_complete(m):  # the single run raises or has room
             out.append(event_sequence(system.replace(**{parameter: float(value)}), options,
                                       t_end))
         else:  # mu, a and c leave the impulse schedule alone: the system's intervals hold
-            out.append(_sequence_from_log(system, logs[m, : n_events[m]]))
+            out.append(_sequence(system, batch.events(m)))
     return out
 
 
-def _sequence_from_log(system: System, log: np.ndarray) -> EventSequence:
-    codes = log[:, 2].astype(int)
-    names = {K.EV_IMPACT: _IMPACT, K.EV_GRAZE: _IMPACT, K.EV_KICK: _IMPACT,
-             K.EV_STICK: _STICK, K.EV_RELEASE: _RELEASE}
-    return EventSequence(log[:, 0].copy(), log[:, 1].copy(),
-                         tuple(names[c] for c in codes), system.impulse_interval(log[:, 0]))
+def _sequence(system: System, events: Events) -> EventSequence:
+    return EventSequence(events.time, events.velocity,
+                         tuple(events.names(_IMPACT, _STICK, _RELEASE)),
+                         system.impulse_interval(events.time))
 
 
 @dataclass(frozen=True)

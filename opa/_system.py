@@ -15,11 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from opa import _kernel as K
 from opa._model import (
     IMPACT_LAWS,
     IMPULSE_MODELS,
-    METHODS,
     PARAMETER_NAMES,
     TRUNCATIONS,
     Oscillator,
@@ -30,6 +28,7 @@ from opa._model import (
     check_flag,
     check_order,
 )
+from opa._run import Inputs, pack, quadrature, sampled
 
 #: the intensity of the uncertain parameter when none is given (every entry point)
 DEFAULT_SIGMA = 0.01
@@ -234,36 +233,51 @@ class System:
         near = (np.abs(times - j * T1) <= tolerance) & (j >= (0 if self.impulse_at_zero else 1))
         return np.where(near, j * T1, times)
 
-    # ------------------------------------------------------------------ the kernel's arguments
-    def pack(self, options: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
-        """The kernel's float vector ``p`` and integer vector ``cfg`` (the one packer)."""
+    # ------------------------------------------------------------------ the kernel's inputs
+    def kernel_inputs(self, options: SolverOptions, rule=None) -> Inputs:
+        """The kernel's inputs (parameter vector, configuration and Gauss rule of order
+        N): the one packer. ``rule`` (nodes, weights, basis (N + 2, Q)) replaces the
+        semicircle's rule (an element's own law, ``opa._elements.element_rule``)."""
         o = self.oscillator
-        p = np.zeros(K.N_PARAMS)
-        p[K.P_MU] = o.mu
-        p[K.P_A] = o.a
-        p[K.P_C] = o.c
-        p[K.P_F] = o.f
-        p[K.P_OMEGA] = o.omega
-        p[K.P_ETA] = o.eta
-        p[K.P_DELTA] = o.delta
-        p[K.P_F0] = o.F0
-        p[K.P_A1] = o.a1
-        p[K.P_OMEGA1] = o.omega1
-        p[K.P_N] = o.n
-        p[K.P_TAU] = self.pulse_width
-        p[K.P_SIGMA] = self.sigma
-        p[K.P_CHATTER_V] = options.chatter_velocity
-        p[K.P_HMAX] = options.max_step
-        cfg = np.zeros(K.N_CFG, dtype=np.int64)
-        cfg[K.C_NCOEF] = self.order + 1
-        cfg[K.C_UNCERTAIN] = ("mu", "a", "c").index(self.uncertain)
-        cfg[K.C_IMPULSE] = IMPULSE_MODELS.index(self.impulse)
-        cfg[K.C_AT_ZERO] = int(self.impulse_at_zero)
-        cfg[K.C_TRUNC] = TRUNCATIONS.index(self.truncation)
-        cfg[K.C_LAW] = IMPACT_LAWS.index(self.impact_law)
-        cfg[K.C_MAXSTEPS] = int(options.max_steps)
-        cfg[K.C_METHOD] = (K.METHOD_DOP853, K.METHOD_DP5)[METHODS.index(options.method)]
-        return p, cfg
+        values = dict(mu=o.mu, a=o.a, c=o.c, f=o.f, omega=o.omega, eta=o.eta, delta=o.delta,
+                      F0=o.F0, a1=o.a1, omega1=o.omega1, n=o.n, pulse_width=self.pulse_width,
+                      sigma=self.sigma, chatter_velocity=options.chatter_velocity,
+                      max_step=options.max_step)
+        return pack(values, order=self.order, max_steps=options.max_steps,
+                    impulse_at_zero=self.impulse_at_zero,
+                    rule=quadrature(self.order) if rule is None else rule,
+                    uncertain=self.uncertain, impulse=self.impulse,
+                    truncation=self.truncation, impact_law=self.impact_law,
+                    method=options.method)
+
+    def sampled_inputs(self, options: SolverOptions, *, xi=None, values=None) -> Inputs:
+        """The kernel's inputs of the sampled deterministic systems: the uncertain
+        parameter at ``values`` (absolute) or at ``p_bar + sigma xi``."""
+        if values is None:
+            mean = float(getattr(self.oscillator, self.uncertain))
+            values = mean + self.sigma * np.asarray(xi, dtype=float)
+        one = self.replace(sigma=0.0, order=0, truncation="galerkin", impact_law="mean",
+                           distribution=None)
+        return sampled(one.kernel_inputs(options), self.uncertain, values)
+
+    def initial_state(self, initial=None) -> np.ndarray:
+        """The start of a run: x_0 = x0, v_0 = v0 and the higher coefficients 0, or
+        ``initial`` (shape (2, N + 1): rows x_coef, v_coef), which must be finite and not
+        beyond the wall."""
+        n = self.order + 1
+        y = np.zeros(2 * n)
+        if initial is None:
+            y[0] = self.oscillator.x0
+            y[n] = self.oscillator.v0
+            return y
+        initial = np.asarray(initial, dtype=float)
+        if initial.shape != (2, n) or not np.all(np.isfinite(initial)):
+            raise ValueError(f"initial must be a finite array of shape (2, {n}), got shape "
+                             f"{initial.shape}")
+        if initial[0, 0] > self.oscillator.delta:
+            raise ValueError(f"initial x_0 must not be beyond the wall, got {initial[0, 0]}")
+        y[:] = initial.ravel()
+        return y
 
     def dataset_attrs(self) -> dict:
         """The system's dataset attributes (docs/datasets.md; netCDF-safe types)."""
@@ -320,10 +334,3 @@ def as_system(system=None, options: SolverOptions | None = None, *, allowed=SYST
     for name, value in legacy.items():
         given.setdefault(name, value)
     return System(system if system is not None else Oscillator(), **given)
-
-
-def pack_parameters(oscillator: Oscillator, options: SolverOptions, **fields):
-    """``System(oscillator, **fields).pack(options)`` with the DMR's defaults (sigma 0,
-    N 0) for the fields not given; kept for callers of the kernel layout."""
-    fields = {"sigma": 0.0, "order": 0, **fields}
-    return as_system(oscillator, options, **fields).pack(options)

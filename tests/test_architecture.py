@@ -156,6 +156,13 @@ def strongly_connected(graph: dict[str, list[str]]) -> list[list[str]]:
     return cycles
 
 
+def test_the_kernel_has_one_caller():
+    """``opa._run`` is the only module of the packages that imports the compiled kernel;
+    everything else goes through its interface (``run``, ``run_batch``, ``Record``)."""
+    importers = sorted(m for m in MODULES if any(t == "opa._kernel" for t, _ in imports(m)))
+    assert importers == ["opa._run"]
+
+
 def test_no_import_cycles():
     """Every import counts, lazy ones included."""
     graph = {m: sorted({t for t, _ in imports(m) if t in MODULES and t != m}) for m in MODULES}

@@ -29,7 +29,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from opa import _kernel as V
 from opa._model import (
     _finite,
     IMPACT_LAWS,
@@ -37,7 +36,7 @@ from opa._model import (
     SolverOptions,
     _choice,
 )
-from opa._run import SimulationError, prepare_kernels, kernel_quadrature, quadrature
+from opa._run import SimulationError, run
 from opa._system import SWEEPABLE, SYSTEM_FIELDS, System
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
@@ -89,7 +88,7 @@ class ImpactSystem(System):
 
     model: str = "dmr"
     options: SolverOptions = field(default_factory=SolverOptions)
-    _packed: tuple = field(init=False, repr=False, compare=False, default=None)
+    _packed: object = field(init=False, repr=False, compare=False, default=None)  # Inputs
 
     def __post_init__(self):
         _choice("model", self.model, ORBIT_MODELS)
@@ -107,7 +106,7 @@ class ImpactSystem(System):
                 raise ValueError("the stability of the OPA system is implemented for the "
                                  "semicircle law of xi only (distribution=None)")
             self.check_samples()
-        object.__setattr__(self, "_packed", _pack(self))
+        object.__setattr__(self, "_packed", self.kernel_inputs(self.options))
 
     @classmethod
     def of(cls, system: System, *, model: str = "dmr",
@@ -134,13 +133,6 @@ class ImpactSystem(System):
     def parameter(self, name: str) -> float:
         return self.sigma if name == "sigma" else float(getattr(self.oscillator, name))
 
-    def initial_state(self) -> np.ndarray:
-        """The transient's start: x_0 = x0, v_0 = v0, higher coefficients 0."""
-        y = np.zeros(self.dim)
-        y[0] = self.oscillator.x0
-        y[self.order + 1] = self.oscillator.v0
-        return y
-
     def attrs(self) -> dict:
         """Dataset attributes (docs/datasets.md)."""
         from opa._dataset import provenance_attrs
@@ -151,14 +143,6 @@ class ImpactSystem(System):
 #: what continuation can follow: every SWEEPABLE name but x0 and v0, which only select
 #: the attractor
 CONTINUABLE = tuple(n for n in SWEEPABLE if n not in ("x0", "v0"))
-
-
-def _pack(system: ImpactSystem):
-    """The kernel's vectors and node-major rule for the system (the one packer,
-    ``opa.System.pack``)."""
-    p, cfg = system.pack(system.options)
-    nodes, weights, U = kernel_quadrature(quadrature(system.order))
-    return p, cfg, nodes, weights, U
 
 
 def impulse_cycle(oscillator: Oscillator, *, max_cycle: int = MAX_CYCLE) -> int | None:
@@ -274,7 +258,6 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
     include_start : apply an impulse that falls on ``times[0]`` (for a transient started
         at t = 0 with ``impulse_at_zero``); otherwise it belongs to the previous interval.
     """
-    p, cfg, nodes, weights, U = system._packed
     y = _as_state(system, state)
     times = np.ascontiguousarray(times, dtype=float)
     if times.ndim != 1 or len(times) < 2:
@@ -297,39 +280,19 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
             W = W[:, None]
         if W.shape[0] != D:
             raise ValueError(f"tangent must have {D} rows, got shape {W.shape}")
-    m = W.shape[1]
-    capacity = 64
-    for attempt in range(2):  # a log cut at its capacity is rerun once, large enough
-        z = np.concatenate([y, W.ravel()])
-        out = np.empty((len(times), D))
-        stats = np.empty((len(times) - 1, V.N_STATS))
-        log = np.empty((capacity, 3))
-        prepare_kernels(V.integrate)
-        status, n_log, _, _, _ = V.integrate(z, m, times, include_start, False, p, cfg, nodes,
-                                             weights, U, system.options.rtol,
-                                             system.options.atol, out, stats, np.empty(0), log)
-        if status != V.OK:
-            raise SimulationError(
-                f"{system.model} variational flow stopped: {V.STATUS_MESSAGES[status]} "
-                f"(t in [{times[0]:.6g}, {times[-1]:.6g}])"
-            )
-        if n_log <= capacity:
-            break
-        capacity = n_log + 16
-    else:
-        raise SimulationError(f"{system.model} variational flow: the impact count changed "
-                              f"between two identical runs ({n_log} impacts)")
-    log = log[:n_log]
-    impacts = np.isin(log[:, 2], (V.EV_IMPACT, V.EV_GRAZE))  # located impacts, not kicks
+    rec = run(system._packed, y, times, rtol=system.options.rtol, atol=system.options.atol,
+              label=f"{system.model} variational flow", tangent=W, statistics=True,
+              include_start=include_start, guard=False)
+    located = rec.events.located  # located impacts, not kicks
     return Flow(
         times=times,
-        states=out,
-        tangent=z[D:].reshape(D, m).copy() if m else None,
-        impact_time=log[impacts, 0].copy(),
-        impact_velocity=log[impacts, 1].copy(),
-        min_gap=float(stats[:, V.S_GAP].min()),
-        sticks=int(stats[:, V.S_STICKS].sum()),
-        steps=int(stats[:, V.S_STEPS].sum()),
+        states=rec.states,
+        tangent=rec.tangent,
+        impact_time=rec.events.time[located],
+        impact_velocity=rec.events.velocity[located],
+        min_gap=float(rec.statistics.gap.min()),
+        sticks=int(rec.statistics.sticks.sum()),
+        steps=int(rec.statistics.steps.sum()),
     )
 
 
@@ -722,7 +685,6 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
     t0 : start time of the transient; initial : start state (default x0, v0, zeros).
     """
     periods, transient = _periods(periods), check_count("transient", transient, 0)
-    p, cfg, nodes, weights, U = system._packed
     T = system.forcing_period
     t0 = check_time("t0", t0, T)
     check_time("the end time t0 + (transient + periods) T", t0 + (transient + periods) * T, T)
@@ -734,24 +696,16 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
         t_rec = t0 + transient * T
         y = flow(system, y, [t0, t_rec], include_start=start).states[-1]
         start = False
-    z = np.concatenate([y, np.full(D, 1.0 / math.sqrt(D))])
-    times = t_rec + np.arange(periods + 1) * T
-    out = np.full((periods + 1, D), np.nan)
-    stats = np.empty((periods, V.N_STATS))
-    growth = np.empty(periods)
-    prepare_kernels(V.integrate)
-    status = V.integrate(z, 1, times, start, True, p, cfg, nodes, weights, U,
-                         system.options.rtol, system.options.atol, out, stats, growth,
-                         np.empty((0, 3)))[0]
-    if status != V.OK:
-        done = int(np.sum(np.isfinite(out[1:, 0])))
-        raise SimulationError(f"Lyapunov run stopped after about {done} periods: "
-                              f"{V.STATUS_MESSAGES[status]}")
+    rec = run(system._packed, y, t_rec + np.arange(periods + 1) * T, rtol=system.options.rtol,
+              atol=system.options.atol, label="Lyapunov run",
+              tangent=np.full((D, 1), 1.0 / math.sqrt(D)), statistics=True, renormalise=True,
+              events=False, include_start=start, guard=False)
+    stats = rec.statistics
     return LyapunovEstimate(
-        exponent=float(np.mean(growth) / T), log_growth=growth, forcing_period=T,
-        method="variational (saltation)", impacts=int(stats[:, V.S_IMPACTS].sum()),
-        min_impact_velocity=float(stats[:, V.S_MIN_VELOCITY].min()),
-        min_gap=float(stats[:, V.S_GAP].min()), sticks=int(stats[:, V.S_STICKS].sum()),
+        exponent=float(np.mean(rec.log_growth) / T), log_growth=rec.log_growth,
+        forcing_period=T, method="variational (saltation)", impacts=int(stats.impacts.sum()),
+        min_impact_velocity=float(stats.min_velocity.min()), min_gap=float(stats.gap.min()),
+        sticks=int(stats.sticks.sum()),
     )
 
 
@@ -811,7 +765,7 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
     Parameters
     ----------
     engine : ``"solver"``: both trajectories as plain runs of the kernel
-        (``opa._run.run_kernel``, the DMR/OPA path, resumed under the impulse train);
+        (``opa._run.run``, the DMR/OPA path, resumed under the impulse train);
         ``"plain"``: through :func:`flow` without tangent vectors. Both share the event
         code, not the saltation matrices.
     """
@@ -822,25 +776,20 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
     impacts, vmin = 0, math.inf
     at_zero = bool(system.impulse_at_zero)
     if engine == "solver":
-        from opa._run import run_kernel
-        p, cfg = system.pack(system.options)
-        quad = quadrature(system.order)
         opts = system.options
 
-        def run(y, ta, tb, first=False):
-            out, log, _ = run_kernel(y, np.array([ta, tb]), p, cfg, quad, rtol=opts.rtol,
-                                     atol=opts.atol, label="Benettin trajectory",
-                                     include_start=first and at_zero)
-            located = np.isin(log[:, 2], (V.EV_IMPACT, V.EV_GRAZE))
-            return out[-1], log[located, 1]
+        def step(y, ta, tb, first=False):
+            rec = run(system._packed, y, np.array([ta, tb]), rtol=opts.rtol, atol=opts.atol,
+                      label="Benettin trajectory", include_start=first and at_zero)
+            return rec.states[-1], rec.events.velocity[rec.events.located]
     else:
-        def run(y, ta, tb, first=False):
+        def step(y, ta, tb, first=False):
             res = flow(system, y, [ta, tb], include_start=first and at_zero)
             return res.states[-1], res.impact_velocity
 
     y = system.initial_state() if initial is None else _as_state(system, initial)
     if transient > 0:
-        y, _ = run(y, 0.0, transient * T, first=True)
+        y, _ = step(y, 0.0, transient * T, first=True)
     u = np.ones(system.dim) / math.sqrt(system.dim)
     growth = np.empty(periods)
     for k in range(periods):
@@ -848,8 +797,8 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
         if y[0] + d0 * u[0] > delta:
             u = -u
         first = transient == 0 and k == 0
-        y_next, v_imp = run(y, ta, tb, first)
-        y_pert, _ = run(y + d0 * u, ta, tb, first)
+        y_next, v_imp = step(y, ta, tb, first)
+        y_pert, _ = step(y + d0 * u, ta, tb, first)
         diff = y_pert - y_next
         dist = float(np.linalg.norm(diff))
         growth[k] = math.log(dist / d0) if dist > 0 else -math.inf

@@ -27,8 +27,8 @@ from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
 from opa import _kernel as K
 from opa.dynamics._continuation import continue_orbits
 from opa.dynamics._sections import impulse_times, stroboscopic_mask
-from opa._run import SimulationError, kernel_quadrature, quadrature
-from opa._system import pack_parameters
+from opa._run import SimulationError
+from tests.conftest import kernel_inputs, rule
 from opa.dynamics._orbits import (
     ImpactSystem,
     flow,
@@ -74,11 +74,12 @@ def compiled():
 
 def run_dmr_kernel(osc: Oscillator, times, options: SolverOptions | None = None):
     """The kernel's own status and counters for one DMR trajectory."""
-    p, cfg = pack_parameters(osc, options or SolverOptions())
+    inputs = kernel_inputs(osc, options or SolverOptions())
+    p, cfg = inputs.p, inputs.cfg
     out, log = np.empty((len(times), 2)), np.empty((64, 3))
     status, _, _, n_steps, _ = K.run_one(
         np.array([osc.x0, osc.v0]), np.asarray(times, dtype=float), p, cfg,
-        *kernel_quadrature(quadrature(0)), 1e-10, 1e-10, out, log)
+        *rule(inputs), 1e-10, 1e-10, out, log)
     return status, n_steps, out
 
 
@@ -136,7 +137,7 @@ def test_error_norm_rejects_a_non_finite_trial_step(bad, method):
 
 def test_escape_bound_follows_the_documented_formula():
     osc = Oscillator(f=2.0, omega=2.8, F0=10.0, a1=0.5, delta=0.3, x0=-1.5, v0=0.7)
-    p, _ = pack_parameters(osc, SolverOptions())
+    p = kernel_inputs(osc, SolverOptions()).p
     y0 = np.array([osc.x0, osc.v0])
     force = 2.0 + 10.0 * 1.5
     a = osc.a
@@ -170,7 +171,7 @@ def test_an_ensemble_stops_at_its_first_failed_sample():
 def test_paper_cases_stay_far_inside_the_escape_bound(section):
     """The bound never fires on the paper's cases: they stay 100 times below it."""
     osc = preset(section)
-    p, _ = pack_parameters(osc, SolverOptions())
+    p = kernel_inputs(osc, SolverOptions()).p
     bound = K.escape_bound(np.array([osc.x0, osc.v0]), p)
     ds = simulate_dmr(osc, periods=100, per_period=16)
     assert 100.0 * max(np.abs(ds.x).max(), np.abs(ds.v).max()) < bound
@@ -329,7 +330,7 @@ def test_kernels_refuse_non_finite_times_at_once():
             status, _, out = run_dmr_kernel(osc, np.array([0.0, 1.0, bad]))
         assert status == K.BAD_TIME and np.isnan(out).all()
     system = ImpactSystem(osc)
-    p, cfg, nodes, weights, U = system._packed
+    p, cfg, (nodes, weights, U) = system._packed.p, system._packed.cfg, rule(system._packed)
     for times in (np.array([0.0, np.nan]), np.array([np.nan, 1.0]), np.array([0.0, np.inf])):
         z = np.array([-1.0, 0.0])
         out, stats, log = np.empty((2, 2)), np.empty((1, K.N_STATS)), np.empty((4, 3))

@@ -19,8 +19,8 @@ import pytest
 
 import opa
 from opa import _kernel as K
-from opa._run import kernel_quadrature, quadrature, run_kernel
-from opa._system import pack_parameters
+from opa._run import run
+from tests.conftest import kernel_inputs, rule
 from tests.opa.test_solver import HARMONIC, kernel_step
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -87,8 +87,9 @@ def test_the_packer_puts_every_model_field_in_its_slot():
     opts = opa.SolverOptions(impulse="pulse", pulse_width=0.53, impulse_at_zero=False,
                              rtol=1e-9, atol=1e-11, max_steps=12345, chatter_velocity=3e-6,
                              max_step=0.59, method="dp5")
-    p, cfg = pack_parameters(osc, opts, sigma=0.061, order=7, uncertain="c",
-                             truncation="paper", impact_law="saltation")
+    inputs = kernel_inputs(osc, opts, sigma=0.061, order=7, uncertain="c",
+                           truncation="paper", impact_law="saltation")
+    p, cfg = inputs.p, inputs.cfg
     want = {K.P_MU: 0.11, K.P_A: 1.13, K.P_C: 0.17, K.P_F: 0.19, K.P_OMEGA: 2.3,
             K.P_ETA: 0.29, K.P_DELTA: 0.31, K.P_F0: 0.37, K.P_A1: 0.41, K.P_OMEGA1: 4.3,
             K.P_N: 3.0, K.P_TAU: 0.53, K.P_SIGMA: 0.061, K.P_CHATTER_V: 3e-6,
@@ -103,9 +104,9 @@ def test_the_packer_puts_every_model_field_in_its_slot():
     for slot, value in want_cfg.items():
         assert cfg[slot] == value, slot
     # the other choices of each switch
-    p, cfg = pack_parameters(osc, dataclasses.replace(opts, impulse="dirac", method="dop853",
-                                                      impulse_at_zero=True),
-                             uncertain="a", truncation="galerkin", impact_law="ensemble")
+    cfg = kernel_inputs(osc, dataclasses.replace(opts, impulse="dirac", method="dop853",
+                                                 impulse_at_zero=True),
+                        uncertain="a", truncation="galerkin", impact_law="ensemble").cfg
     assert (cfg[K.C_IMPULSE], cfg[K.C_METHOD], cfg[K.C_AT_ZERO]) == (
         K.IMPULSE_DIRAC, K.METHOD_DOP853, 1)
     assert (cfg[K.C_UNCERTAIN], cfg[K.C_TRUNC], cfg[K.C_LAW]) == (
@@ -157,23 +158,22 @@ def test_a_trajectory_resumes_under_the_impulse_train(split, impulse):
     osc = opa.preset("3.1")
     opts = opa.SolverOptions(impulse=impulse, pulse_width=0.3, rtol=1e-12, atol=1e-12)
     T = osc.forcing_period
-    p, cfg = pack_parameters(osc, opts)
-    quad = quadrature(0)
+    inputs = kernel_inputs(osc, opts)
     y0 = np.array([osc.x0, osc.v0])
-    whole, log, _ = run_kernel(y0, np.array([0.0, split * T, 28 * T]), p, cfg, quad,
-                               rtol=opts.rtol, atol=opts.atol)
-    first, _, _ = run_kernel(y0, np.array([0.0, split * T]), p, cfg, quad, rtol=opts.rtol,
-                             atol=opts.atol)
-    second, _, _ = run_kernel(first[-1], np.array([split * T, 28 * T]), p, cfg, quad,
-                              rtol=opts.rtol, atol=opts.atol, include_start=False)
+    whole = run(inputs, y0, np.array([0.0, split * T, 28 * T]), rtol=opts.rtol,
+                atol=opts.atol)
+    first = run(inputs, y0, np.array([0.0, split * T]), rtol=opts.rtol, atol=opts.atol).states
+    second = run(inputs, first[-1], np.array([split * T, 28 * T]), rtol=opts.rtol,
+                 atol=opts.atol, include_start=False).states
+    log, whole = whole.events, whole.states
     assert len(log) >= 3
     np.testing.assert_allclose(first[-1], whole[1], rtol=0, atol=0)
     np.testing.assert_allclose(second[-1], whole[-1], rtol=0, atol=1e-8)
     # re-applying the start impulse (include_start) is a different trajectory when an
     # impulse falls on the split
     if split == 14 and impulse == "dirac":
-        again, _, _ = run_kernel(first[-1], np.array([split * T, 28 * T]), p, cfg, quad,
-                                 rtol=opts.rtol, atol=opts.atol, include_start=True)
+        again = run(inputs, first[-1], np.array([split * T, 28 * T]), rtol=opts.rtol,
+                    atol=opts.atol, include_start=True).states
         assert np.abs(again[-1] - whole[-1]).max() > 1e-3
 
 
@@ -276,8 +276,9 @@ def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h,
     (forced by a one-node rule at a node that is not exactly 0, with sigma = 0): every
     stage, the new state and every dense-output coefficient equal."""
     osc = opa.preset("3.2")
-    p, cfg = pack_parameters(osc, opa.SolverOptions())
-    nodes, weights, U = kernel_quadrature(quadrature(0))
+    inputs = kernel_inputs(osc, opa.SolverOptions())
+    p, cfg = inputs.p, inputs.cfg
+    nodes, weights, U = rule(inputs)
     general_nodes = np.array([1e-300])
     z = np.array([-0.37, 0.81])
     stages, results = [], []
@@ -320,8 +321,9 @@ def test_the_register_path_of_the_driver_is_the_general_loop_bit_for_bit(case, w
     one-node rule at 1e-300): every output, event, statistic and counter equal."""
     osc, fields, tol = REGISTER_CASES[case]
     options = opa.SolverOptions(rtol=tol, atol=tol, chatter_velocity=0.05)
-    p, cfg = pack_parameters(osc, options, **fields)
-    nodes, weights, U = kernel_quadrature(quadrature(0))
+    inputs = kernel_inputs(osc, options, **fields)
+    p, cfg = inputs.p, inputs.cfg
+    nodes, weights, U = rule(inputs)
     times = np.linspace(0.0, 80.0, 161)
     runs = []
     for rule_nodes in (nodes, np.array([1e-300])):

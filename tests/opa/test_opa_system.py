@@ -23,8 +23,7 @@ import pytest
 
 import opa
 from opa import _kernel
-from opa._run import kernel_quadrature, quadrature
-from opa._system import pack_parameters
+from tests.conftest import kernel_inputs, rule
 from tests.reference import reference_trajectory
 from tests.truths import semicircle_cubic_projection, semicircle_gauss_rule
 
@@ -79,11 +78,12 @@ def paper_rhs(t, y, model, sigma, uncertain, truncation, pulse=0.0):
 
 def kernel_rhs(t, y, oscillator, sigma, order, uncertain, truncation, pulse=0.0):
     """``opa._kernel.vector_field`` at (t, y); returns (derivative, release value)."""
-    p, cfg = pack_parameters(
+    inputs = kernel_inputs(
         oscillator, opa.SolverOptions(), sigma=sigma, order=order, uncertain=uncertain,
         truncation=truncation,
     )  # fmt: skip
-    nodes, weights, basis = kernel_quadrature(quadrature(order))
+    p, cfg = inputs.p, inputs.cfg
+    nodes, weights, basis = rule(inputs)
     out = np.empty_like(y)
     work = np.empty((6, len(nodes)))
     release = _kernel.vector_field(y, 0, p, cfg, nodes, weights, basis,

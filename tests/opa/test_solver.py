@@ -28,8 +28,7 @@ import pytest
 import opa
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
 from opa import _kernel as K
-from opa._run import kernel_quadrature, quadrature
-from opa._system import pack_parameters
+from tests.conftest import kernel_inputs, rule
 from tests.reference import reference_trajectory
 from tests.truths import (
     accumulation_time,
@@ -115,8 +114,9 @@ METHODS = [K.METHOD_DOP853, K.METHOD_DP5]
 
 def kernel_step(osc: Oscillator, t0: float, y0, h: float, method: int = K.METHOD_DP5):
     """One compiled step of the DMR: returns (K stages, y_new, dense coefficients F)."""
-    p, cfg = pack_parameters(osc, SolverOptions())
-    nodes, weights, U = kernel_quadrature(quadrature(0))
+    inputs = kernel_inputs(osc, SolverOptions())
+    p, cfg = inputs.p, inputs.cfg
+    nodes, weights, U = rule(inputs)
     y0 = np.asarray(y0, dtype=float)
     stages, y_new, ytmp = np.zeros((K.K_ROWS, 2)), np.empty(2), np.empty(2)
     work, F = np.empty((6, 1)), np.empty((7, 2))
@@ -204,11 +204,12 @@ def test_no_wall_crossing_when_the_step_stays_below(method):
 def test_kernel_reports_status_codes_and_fills_unreached_outputs_with_nan():
     osc = preset("3.2")
     opts = SolverOptions(max_steps=50)
-    p, cfg = pack_parameters(osc, opts)
+    inputs = kernel_inputs(osc, opts)
+    p, cfg = inputs.p, inputs.cfg
     times = np.linspace(0.0, 20.0, 5)
     out, log = np.empty((5, 2)), np.empty((16, 3))
     status, _, _, n_steps, _ = K.run_one(
-        np.array([osc.x0, osc.v0]), times, p, cfg, *kernel_quadrature(quadrature(0)), 1e-10,
+        np.array([osc.x0, osc.v0]), times, p, cfg, *rule(inputs), 1e-10,
         1e-10, out, log)
     assert status == K.MAX_STEPS and n_steps == 50
     assert np.isfinite(out[0]).all() and np.isnan(out[-1]).all()
