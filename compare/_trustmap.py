@@ -852,8 +852,13 @@ def combine(cfg: ValidateConfig, points: list[list[xr.Dataset]],
                                        {"long_name": "1 where the variant is run at this N "
                                         "(multi-element variants: N = Nmax only)", **ONE})},
                       coords=_coords(cfg, "variant", "N"))
-    ds = xr.merge([grid, by_value, wide], compat="no_conflicts", join="outer",
-                  combine_attrs="override").drop_attrs(deep=False)
+    merged = xr.merge([grid, by_value, wide], compat="no_conflicts", join="outer",
+                      combine_attrs="override")
+    # the grid's coordinates first, then the rest in the order they come (docs/datasets.md)
+    first = ["value", "sigma"]
+    ds = xr.Dataset({name: merged[name].variable for name in merged.data_vars},
+                    coords={name: merged[name].variable
+                            for name in first + [c for c in merged.coords if c not in first]})
     failures = [f"{cfg.parameter} = {value:g}, sigma = {sigma:g}: "
                 f"{point.attrs['element_failure']}"
                 for value, row in zip(cfg.values, points)

@@ -9,7 +9,7 @@ import pytest
 import xarray as xr
 
 from compare import load_config, run_validation, write_report
-from compare._trustmap import VARIANTS
+from compare._config import VARIANTS
 from mc import simulate_mc
 from opa import simulate_opa
 from opa.cli._main import main
