@@ -181,7 +181,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     """
     import xarray as xr
 
-    from opa._dataset import provenance_attrs
+    from opa._dataset import Store, package_version, provenance_attrs
     from opa._measure import parse
 
     if isinstance(oscillator, System):
@@ -211,8 +211,6 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     slices = []
     store = None
     if parts is not None:
-        from opa._dataset import Store, package_version
-
         store = Store(parts, "stochastic diagram", log=log)
     for i, value in enumerate(values):
         osc = oscillator.replace(**{parameter: float(value)})
