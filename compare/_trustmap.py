@@ -990,7 +990,7 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
     finished dataset (default: from the call)."""
     started = time.perf_counter() if started is None else started
     ds = _Map(cfg, progress=progress, log=log).run()
-    for dim in ds.dims:  # every dimension has a coordinate (parts of older versions)
+    for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
         if dim not in ds.coords:
             ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
                                          {"long_name": f"index along {dim}", "units": "1"})})
