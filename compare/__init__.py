@@ -1,8 +1,9 @@
 """compare: OPA against Monte Carlo — error metrics, the trust map, reports."""
 
+from compare._config import ValidateConfig, load_config
 from compare._metrics import compare_runs, error_metrics
 from compare._report import boundary_table, findings, verdict_grid, write_report
-from compare._trustmap import ValidateConfig, count_distribution, load_config, run_validation
+from compare._trustmap import count_distribution, run_validation
 from compare._verify import verify
 
 

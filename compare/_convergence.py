@@ -107,7 +107,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     ``memo(name, spec, compute)``: ``spec`` is a JSON-able dict of everything the run
     depends on, ``compute()`` does the run and returns a dict of arrays, numbers and
     strings, and ``memo`` returns that dict or the one an identical earlier call returned
-    (the trust map keeps them in its parts, :class:`compare._trustmap.Parts`). Without
+    (the trust map keeps them in its parts, :class:`opa._dataset.Store`). Without
     ``memo`` every run is done. The dataset's ``wall_seconds`` is the sum of the runs' wall
     times (for reused runs, the time they took when they were done).
     """

@@ -25,10 +25,12 @@ systems' impact sequences are scanned along the uncertain parameter
 (:func:`opa._splits.scan_splits`): their splits, what happens there, and the distribution
 of impact counts at every grid point say *why* the boundary is where it is.
 
-Every piece of work is written to ``OUTDIR/parts/`` as it finishes (:class:`Parts`) and
-reused by a rerun, so an interrupted map resumes and a finished one is reassembled without
-integrating anything. Each file name ends in a hash of everything that determines its
-content, and the file stores that hash too::
+Every piece of work is written to ``OUTDIR/parts/`` as it finishes, a store
+(:class:`opa._dataset.Store`) shared by every map written to OUTDIR, and reused by a
+rerun, so an interrupted map resumes and a finished one is reassembled without
+integrating anything. Each part is keyed by a hash of the inputs of the call that
+computes it (the System, the output times, the options, ...), which its file name ends
+in and its file stores::
 
     mc_<q><value>_sigma<sigma>_M<samples>_<key>.nc   a Monte Carlo ensemble's moments
     opa_<q><value>_sigma<sigma>_N<order>_<key>.npz   OPA at one N, the single-element variants
@@ -37,595 +39,40 @@ content, and the file stores that hash too::
     details_<q><value>_sigma<sigma>_<key>.nc         phase portraits, EMR_0 against DMR
     frontier_<run>_<key>.npz                         one run of the cost-accuracy study
 
-A part that cannot be read, or whose stored hash is not the expected one (a file copied
-or left from other settings), is named in the log, moved aside to ``<name>.bad`` and
-computed again; temporaries left by a killed run are removed when the next one starts.
+A part that cannot be read, or stores another key (a file copied or left from other
+inputs), is named in the log, moved aside to ``<name>.bad`` and computed again;
+temporaries left by a killed run are removed when the next one starts. A parts folder
+of a version before the store is refused, naming it: remove it to start over.
+
+The map itself is assembled per point: each grid point (value, sigma) gives a dataset
+(:func:`point_dataset`: its errors, verdicts, Monte Carlo moments, impact counts), each
+swept value one more (:func:`value_dataset`: sigma*, the bisection probes, the splits),
+and :func:`combine` joins them over the grid with the map-wide variables.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import hashlib
-import json
 import math
-import numbers
 import os
 import time
-import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
 
+from compare._config import CRITERIA, ELEMENT_TOLERANCE, ValidateConfig, noise_floor
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
 from mc._ensemble import simulate_mc
 from mc._sampling import semicircle_cdf
-from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
-from opa._elements import (MAX_ELEMENTS, adaptive_edges, collocate_element, run_elements,
-                           uniform_edges)
-from opa._measure import Measure, parse as parse_law
-from opa._memory import check_memory
-from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
-                        preset, time_grid)
+from opa._dataset import Store, provenance_attrs, write_netcdf
+from opa._elements import adaptive_edges, collocate_element, run_elements, uniform_edges
+from opa._measure import Measure
+from opa._model import SolverOptions, time_grid
 from opa._run import SimulationError
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
-from opa._system import IMPULSE_FIELDS, System
+from opa._system import System
 from opa._splits import (MAX_CROSSINGS, MAX_SPLITS, SPLIT_KINDS, Split, count_probabilities,
                          scan_splits)
-
-# The single-element variants (impact law, truncation) under the semicircle law. Under
-# another law of xi the `paper` truncation (eq. (27), written in the semicircle's basis)
-# does not exist: the map runs the three impact laws with the exact Galerkin projection
-# in that law's orthonormal basis (LAW_VARIANTS).
-VARIANTS = (("mean", "galerkin"), ("ensemble", "galerkin"), ("mean", "paper"),
-            ("ensemble", "paper"), ("saltation", "galerkin"))
-ELEMENT_LAWS = ("mean", "ensemble", "saltation")
-LAW_VARIANTS = tuple((law, "galerkin") for law in ELEMENT_LAWS)
-# Multi-element variants: the impact laws of ELEMENT_LAWS, Galerkin truncation, run at
-# N = Nmax only (the order sigma* is read at); adaptive refinement stops when every
-# element's variance share is below ELEMENT_TOLERANCE (simulate's default) or the budget
-# is spent.
-ELEMENT_TOLERANCE = 1e-6
-DEFAULT_MAX_ELEMENTS = 64
-CRITERIA = ("mean", "variance")
-PAPER_SIGMAS = (0.01, 0.014, 0.02, 0.03)
-
-# The swept parameter's default range for each of the paper's sets (sections 3.1-3.3).
-SWEEPS = {
-    "3.1": ("c", tuple(np.round(np.linspace(0.01, 0.1, 7), 6))),
-    "3.2": ("omega", (3.98, 4.035, 4.09, 4.145, 4.2)),
-    "3.3": ("omega", tuple(np.round(np.linspace(3.9, 5.9, 6), 6))),
-}
-DEFAULT_SIGMAS = (0.005, 0.01, 0.014, 0.02, 0.025, 0.03, 0.04, 0.05)
-SIGMAS_33 = (0.01, 0.02, 0.05, 0.1, 0.14, 0.16, 0.18, 0.2)
-
-
-@dataclass(frozen=True)
-class ValidateConfig:
-    """What ``opa-mc validate`` runs; the defaults are the embedded default job.
-
-    The section 3.2 set, omega in {3.98, 4.035, 4.09, 4.145, 4.2}, sigma from 0.005 to
-    0.05 (the paper's 0.01, 0.014, 0.02, 0.03 included), N = 0..8, all five variants,
-    horizons of 10 and 50 forcing periods, 8 outputs per period, Sobol ensembles of 1024
-    samples doubled up to 8192 where the verdict hangs on the MC noise, tolerance 0.1 of
-    the spread for the mean and 0.25 of the variance for the variance, 3 standard errors
-    of allowance, sigma* to 1e-3, splits located to 1e-6 in xi at the smallest sigma.
-    """
-
-    preset: str = "3.2"
-    oscillator: Oscillator = field(default_factory=lambda: preset("3.2"))
-    options: SolverOptions = field(default_factory=lambda: SolverOptions(rtol=1e-9, atol=1e-9))
-    parameter: str = "omega"
-    values: tuple[float, ...] = SWEEPS["3.2"][1]
-    sigmas: tuple[float, ...] = DEFAULT_SIGMAS
-    orders: tuple[int, ...] = tuple(range(9))
-    uncertain: str = "mu"
-    impulse: str = "dirac"  # the impulse model: opa.System's fields of the same names
-    pulse_width: float = 0.1
-    impulse_at_zero: bool = True
-    horizons: tuple[float, ...] = (10.0, 50.0)
-    per_period: int = 8
-    samples: int = 1024
-    max_samples: int = 8192
-    seed: int = 0
-    tolerance: float = 0.1
-    var_tolerance: float = 0.25
-    z: float = 3.0
-    resolution: float = 1e-3
-    split_resolution: float = 1e-6
-    outdir: str = "results"
-    plots: bool = True
-    scheduler: str | None = None
-    frontier: bool = True
-    # the law of xi (a name of opa._measure.DISTRIBUTIONS) and the multi-element variants:
-    # None (single element only), K >= 2 equal-probability elements, or "adaptive" with a
-    # budget of max_elements (default 64; refused without "adaptive")
-    distribution: str = "semicircle"
-    elements: int | str | None = None
-    max_elements: int | None = None
-
-    def __post_init__(self):
-        self._check_law()
-        for name in ("samples", "max_samples", "per_period", "seed"):
-            value = getattr(self, name)
-            if not isinstance(value, numbers.Integral) or isinstance(value, bool):
-                raise ValueError(f"{name} must be an integer, got {value!r}")
-            if not -2**53 <= value <= 2**53:
-                raise ValueError(f"{name} must be at most 2^53, got {value}")
-        if self.scheduler is not None and (not isinstance(self.scheduler, str)
-                                           or not self.scheduler.strip()):
-            raise ValueError(f"scheduler must be an address such as tcp://host:8786, got "
-                             f"{self.scheduler!r:.60}")
-        if not isinstance(self.orders, tuple) or not all(
-                isinstance(n, numbers.Integral) and not isinstance(n, bool)
-                for n in self.orders):
-            raise ValueError(f"orders must be a list of integers, got {self.orders!r:.80}")
-        for name in ("tolerance", "var_tolerance", "z", "resolution", "split_resolution"):
-            value = getattr(self, name)
-            if not isinstance(value, numbers.Real) or isinstance(value, bool):
-                raise ValueError(f"{name} must be a number, got {value!r}")
-        for name in ("outdir", "preset", "parameter", "uncertain"):
-            if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ValueError(f"{name} must be a non-empty string, got "
-                                 f"{getattr(self, name)!r}")
-        if self.parameter not in PARAMETER_NAMES or self.parameter in ("x0", "v0"):
-            raise ValueError(f"parameter must be a model parameter, got {self.parameter!r}")
-        if self.parameter == self.uncertain:
-            raise ValueError(f"the swept parameter must differ from the uncertain one, got "
-                             f"{self.parameter!r} for both")
-        if self.uncertain not in ("mu", "a", "c"):
-            raise ValueError(f"uncertain must be one of mu, a, c, got {self.uncertain!r}")
-        for name in ("values", "sigmas", "horizons"):
-            seq = getattr(self, name)
-            if not isinstance(seq, tuple) or not seq or not all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                    for v in seq):
-                raise ValueError(f"{name} must be a non-empty list of finite numbers, got {seq!r}")
-            if len(set(seq)) != len(seq) or list(seq) != sorted(seq):
-                raise ValueError(f"{name} must be strictly increasing, got {seq}")
-        if self.sigmas[0] <= 0:
-            raise ValueError(f"sigmas must be > 0, got {self.sigmas}")
-        if self.horizons[0] <= 0:
-            raise ValueError(f"horizons must be > 0 forcing periods, got {self.horizons}")
-        if not self.orders or any(int(n) != n or n < 0 for n in self.orders):
-            raise ValueError(f"orders must be non-negative integers, got {self.orders}")
-        if list(self.orders) != sorted(set(self.orders)):
-            raise ValueError(f"orders must be strictly increasing, got {self.orders}")
-        if int(self.per_period) != self.per_period or self.per_period < 1:
-            raise ValueError(f"per_period must be a positive integer, got {self.per_period}")
-        for h in self.horizons:
-            if abs(h * self.per_period - round(h * self.per_period)) > 1e-9:
-                raise ValueError(f"horizon {h} is not a whole number of outputs at "
-                                 f"per_period = {self.per_period}")
-        if int(self.samples) != self.samples or self.samples < 64 or self.samples % 16:
-            raise ValueError(f"samples must be a multiple of 16 and >= 64, got {self.samples}")
-        if self.max_samples < self.samples:
-            raise ValueError(f"max_samples must be >= samples, got {self.max_samples}")
-        for name in ("tolerance", "var_tolerance", "resolution", "split_resolution"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value!r}")
-        # bisections that doubles cannot finish are refused, not run for ever
-        if self.resolution < 1e-12 * max(self.sigmas):
-            raise ValueError(f"resolution must be >= 1e-12 x the largest sigma (sigma* cannot "
-                             f"be bisected finer in floating point), got {self.resolution:g}")
-        if not 1e-12 <= self.split_resolution <= 1.0:
-            raise ValueError(f"split_resolution must be in [1e-12, 1] (in xi, whose support "
-                             f"is [-1, 1]), got {self.split_resolution:g}")
-        if not (math.isfinite(self.z) and self.z >= 0):
-            raise ValueError(f"z must be >= 0, got {self.z}")
-        for name in ("plots", "frontier"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
-        self._check_sizes()
-
-    def _check_law(self) -> None:
-        """The law of xi (stored under its canonical name) and the element settings."""
-        if not isinstance(self.distribution, str) or not self.distribution:
-            raise ValueError(f"distribution must be a name such as uniform or beta:2,3, got "
-                             f"{self.distribution!r}")
-        try:
-            law = parse_law(self.distribution)
-        except ValueError as err:
-            text = str(err)
-            raise ValueError(text if text.startswith("distribution") else
-                             f"distribution {self.distribution!r}: {text}") from None
-        if (law.lo, law.hi) != (-1.0, 1.0):
-            raise ValueError(f"distribution must have the support [-1, 1], got "
-                             f"[{law.lo:g}, {law.hi:g}] for {self.distribution!r}")
-        object.__setattr__(self, "distribution", law.name)
-        el = self.elements
-        if el is not None and not (el == "adaptive" if isinstance(el, str) else (
-                isinstance(el, numbers.Integral) and not isinstance(el, bool)
-                and 2 <= el <= MAX_ELEMENTS)):
-            raise ValueError(f"elements must be an integer in 2..{MAX_ELEMENTS} or 'adaptive' "
-                             f"(one element is the single-element map), got {el!r}")
-        if self.max_elements is not None:
-            if el != "adaptive":
-                raise ValueError(f"max_elements = {self.max_elements!r} is the budget of "
-                                 f"adaptive elements and has no effect without elements = "
-                                 f"'adaptive' (got elements = {el!r})")
-            m = self.max_elements
-            if not (isinstance(m, numbers.Integral) and not isinstance(m, bool)
-                    and 2 <= m <= MAX_ELEMENTS):
-                raise ValueError(f"max_elements must be an integer in 2..{MAX_ELEMENTS}, got "
-                                 f"{m!r}")
-
-    def _check_sizes(self) -> None:
-        """Refuse maps that cannot finish or fit: grid sizes, orders, run lengths, memory."""
-        if not isinstance(self.oscillator, Oscillator):
-            raise ValueError(f"oscillator must be an Oscillator, got {self.oscillator!r:.60}")
-        if not isinstance(self.options, SolverOptions):
-            raise ValueError(f"options must be a SolverOptions, got {self.options!r:.60}")
-        for name in ("values", "sigmas", "orders", "horizons"):
-            if len(getattr(self, name)) > MAX_GRID:
-                raise ValueError(f"{name}: at most {MAX_GRID} entries, got "
-                                 f"{len(getattr(self, name))}")
-        check_order(self.nmax)
-        if self.max_samples > MAX_SAMPLES:
-            raise ValueError(f"max_samples must be at most {MAX_SAMPLES}, got {self.max_samples}")
-        for value in self.values:
-            osc = self.oscillator_at(value)
-            try:
-                check_span(osc, max(self.horizons) * osc.forcing_period)
-            except ValueError as err:
-                raise ValueError(f"horizons up to {max(self.horizons):g} forcing periods at "
-                                 f"{self.parameter} = {value:g}: {err}") from None
-        outputs = round(max(self.horizons) * self.per_period) + 1
-        check_memory(f"horizons up to {max(self.horizons):g} periods x per_period "
-                     f"{self.per_period}", outputs * (2 * self.nmax + 8) * 8 * len(self.variants))
-        for value in self.values:  # checks the impulse model (e.g. pulse_width < 2 pi/omega1)
-            self.system_at(value)
-
-    @property
-    def nmax(self) -> int:
-        return max(self.orders)
-
-    @property
-    def semicircle(self) -> bool:
-        """Whether xi has the paper's law (the single-element variants then include the
-        paper's truncation)."""
-        return self.distribution == "semicircle"
-
-    @property
-    def single_variants(self) -> tuple[tuple[str, str], ...]:
-        """(impact law, truncation) of the single-element variants."""
-        return VARIANTS if self.semicircle else LAW_VARIANTS
-
-    @property
-    def element_laws(self) -> tuple[str, ...]:
-        """Impact laws of the multi-element variants (none without ``elements``)."""
-        return () if self.elements is None else ELEMENT_LAWS
-
-    @property
-    def budget(self) -> int:
-        """The element budget of adaptive elements."""
-        return DEFAULT_MAX_ELEMENTS if self.max_elements is None else int(self.max_elements)
-
-    @property
-    def element_label(self) -> str:
-        """'K8' or 'adaptive64' ('' without elements)."""
-        if self.elements is None:
-            return ""
-        return f"adaptive{self.budget}" if self.elements == "adaptive" else f"K{self.elements}"
-
-    @property
-    def variants(self) -> list[str]:
-        """Names of every variant: 'law/truncation' (one element), then 'law/ME-K8' or
-        'law/ME-adaptive64' (multi-element, Galerkin)."""
-        return ([f"{law}/{trunc}" for law, trunc in self.single_variants]
-                + [f"{law}/ME-{self.element_label}" for law in self.element_laws])
-
-    @property
-    def dropped_variants(self) -> list[str]:
-        """The single-element variants of the semicircle map this law cannot run."""
-        return [f"{law}/{trunc}" for law, trunc in VARIANTS
-                if (law, trunc) not in self.single_variants]
-
-    def measure(self) -> Measure:
-        return parse_law(self.distribution)
-
-    def oscillator_at(self, value: float) -> Oscillator:
-        return self.oscillator.replace(**{self.parameter: float(value)})
-
-    def system_at(self, value: float, **fields) -> System:
-        """The :class:`opa.System` at one swept value (samples below zero allowed: the map
-        crosses them on purpose), with ``fields`` (sigma, order, ...) and the law of xi
-        (None for the semicircle, so that the default map runs as it always did)."""
-        return System(self.oscillator_at(value), uncertain=self.uncertain, allow_negative=True,
-                      impulse=self.impulse, pulse_width=self.pulse_width,
-                      impulse_at_zero=self.impulse_at_zero,
-                      distribution=None if self.semicircle else self.distribution, **fields)
-
-    def impulse_key(self) -> list:
-        """The impulse model, for the hashes of the parts (only when not the default, so
-        that the parts of earlier versions stay valid)."""
-        model = [self.impulse, self.pulse_width, self.impulse_at_zero]
-        return [] if model == ["dirac", 0.1, True] else [model]
-
-    def law_key(self) -> list:
-        """The law of xi, for the hashes of the parts (only when not the semicircle, so
-        that the default map's parts stay valid)."""
-        return [] if self.semicircle else [["distribution", self.distribution]]
-
-    def key(self, value: float, sigma: float, samples: int) -> str:
-        """A hash of everything one Monte Carlo run of the map depends on."""
-        return digest([self.oscillator_at(value).as_dict(), dataclasses.asdict(self.options),
-                       sigma, self.uncertain, samples, self.seed, max(self.horizons),
-                       self.per_period, self.nmax, *self.impulse_key(), *self.law_key()])
-
-    def opa_key(self, value: float, sigma: float, order: int) -> str:
-        """A hash of everything the single-element OPA runs of the map at one point and
-        one N depend on."""
-        return digest(["opa", self.oscillator_at(value).as_dict(),
-                       dataclasses.asdict(self.options), float(sigma), int(order),
-                       self.uncertain, self.single_variants, max(self.horizons),
-                       self.per_period, *self.impulse_key(), *self.law_key()])
-
-    def element_key(self, value: float, sigma: float, order: int) -> str:
-        """A hash of everything the multi-element runs at one point and one N depend on."""
-        return digest(["elements", self.oscillator_at(value).as_dict(),
-                       dataclasses.asdict(self.options), float(sigma), int(order),
-                       self.uncertain, self.distribution, self.element_laws, self.elements,
-                       self.budget if self.elements == "adaptive" else None,
-                       ELEMENT_TOLERANCE, "collocation of failed elements",
-                       max(self.horizons), self.per_period, *self.impulse_key()])
-
-    def splits_key(self, value: float) -> str:
-        """A hash of everything the split scan at one swept value depends on."""
-        return digest(["splits", self.oscillator_at(value).as_dict(),
-                       dataclasses.asdict(self.options), self.uncertain, max(self.sigmas),
-                       min(self.sigmas), self.horizons, self.split_resolution,
-                       *self.impulse_key(), "complete", self.per_period,
-                       MAX_SPLITS, MAX_CROSSINGS])
-
-
-def digest(payload) -> str:
-    """A 12-hex-digit hash of ``payload`` (anything ``json`` writes, floats exactly)."""
-    blob = json.dumps(payload, sort_keys=True, default=str)
-    return hashlib.sha256(blob.encode()).hexdigest()[:12]
-
-
-# Largest ensemble the map may double up to (2^20 samples, hours per point).
-MAX_SAMPLES = 2**20
-
-
-#: the largest config file read (a validate config is a few hundred bytes)
-MAX_CONFIG_BYTES = 1 << 20
-#: the deepest nesting of arrays and tables a config may have ([model] holds numbers)
-MAX_CONFIG_DEPTH = 4
-
-
-def _read_toml(path) -> dict:
-    """A config file's TOML: a regular file (not a FIFO, device or folder) of at most
-    MAX_CONFIG_BYTES, nested at most MAX_CONFIG_DEPTH deep."""
-    import stat
-
-    try:
-        info = os.stat(path)
-    except OSError as err:
-        raise ValueError(f"config file {path}: {err.strerror}") from None
-    if not stat.S_ISREG(info.st_mode):
-        raise ValueError(f"config file {path}: not a regular file")
-    if info.st_size > MAX_CONFIG_BYTES:
-        raise ValueError(f"config file {path}: {info.st_size} bytes, more than the "
-                         f"{MAX_CONFIG_BYTES} a config may have")
-    try:
-        with open(path, "rb") as fh:
-            blob = fh.read(MAX_CONFIG_BYTES + 1)
-    except OSError as err:
-        raise ValueError(f"config file {path}: {err.strerror}") from None
-    if len(blob) > MAX_CONFIG_BYTES:
-        raise ValueError(f"config file {path}: more than the {MAX_CONFIG_BYTES} bytes a "
-                         f"config may have")
-    try:
-        data = tomllib.loads(blob.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ValueError(f"config file {path} is not valid TOML: {err}") from None
-    except RecursionError:
-        raise ValueError(f"config file {path}: arrays or tables nested too deeply (at most "
-                         f"{MAX_CONFIG_DEPTH} levels)") from None
-
-    def depth(value) -> int:
-        if isinstance(value, dict):
-            return 1 + max(map(depth, value.values()), default=0)
-        if isinstance(value, list):
-            return 1 + max(map(depth, value), default=0)
-        return 0
-
-    for key, value in data.items():
-        if depth(value) > MAX_CONFIG_DEPTH - 1:
-            raise ValueError(f"config file {path}: key {key!r} is nested too deeply (at most "
-                             f"{MAX_CONFIG_DEPTH} levels)")
-    return data
-
-
-def load_config(path: str | None, **overrides) -> ValidateConfig:
-    """A configuration from a TOML file (all keys optional) and keyword overrides.
-
-    TOML layout::
-
-        preset = "3.2"            # 3.1 sweeps c, 3.2 and 3.3 sweep omega
-        parameter = "omega"
-        values = [3.98, 4.09, 4.2]
-        sigmas = [0.005, 0.01, 0.02]
-        horizons = [10, 50]
-        [model]                   # any Oscillator parameter
-        F0 = 0.1
-        [solver]                  # any SolverOptions field
-        rtol = 1e-9
-    """
-    data: dict = {}
-    if path is not None:
-        data = _read_toml(path)
-    model = data.pop("model", {})
-    solver = data.pop("solver", {})
-    for name, table in (("model", model), ("solver", solver)):
-        if not isinstance(table, dict):
-            raise ValueError(f"config [{name}] must be a table, got {table!r}")
-    model = {**model, **(overrides.pop("model", None) or {})}
-    solver = {**solver, **(overrides.pop("solver", None) or {})}
-    for name in IMPULSE_FIELDS:  # the impulse model is the system's ([solver] still works)
-        if name in solver:
-            data.setdefault(name, solver.pop(name))
-    known = {f.name for f in dataclasses.fields(ValidateConfig)} - {"oscillator", "options"}
-    unknown = set(data) - known
-    if unknown:
-        raise ValueError(f"unknown config key(s) {sorted(unknown)}; known: {sorted(known)}")
-    data.update({k: v for k, v in overrides.items() if v is not None})
-    name = data.setdefault("preset", model.pop("preset", "3.2"))
-    if name not in SWEEPS:
-        raise ValueError(f"preset must be one of {', '.join(SWEEPS)}, got {name!r}")
-    parameter, values = SWEEPS[name]
-    data.setdefault("parameter", parameter)
-    if "values" not in data and data["parameter"] in model:
-        data["values"] = (model[data["parameter"]],)  # e.g. --omega 4.0: a one-column map
-    if "values" not in data:
-        if data["parameter"] != parameter:
-            raise ValueError(f"values are needed when sweeping {data['parameter']!r}")
-        data["values"] = values
-    if name == "3.3":
-        data.setdefault("sigmas", SIGMAS_33)
-    for key in ("values", "sigmas", "orders", "horizons"):
-        if key in data:
-            if not isinstance(data[key], (list, tuple)):
-                raise ValueError(f"{key} must be a list, got {data[key]!r}")
-            data[key] = tuple(data[key])
-    try:
-        options = dataclasses.replace(SolverOptions(rtol=1e-9, atol=1e-9), **solver)
-        osc = preset(name, **model)
-    except TypeError as err:
-        raise ValueError(f"unknown model or solver key: {err}") from None
-    return ValidateConfig(oscillator=osc, options=options, **data)
-
-
-def noise_floor(options: SolverOptions) -> float:
-    """Absolute error of x below which a difference is the solvers' own: 10 (rtol + atol)."""
-    return 10.0 * (options.rtol + options.atol)
-
-
-# --------------------------------------------------------------------------- parts on disk
-
-# Temporaries are named .tmp-opa-mc-<pid>-<random><suffix> (as opa._dataset names them), so
-# that the next run can tell whether their writer is still alive.
-
-
-class Parts:
-    """Finished pieces of work in one directory, each found again by the hash of what
-    determines it.
-
-    :meth:`dataset` (netCDF) and :meth:`arrays` (``.npz``: arrays, numbers, strings) return
-    the part stored under ``<stem>_<key>`` when it is readable and stores ``key``;
-    otherwise they compute it, write it atomically (a temporary in the same directory,
-    flushed, then renamed over the name) and return what was written, read back, so that
-    a fresh result and a reused one are the same to the bit. A part that cannot be read
-    or stores another key is logged, renamed to ``<name>.bad`` (replacing an older one)
-    and computed again.
-    """
-
-    def __init__(self, directory: str, log):
-        self.directory = directory
-        self.log = log
-        self.computed = 0  # parts written by this object
-        self.set_aside = 0
-
-    def clean(self) -> list[str]:
-        """Remove the temporaries that killed writers left (see
-        :func:`opa._dataset.clean_stale_temporaries`). Returns their names."""
-        removed = sorted(os.path.basename(p) for p in clean_stale_temporaries(self.directory))
-        if removed:
-            self.log(f"parts: removed {len(removed)} temporary file(s) an interrupted run "
-                     f"left behind: {', '.join(removed)}")
-        return removed
-
-    def dataset(self, stem: str, key: str, compute, *, check=None) -> xr.Dataset:
-        """The netCDF part ``<stem>_<key>.nc``; ``compute()`` returns an ``xr.Dataset``.
-
-        ``check(ds)`` judges a stored part that carries no key (written by an older
-        version): it returns why the part does not fit, or None to accept it.
-        """
-        path = os.path.join(self.directory, f"{stem}_{key}.nc")
-
-        def save(ds, tmp):
-            ds.assign_attrs(part_key=key).to_netcdf(tmp, engine="netcdf4")
-
-        ds = self._get(path, key, _read_dataset, compute, save, check)
-        ds.attrs.pop("part_key", None)
-        return ds
-
-    def arrays(self, stem: str, key: str, compute) -> dict:
-        """The ``.npz`` part ``<stem>_<key>.npz``; ``compute()`` returns a dict of arrays,
-        numbers and strings (0-d entries come back as Python scalars)."""
-        path = os.path.join(self.directory, f"{stem}_{key}.npz")
-
-        def save(content, tmp):
-            if "part_key" in content:
-                raise ValueError("part_key is a reserved name in a part")
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **content, part_key=np.str_(key))
-
-        out = self._get(path, key, _read_arrays, compute, save, None)
-        out.pop("part_key")
-        return out
-
-    def _get(self, path, key, read, compute, save, check):
-        found = self._load(path, key, read, check)
-        if found is not None:
-            return found
-        content = compute()  # before the temporary exists: a kill here leaves nothing
-        self._write(path, lambda tmp: save(content, tmp))
-        self.computed += 1
-        return read(path)  # what the next run will read, not what was computed
-
-    def _load(self, path, key, read, check):
-        if not os.path.lexists(path):
-            return None
-        try:
-            content = read(path)
-        except Exception as err:  # noqa: BLE001 -- whatever makes it unreadable: recompute
-            reason = f"cannot be read ({type(err).__name__}: {err})".replace("\n", " ")
-        else:
-            stored = _stored_key(content)
-            if stored == key:
-                return content
-            if stored is None and check is not None:
-                reason = check(content)
-                if reason is None:
-                    return content
-            elif stored is None:
-                reason = "stores no key"
-            else:
-                reason = f"stores the key {stored}, not {key}: it belongs to other settings"
-        name = os.path.basename(path)
-        os.replace(path, path + ".bad")
-        self.set_aside += 1
-        self.log(f"parts: {name} {reason}; moved aside to {name}.bad, computing it again")
-        return None
-
-    def _write(self, path, write):
-        atomic_write(path, write, suffix=os.path.splitext(path)[1], clean=False)
-
-
-def _read_dataset(path: str) -> xr.Dataset:
-    with xr.open_dataset(path, engine="netcdf4") as ds:
-        return ds.load()
-
-
-def _read_arrays(path: str) -> dict:
-    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as npz:  # closed on errors too
-        content = {name: npz[name] for name in npz.files}
-    return {name: (a.item() if a.ndim == 0 else a) for name, a in content.items()}
-
-
-def _stored_key(content) -> str | None:
-    stored = content.attrs.get("part_key") if isinstance(content, xr.Dataset) \
-        else content.get("part_key")
-    return None if stored is None else str(stored)
-
-
-def _plain(value):
-    return value.item() if isinstance(value, np.generic) else value
-
 
 @dataclass
 class Point:
@@ -654,7 +101,7 @@ class _Map:
         self.cfg = cfg
         self.log = log
         self.progress = progress
-        self.parts = Parts(os.path.join(cfg.outdir, "parts"), log)
+        self.parts = Store(os.path.join(cfg.outdir, "parts"), "trust map", log=log)
         self.floor = noise_floor(cfg.options)
         self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
         self.mc_runs = 0
@@ -680,20 +127,10 @@ class _Map:
                 impacts_min=int(ds.n_impacts.min()), impacts_max=int(ds.n_impacts.max()),
                 wall_seconds=time.perf_counter() - start)
 
-        def check(ds):  # a part of an older version, which stored no key
-            expected = {**provenance_attrs("mc", cfg.system_at(value, sigma=sigma),
-                                           cfg.options, seed=cfg.seed),
-                        "samples": samples}
-            wrong = [f"{name}={_plain(ds.attrs.get(name))!r} (expected {expected[name]!r})"
-                     for name in (*PARAMETER_NAMES, "sigma", "uncertain", "seed", "samples",
-                                  "rtol", "atol")
-                     if ds.attrs.get(name) != expected[name]]
-            if ds.sizes.get("time", 0) != len(times):
-                wrong.append(f"{ds.sizes.get('time', 0)} outputs")
-            return f"does not fit these settings ({', '.join(wrong)})" if wrong else None
-
-        return self.parts.dataset(f"mc_{self._name(value, sigma)}_M{samples}",
-                                  cfg.key(value, sigma, samples), compute, check=check)
+        inputs = {"system": cfg.system_at(value, sigma=sigma, order=0), "samples": samples,
+                  "sampler": "sobol", "seed": cfg.seed, "times": times, "options": cfg.options}
+        return self.parts.get(f"mc_{self._name(value, sigma)}_M{samples}", inputs, compute,
+                               ".nc")
 
     def _opa(self, osc, value, sigma, order, times) -> dict:
         """Every single-element variant of OPA at one N: x_mean, x_var (variant, output),
@@ -718,8 +155,9 @@ class _Map:
             return {"x_mean": mean, "x_var": var, "first_impact": first,
                     "seconds": time.perf_counter() - start}
 
-        return self.parts.arrays(f"opa_{self._name(value, sigma)}_N{order}",
-                                 cfg.opa_key(value, sigma, order), compute)
+        inputs = {"system": cfg.system_at(value, sigma=sigma, order=order),
+                  "variants": cfg.single_variants, "times": times, "options": cfg.options}
+        return self.parts.get(f"opa_{self._name(value, sigma)}_N{order}", inputs, compute)
 
     def _elements(self, value, sigma, order, times) -> dict:
         """The multi-element variants at one N (one per law of ``cfg.element_laws``):
@@ -762,8 +200,12 @@ class _Map:
                     "collocated": collocated, "failure": " | ".join(failures),
                     "seconds": time.perf_counter() - start}
 
-        return self.parts.arrays(f"elements_{self._name(value, sigma)}_N{order}",
-                                 cfg.element_key(value, sigma, order), compute)
+        inputs = {"system": cfg.system_at(value, sigma=sigma, order=order),
+                  "laws": cfg.element_laws, "elements": cfg.elements,
+                  "budget": cfg.budget if cfg.elements == "adaptive" else None,
+                  "tolerance": ELEMENT_TOLERANCE, "fallback": "collocation", "times": times,
+                  "options": cfg.options}
+        return self.parts.get(f"elements_{self._name(value, sigma)}_N{order}", inputs, compute)
 
     def evaluate(self, value: float, sigma: float, orders=None) -> Point:
         """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts.
@@ -893,8 +335,11 @@ class _Map:
                     scan.complete_within, scan.crossings_within))
             return _splits_to_arrays(scans)
 
-        stored = self.parts.arrays(f"splits_{self._name(value)}", cfg.splits_key(value),
-                                   compute)
+        inputs = {"system": cfg.system_at(value), "uncertain": cfg.uncertain,
+                  "sigmas": [min(cfg.sigmas), max(cfg.sigmas)], "horizons": cfg.horizons,
+                  "tol": cfg.split_resolution, "per_period": cfg.per_period,
+                  "options": cfg.options, "limits": [MAX_SPLITS, MAX_CROSSINGS]}
+        stored = self.parts.get(f"splits_{self._name(value)}", inputs, compute)
         return centre, _splits_from_arrays(stored)
 
     def boundary(self, value, grid: dict[float, Point]):
@@ -937,10 +382,13 @@ class _Map:
         from tqdm.auto import tqdm
 
         cfg = self.cfg
-        os.makedirs(self.parts.directory, exist_ok=True)
-        self.parts.clean()
+        if self.parts.removed:
+            self.log(f"parts: removed {len(self.parts.removed)} temporary file(s) an "
+                     f"interrupted run left behind: "
+                     f"{', '.join(os.path.basename(p) for p in self.parts.removed)}")
         total = len(cfg.values) * len(cfg.sigmas)
-        results = []
+        cdf = None if cfg.semicircle else self.measure.cdf
+        points, values, first = [], [], None
         start = time.perf_counter()
         with tqdm(total=total, unit="point", desc="trust map", disable=not self.progress) as bar:
             self.bar = bar
@@ -948,16 +396,19 @@ class _Map:
                 self.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
                          f"{len(cfg.sigmas)} sigmas x {len(cfg.variants) * len(cfg.orders)} OPA "
                          f"runs against Monte Carlo ...")
-                split_info = self.splits(value)
+                centre, scans = self.splits(value)
                 grid = {}
                 for sigma in cfg.sigmas:
                     grid[float(sigma)] = self.evaluate(value, float(sigma))
                     bar.update(1)
                 star, steps, probes = self.boundary(value, grid)
-                results.append((value, split_info, grid, star, steps, probes))
+                points.append([point_dataset(cfg, value, grid[float(s)], centre, scans, cdf)
+                               for s in cfg.sigmas])
+                values.append(value_dataset(cfg, value, centre, scans, star, steps, probes))
+                first = grid if first is None else first
         self.bar = None
-        ds = _assemble(cfg, results)
-        ds = xr.merge([ds, self.details(results)], combine_attrs="drop_conflicts")
+        ds = combine(cfg, points, values)
+        ds = xr.merge([ds, self.details(first)], combine_attrs="drop_conflicts")
         if cfg.frontier:
             self.log("cost-accuracy frontier at the largest sigma ...")
             ds = xr.merge([ds, frontier(cfg, parts=self.parts)], combine_attrs="drop_conflicts")
@@ -971,16 +422,16 @@ class _Map:
         ds.attrs["parts_set_aside"] = self.parts.set_aside
         return ds
 
-    def details(self, results) -> xr.Dataset:
-        """:func:`_details` at the first swept value, kept as a part."""
+    def details(self, grid: dict[float, Point]) -> xr.Dataset:
+        """:func:`_details` at the first swept value (``grid``: its points), kept as a
+        part."""
         cfg = self.cfg
-        value, sigma = cfg.values[0], _phase_sigma(cfg, results[0][2])
-        key = digest(["details", cfg.oscillator_at(value).as_dict(),
-                      dataclasses.asdict(cfg.options), float(sigma), cfg.nmax, cfg.uncertain,
-                      cfg.horizons, cfg.per_period, cfg.seed, DENSE_PER_PERIOD,
-                      *cfg.impulse_key(), *cfg.law_key()])
-        return self.parts.dataset(f"details_{self._name(value, sigma)}", key,
-                                  lambda: _details(cfg, sigma))
+        value, sigma = cfg.values[0], _phase_sigma(cfg, grid)
+        inputs = {"system": cfg.system_at(value, sigma=float(sigma), order=cfg.nmax),
+                  "horizons": cfg.horizons, "per_period": cfg.per_period, "seed": cfg.seed,
+                  "dense_per_period": DENSE_PER_PERIOD, "options": cfg.options}
+        return self.parts.get(f"details_{self._name(value, sigma)}", inputs,
+                              lambda: _details(cfg, sigma), ".nc")
 
 
 FRONTIER_BUDGETS = (8, 16, 32, 64)
@@ -988,7 +439,7 @@ FRONTIER_SAMPLES = (256, 512, 1024, 2048, 4096, 8192)
 FRONTIER_REFERENCE = 32768
 
 
-def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
+def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
     """Cost against accuracy at the first swept value, the largest sigma and the first
     horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element OPA (mean and
     saltation laws, element budgets 8..64), multi-element collocation, single-element
@@ -1009,7 +460,7 @@ def frontier(cfg: ValidateConfig, parts: Parts | None = None) -> xr.Dataset:
     memo = None
     if parts is not None:
         def memo(run, spec, compute):
-            return parts.arrays(f"frontier_{run}", digest(spec), compute)
+            return parts.get(f"frontier_{run}", spec, compute)
     ds = run_convergence(conv, log=lambda *a: None, write=False, memo=memo)
     out = ds.rename({name: f"frontier_{name}" for name in ds.data_vars} | {"run": "frontier_run"})
     out.attrs = {"frontier_" + k: v for k, v in ds.attrs.items()
@@ -1132,241 +583,271 @@ def count_distribution(centre, sigma, splits, count_at_centre, cdf=None,
     return count_probabilities(splits, centre, sigma, count_at_centre, cdf, complete_within)[0]
 
 
-def _assemble(cfg: ValidateConfig, results) -> xr.Dataset:
-    Q, S, V, N, H = (len(cfg.values), len(cfg.sigmas), len(cfg.variants), len(cfg.orders),
-                     len(cfg.horizons))
-    cdf = None if cfg.semicircle else cfg.measure().cdf
-    element_count = np.zeros((Q, S, V), np.int64)
-    collocated = np.zeros((Q, S, V), np.int64)
-    failures = []
+# --------------------------------------------------------------------------- the dataset
+
+ONE = {"units": "1"}
+#: padding of the dimensions whose length differs between swept values or points
+PADDING = {"probe_sigma": np.nan, "probe_agrees": -1, "split_value": np.nan,
+           "split_kind": -1, "split_time": np.nan, "split_speed": np.nan, "split_left": -1,
+           "split_right": -1, "count_prob": 0.0}
+# concatenation and merging spelled out: xarray's defaults are changing
+_JOIN = dict(data_vars="all", coords="minimal", compat="override", join="outer",
+             combine_attrs="override")
+
+
+def _coords(cfg: ValidateConfig, *names: str, **sizes: int) -> dict:
+    """The coordinates ``names`` of the map (docs/datasets.md), and index coordinates of
+    the given ``sizes``."""
     n_out = int(round(max(cfg.horizons) * cfg.per_period)) + 1
-    f = lambda *shape: np.full(shape, np.nan)  # noqa: E731
-    errors, agrees, disagree = f(Q, S, V, N, H, 2, 3), np.zeros((Q, S, V, N, H, 2), np.int8), \
-        f(Q, S, V, N, 2)
-    pre, first = f(Q, S, V, N), f(Q, S, V, N)
-    opa_mean, opa_var = f(Q, S, V, N, n_out), f(Q, S, V, N, n_out)
-    mc = {k: f(Q, S, n_out) for k in ("x_mean", "x_var", "x_sem", "x_var_sem")}
-    samples, imin, imax = (np.zeros((Q, S), np.int64) for _ in range(3))
-    mc_seconds, mc_rhs, seconds = f(Q, S), np.zeros((Q, S), np.int64), f(Q, S)
-    star = f(Q, V, H, 2, 2)
-    steps = np.zeros((Q, V, H, 2), np.int64)
-    max_split = max(1, max(len(scan.splits) for r in results for scan in r[1][1]))
-    sv, skind, stime, sspeed = f(Q, H, max_split), np.full((Q, H, max_split), -1, np.int8), \
-        f(Q, H, max_split), f(Q, H, max_split)
-    sleft, sright = (np.full((Q, H, max_split), -1, np.int64) for _ in range(2))
-    struncated = np.zeros((Q, H), np.int8)
-    complete, crossing_complete = np.full((Q, H), np.inf), np.full((Q, H), np.inf)
-    unknown = np.zeros((Q, S, H))
-    slow_speed, slow_time = f(Q, H), f(Q, H)
-    sigma_split = f(Q, H)
-    split_kind_nearest = np.full((Q, H), -1, np.int8)
-    max_probes = max(len(r[5]) for r in results)
-    probe_sigma = f(Q, max_probes)
-    probe_agrees = np.full((Q, max_probes, V, H, 2), -1, np.int8)
-    counts: dict = {}
-    for q, (value, (centre, scans), grid, st, stp, probes) in enumerate(results):
-        T = cfg.oscillator_at(value).forcing_period
-        for s, sigma in enumerate(cfg.sigmas):
-            p = grid[float(sigma)]
-            errors[q, s], agrees[q, s], disagree[q, s] = p.errors, p.agrees, p.disagree
-            pre[q, s], first[q, s] = p.pre_impact, p.first_impact
-            opa_mean[q, s], opa_var[q, s] = p.opa_mean, p.opa_var
-            for k in mc:
-                mc[k][q, s] = p.mc[k]
-            samples[q, s] = p.samples
-            element_count[q, s] = p.elements
-            collocated[q, s] = p.collocated
-            if p.failure:
-                failures.append(f"{cfg.parameter} = {value:g}, sigma = {sigma:g}: {p.failure}")
-            imin[q, s], imax[q, s] = p.mc["impacts"]
-            mc_seconds[q, s], mc_rhs[q, s], seconds[q, s] = p.mc["seconds"], p.mc["rhs"], \
-                p.seconds
-        star[q], steps[q] = st, stp
-        for j, (sig, point) in enumerate(sorted(probes.items())):
-            probe_sigma[q, j] = sig
-            probe_agrees[q, j] = point.agrees[:, -1]
-        for h, scan in enumerate(scans):
-            splits = scan.splits
-            struncated[q, h] = scan.truncated
-            complete[q, h], crossing_complete[q, h] = scan.complete_within, \
-                scan.crossings_within
-            slow_speed[q, h], slow_time[q, h] = scan.slowest_speed, scan.slowest_time
-            real = [sp for sp in splits if sp.kind not in ("horizon", "output crossing")]
-            if real:
-                near = min(real, key=lambda sp: abs(sp.value - centre))
-                sigma_split[q, h] = abs(near.value - centre)
-                split_kind_nearest[q, h] = SPLIT_KINDS.index(near.kind)
-            for j, sp in enumerate(splits):
-                sv[q, h, j], stime[q, h, j], sspeed[q, h, j] = sp.value, sp.time / T, sp.speed
-                skind[q, h, j] = SPLIT_KINDS.index(sp.kind)
-                sleft[q, h, j], sright[q, h, j] = sp.left, sp.right
-            for s, sigma in enumerate(cfg.sigmas):
-                counts[(q, s, h)] = count_distribution(centre, sigma, splits, scan.count, cdf,
-                                                       scan.complete_within)
-                if scan.complete_within < sigma:
-                    unknown[q, s, h] = 1.0 - sum(counts[(q, s, h)].values())
-    kmax = max(max(d, default=0) for d in counts.values())
-    count_prob = np.zeros((Q, S, H, kmax + 1))
-    for (q, s, h), dist in counts.items():
+    known = {
+        "variant": (np.array(cfg.variants, dtype=object),
+                    {"long_name": "OPA variant: impact law/truncation, or impact "
+                     "law/ME-<elements> for multi-element OPA"}),
+        "N": (np.array(cfg.orders), {"long_name": "order of the OPA expansion", **ONE}),
+        "horizon": (np.array(cfg.horizons, float), {"long_name": "length of the comparison "
+                                                    "window", "units": "forcing periods"}),
+        "criterion": (np.array(CRITERIA, dtype=object),
+                      {"long_name": "quantity compared with Monte Carlo"}),
+        "time": (np.arange(n_out) / cfg.per_period,
+                 {"long_name": "time in forcing periods t omega / (2 pi) (the forcing "
+                  "period differs along the sweep)", "units": "forcing periods"}),
+    }
+    index = {"count": "number of impacts up to the horizon",
+             "probe": "index of an evaluated sigma (ascending; NaN-padded)",
+             "split": "index of a located split (kind -1: padding)"}
+    out = {name: (name, *known[name]) for name in names}
+    out.update({name: (name, np.arange(size), {"long_name": index[name], **ONE})
+                for name, size in sizes.items()})
+    return out
+
+
+def _dims(dims) -> tuple[str, ...]:
+    return (dims,) if isinstance(dims, str) else tuple(dims)
+
+
+def _grid_coords(cfg: ValidateConfig, value: float, sigma: float | None = None) -> dict:
+    """The grid coordinates of one swept value (and one sigma), each of length 1."""
+    unc = cfg.uncertain
+    out = {"value": ("value", [float(value)], {"long_name": f"swept parameter "
+                                                f"{cfg.parameter}", **ONE})}
+    if sigma is not None:
+        out["sigma"] = ("sigma", [float(sigma)],
+                        {"long_name": f"intensity of the uncertainty: {unc} = nominal {unc} + "
+                         "sigma xi", **ONE})
+    return out
+
+
+def point_dataset(cfg: ValidateConfig, value: float, point: Point, centre: float,
+                  scans: list[HorizonSplits], cdf=None) -> xr.Dataset:
+    """One grid point (value, sigma) of the map, over ``value`` and ``sigma`` of length 1:
+    OPA's errors against Monte Carlo and its verdicts per variant, N, horizon and
+    criterion, the OPA and Monte Carlo curves, the costs, the elements of the
+    multi-element variants, and the distribution of impact counts over the point's
+    ensemble (from the splits ``scans`` of its swept value about ``centre``; ``cdf``: the
+    law of xi's, None for the semicircle). Attribute ``element_failure``: why a
+    multi-element variant was not run ("" when all were)."""
+    H = len(cfg.horizons)
+    counts = [count_distribution(centre, point.sigma, scan.splits, scan.count, cdf,
+                                 scan.complete_within) for scan in scans]
+    count_prob = np.zeros((H, max(max(d, default=0) for d in counts) + 1))
+    unknown = np.zeros(H)
+    for h, (scan, dist) in enumerate(zip(scans, counts)):
         for n, prob in dist.items():
-            count_prob[q, s, h, n] = prob
-    dims = ("value", "sigma", "variant", "N")
-    one = {"units": "1"}
-    ran = np.zeros((V, N), np.int8)
-    ran[: len(cfg.single_variants)] = 1
-    ran[len(cfg.single_variants):, -1] = 1
+            count_prob[h, n] = prob
+        if scan.complete_within < point.sigma:
+            unknown[h] = 1.0 - sum(dist.values())
+    e = point.errors
+    vn = ("variant", "N")
+    vnh = vn + ("horizon",)
+    data = {
+        "err_mean": (vnh, e[..., 0, 0], {"long_name": "RMS error of x_0 against the MC mean",
+                                         **ONE}),
+        "err_mean_se": (vnh, e[..., 0, 1], {"long_name": "RMS error of x_0 in RMS MC standard "
+                                            "errors", **ONE}),
+        "err_mean_rel": (vnh, e[..., 0, 2], {"long_name": "RMS error of x_0 relative to the "
+                                             "RMS MC spread", **ONE}),
+        "err_var": (vnh, e[..., 1, 0], {"long_name": "RMS error of the OPA variance against "
+                                        "the MC variance", **ONE}),
+        "err_var_se": (vnh, e[..., 1, 1], {"long_name": "RMS variance error in RMS MC "
+                                           "standard errors", **ONE}),
+        "err_var_rel": (vnh, e[..., 1, 2], {"long_name": "RMS variance error relative to the "
+                                            "RMS MC variance", **ONE}),
+        "agrees": (vnh + ("criterion",), point.agrees.astype(np.int8),
+                   {"long_name": "1 where OPA agrees with MC over the horizon", **ONE}),
+        "disagree_time": (vn + ("criterion",), point.disagree,
+                          {"long_name": "first time of disagreement (inf: never within the "
+                           "longest horizon)", "units": "forcing periods"}),
+        "pre_impact_err": (vn, point.pre_impact, {"long_name": "RMS error of x_0 before OPA's "
+                                                  "first impact", **ONE}),
+        "first_impact": (vn, point.first_impact, {"long_name": "time of OPA's first impact",
+                                                  "units": "forcing periods"}),
+        "opa_x_mean": (vn + ("time",), point.opa_mean, {"long_name": "OPA mean x_0", **ONE}),
+        "opa_x_var": (vn + ("time",), point.opa_var, {"long_name": "OPA variance", **ONE}),
+        "mc_x_mean": ("time", point.mc["x_mean"], {"long_name": "MC mean E[x]", **ONE}),
+        "mc_x_var": ("time", point.mc["x_var"], {"long_name": "MC variance Var[x]", **ONE}),
+        "mc_x_sem": ("time", point.mc["x_sem"], {"long_name": "MC standard error of E[x]",
+                                                 **ONE}),
+        "mc_x_var_sem": ("time", point.mc["x_var_sem"],
+                         {"long_name": "MC standard error of Var[x]", **ONE}),
+        "mc_samples": ((), np.int64(point.samples), {"long_name": "MC samples used", **ONE}),
+        "mc_impacts_min": ((), np.int64(point.mc["impacts"][0]),
+                           {"long_name": "fewest impacts of an MC sample (longest horizon)",
+                            **ONE}),
+        "mc_impacts_max": ((), np.int64(point.mc["impacts"][1]),
+                           {"long_name": "most impacts of an MC sample (longest horizon)",
+                            **ONE}),
+        "mc_seconds": ((), float(point.mc["seconds"]), {"long_name": "MC wall time",
+                                                        "units": "s"}),
+        "mc_rhs_evaluations": ((), np.int64(point.mc["rhs"]),
+                               {"long_name": "MC right-hand sides", **ONE}),
+        "point_seconds": ((), float(point.seconds),
+                          {"long_name": "wall time of the point (OPA + MC)", "units": "s"}),
+        "count_prob": (("horizon", "count"), count_prob,
+                       {"long_name": "probability of k impacts up to the horizon (exact "
+                        "where the split list is complete)", **ONE}),
+        "count_unknown": ("horizon", unknown,
+                          {"long_name": "probability of the samples beyond "
+                           "split_complete_sigma, whose count is not known (0: complete)",
+                           **ONE}),
+        "variant_elements": ("variant", np.asarray(point.elements, np.int64),
+                             {"long_name": "elements of the variant at N = Nmax (0: not "
+                              "computed, see the attribute element_failures)", **ONE}),
+        "variant_collocated": ("variant", np.asarray(point.collocated, np.int64),
+                               {"long_name": "elements whose OPA system could not be "
+                                "completed, computed by collocation of the true systems "
+                                "(as simulate_opa does)", **ONE}),
+    }
+    coords = {**_grid_coords(cfg, value, point.sigma),
+              **_coords(cfg, "variant", "N", "horizon", "criterion", "time",
+                        count=count_prob.shape[1])}
+    ds = xr.Dataset({name: (("value", "sigma", *_dims(dims)), np.asarray(array)[None, None],
+                            attrs) for name, (dims, array, attrs) in data.items()},
+                    coords=coords)
+    return ds.assign_attrs(element_failure=point.failure)
+
+
+def value_dataset(cfg: ValidateConfig, value: float, centre: float,
+                  scans: list[HorizonSplits], star: np.ndarray, steps: np.ndarray,
+                  probes: dict[float, Point]) -> xr.Dataset:
+    """One swept value of the map, over ``value`` of length 1: sigma* by bisection
+    (``star``: (variant, horizon, criterion, 2) bracket, ``steps``), every sigma evaluated
+    (``probes``) with its verdict at N = Nmax, and the splits of the sampled systems'
+    event sequences per horizon (``scans``, about ``centre``)."""
+    T = cfg.oscillator_at(value).forcing_period
+    H = len(cfg.horizons)
+    nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
+    width = max(1, max(len(scan.splits) for scan in scans))
+    sv, stime, sspeed = nan(H, width), nan(H, width), nan(H, width)
+    skind = np.full((H, width), -1, np.int8)
+    sleft, sright = (np.full((H, width), -1, np.int64) for _ in range(2))
+    truncated = np.array([scan.truncated for scan in scans], np.int8)
+    complete = np.array([scan.complete_within for scan in scans], float)
+    crossing_complete = np.array([scan.crossings_within for scan in scans], float)
+    slow_speed = np.array([scan.slowest_speed for scan in scans], float)
+    slow_time = np.array([scan.slowest_time for scan in scans], float)
+    sigma_split, nearest = nan(H), np.full(H, -1, np.int8)
+    for h, scan in enumerate(scans):
+        real = [sp for sp in scan.splits if sp.kind not in ("horizon", "output crossing")]
+        if real:
+            near = min(real, key=lambda sp: abs(sp.value - centre))
+            sigma_split[h] = abs(near.value - centre)
+            nearest[h] = SPLIT_KINDS.index(near.kind)
+        for j, sp in enumerate(scan.splits):
+            sv[h, j], stime[h, j], sspeed[h, j] = sp.value, sp.time / T, sp.speed
+            skind[h, j] = SPLIT_KINDS.index(sp.kind)
+            sleft[h, j], sright[h, j] = sp.left, sp.right
+    ordered = sorted(probes.items())
+    probe_sigma = np.array([sig for sig, _ in ordered], float)
+    probe_agrees = np.array([point.agrees[:, -1] for _, point in ordered], np.int8)
     kinds = {"flag_values": np.arange(len(SPLIT_KINDS), dtype=np.int8),
              "flag_meanings": " ".join(k.replace(" ", "_") for k in SPLIT_KINDS),
              "units": "1"}
+    vhc = ("variant", "horizon", "criterion")
+    hs = ("horizon", "split")
     data = {
-        "err_mean": (dims + ("horizon",), errors[..., 0, 0],
-                     {"long_name": "RMS error of x_0 against the MC mean", **one}),
-        "err_mean_se": (dims + ("horizon",), errors[..., 0, 1],
-                        {"long_name": "RMS error of x_0 in RMS MC standard errors", **one}),
-        "err_mean_rel": (dims + ("horizon",), errors[..., 0, 2],
-                         {"long_name": "RMS error of x_0 relative to the RMS MC spread", **one}),
-        "err_var": (dims + ("horizon",), errors[..., 1, 0],
-                    {"long_name": "RMS error of the OPA variance against the MC variance",
-                     **one}),
-        "err_var_se": (dims + ("horizon",), errors[..., 1, 1],
-                       {"long_name": "RMS variance error in RMS MC standard errors", **one}),
-        "err_var_rel": (dims + ("horizon",), errors[..., 1, 2],
-                        {"long_name": "RMS variance error relative to the RMS MC variance",
-                         **one}),
-        "agrees": (dims + ("horizon", "criterion"), agrees,
-                   {"long_name": "1 where OPA agrees with MC over the horizon", **one}),
-        "disagree_time": (dims + ("criterion",), disagree,
-                          {"long_name": "first time of disagreement (inf: never within the "
-                           "longest horizon)", "units": "forcing periods"}),
-        "pre_impact_err": (dims, pre, {"long_name": "RMS error of x_0 before OPA's first "
-                                       "impact", **one}),
-        "first_impact": (dims, first, {"long_name": "time of OPA's first impact",
-                                       "units": "forcing periods"}),
-        "opa_x_mean": (dims + ("time",), opa_mean, {"long_name": "OPA mean x_0", **one}),
-        "opa_x_var": (dims + ("time",), opa_var, {"long_name": "OPA variance", **one}),
-        "mc_x_mean": (("value", "sigma", "time"), mc["x_mean"],
-                      {"long_name": "MC mean E[x]", **one}),
-        "mc_x_var": (("value", "sigma", "time"), mc["x_var"],
-                     {"long_name": "MC variance Var[x]", **one}),
-        "mc_x_sem": (("value", "sigma", "time"), mc["x_sem"],
-                     {"long_name": "MC standard error of E[x]", **one}),
-        "mc_x_var_sem": (("value", "sigma", "time"), mc["x_var_sem"],
-                         {"long_name": "MC standard error of Var[x]", **one}),
-        "mc_samples": (("value", "sigma"), samples, {"long_name": "MC samples used", **one}),
-        "mc_impacts_min": (("value", "sigma"), imin,
-                           {"long_name": "fewest impacts of an MC sample (longest horizon)",
-                            **one}),
-        "mc_impacts_max": (("value", "sigma"), imax,
-                           {"long_name": "most impacts of an MC sample (longest horizon)",
-                            **one}),
-        "mc_seconds": (("value", "sigma"), mc_seconds, {"long_name": "MC wall time",
-                                                        "units": "s"}),
-        "mc_rhs_evaluations": (("value", "sigma"), mc_rhs,
-                               {"long_name": "MC right-hand sides", **one}),
-        "point_seconds": (("value", "sigma"), seconds,
-                          {"long_name": "wall time of the point (OPA + MC)", "units": "s"}),
-        "sigma_star": (("value", "variant", "horizon", "criterion"), star[..., 0],
+        "sigma_star": (vhc, star[..., 0],
                        {"long_name": "largest sigma at which OPA (N = Nmax) agrees: lower end "
-                        "of the bisection bracket", **one}),
-        "sigma_star_upper": (("value", "variant", "horizon", "criterion"), star[..., 1],
+                        "of the bisection bracket", **ONE}),
+        "sigma_star_upper": (vhc, star[..., 1],
                              {"long_name": "upper end of the bisection bracket (NaN: agrees at "
-                              "every sigma tried)", **one}),
-        "bisection_steps": (("value", "variant", "horizon", "criterion"), steps,
-                            {"long_name": "bisection evaluations", **one}),
-        "probe_sigma": (("value", "probe"), probe_sigma,
-                        {"long_name": "every sigma evaluated (grid and bisection)", **one}),
-        "probe_agrees": (("value", "probe", "variant", "horizon", "criterion"), probe_agrees,
+                              "every sigma tried)", **ONE}),
+        "bisection_steps": (vhc, steps, {"long_name": "bisection evaluations", **ONE}),
+        "probe_sigma": ("probe", probe_sigma,
+                        {"long_name": "every sigma evaluated (grid and bisection)", **ONE}),
+        "probe_agrees": (("probe", *vhc), probe_agrees,
                          {"long_name": "verdict at N = Nmax at each evaluated sigma (-1: none)",
-                          **one}),
-        "split_value": (("value", "horizon", "split"), sv,
-                        {"long_name": f"value of {cfg.uncertain} where the sampled systems' "
-                         "event sequence changes", **one}),
-        "split_kind": (("value", "horizon", "split"), skind,
-                       {"long_name": "what happens at the split (-1: none)", **kinds}),
-        "split_time": (("value", "horizon", "split"), stime,
-                       {"long_name": "time of the first differing event (output "
-                        "crossing: the output time)", "units": "forcing periods"}),
-        "split_speed": (("value", "horizon", "split"), sspeed,
-                        {"long_name": "speed of the first differing event (output "
-                         "crossing: of the impact)", **one}),
-        "split_left": (("value", "horizon", "split"), sleft,
-                       {"long_name": "impacts up to the horizon just below the split", **one}),
-        "split_right": (("value", "horizon", "split"), sright,
-                        {"long_name": "impacts up to the horizon just above the split", **one}),
-        "split_truncated": (("value", "horizon"), struncated,
+                          **ONE}),
+        "split_value": (hs, sv, {"long_name": f"value of {cfg.uncertain} where the sampled "
+                                 "systems' event sequence changes", **ONE}),
+        "split_kind": (hs, skind, {"long_name": "what happens at the split (-1: none)",
+                                   **kinds}),
+        "split_time": (hs, stime, {"long_name": "time of the first differing event (output "
+                                   "crossing: the output time)", "units": "forcing periods"}),
+        "split_speed": (hs, sspeed, {"long_name": "speed of the first differing event "
+                                     "(output crossing: of the impact)", **ONE}),
+        "split_left": (hs, sleft, {"long_name": "impacts up to the horizon just below the "
+                                   "split", **ONE}),
+        "split_right": (hs, sright, {"long_name": "impacts up to the horizon just above the "
+                                     "split", **ONE}),
+        "split_truncated": ("horizon", truncated,
                             {"long_name": "1 where the split limit left changes unlocated "
-                             "(the list is complete within split_complete_sigma)", **one}),
-        "split_complete_sigma": (("value", "horizon"), complete,
+                             "(the list is complete within split_complete_sigma)", **ONE}),
+        "split_complete_sigma": ("horizon", complete,
                                  {"long_name": "every split with |value - nominal| below "
-                                  "this is listed (inf: the whole scan)", **one}),
-        "crossing_complete_sigma": (("value", "horizon"), crossing_complete,
+                                  "this is listed (inf: the whole scan)", **ONE}),
+        "crossing_complete_sigma": ("horizon", crossing_complete,
                                     {"long_name": "every output crossing with |value - "
                                      "nominal| below this is listed (inf: the whole scan)",
-                                     **one}),
-        "nominal_slowest_speed": (("value", "horizon"), slow_speed,
+                                     **ONE}),
+        "nominal_slowest_speed": ("horizon", slow_speed,
                                   {"long_name": "slowest impact of the nominal system within "
-                                   "the horizon: its speed (NaN: no impact)", **one}),
-        "nominal_slowest_time": (("value", "horizon"), slow_time,
+                                   "the horizon: its speed (NaN: no impact)", **ONE}),
+        "nominal_slowest_time": ("horizon", slow_time,
                                  {"long_name": "time of that impact",
                                   "units": "forcing periods"}),
-        "sigma_split": (("value", "horizon"), sigma_split,
+        "sigma_split": ("horizon", sigma_split,
                         {"long_name": "smallest sigma whose ensemble contains a split "
-                         "(NaN: none within the largest sigma)", **one}),
-        "sigma_split_kind": (("value", "horizon"), split_kind_nearest,
-                             {"long_name": "kind of that nearest split", **kinds}),
-        "count_prob": (("value", "sigma", "horizon", "count"), count_prob,
-                       {"long_name": "probability of k impacts up to the horizon (exact "
-                        "where the split list is complete)", **one}),
-        "count_unknown": (("value", "sigma", "horizon"), unknown,
-                          {"long_name": "probability of the samples beyond "
-                           "split_complete_sigma, whose count is not known (0: complete)",
-                           **one}),
-        "variant_ran": (("variant", "N"), ran,
-                        {"long_name": "1 where the variant is run at this N (multi-element "
-                         "variants: N = Nmax only)", **one}),
-        "variant_elements": (("value", "sigma", "variant"), element_count,
-                             {"long_name": "elements of the variant at N = Nmax (0: not "
-                              "computed, see the attribute element_failures)", **one}),
-        "variant_collocated": (("value", "sigma", "variant"), collocated,
-                               {"long_name": "elements whose OPA system could not be "
-                                "completed, computed by collocation of the true systems "
-                                "(as simulate_opa does)", **one}),
+                         "(NaN: none within the largest sigma)", **ONE}),
+        "sigma_split_kind": ("horizon", nearest, {"long_name": "kind of that nearest split",
+                                                  **kinds}),
     }
-    if failures:  # grid points only; bisection probes say so in the log
-        attrs = {"element_failures": " | ".join(failures)}
-    else:
-        attrs = {}
-    unc = cfg.uncertain
-    index = lambda dim, text: (dim, np.arange(sizes[dim]), {"long_name": text, **one})  # noqa: E731
-    sizes = {"probe": max_probes, "split": max_split}
-    return xr.Dataset(
-        data,
-        coords={
-            "value": ("value", np.array(cfg.values, float),
-                      {"long_name": f"swept parameter {cfg.parameter}", **one}),
-            "sigma": ("sigma", np.array(cfg.sigmas, float),
-                      {"long_name": f"intensity of the uncertainty: {unc} = nominal {unc} + "
-                       "sigma xi", **one}),
-            "variant": ("variant", np.array(cfg.variants, dtype=object),
-                        {"long_name": "OPA variant: impact law/truncation, or impact "
-                         "law/ME-<elements> for multi-element OPA"}),
-            "N": ("N", np.array(cfg.orders), {"long_name": "order of the OPA expansion",
-                                               **one}),
-            "horizon": ("horizon", np.array(cfg.horizons, float),
-                        {"long_name": "length of the comparison window",
-                         "units": "forcing periods"}),
-            "criterion": ("criterion", np.array(CRITERIA, dtype=object),
-                          {"long_name": "quantity compared with Monte Carlo"}),
-            "time": ("time", np.arange(n_out) / cfg.per_period,
-                     {"long_name": "time in forcing periods t omega / (2 pi) (the forcing "
-                      "period differs along the sweep)", "units": "forcing periods"}),
-            "count": ("count", np.arange(kmax + 1),
-                      {"long_name": "number of impacts up to the horizon", **one}),
-            "probe": index("probe", "index of an evaluated sigma (ascending; NaN-padded)"),
-            "split": index("split", "index of a located split (kind -1: padding)"),
-        },
-        attrs=attrs,
-    )
+    coords = {**_grid_coords(cfg, value),
+              **_coords(cfg, "variant", "horizon", "criterion", probe=len(ordered),
+                        split=width)}
+    return xr.Dataset({name: (("value", *_dims(dims)), np.asarray(array)[None], attrs)
+                       for name, (dims, array, attrs) in data.items()}, coords=coords)
+
+
+def combine(cfg: ValidateConfig, points: list[list[xr.Dataset]],
+            values: list[xr.Dataset]) -> xr.Dataset:
+    """The map: the grid points (``points[q][s]``, :func:`point_dataset`) and the swept
+    values (:func:`value_dataset`) joined over ``value`` and ``sigma``, the dimensions
+    whose length differs padded (``PADDING``), with the map-wide ``variant_ran`` and the
+    attribute ``element_failures`` (the grid points' failures; bisection probes say so in
+    the log)."""
+    grid = xr.combine_nested(points, concat_dim=["value", "sigma"], fill_value=PADDING,
+                             **_JOIN)
+    by_value = xr.concat(values, "value", fill_value=PADDING, **_JOIN)
+    V, N, S = len(cfg.variants), len(cfg.orders), len(cfg.single_variants)
+    ran = np.zeros((V, N), np.int8)
+    ran[:S] = 1
+    ran[S:, -1] = 1
+    wide = xr.Dataset({"variant_ran": (("variant", "N"), ran,
+                                       {"long_name": "1 where the variant is run at this N "
+                                        "(multi-element variants: N = Nmax only)", **ONE})},
+                      coords=_coords(cfg, "variant", "N"))
+    merged = xr.merge([grid, by_value, wide], compat="no_conflicts", join="outer",
+                      combine_attrs="override")
+    # the grid's coordinates first, then the rest in the order they come (docs/datasets.md)
+    first = ["value", "sigma"]
+    ds = xr.Dataset({name: merged[name].variable for name in merged.data_vars},
+                    coords={name: merged[name].variable
+                            for name in first + [c for c in merged.coords if c not in first]})
+    failures = [f"{cfg.parameter} = {value:g}, sigma = {sigma:g}: "
+                f"{point.attrs['element_failure']}"
+                for value, row in zip(cfg.values, points)
+                for sigma, point in zip(cfg.sigmas, row) if point.attrs["element_failure"]]
+    return ds.assign_attrs(element_failures=" | ".join(failures)) if failures else ds
 
 
 DENSE_PER_PERIOD = 64
@@ -1493,7 +974,7 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
     finished dataset (default: from the call)."""
     started = time.perf_counter() if started is None else started
     ds = _Map(cfg, progress=progress, log=log).run()
-    for dim in ds.dims:  # every dimension has a coordinate (parts of older versions)
+    for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
         if dim not in ds.coords:
             ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
                                          {"long_name": f"index along {dim}", "units": "1"})})
@@ -1509,5 +990,5 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
     return ds
 
 
-__all__ = ["CRITERIA", "SWEEPS", "VARIANTS", "ValidateConfig", "count_distribution",
-           "load_config", "run_validation"]
+__all__ = ["combine", "count_distribution", "point_dataset", "run_validation",
+           "value_dataset"]

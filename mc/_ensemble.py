@@ -34,10 +34,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import xarray as xr
 
-from mc._checkpoint import Checkpoint, digest, stats_arrays
+from mc._checkpoint import Checkpoint, stats_arrays
 from mc._sampling import _check_sampler, sample_xi
 from opa._basis import chebyshev_u, orthonormal
-from opa._dataset import package_version, provenance_attrs, time_coord
+from opa._dataset import digest, package_version, provenance_attrs, time_coord
 from opa._memory import check_memory
 from opa._model import Oscillator, SolverOptions, check_instance
 from opa._run import SimulationError, output_times, run_batch
@@ -448,7 +448,7 @@ def _chunk_check(T: int, order: int, replicates: int, keep_paths: bool):
               "x_moment": ((order + 1, T), "f"), "x_moment_m2": ((order + 1, T), "f"),
               "x_moment_rep": ((R, order + 1, T), "f"), "x_rep": ((R, T), "f"),
               "v_rep": ((R, T), "f"), "x2_rep": ((R, T), "f"), "rep_weight": ((R,), "f"),
-              "rhs_evaluations": ((), "i"), "run": ((), "U")}
+              "rhs_evaluations": ((), "i")}
 
     def check(arrays, lo, hi):
         expected = {**fields, "n_impacts": ((hi - lo,), "i")}

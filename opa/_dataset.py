@@ -1,15 +1,20 @@
-"""Dataset conventions shared by every model (docs/datasets.md): attributes and safe I/O."""
+"""Dataset conventions shared by every model (docs/datasets.md): attributes, safe I/O and
+the one resume store of long jobs (:class:`Store`)."""
 
 from __future__ import annotations
 
 import contextvars
+import dataclasses
 import datetime as _dt
 import functools
+import hashlib
+import json
 import os
 import re
 import sys
 import tempfile
 import time
+import warnings
 from collections.abc import Callable
 from importlib import metadata
 
@@ -248,3 +253,323 @@ def write_netcdf(ds: xr.Dataset, path: str | os.PathLike) -> None:
     temporaries of earlier crashed writes in that directory are removed.
     """
     atomic_write(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4"), suffix=".nc")
+
+
+# --------------------------------------------------------------------------- the store
+
+#: the format of a store folder, written to its marker file: a folder without the marker
+#: (the parts of a version before the one store) or with another format is refused
+STORE_FORMAT = "opa-mc store 1"
+STORE_MARKER = "store.json"
+#: where a part keeps its key: an ``.npz`` entry, a netCDF attribute, a JSON member
+KEY_ENTRY = "store_key"
+_SUFFIXES = (".npz", ".nc", ".json")
+_PART = re.compile(r".+_[0-9a-f]{12}\.(npz|nc|json)(\.bad)?")
+
+
+def digest(payload) -> str:
+    """sha256 (64 hex digits) of ``payload``, the key of a part of a :class:`Store`.
+
+    ``payload`` is made of JSON values (dict keys sorted, tuples as lists, floats
+    exactly), numpy scalars (as their values), numpy arrays (by dtype, shape and bytes;
+    object arrays by their elements) and dataclass instances (by type name and their
+    compared fields: an :class:`opa.System` or a law of xi by what defines it). Anything
+    else is a TypeError: a key never rests on an object's ``repr``.
+
+    >>> digest({"b": (1, 2.5), "a": np.arange(3)}) == digest({"a": np.arange(3),
+    ...                                                        "b": [1, 2.5]})
+    True
+    >>> digest(np.arange(3)) == digest(np.arange(3.0))   # the dtype counts
+    False
+    """
+    text = json.dumps(_canonical(payload), sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _canonical(value):
+    if isinstance(value, np.generic):
+        value = value.item()
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, np.ndarray):
+        if value.dtype.hasobject:
+            return {"__ndarray__": list(value.shape), "items": _canonical(value.ravel().tolist())}
+        array = np.ascontiguousarray(value)
+        return {"__ndarray__": list(array.shape), "dtype": array.dtype.str,
+                "sha256": hashlib.sha256(array.tobytes()).hexdigest()}
+    if isinstance(value, dict):
+        if not all(isinstance(k, str) for k in value):
+            raise TypeError(f"digest: dict keys must be strings, got {list(value)!r:.80}")
+        return {k: _canonical(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_canonical(v) for v in value]
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {"__dataclass__": type(value).__qualname__,
+                **{f.name: _canonical(getattr(value, f.name))
+                   for f in dataclasses.fields(value) if f.compare}}
+    raise TypeError(f"digest: cannot hash a {type(value).__name__} ({value!r:.60})")
+
+
+def _plain(value):
+    """``value`` as JSON gives it back (tuples as lists, numpy scalars as Python)."""
+    return json.loads(json.dumps(value, default=lambda v: v.item()))
+
+
+def _first_difference(old, new, path=""):
+    """(dotted key, old value, new value) of the first difference, or None."""
+    if isinstance(old, dict) and isinstance(new, dict):
+        for key in list(new) + [k for k in old if k not in new]:
+            if key not in old or key not in new:
+                return f"{path}{key}", old.get(key, "absent"), new.get(key, "absent")
+            found = _first_difference(old[key], new[key], f"{path}{key}.")
+            if found:
+                return found
+        return None
+    if old != new:
+        return path.rstrip("."), old, new
+    return None
+
+
+def _short(value) -> str:
+    if isinstance(value, list):
+        return f"{len(value)} entries"
+    text = json.dumps(value) if not isinstance(value, str) else value
+    return text if len(text) <= 48 else text[:36] + "..."
+
+
+class Store:
+    """The one resume store: a folder of the finished parts of long jobs, each found again
+    by a hash of its inputs (:func:`digest`).
+
+    Layout::
+
+        store.json                    the format (STORE_FORMAT), the job, its settings
+        <name>_<key[:12]>.npz         a part: arrays, numbers, strings (+ its full key)
+        <name>_<key[:12]>.nc          a part: an xarray Dataset (its key an attribute)
+        <name>_<key[:12]>.json        a part: JSON values (its key a member)
+
+    The key of a part is the digest of the store's settings and the part's ``inputs``
+    (everything the part depends on), and the file stores it: a part copied or left from
+    other inputs is found out. Every file is written to a temporary beside it, flushed
+    and renamed (:func:`atomic_write`), so a file under its final name is complete;
+    temporaries of a killed writer are removed when a store opens the folder
+    (``removed``). A part that cannot be read, stores another key or fails the caller's
+    ``check`` is damaged: moved aside to ``<file>.bad`` (replacing an older one), named
+    in one ``log`` line, and computed again.
+
+    A folder without ``store.json`` that holds anything (the parts of an opa-mc version
+    before this store, or files that are not a store's) is refused with one message
+    naming it: remove it to start over. So is a folder of another format or another job.
+
+    Parameters
+    ----------
+    directory : the folder (created if missing).
+    job : what the folder holds, for messages ("Monte Carlo checkpoint", "sweep", ...).
+    settings : JSON-able dict of everything one run depends on, for a folder that holds
+        one run (a checkpoint, a sweep's points): a folder written with other settings is
+        refused naming the first difference. None: the folder is shared by runs (the
+        trust map's parts), each part found by its own inputs alone.
+    log : callable taking one line (damaged parts); default ``warnings.warn``
+        (RuntimeWarning).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> store = Store(tempfile.mkdtemp(), "example")
+    >>> store.get("square", {"x": 3}, lambda: {"y": 9})["y"]
+    9
+    >>> store.get("square", {"x": 3}, lambda: {"y": -1})["y"], store.computed  # read back
+    (9, 1)
+    """
+
+    def __init__(self, directory: str | os.PathLike, job: str, settings: dict | None = None,
+                 log: Callable[[str], object] | None = None):
+        self.directory = os.fspath(directory)
+        self.job = job
+        self.log = log if log is not None else _warn
+        self.computed = 0  # parts written by this object
+        self.set_aside = 0  # damaged parts it moved aside
+        if os.path.exists(self.directory) and not os.path.isdir(self.directory):
+            raise ValueError(f"{job} {self.directory!r} is not a directory")
+        os.makedirs(self.directory, exist_ok=True)
+        self.removed = sorted(clean_stale_temporaries(self.directory))
+        header = {"format": STORE_FORMAT, "job": job,
+                  "settings": None if settings is None else _plain(settings)}
+        marker = os.path.join(self.directory, STORE_MARKER)
+        if os.path.exists(marker):
+            self._check(marker, header)
+        else:
+            found = sorted(n for n in os.listdir(self.directory) if not n.startswith(TEMP_PREFIX))
+            if found:
+                raise ValueError(
+                    f"{job} {self.directory!r} holds files but no {STORE_MARKER} ({found[0]}"
+                    f"{', ...' if len(found) > 1 else ''}): the parts of an opa-mc version "
+                    f"before the one store, or not a {job}'s; remove it (or name another "
+                    f"folder) to start over")
+            text = json.dumps(header, indent=1, sort_keys=True)
+            atomic_write(marker, lambda tmp: _write_text(tmp, text), suffix=".json",
+                         clean=False)
+        self.header = header
+
+    def _check(self, marker: str, header: dict) -> None:
+        where = f"{self.job} {self.directory!r}"
+        try:
+            with open(marker, encoding="utf-8") as file:
+                old = json.load(file)
+            if not isinstance(old, dict):
+                raise ValueError("not a JSON object")
+        except (OSError, ValueError) as err:
+            raise ValueError(f"{where} has an unreadable {STORE_MARKER} ({err}); remove it "
+                             f"to start over") from None
+        if old.get("format") != STORE_FORMAT:
+            raise ValueError(f"{where} holds parts of another format ({old.get('format')!r}; "
+                             f"this version reads {STORE_FORMAT!r}): remove it to start over")
+        if old.get("job") != header["job"]:
+            raise ValueError(f"{where} holds the parts of a {old.get('job')}, not of a "
+                             f"{header['job']}: name another folder")
+        found = _first_difference(old.get("settings"), header["settings"])
+        if found:
+            key, before, now = found
+            raise ValueError(f"{where} belongs to another run: {key} is {_short(before)} "
+                             f"there, {_short(now)} here; rerun it with its own settings to "
+                             f"finish it, or remove it to start over")
+
+    # -- parts -------------------------------------------------------------------------
+    def key(self, inputs) -> str:
+        """The key of a part: the digest of the store's settings and the part's inputs."""
+        return digest({"settings": self.header["settings"], "inputs": inputs})
+
+    def path(self, name: str, inputs, suffix: str = ".npz") -> str:
+        """The file of part ``name`` with ``inputs``."""
+        if suffix not in _SUFFIXES:
+            raise ValueError(f"a part's suffix must be one of {_SUFFIXES}, got {suffix!r}")
+        return os.path.join(self.directory, f"{name}_{self.key(inputs)[:12]}{suffix}")
+
+    def load(self, name: str, inputs, suffix: str = ".npz", check=None):
+        """The part, or None: absent, or damaged (then moved aside and logged).
+
+        ``.npz``: a dict (0-d entries as Python scalars); ``.nc``: an xarray Dataset;
+        ``.json``: the JSON value saved. ``check(content)`` returns what is wrong with a
+        part that reads and stores its key, or None."""
+        path = self.path(name, inputs, suffix)
+        if not os.path.lexists(path):
+            return None
+        key = self.key(inputs)
+        try:
+            stored, content = _READ[suffix](path)
+        except Exception as err:  # noqa: BLE001 -- whatever makes it unreadable: recompute
+            reason = f"cannot be read ({type(err).__name__}: {err})".replace("\n", " ")
+        else:
+            if stored is None:
+                reason = "stores no key"
+            elif stored != key:
+                reason = f"stores the key {stored[:12]}, not {key[:12]}: other inputs"
+            else:
+                reason = None if check is None else check(content)
+                if reason is None:
+                    return content
+        file = os.path.basename(path)
+        try:
+            os.replace(path, path + ".bad")
+            where = f"moved aside to {file}.bad"
+        except OSError as err:
+            where = f"could not be moved aside ({err})"
+        self.set_aside += 1
+        self.log(f"{self.job} part {path} is damaged ({reason}); {where}, computing it again")
+        return None
+
+    def save(self, name: str, inputs, content, suffix: str = ".npz") -> None:
+        """Write part ``name`` atomically, with its key."""
+        path = self.path(name, inputs, suffix)
+        key = self.key(inputs)
+        if suffix == ".npz" and KEY_ENTRY in content:
+            raise ValueError(f"{KEY_ENTRY} is a reserved name in a part")
+        atomic_write(path, lambda tmp: _WRITE[suffix](tmp, content, key), suffix=suffix,
+                     clean=False)
+
+    def get(self, name: str, inputs, compute: Callable[[], object], suffix: str = ".npz",
+            check=None):
+        """The part ``name`` with ``inputs``: loaded, or ``compute()``-d, saved and read
+        back (so that a fresh result and a reused one are the same to the bit)."""
+        found = self.load(name, inputs, suffix, check)
+        if found is not None:
+            return found
+        content = compute()  # before the temporary exists: a kill here leaves nothing
+        self.save(name, inputs, content, suffix)
+        self.computed += 1
+        return _READ[suffix](self.path(name, inputs, suffix))[1]
+
+
+def remove_store(directory: str | os.PathLike) -> None:
+    """Delete a store folder's files once its job's result is safely written.
+
+    Only what a store holds (its marker, part files, ``.bad`` parts, stale temporaries)
+    is removed; the folder itself goes when nothing else is left in it. A missing folder
+    is fine.
+    """
+    directory = os.fspath(directory)
+    if not os.path.isdir(directory):
+        return
+    clean_stale_temporaries(directory)
+    for name in os.listdir(directory):
+        if name == STORE_MARKER or _PART.fullmatch(name) or name.startswith(
+                f"{TEMP_PREFIX}{os.getpid()}-"):
+            try:
+                os.remove(os.path.join(directory, name))
+            except OSError:
+                pass
+    try:
+        os.rmdir(directory)
+    except OSError:  # something else lives there
+        pass
+
+
+def _write_text(path: str, text: str) -> None:
+    with open(path, "w", encoding="utf-8") as file:
+        file.write(text)
+
+
+def _write_npz(path: str, content: dict, key: str) -> None:
+    with open(path, "wb") as file:
+        np.savez(file, **content, **{KEY_ENTRY: np.str_(key)})
+
+
+def _read_npz(path: str):
+    # our own handle: np.load leaks its file when the archive is damaged
+    with open(path, "rb") as file, np.load(file, allow_pickle=False) as npz:
+        content = {name: npz[name] for name in npz.files}  # reads, CRCs all
+    content = {name: (a.item() if a.ndim == 0 else a) for name, a in content.items()}
+    stored = content.pop(KEY_ENTRY, None)
+    return (None if stored is None else str(stored)), content
+
+
+def _write_nc(path: str, ds, key: str) -> None:
+    ds.assign_attrs({KEY_ENTRY: key}).to_netcdf(path, engine="netcdf4")
+
+
+def _read_nc(path: str):
+    with xr.open_dataset(path, engine="netcdf4") as ds:
+        ds = ds.load()
+    stored = ds.attrs.pop(KEY_ENTRY, None)
+    return (None if stored is None else str(stored)), ds
+
+
+def _write_json(path: str, content, key: str) -> None:
+    _write_text(path, json.dumps({KEY_ENTRY: key, "content": content}))
+
+
+def _read_json(path: str):
+    with open(path, encoding="utf-8") as file:
+        data = json.load(file)
+    if not isinstance(data, dict) or "content" not in data:
+        raise ValueError("not a part")
+    stored = data.get(KEY_ENTRY)
+    return (None if stored is None else str(stored)), data["content"]
+
+
+_WRITE = {".npz": _write_npz, ".nc": _write_nc, ".json": _write_json}
+_READ = {".npz": _read_npz, ".nc": _read_nc, ".json": _read_json}
+
+
+def _warn(message: str) -> None:
+    warnings.warn(message, RuntimeWarning, stacklevel=4)

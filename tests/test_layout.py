@@ -32,7 +32,7 @@ THEMES = {
     "tests/opa/cli/test_commands.py": "the happy path of every subcommand",
     "tests/mc/test_coef_sem.py": "standard errors of the Monte Carlo coefficients",
     "tests/mc/test_dask.py": "the Dask backend of simulate_mc",
-    "tests/compare/test_parts.py": "the trust map's parts on disk (compare._trustmap)",
+    "tests/compare/test_parts.py": "the trust map's parts on disk (compare._trustmap, opa._dataset.Store)",
 }
 
 #: source modules without a test module of their own -> the test modules that cover them
@@ -47,6 +47,7 @@ TESTED_IN = {
     "opa/cli/_stochastic.py": ("tests/opa/cli/test_commands.py",),
     "mc/_source.py": ("tests/opa/test_shims.py",),
     "compare/_report.py": ("tests/compare/test_trustmap.py",),
+    "compare/_config.py": ("tests/compare/test_trustmap.py",),
 }
 
 #: what a covering test module must contain to name the source module
@@ -61,6 +62,7 @@ NAMED_AS = {
     "opa/cli/_stochastic.py": "opa-mc stochastic",
     "mc/_source.py": "sweep_source",
     "compare/_report.py": "write_report",
+    "compare/_config.py": "load_config",
 }
 
 

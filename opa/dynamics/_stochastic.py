@@ -116,53 +116,18 @@ def stochastic_slice(oscillator: Oscillator, uncertain: str, sigma: float,
     return out
 
 
-def _slice_key(oscillator: Oscillator, uncertain, sigma, measure, samples, seed, options,
-               transient, record, xtol) -> str:
-    """A hash of everything one slice depends on (its file name in the parts folder)."""
+def _slice_to_json(piece: Slice) -> dict:
     import dataclasses
-    import hashlib
-    import json
 
-    from opa._dataset import package_version
-
-    payload = [oscillator.as_dict(), uncertain, float(sigma), measure.name, measure.lo,
-               measure.hi, int(samples), int(seed), dataclasses.asdict(options),
-               int(transient), int(record), float(xtol), package_version()]
-    text = json.dumps(payload, sort_keys=True, default=repr)
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    return dataclasses.asdict(piece)
 
 
-def _load_slice(path: str) -> Slice | None:
-    """A finished slice from its part, or None (absent or damaged: computed again)."""
-    import json
-
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
-        return Slice(value=float(data["value"]),
-                     boundaries=[tuple(b) for b in data["boundaries"]],
-                     intervals=[tuple(i) for i in data["intervals"]],
-                     probability=dict(data["probability"]),
-                     mc_probability=dict(data["mc_probability"]),
-                     samples=int(data["samples"]), method=str(data["method"]),
-                     located=[tuple(b) for b in data["located"]])
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
-def _save_slice(path: str, piece: Slice) -> None:
-    import dataclasses
-    import json
-
-    from opa._dataset import atomic_write
-
-    text = json.dumps(dataclasses.asdict(piece))
-
-    def write(tmp: str) -> None:
-        with open(tmp, "w", encoding="utf-8") as fh:
-            fh.write(text)
-
-    atomic_write(path, write, suffix=".json")
+def _slice_from_json(data: dict) -> Slice:
+    return Slice(value=float(data["value"]), boundaries=[tuple(b) for b in data["boundaries"]],
+                 intervals=[tuple(i) for i in data["intervals"]],
+                 probability=dict(data["probability"]),
+                 mc_probability=dict(data["mc_probability"]), samples=int(data["samples"]),
+                 method=str(data["method"]), located=[tuple(b) for b in data["located"]])
 
 
 def _periodic(kind: str) -> bool:
@@ -187,10 +152,12 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     transient, record : forcing periods dropped, then recorded, by each classification.
     xtol : tolerance of the located boundaries in xi.
     workers : processes of the classification sweeps.
-    parts : a folder where each finished control value is kept as it finishes (a file
-        named by a hash of everything it depends on); a rerun with the same folder reads
-        them back instead of computing them again (an interrupted diagram resumes), and
-        a damaged file is computed again. None: nothing is kept.
+    parts : a folder where each finished control value is kept as it finishes, a
+        :class:`opa._dataset.Store` keyed by everything the value depends on; a rerun
+        with the same folder reads them back instead of computing them again (an
+        interrupted diagram resumes), and a damaged file is set aside, named (``log``,
+        else a warning) and computed again. A folder of a version before the store is
+        refused, naming it. None: nothing is kept.
     log : callable taking a progress line, or None.
 
     Returns
@@ -214,7 +181,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     """
     import xarray as xr
 
-    from opa._dataset import provenance_attrs
+    from opa._dataset import Store, package_version, provenance_attrs
     from opa._measure import parse
 
     if isinstance(oscillator, System):
@@ -242,25 +209,31 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                     distribution=distribution)
     system.check_samples()
     slices = []
+    store = None
     if parts is not None:
-        import os
-
-        os.makedirs(parts, exist_ok=True)
+        store = Store(parts, "stochastic diagram", log=log)
     for i, value in enumerate(values):
         osc = oscillator.replace(**{parameter: float(value)})
-        path = None if parts is None else os.path.join(parts, "slice-" + _slice_key(
-            osc, uncertain, sigma, measure, samples, seed + i, options, transient, record,
-            xtol) + ".json")
-        piece = None if path is None else _load_slice(path)
-        reused = piece is not None
-        if piece is None:
+        inputs = {"oscillator": osc, "uncertain": uncertain, "sigma": float(sigma),
+                  "measure": measure, "samples": int(samples), "seed": seed + i,
+                  "options": options, "transient": int(transient), "record": int(record),
+                  "xtol": float(xtol), "value": float(value), "version": package_version()}
+
+        def compute(osc=osc, i=i, value=value):
             piece = stochastic_slice(osc, uncertain, float(sigma), measure,
                                      samples=int(samples), seed=seed + i, options=options,
                                      transient=transient, record=record, xtol=xtol,
                                      workers=workers)
             piece.value = float(value)
-            if path is not None:
-                _save_slice(path, piece)
+            return piece
+
+        if store is None:
+            piece, reused = compute(), False
+        else:
+            before = store.computed
+            piece = _slice_from_json(store.get(f"slice-{parameter}{value:g}", inputs,
+                                               lambda: _slice_to_json(compute()), ".json"))
+            reused = store.computed == before
         slices.append(piece)
         if log is not None:
             shown = ", ".join(f"{k} {p:.3f}" for k, p in sorted(piece.probability.items()))

@@ -15,10 +15,12 @@ numba thread) or on a Dask distributed cluster (``scheduler``). Continuation swe
 final state of the previous one and are sequential by nature.
 
 Crash safety and resumption: with ``out`` set, every finished point is written at once
-to ``<out>.parts/point-NNNNN.npz`` (temporary file, fsync, atomic rename) next to a
-``sweep.json`` manifest of the sweep's settings. A rerun with the same settings reads the
-finished points back and computes only the others (a continuation resumes from the last
-finished point's final state); when all are done the dataset is written atomically to
+to ``<out>.parts/point-NNNNN_<key>.npz`` (temporary file, fsync, atomic rename), a store
+(:class:`opa._dataset.Store`) whose ``store.json`` holds the sweep's settings. A rerun with
+the same settings reads the finished points back and computes only the others (a
+continuation resumes from the last finished point's final state); other settings, or a
+folder of an older version, are refused naming the folder; a damaged point is set aside
+with a warning and computed again. When all are done the dataset is written atomically to
 ``out`` and the parts are removed. Each point starts at t = 0: continuation carries the
 state over, not the clock (the forcing phase is the same at the handover, since runs end
 at a multiple of 2 pi/omega, but the impulse train restarts).
@@ -26,18 +28,15 @@ at a multiple of 2 pi/omega, but the impulse train restarts).
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import shutil
 import sys
-import warnings
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from opa._dataset import atomic_write, clean_stale_temporaries, provenance_attrs, write_netcdf
+from opa._dataset import Store, provenance_attrs, remove_store, write_netcdf
 from opa._lazy import lazy
 from opa._model import (
     Oscillator,
@@ -64,7 +63,6 @@ CONTINUATIONS = ("fixed", "forward", "backward")
 #: the System fields a sweep takes as keywords (its OPA system uses the semicircle law)
 SWEEP_FIELDS = tuple(f for f in SYSTEM_FIELDS if f != "distribution")
 DEFAULT_WORKERS = 2
-_MANIFEST = "sweep.json"
 
 
 # --------------------------------------------------------------------------- one point
@@ -277,74 +275,26 @@ def _parts_dir(out: str) -> str:
     return os.fspath(out) + ".parts"
 
 
-def _part_path(parts: str, index: int) -> str:
-    return os.path.join(parts, f"point-{index:05d}.npz")
+def _part_name(index: int) -> str:
+    return f"point-{index:05d}"
 
 
-def _write_part(parts: str, result: dict) -> None:
-    arrays = {k: np.asarray(v) for k, v in result.items()}
-    atomic_write(_part_path(parts, result["index"]), lambda tmp: np.savez(tmp, **arrays),
-                 suffix=".npz", clean=False)
+def _write_part(parts: Store, result: dict) -> None:
+    index = int(result["index"])
+    parts.save(_part_name(index), {"index": index},
+               {k: np.asarray(v) for k, v in result.items()})
 
 
-def _read_part(path: str) -> dict:
-    # our own handle: np.load leaks its file when the archive is damaged
-    with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
-        out = {k: z[k] for k in z.files}
-    for k, v in out.items():
-        if v.ndim == 0:
-            out[k] = v.item()
-    return out
-
-
-def _write_text(path: str, text: str) -> None:
-    with open(path, "w") as fh:
-        fh.write(text)
-
-
-def _set_aside(path: str, why: str) -> None:
-    """Move a damaged part to ``<path>.bad`` (replacing an older one) and say so."""
-    os.replace(path, path + ".bad")
-    warnings.warn(f"sweep part {path} {why}; moved aside to {os.path.basename(path)}.bad, "
-                  f"computing it again", RuntimeWarning, stacklevel=3)
-
-
-def _open_parts(out: str | None, manifest: dict) -> tuple[str | None, dict]:
-    """Create or check ``<out>.parts`` and return it with the finished points it holds."""
+def _open_parts(out: str | None, manifest: dict, count: int) -> tuple[Store | None, dict]:
+    """The store ``<out>.parts`` of this sweep (:class:`opa._dataset.Store`, refused when
+    it holds another sweep) and the finished points it holds, by index."""
     if out is None:
         return None, {}
-    parts = _parts_dir(out)
-    path = os.path.join(parts, _MANIFEST)
-    if os.path.exists(path):
-        try:
-            with open(path) as fh:
-                old = json.load(fh)
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError):
-            raise ValueError(f"{path} cannot be read: remove {parts} to start the sweep "
-                             f"over") from None
-        if old != manifest:
-            keys = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
-            raise ValueError(
-                f"{parts} holds an unfinished sweep with different settings ({', '.join(keys)}); "
-                f"rerun it with its own settings to finish it, or remove {parts}"
-            )
-    else:
-        os.makedirs(parts, exist_ok=True)
-        text = json.dumps(manifest, indent=1, sort_keys=True)
-        atomic_write(path, lambda tmp: _write_text(tmp, text), clean=False)
-    clean_stale_temporaries(parts)
+    parts = Store(_parts_dir(out), "sweep", settings=manifest)
     done = {}
-    for name in sorted(os.listdir(parts)):
-        if name.startswith("point-") and name.endswith(".npz"):
-            try:
-                result = _read_part(os.path.join(parts, name))
-                index = int(result["index"])
-            except Exception as err:  # noqa: BLE001 -- any damage: recompute the point
-                _set_aside(os.path.join(parts, name), f"cannot be read ({type(err).__name__})")
-                continue
-            if name != os.path.basename(_part_path(parts, index)):
-                _set_aside(os.path.join(parts, name), f"holds point {index}")
-                continue
+    for index in range(count):
+        result = parts.load(_part_name(index), {"index": index})
+        if result is not None:
             done[index] = result
     return parts, done
 
@@ -514,7 +464,7 @@ def sweep(
     manifest = _settings(model, param, values, base, options,
                          {**kw, "continuation": continuation})
     out = None if out is None else os.fspath(out)
-    parts, done = _open_parts(out, manifest)
+    parts, done = _open_parts(out, manifest, len(tasks))
 
     if progress is None:
         progress = sys.stderr.isatty()
@@ -554,7 +504,7 @@ def sweep(
     if out is not None:
         write_netcdf(ds, out)
         if not keep_parts:
-            shutil.rmtree(parts, ignore_errors=True)
+            remove_store(parts.directory)
     return ds
 
 

@@ -1,5 +1,6 @@
-"""The trust map's parts on disk: a rerun reuses every finished piece of work, and a part
-that is damaged, foreign or half-written is named, set aside and computed again."""
+"""The trust map's parts on disk (an opa._dataset.Store): a rerun reuses every finished
+piece of work, a part that is damaged, foreign or half-written is named, set aside and
+computed again, and a parts folder of a version before the store is refused."""
 
 import os
 import shutil
@@ -14,7 +15,7 @@ import compare._convergence as convergence
 import compare._trustmap as trustmap
 from compare import load_config, run_validation
 from compare._convergence import ConvergenceConfig, run_convergence
-from compare._trustmap import Parts, digest
+from opa._dataset import Store
 
 # one swept value, two sigmas, N = 0 and 1, one horizon, no frontier: about a second
 SMALL = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1), horizons=(4,), samples=64,
@@ -74,6 +75,11 @@ def _same(a: xr.Dataset, b: xr.Dataset, *, timings: bool = True):
     xr.testing.assert_identical(a, b)
 
 
+def _store_lines(lines):
+    """What the store said: damaged parts, removed temporaries."""
+    return [line for line in lines if " is damaged " in line or line.startswith("parts:")]
+
+
 def _part(outdir, prefix, index=0):
     names = sorted(p for p in os.listdir(outdir / "parts") if p.startswith(prefix + "_")
                    and not p.endswith(".bad"))
@@ -84,7 +90,7 @@ def test_a_finished_map_is_reassembled_without_integrating(clean, copy, monkeypa
     _forbid_integration(monkeypatch)
     ds, lines = _run(copy)
     assert ds.attrs["parts_computed"] == 0 and ds.attrs["mc_runs_computed"] == 0
-    assert not [line for line in lines if line.startswith("parts:")]
+    assert not _store_lines(lines)
     _same(ds, clean[0])
     with xr.open_dataset(copy / "validate.nc") as back:
         _same(back.load(), clean[0])
@@ -110,7 +116,7 @@ def test_a_damaged_part_is_named_set_aside_and_recomputed(clean, copy, prefix, l
     assert ds.attrs["opa_runs_computed"] == (prefix == "opa")
     _same(ds, clean[0], timings=False)
     _, again = _run(copy)  # the recomputed part is whole
-    assert not [line for line in again if line.startswith("parts:")]
+    assert not _store_lines(again)
 
 
 @pytest.mark.parametrize("prefix", ["mc", "opa"])
@@ -128,28 +134,52 @@ def test_a_part_of_other_settings_is_found_by_its_stored_key(clean, copy, prefix
     _same(ds, clean[0], timings=False)
 
 
-def _rewrite(path, **attrs):
-    """The netCDF part as an older version wrote it: without its key, ``attrs`` changed."""
+def test_a_part_without_its_key_is_set_aside(clean, copy):
+    """No exception for parts that store no key: such a part is damage."""
+    path = _part(copy, "mc_omega3.98_sigma0.01")
     with xr.open_dataset(path) as ds:
         ds = ds.load()
-    ds.attrs.pop("part_key", None)
-    ds.attrs.update(attrs)
+    del ds.attrs["store_key"]
     ds.to_netcdf(path, engine="netcdf4")
-
-
-def test_a_monte_carlo_part_without_a_key_is_judged_by_its_attributes(clean, copy):
-    path = _part(copy, "mc_omega3.98_sigma0.01")
-    _rewrite(path)
-    ds, lines = _run(copy)
-    assert ds.attrs["parts_computed"] == 0, lines  # written by an older version: kept
-    _same(ds, clean[0])
-
-    _rewrite(path, sigma=0.03)
     ds, lines = _run(copy)
     named = [line for line in lines if path.name in line]
-    assert len(named) == 1 and "sigma=0.03 (expected 0.01)" in named[0], lines
-    assert ds.attrs["mc_runs_computed"] == 1
+    assert len(named) == 1 and "stores no key" in named[0], lines
+    assert ds.attrs["mc_runs_computed"] == 1 and ds.attrs["parts_set_aside"] == 1
     _same(ds, clean[0], timings=False)
+
+
+def test_a_parts_folder_of_an_older_version_is_refused(tmp_path):
+    """A folder of parts written before the one store (no store.json) is refused in one
+    line naming it, before anything is computed, and left as it was."""
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    (parts / "mc_omega3.98_sigma0.01_M64_0123456789ab.nc").write_bytes(b"old")
+    with pytest.raises(ValueError, match=r"trust map '.*parts' holds files but no "
+                                         r"store.json .*remove it") as err:
+        _run(tmp_path)
+    assert "\n" not in str(err.value)
+    assert os.listdir(parts) == ["mc_omega3.98_sigma0.01_M64_0123456789ab.nc"]
+
+
+def test_the_keys_are_the_inputs(clean, copy):
+    """Another seed changes the inputs of the Monte Carlo ensembles and the phase
+    portraits' (computed again), not those of OPA or of the split scans (reused)."""
+    import re
+
+    def stems(names, prefix):
+        return {n.rsplit("_", 1)[0] for n in names if n.startswith(prefix + "_")}
+
+    old = set(os.listdir(clean[1]))
+    cfg = load_config(None, outdir=str(copy), seed=1, **SMALL)
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+    new = set(os.listdir(copy / "parts")) - old
+    assert stems(old, "mc") <= stems(new, "mc")  # every ensemble again, under a new key
+    assert stems(new, "details")
+    assert not stems(new, "splits")
+    # OPA only at the sigmas the new bisections probe (the verdicts may move)
+    probed = {re.search(r"_sigma([0-9.e-]+)_", n)[1] for n in stems(old, "opa")}
+    assert not {re.search(r"_sigma([0-9.e-]+)_", n)[1] for n in stems(new, "opa")} & probed
+    assert ds.attrs["parts_set_aside"] == 0
 
 
 def _dead_pid() -> int:
@@ -180,23 +210,6 @@ def test_temporaries_of_killed_writers_are_removed(clean, copy):
     _same(ds, clean[0])
 
 
-def test_parts_round_trip_and_refuse_a_reserved_name(tmp_path):
-    parts = Parts(str(tmp_path), log=lambda *a: None)
-    content = {"a": np.arange(3.0), "s": "text", "n": 7, "x": 0.1 + 0.2,
-               "e": np.array([], dtype=str)}
-    got = parts.arrays("thing", "k1", lambda: content)
-    again = parts.arrays("thing", "k1", lambda: pytest.fail("recomputed"))
-    for out in (got, again):
-        assert set(out) == set(content)
-        np.testing.assert_array_equal(out["a"], content["a"])
-        assert out["s"] == "text" and out["n"] == 7 and out["x"] == 0.1 + 0.2
-        assert out["e"].shape == (0,)
-    with pytest.raises(ValueError, match="reserved"):
-        parts.arrays("other", "k2", lambda: {"part_key": 1})
-    assert [p for p in os.listdir(tmp_path) if p.startswith(".tmp")] == []
-    assert os.stat(tmp_path / "thing_k1.npz").st_mode & 0o044  # not mkstemp's 0o600
-
-
 CONVERGENCE = dict(sigma=0.02, periods=2, per_period=4, orders=(0, 1), uniform=(1, 2),
                    budgets=(2, 4), order_budget=4, single_nodes=(1, 2), mc_samples=(64, 128),
                    reference=1024)
@@ -204,13 +217,14 @@ CONVERGENCE = dict(sigma=0.02, periods=2, per_period=4, orders=(0, 1), uniform=(
 
 def test_the_convergence_study_runs_each_run_once(tmp_path, monkeypatch):
     cfg = ConvergenceConfig(outdir=str(tmp_path), **CONVERGENCE)
-    parts = Parts(str(tmp_path), log=lambda *a: None)
+    parts = Store(str(tmp_path), "trust map", log=lambda *a: None)
 
     def memo(run, spec, compute):
-        return parts.arrays(f"frontier_{run}", digest(spec), compute)
+        return parts.get(f"frontier_{run}", spec, compute)
 
     first = run_convergence(cfg, log=lambda *a: None, write=False, memo=memo)
-    assert parts.computed == len(os.listdir(tmp_path)) == first.sizes["run"] + 1  # + reference
+    # every run and the reference, beside store.json
+    assert parts.computed == len(os.listdir(tmp_path)) - 1 == first.sizes["run"] + 1
     plain = run_convergence(cfg, log=lambda *a: None, write=False)
     # the same rows as without parts, apart from the wall times
     _same(first.drop_vars("seconds").drop_attrs(deep=False),
@@ -221,30 +235,6 @@ def test_the_convergence_study_runs_each_run_once(tmp_path, monkeypatch):
     _same(again, first)
     assert again.attrs["wall_seconds"] == first.attrs["wall_seconds"] == pytest.approx(
         float(first.seconds.sum()) + first.attrs["reference_seconds"])
-
-
-def test_the_default_keys_are_those_of_earlier_versions():
-    """The law of xi and the elements enter the hashes only when not the default, so that
-    a rerun of the default map reuses the parts an earlier version wrote."""
-    import dataclasses
-
-    cfg = load_config(None)
-    osc, opts = cfg.oscillator_at(3.98).as_dict(), dataclasses.asdict(cfg.options)
-    assert cfg.key(3.98, 0.01, 1024) == digest([osc, opts, 0.01, "mu", 1024, 0, 50.0, 8, 8])
-    assert cfg.opa_key(3.98, 0.01, 4) == digest(["opa", osc, opts, 0.01, 4, "mu",
-                                                 trustmap.VARIANTS, 50.0, 8])
-    others = [load_config(None, distribution="uniform"),
-              load_config(None, distribution="beta:2,3"),
-              load_config(None, uncertain="c")]
-    for other in others:
-        assert other.key(3.98, 0.01, 1024) != cfg.key(3.98, 0.01, 1024)
-        assert other.opa_key(3.98, 0.01, 4) != cfg.opa_key(3.98, 0.01, 4)
-    k4, ka = load_config(None, elements=4), load_config(None, elements="adaptive")
-    kb = load_config(None, elements="adaptive", max_elements=32)
-    ku = load_config(None, distribution="uniform", elements=4)
-    assert len({c.element_key(3.98, 0.01, 8) for c in (k4, ka, kb, ku)}) == 4
-    assert k4.key(3.98, 0.01, 1024) == cfg.key(3.98, 0.01, 1024)  # elements: OPA only
-    assert k4.opa_key(3.98, 0.01, 4) == cfg.opa_key(3.98, 0.01, 4)
 
 
 def test_adding_elements_to_a_finished_map_reuses_its_parts(clean, copy, monkeypatch):

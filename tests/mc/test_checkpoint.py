@@ -63,8 +63,11 @@ def test_rerun_loads_every_finished_chunk_and_is_bit_identical(tmp_path, fresh, 
     parts = tmp_path / "run.nc.parts"
     first = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
     assert len(counted) == 6
-    assert chunk_files(parts) == [f"chunk-{i:06d}-{16 * i}-{16 * i + 16}.npz" for i in range(6)]
-    assert json.loads((parts / "manifest.json").read_text())["seed"] == 3
+    names = chunk_files(parts)
+    assert [n.rsplit("_", 1)[0] for n in names] == \
+        [f"chunk-{i:06d}-{16 * i}-{16 * i + 16}" for i in range(6)]
+    assert all(len(n.rsplit("_", 1)[1]) == len("0123456789ab.npz") for n in names)
+    assert json.loads((parts / "store.json").read_text())["settings"]["seed"] == 3
     again = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
     assert len(counted) == 6  # nothing computed twice
     assert_identical(first, fresh)
@@ -99,7 +102,7 @@ def test_a_damaged_chunk_warns_by_default(tmp_path, fresh):
     mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
     name = chunk_files(parts)[0]
     (parts / name).write_bytes(b"not a zip file")
-    with pytest.warns(RuntimeWarning, match=rf"checkpoint chunk .*{name} is damaged"):
+    with pytest.warns(RuntimeWarning, match=rf"checkpoint part .*{name} is damaged"):
         resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
     assert_identical(resumed, fresh)
 
@@ -138,19 +141,19 @@ def test_a_chunk_without_the_coefficient_sums_of_squares_is_recomputed(tmp_path,
     assert_identical(resumed, fresh)
 
 
-def test_a_checkpoint_of_the_previous_format_is_refused_naming_both(tmp_path):
+def test_a_checkpoint_of_the_previous_format_is_refused_naming_it(tmp_path):
     """Format 1 chunks lack the coefficients' SE sums: the directory is another run's,
     refused in one line that names both formats, and left untouched."""
     parts = tmp_path / "parts"
     mc.simulate_mc(OSC, checkpoint=parts, **RUN)
-    manifest = json.loads((parts / "manifest.json").read_text())
-    assert manifest["format"] == "opa-mc monte-carlo checkpoint 2"
-    manifest["format"] = "opa-mc monte-carlo checkpoint 1"
-    (parts / "manifest.json").write_text(json.dumps(manifest))
+    marker = json.loads((parts / "store.json").read_text())
+    assert marker["settings"]["format"] == "opa-mc monte-carlo checkpoint 2"
+    marker["settings"]["format"] = "opa-mc monte-carlo checkpoint 1"
+    (parts / "store.json").write_text(json.dumps(marker))
     before = {n: (parts / n).read_bytes() for n in os.listdir(parts)}
-    with pytest.raises(ValueError, match=r"holds chunks of another format \('opa-mc "
-                                         r"monte-carlo checkpoint 1'; this version reads "
-                                         r"'opa-mc monte-carlo checkpoint 2'\)") as err:
+    with pytest.raises(ValueError, match=r"belongs to another run: format is opa-mc monte-"
+                                         r"carlo checkpoint 1 there, opa-mc monte-carlo "
+                                         r"checkpoint 2 here") as err:
         mc.simulate_mc(OSC, checkpoint=parts, **RUN)
     assert "\n" not in str(err.value)
     assert {n: (parts / n).read_bytes() for n in os.listdir(parts)} == before
@@ -180,12 +183,19 @@ def test_a_checkpoint_of_another_run_is_refused(tmp_path, change, key):
     assert {n: (parts / n).read_bytes() for n in os.listdir(parts)} == before  # untouched
 
 
-def test_chunk_files_without_a_manifest_are_refused(tmp_path):
+def test_a_checkpoint_of_an_older_version_is_refused(tmp_path):
+    """A directory as versions before the one store wrote it (manifest.json and chunk
+    files, no store.json) is refused in one line naming it, and left untouched."""
     parts = tmp_path / "parts"
     parts.mkdir()
+    (parts / "manifest.json").write_text("{}")
     (parts / "chunk-000000-0-16.npz").write_bytes(b"")
-    with pytest.raises(ValueError, match=r"holds chunk files but no manifest.json"):
+    with pytest.raises(ValueError, match=r"checkpoint '.*parts' holds files but no "
+                                         r"store.json \(chunk-000000-0-16.npz, ...\).*"
+                                         r"remove it") as err:
         mc.simulate_mc(OSC, checkpoint=parts, **RUN)
+    assert "\n" not in str(err.value)
+    assert sorted(os.listdir(parts)) == ["chunk-000000-0-16.npz", "manifest.json"]
     (tmp_path / "file").write_text("")
     with pytest.raises(ValueError, match=r"checkpoint '.*file' is not a directory"):
         mc.simulate_mc(OSC, checkpoint=tmp_path / "file", **RUN)

@@ -1,8 +1,10 @@
-"""Tests for opa._dataset: atomic netCDF files with the umask's mode and the cleaning of
-temporaries that crashed writes left behind (README, 'Errors, limits and resuming')."""
+"""Tests for opa._dataset: atomic netCDF files with the umask's mode, the cleaning of
+temporaries that crashed writes left behind, and the one resume store (README, 'Errors,
+limits and resuming')."""
 
 from __future__ import annotations
 
+import json
 import os
 import stat
 import subprocess
@@ -13,7 +15,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from opa._dataset import atomic_write, clean_stale_temporaries, current_umask, write_netcdf
+from opa._dataset import (Store, atomic_write, clean_stale_temporaries, current_umask, digest,
+                          remove_store, write_netcdf)
 
 
 @pytest.fixture
@@ -117,3 +120,123 @@ def test_a_killed_writer_leaves_a_temporary_the_next_write_removes(tmp_path, ds)
     assert len(left) == 1 and left[0].startswith(f".tmp-opa-mc-{child.pid}-")
     write_netcdf(ds, tmp_path / "out.nc")
     assert os.listdir(tmp_path) == ["out.nc"]
+
+
+# --------------------------------------------------------------------------- the store
+
+
+def test_digest_hashes_values_arrays_and_dataclasses():
+    from opa import SolverOptions, System, preset
+
+    assert digest({"a": 1, "b": (2.5, "x")}) == digest({"b": [2.5, "x"], "a": 1})
+    assert digest(0.1 + 0.2) != digest(0.3)  # floats exactly
+    a = np.arange(6.0)
+    assert digest(a) == digest(a.copy()) == digest(np.float64(0) + a)
+    assert len({digest(a), digest(a.reshape(2, 3)), digest(a.astype(np.float32)),
+                digest(np.arange(6))}) == 4  # dtype and shape count
+    assert digest(a[::2]) == digest(np.array([0.0, 2.0, 4.0]))  # by value, not by layout
+    assert digest(np.int64(3)) == digest(3)
+    s = System(preset("3.2"), sigma=0.02)
+    assert digest(s) == digest(System(preset("3.2"), sigma=0.02))
+    assert digest(s) != digest(s.replace(sigma=0.03))
+    assert digest(SolverOptions()) != digest(SolverOptions(rtol=1e-9))
+    with pytest.raises(TypeError, match="cannot hash a object"):
+        digest({"x": object()})
+    with pytest.raises(TypeError, match="keys must be strings"):
+        digest({1: 2})
+
+
+@pytest.mark.parametrize(("suffix", "content"), [
+    (".npz", {"a": np.arange(3.0), "s": "text", "n": 7, "x": 0.1 + 0.2,
+              "e": np.array([], dtype=str)}),
+    (".json", {"a": [1.5, None], "s": "text"}),
+    (".nc", xr.Dataset({"x": ("t", np.arange(3.0))}, attrs={"model": "m"})),
+])
+def test_store_parts_round_trip_and_are_computed_once(tmp_path, umask, suffix, content):
+    umask(0o022)
+    store = Store(tmp_path, "test job")
+    got = store.get("thing", {"k": 1}, lambda: content, suffix)
+    again = store.get("thing", {"k": 1}, lambda: pytest.fail("recomputed"), suffix)
+    other = store.get("thing", {"k": 2}, lambda: content, suffix)
+    assert store.computed == 2
+    for out in (got, again, other):
+        if suffix == ".nc":
+            xr.testing.assert_identical(out, content)
+        else:
+            assert set(out) == set(content)
+            for name in content:
+                np.testing.assert_array_equal(out[name], content[name])
+    names = sorted(os.listdir(tmp_path))
+    parts = [n for n in names if n != "store.json"]
+    assert len(parts) == 2 and len(names) == 3  # no temporaries left
+    assert all(n.startswith("thing_") and n.endswith(suffix) for n in parts)
+    assert stat.S_IMODE(os.stat(tmp_path / parts[0]).st_mode) == 0o644  # not mkstemp's
+    # a new store of the same folder reads them back
+    assert Store(tmp_path, "test job").load("thing", {"k": 1}, suffix) is not None
+
+
+def test_store_refuses_a_reserved_name(tmp_path):
+    with pytest.raises(ValueError, match="reserved"):
+        Store(tmp_path, "job").save("x", {}, {"store_key": 1})
+
+
+def test_damaged_and_foreign_parts_are_set_aside_named_and_recomputed(tmp_path):
+    lines = []
+    store = Store(tmp_path, "job", log=lines.append)
+    for k in range(3):
+        store.get("p", {"k": k}, lambda k=k: {"v": k})
+    path = [store.path("p", {"k": k}) for k in range(3)]
+    with open(path[0], "wb") as fh:
+        fh.write(b"half")
+    os.replace(path[1], path[2])  # k = 2's file holds k = 1
+    for k in range(3):
+        assert store.get("p", {"k": k}, lambda k=k: {"v": 10 + k})["v"] == 10 + k
+    assert store.set_aside == 2 and len(lines) == 2
+    assert path[0] in lines[0] and "is damaged (cannot be read" in lines[0]
+    assert path[2] in lines[1] and "stores the key" in lines[1]
+    assert all(os.path.exists(p + ".bad") for p in (path[0], path[2]))
+    with open(path[0], "wb") as fh:
+        fh.write(b"")
+    with pytest.warns(RuntimeWarning, match=r"job part .* is damaged"):  # default: a warning
+        assert Store(tmp_path, "job").load("p", {"k": 0}) is None
+
+
+def test_a_folder_of_an_older_version_or_of_another_run_is_refused(tmp_path):
+    old = tmp_path / "old"
+    old.mkdir()
+    (old / "manifest.json").write_text("{}")
+    with pytest.raises(ValueError, match=r"job '.*old' holds files but no store.json "
+                                         r"\(manifest.json\).*remove it"):
+        Store(old, "job")
+    assert os.listdir(old) == ["manifest.json"]
+
+    folder = tmp_path / "run"
+    Store(folder, "job", settings={"a": 1, "b": {"c": [1, 2]}})
+    Store(folder, "job", settings={"a": 1, "b": {"c": (1, 2)}})  # the same settings
+    with pytest.raises(ValueError, match=r"belongs to another run: b.c is 2 entries there, "
+                                         r"3 entries here"):
+        Store(folder, "job", settings={"a": 1, "b": {"c": [1, 2, 3]}})
+    with pytest.raises(ValueError, match=r"holds the parts of a job, not of a sweep"):
+        Store(folder, "sweep", settings={"a": 1, "b": {"c": [1, 2]}})
+    marker = json.loads((folder / "store.json").read_text())
+    marker["format"] = "opa-mc store 0"
+    (folder / "store.json").write_text(json.dumps(marker))
+    with pytest.raises(ValueError, match=r"another format \('opa-mc store 0'; this version "
+                                         r"reads 'opa-mc store 1'\)"):
+        Store(folder, "job", settings={"a": 1, "b": {"c": [1, 2]}})
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ValueError, match="is not a directory"):
+        Store(tmp_path / "file", "job")
+
+
+def test_remove_store_removes_only_what_a_store_holds(tmp_path):
+    store = Store(tmp_path / "s", "job")
+    store.get("p", {}, lambda: {"v": 1})
+    (tmp_path / "s" / "p_0123456789ab.npz.bad").write_bytes(b"")
+    remove_store(tmp_path / "s")
+    assert not (tmp_path / "s").exists()
+    remove_store(tmp_path / "s")  # gone already: fine
+    store = Store(tmp_path / "s", "job")
+    (tmp_path / "s" / "notes.txt").write_text("mine")
+    remove_store(tmp_path / "s")
+    assert os.listdir(tmp_path / "s") == ["notes.txt"]

@@ -108,8 +108,12 @@ def test_an_interrupted_diagram_resumes_from_its_parts(tmp_path, monkeypatch):
     assert len(calls) == 1  # 0.04 was read back
     np.testing.assert_array_equal(both.probability.sel(c=0.04).values,
                                   first.probability.sel(c=0.04).values)
-    for path in (tmp_path / "parts").iterdir():
+    slices = sorted((tmp_path / "parts").glob("slice-*.json"))
+    assert len(slices) == 2
+    for path in slices:
         path.write_text("{not json")
-    again = stochastic_diagram(SECTION_31, "c", [0.04, 0.05], **kw)
-    assert len(calls) == 3
+    with pytest.warns(RuntimeWarning, match="is damaged") as caught:
+        again = stochastic_diagram(SECTION_31, "c", [0.04, 0.05], **kw)
+    assert len(calls) == 3 and len(caught) == 2
+    assert all(path.with_name(path.name + ".bad").exists() for path in slices)
     np.testing.assert_array_equal(again.probability.values, both.probability.values)

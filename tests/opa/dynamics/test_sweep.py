@@ -193,8 +193,8 @@ def test_interrupted_sweep_resumes_without_loss_or_rework(tmp_path, monkeypatch,
             sweep("dmr", "c", values, osc, out=out, **kw)
     parts = str(out) + ".parts"
     assert len(written) == 3 and not out.exists()
-    assert sorted(f for f in os.listdir(parts) if f.startswith("point-")) == \
-        [f"point-{i:05d}.npz" for i in sorted(written)]
+    assert sorted(f.rsplit("_", 1)[0] for f in os.listdir(parts) if f.startswith("point-")) \
+        == [f"point-{i:05d}" for i in sorted(written)]
     before = {f: os.stat(os.path.join(parts, f)).st_mtime_ns for f in os.listdir(parts)}
 
     with monkeypatch.context() as m:
@@ -212,8 +212,9 @@ def test_interrupted_sweep_resumes_without_loss_or_rework(tmp_path, monkeypatch,
 
 
 def test_damaged_parts_are_set_aside_and_recomputed(tmp_path, monkeypatch):
-    """A truncated, an empty and a misnamed part, plus a killed writer's temporary: the
-    rerun names each, moves it to .bad, recomputes exactly those points and loses nothing."""
+    """A truncated, an empty and a part holding another point, plus a killed writer's
+    temporary: the rerun names each, moves it to .bad, recomputes exactly those points
+    (and the one whose file went elsewhere) and loses nothing."""
     osc = preset("3.1")
     values = np.linspace(0.02, 0.08, 5)
     kw = {"transient": 30, "record": 10, "per_period": 8, "workers": 1}
@@ -224,20 +225,23 @@ def test_damaged_parts_are_set_aside_and_recomputed(tmp_path, monkeypatch):
         with pytest.raises(Interrupt):
             sweep("dmr", "c", values, osc, out=out, **kw)
     parts = str(out) + ".parts"
-    point = [os.path.join(parts, f"point-{i:05d}.npz") for i in range(5)]
+    point = {int(f[6:11]): os.path.join(parts, f) for f in os.listdir(parts)
+             if f.startswith("point-")}
+    assert sorted(point) == [0, 1, 2, 3]
     data = Path(point[0]).read_bytes()
     Path(point[0]).write_bytes(data[: len(data) // 2])  # truncated
     Path(point[1]).write_bytes(b"")  # empty
-    os.replace(point[2], os.path.join(parts, "point-00009.npz"))  # holds point 2
+    os.replace(point[2], point[3])  # point 3's file holds point 2
     stale = os.path.join(parts, ".tmp-opa-mc-999999999-x.npz")
     Path(stale).write_bytes(b"")  # a temporary of a writer that is gone
     with monkeypatch.context() as m:
         computed = count_computed(m)
         with pytest.warns(RuntimeWarning, match="moved aside") as caught:
             resumed = sweep("dmr", "c", values, osc, out=out, keep_parts=True, **kw)
-    assert sorted(computed) == [0, 1, 2, 4]
+    assert sorted(computed) == [0, 1, 2, 3, 4]
     assert len(caught) == 3
-    assert os.path.exists(point[0] + ".bad") and os.path.exists(point[1] + ".bad")
+    assert "other inputs" in str(caught[2].message)
+    assert all(os.path.exists(point[i] + ".bad") for i in (0, 1, 3))
     assert not os.path.exists(stale)
     assert_same(resumed, reference)
 
@@ -249,7 +253,7 @@ def test_resume_refuses_different_settings(tmp_path, monkeypatch):
         interrupt_after(m, 1)
         with pytest.raises(Interrupt):
             sweep("dmr", "c", [0.02, 0.05], osc, out=out, **QUICK)
-    with pytest.raises(ValueError, match="different settings.*record"):
+    with pytest.raises(ValueError, match="belongs to another run: record is 10 there, 12 here"):
         sweep("dmr", "c", [0.02, 0.05], osc, out=out, **{**QUICK, "record": 12})
 
 
