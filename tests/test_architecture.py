@@ -45,6 +45,10 @@ def modules() -> dict[str, Path]:
 
 
 MODULES = modules()
+# parsed once, at collection: CPython 3.11.7's ast.parse can fail with "AST constructor
+# recursion depth mismatch" while threads of an earlier test (a Dask cluster shutting
+# down) still compile code
+TREES = {m: ast.parse(path.read_text(), filename=str(path)) for m, path in MODULES.items()}
 
 
 def layer(module: str) -> int:
@@ -83,7 +87,7 @@ def _resolve(importer: str, is_package: bool, node: ast.ImportFrom) -> list[str]
 def imports(module: str) -> list[tuple[str, bool]]:
     """(imported module of our packages, whether the import is inside a function)."""
     path = MODULES[module]
-    tree = ast.parse(path.read_text(), filename=str(path))
+    tree = TREES[module]
     found = []
 
     def visit(node, nested):
@@ -182,7 +186,7 @@ def test_matplotlib_is_imported_only_by_figure_modules():
     drawing = {"opa.plots._diagrams", "opa.plots._branches", "opa.plots._stochastic",
                "compare._figures"}
     for module, path in MODULES.items():
-        tree = ast.parse(path.read_text())
+        tree = TREES[module]
         top = [n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))]
         names = [a.name for n in top if isinstance(n, ast.Import) for a in n.names]
         names += [n.module for n in top if isinstance(n, ast.ImportFrom) and n.module]
@@ -203,7 +207,7 @@ def test_one_name_one_meaning_for_module_constants():
     once all called GRAZE_VELOCITY): a second module imports it or names its own."""
     defined: dict[str, list[str]] = {}
     for module, path in MODULES.items():
-        for node in ast.parse(path.read_text()).body:
+        for node in TREES[module].body:
             targets = (node.targets if isinstance(node, ast.Assign) else
                        [node.target] if isinstance(node, ast.AnnAssign) else [])
             for target in targets:
