@@ -13,12 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from opa._elements import MAX_ELEMENTS
-from opa._measure import Measure, parse as parse_law
-from opa._memory import check_memory
-from opa._model import (MAX_GRID, PARAMETER_NAMES, Oscillator, SolverOptions, check_order, check_span,
-                        preset)
-from opa._system import IMPULSE_FIELDS, System
+from opa.engine import (
+    IMPULSE_FIELDS, MAX_ELEMENTS, MAX_GRID, PARAMETER_NAMES, check_memory, check_order,
+    check_span, Measure, Oscillator, parse as parse_law, preset, SolverOptions, System,
+)
 
 # The single-element variants (impact law, truncation) under the semicircle law. Under
 # another law of xi the `paper` truncation (eq. (27), written in the semicircle's basis)

@@ -31,16 +31,13 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import xarray as xr
 
-from mc._ensemble import simulate_mc
-from opa._basis import quadrature_order
-from opa._dataset import provenance_attrs, write_netcdf
+from mc import simulate_mc
+from opa.engine import (
+    collocation, ElementBudgetWarning, Oscillator, parse, preset, provenance_attrs,
+    quadrature_order, simulate_opa, SimulationError, SolverOptions, System, time_grid,
+    uniform_edges, write_netcdf,
+)
 from compare._verify import verify
-from opa._elements import ElementBudgetWarning, collocation, uniform_edges
-from opa._measure import parse
-from opa._model import Oscillator, SolverOptions, preset, time_grid
-from opa._system import System
-from opa._simulate import simulate_opa
-from opa._run import SimulationError
 
 STUDY_LAWS = ("mean", "saltation")
 

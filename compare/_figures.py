@@ -25,7 +25,7 @@ the stochastic oscillator's. Each figure writes beside ``figN.png``:
   the caption and the differences as attributes.
 
 Bifurcation lines are drawn only at located bifurcations listed in the sweep dataset
-(``opa.plots._diagrams._located_marks``); brute-force period labels are reported in the text,
+(``opa.plots._diagrams.located_marks``); brute-force period labels are reported in the text,
 never drawn as bifurcations. Panel titles carry the labels z = n/p measured on that run.
 
 Default sizes: 61 sweep values, 300 + 60 periods; portraits 500 + 100 periods; Monte
@@ -52,12 +52,13 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import xarray as xr  # noqa: E402
 
-from opa._model import SolverOptions, check_order, preset  # noqa: E402
-from opa._system import System  # noqa: E402
-from opa.plots._diagrams import (  # noqa: E402
+from opa.engine import (  # noqa: E402
+    check_order, identify_motion, mean_state, phase_section, preset, SolverOptions, System,
+)
+from opa.plots import (  # noqa: E402
     COLORS,
     SECTION_LABELS,
-    _located_marks,
+    located_marks,
     describe_marks,
     diagram,
     draw_marks,
@@ -67,7 +68,6 @@ from opa.plots._diagrams import (  # noqa: E402
     section_bars,
     window,
 )
-from opa.dynamics._sections import identify_motion, mean_state, phase_section  # noqa: E402
 
 FIGURES = ("fig2", "fig3", "fig4", "fig5", "fig6", "fig7", "fig8", "fig9", "fig10", "fig11")
 
@@ -149,7 +149,7 @@ class _Context:
         self.executor = None
 
     def sweep(self, name, model, param, values, osc, **kw):
-        from opa.dynamics._sweep import local_executor, sweep
+        from opa.engine import local_executor, sweep
 
         if self.executor is None and self.scheduler is None and self.workers > 1:
             self.executor = local_executor(self.workers)
@@ -165,7 +165,7 @@ class _Context:
                    out=out, scheduler=self.scheduler, executor=self.executor,
                    workers=self.workers, progress=self.progress, **self.impulse_model, **kw)
         if self.log:
-            from opa.dynamics._sweep import summary_lines
+            from opa.engine import summary_lines
 
             self.log(f"  {name}:")
             for line in summary_lines(ds):
@@ -173,7 +173,7 @@ class _Context:
         return ds, out
 
     def times(self, osc, record=None):
-        from opa.dynamics._sweep import sweep_times
+        from opa.engine import sweep_times
 
         # strong impulses (F0 = 10) kick the velocity far up, and the cubic damping brings
         # it back within a fraction of a period: resolve that in the drawn trajectory
@@ -184,7 +184,7 @@ class _Context:
 
     def run(self, model, osc, *, sigma=0.0, record=None):
         """One portrait run on a grid that is stroboscopic through the transient."""
-        from opa._simulate import simulate_dmr, simulate_opa
+        from opa.engine import simulate_dmr, simulate_opa
 
         times = self.times(osc, record)
         if model == "dmr":
@@ -238,7 +238,7 @@ def _drawn(ctx, name, fig, caption, differences, *, data=None, files=(), width=1
 
 def _write(ctx, drawn: Drawn) -> list[str]:
     """PNG, text and data of a drawn figure; returns the paths written."""
-    from opa._dataset import atomic_write, write_netcdf
+    from opa.engine import atomic_write, write_netcdf
 
     png = os.path.join(ctx.outdir, f"{drawn.name}.png")
     drawn.fig.savefig(png, dpi=110)
@@ -343,14 +343,14 @@ def _observed_period_changes(ds) -> int:
 
 
 def _cycle(osc) -> int | None:
-    from opa.dynamics._orbits import impulse_cycle
+    from opa.engine import impulse_cycle
 
     return impulse_cycle(osc)
 
 
 def _cycle_note(osc, record: int) -> str:
     """Why a label can or cannot come out: the forcing's own repeat (impulse train)."""
-    from opa.dynamics._orbits import MAX_CYCLE
+    from opa.engine import MAX_CYCLE
 
     k = _cycle(osc)
     if k is None:
@@ -382,11 +382,11 @@ def _emr0_dmr_text(dmr, emr0, record: int) -> str:
 def _opa_not_located(ctx, osc, param, values, sigma) -> str:
     """Why a figure's OPA sweep has no located bifurcations: the reason the continuation
     cannot be done, or (EMR_0) where the DMR's, which are EMR_0's, are located."""
-    from opa.dynamics._sweep import _locate_setup
+    from opa.engine import locate_setup
 
     system = System(osc, sigma=sigma, order=ctx.order, **ctx.impulse_model)
     try:
-        _locate_setup(True, "opa", param, np.asarray(values, dtype=float), system,
+        locate_setup(True, "opa", param, np.asarray(values, dtype=float), system,
                       ctx.options)
     except ValueError as err:
         return "not located: " + str(err).removeprefix("locate=True: ")
@@ -418,7 +418,7 @@ def _marks_text(marks, param, ds=None, why=None) -> str:
 def _merge_marks(*datasets):
     seen, out = set(), []
     for ds in datasets:
-        for m in _located_marks(ds):
+        for m in located_marks(ds):
             key = (round(m[0], 9), m[1])
             if key not in seen:
                 seen.add(key)
@@ -622,7 +622,7 @@ def fig9(ctx):
             line += (f"EMR against the MC mean at {len(mc_values)} values of ω: largest "
                      f"phase-plane difference {rows[k]:.2g} (at ω = {mc_values[k]:.4g}), "
                      f"median {np.median(finite) if finite.size else math.nan:.2g}; ")
-        marks = _located_marks(emr)
+        marks = located_marks(emr)
         all_marks.append(marks)
         _guide_lines(ax, (3.98, 4.00495), "ω = 3.98, 4.00495 (Figs. 7, 8)")
         draw_marks(ax, marks)
@@ -650,7 +650,8 @@ def fig9(ctx):
         describe_marks([], "ω")
     caption = (f"Fig. 9: bifurcation diagrams vs ω in the phase plane (x at t = k 2π/ω), set "
                f"3.3 (a = f = 3.5, c = 0.05, F0 = 0.1), {s.count} values of ω, {s.record} "
-               f"recorded periods after {s.transient}: (a) EMR_0 (σ = 0, orange dots) on the DMR (black circles, its "
+               f"recorded periods after {s.transient}: (a) EMR_0 (σ = 0, orange dots) on the DMR "
+               f"(black circles, its "
                f"truth), (b)-(d) "
                f"EMR for σ = 0.1, 0.16, 0.18 (blue) with the Monte Carlo mean (green x, "
                f"{s.sweep_mc_samples} Sobol samples, at every {s.sweep_mc_stride}th ω); "
@@ -704,7 +705,7 @@ def fig10(ctx):
         dmr, p_dmr = ctx.sweep(f"fig10_dmr_n{n}", "dmr", "c", values, osc, record=record,
                                locate=False)
         files += [path, p_dmr]
-        marks = _located_marks(emr0)
+        marks = located_marks(emr0)
         all_marks.append(marks)
         for ax, section, tag in zip(row, ("phase", "constraint"), tags):
             diagram(ax, dmr, section, color=COLORS["DMR"], label="DMR", ms=4.0, marker="o")
@@ -1013,7 +1014,8 @@ def reproduce(figure: str, outdir: str | os.PathLike = "figures", *, full: bool 
     os.makedirs(outdir, exist_ok=True)
     ctx = _Context(outdir, sizes or (FULL_SIZES if full else DEFAULT_SIZES),
                    impulse=impulse, pulse_width=pulse_width,
-                   impulse_at_zero=impulse_at_zero, order=int(order), workers=int(workers), scheduler=scheduler,
+                   impulse_at_zero=impulse_at_zero, order=int(order), workers=int(workers),
+                   scheduler=scheduler,
                    progress=progress, log=log)
     paths = []
     try:

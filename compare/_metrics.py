@@ -73,8 +73,8 @@ def _opa_coefficients(opa_ds: xr.Dataset, order: int):
         return opa_ds.x_coef.values[: order + 1]
     if "element_x_coef" not in opa_ds:
         return None
-    from opa._elements import global_coefficients
-    from opa._measure import parse
+    from opa.engine import global_coefficients
+    from opa.engine import parse
 
     try:
         measure = parse(opa_ds.attrs.get("distribution", "semicircle"))

@@ -1156,6 +1156,7 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
 
 
 __all__ = ["best_variant", "boundary_table", "cause", "first_screen", "run_failures",
-           "short_cause", "wall_text", "bullet", "process_started", "complete_within", "count_table", "findings",
+           "short_cause", "wall_text", "bullet", "process_started", "complete_within",
+           "count_table", "findings",
            "frontier_dataset", "frontier_lines", "nearest_crossing", "nearest_split",
            "star_text", "verdict_grid", "write_report"]

@@ -62,17 +62,14 @@ import xarray as xr
 
 from compare._config import CRITERIA, ELEMENT_TOLERANCE, ValidateConfig, noise_floor
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
-from mc._ensemble import simulate_mc
-from mc._sampling import semicircle_cdf
-from opa._dataset import Store, provenance_attrs, write_netcdf
-from opa._elements import adaptive_edges, collocate_element, run_elements, uniform_edges
-from opa._measure import Measure
-from opa._model import SolverOptions, time_grid
-from opa._run import SimulationError
-from opa._simulate import opa_variants, simulate_dmr, simulate_opa
-from opa._system import System
-from opa._splits import (MAX_CROSSINGS, MAX_SPLITS, SPLIT_KINDS, Split, count_probabilities,
-                         scan_splits)
+from mc import simulate_mc
+from mc import semicircle_cdf
+from opa.engine import (
+    MAX_CROSSINGS, MAX_SPLITS, SPLIT_KINDS, adaptive_edges, collocate_element,
+    count_probabilities, Measure, opa_variants, provenance_attrs, run_elements, scan_splits,
+    simulate_dmr, simulate_opa, SimulationError, SolverOptions, Split, Store, System,
+    time_grid, uniform_edges, write_netcdf,
+)
 
 @dataclass
 class Point:
@@ -320,7 +317,8 @@ class _Map:
             found = {}
             for h in sorted(cfg.horizons, reverse=True):
                 found[h] = scan_splits(
-                    cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax, centre + smax, h * T,
+                    cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax,
+                    centre + smax, h * T,
                     tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache,
                     outputs=time_grid(osc.omega, h, cfg.per_period))
             seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache,
@@ -441,7 +439,8 @@ FRONTIER_REFERENCE = 32768
 
 def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
     """Cost against accuracy at the first swept value, the largest sigma and the first
-    horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element OPA (mean and
+    horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element
+    OPA (mean and
     saltation laws, element budgets 8..64), multi-element collocation, single-element
     collocation, MC and scrambled Sobol, against a 2^15-sample Sobol reference
     (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``.
@@ -515,7 +514,7 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
 
 
 def _sequence(system, cfg, cache, value):
-    from opa._splits import event_sequence
+    from opa.engine import event_sequence
 
     seq = event_sequence(system.replace(**{cfg.uncertain: value}), cfg.options,
                          cache["t_end"])

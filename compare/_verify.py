@@ -46,13 +46,11 @@ import numpy as np
 import xarray as xr
 
 from compare._trust import first_disagreement, marginal
-from mc._sampling import sample_xi
-from opa._dataset import check_opa_layout
-from opa._elements import true_runs
-from opa._memory import check_memory
-from opa._model import PARAMETER_NAMES, Oscillator, SolverOptions
-from opa._surrogate import run_measure, surrogate, surrogate_moments
-from opa._system import System
+from mc import sample_xi
+from opa.engine import (
+    PARAMETER_NAMES, check_memory, check_opa_layout, Oscillator, run_measure, SolverOptions,
+    surrogate, surrogate_moments, System, true_runs,
+)
 
 #: the trust map's criterion (README, "The main job")
 MEAN_TOLERANCE = 0.1

@@ -26,7 +26,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from opa._dataset import Store, remove_store
+from opa.engine import remove_store, Store
 
 # Version of the chunk files' contents. 2: ChunkStats gained x_moment_m2 and x_moment_rep
 # (the coefficients' standard errors); chunks of format 1 lack them.

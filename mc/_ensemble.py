@@ -35,13 +35,12 @@ import numpy as np
 import xarray as xr
 
 from mc._checkpoint import Checkpoint, stats_arrays
-from mc._sampling import _check_sampler, sample_xi
-from opa._basis import chebyshev_u, orthonormal
-from opa._dataset import digest, package_version, provenance_attrs, time_coord
-from opa._memory import check_memory
-from opa._model import Oscillator, SolverOptions, check_instance
-from opa._run import SimulationError, output_times, run_batch
-from opa._system import IMPULSE_FIELDS, System, as_system
+from mc._sampling import check_sampler, sample_xi
+from opa.engine import (
+    IMPULSE_FIELDS, as_system, chebyshev_u, check_instance, check_memory, digest, orthonormal,
+    Oscillator, output_times, package_version, provenance_attrs, run_batch, SimulationError,
+    SolverOptions, System, time_coord,
+)
 
 #: the System fields a Monte Carlo ensemble takes (it has no closures: each sample is the
 #: true impact system)
@@ -197,7 +196,7 @@ def run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_pa
 
 def _chunk_size(n_times: int, requested: int | None) -> int:
     if requested is not None:
-        from opa._model import check_count
+        from opa.engine import check_count
 
         try:
             return check_count("chunk_size", requested)
@@ -304,7 +303,7 @@ def simulate_mc(
         if flag not in (True, False, None) or isinstance(flag, str) or \
                 (name == "keep_paths" and flag is None):
             raise ValueError(f"{name} must be True or False, got {flag!r}")
-    _check_sampler(sampler, samples, seed)
+    check_sampler(sampler, samples, seed)
     samples = int(samples)
     if samples < 2 and sampler != "gauss":
         raise ValueError(f"samples must be >= 2 for a variance and a standard error, got "

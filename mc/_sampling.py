@@ -28,7 +28,7 @@ import numbers
 
 import numpy as np
 
-from opa._basis import gauss_nodes
+from opa.engine import gauss_nodes
 from scipy import special
 from scipy.stats import qmc
 
@@ -114,11 +114,11 @@ def semicircle_ppf(u: np.ndarray | float) -> np.ndarray | float:
     return xi[()] if xi.ndim == 0 else xi
 
 
-def _check_sampler(sampler: str, samples: int, seed: int | None) -> None:
+def check_sampler(sampler: str, samples: int, seed: int | None) -> None:
     if sampler not in SAMPLERS:
         allowed = ", ".join(repr(s) for s in SAMPLERS)
         raise ValueError(f"sampler must be one of {allowed}, got {sampler!r}")
-    from opa._model import check_count
+    from opa.engine import check_count
 
     if isinstance(samples, float) or not isinstance(samples, (numbers.Integral, np.ndarray,
                                                               np.generic)):
@@ -190,11 +190,11 @@ def sample_xi(
     >>> abs(float(w @ xi**2) - 0.25) < 1e-4
     True
     """
-    _check_sampler(sampler, samples, seed)
+    check_sampler(sampler, samples, seed)
     samples = int(samples)
     measure = None
     if distribution is not None:
-        from opa._measure import parse
+        from opa.engine import parse
 
         measure = parse(distribution)
         if measure.name == "semicircle" and measure.is_whole:

@@ -76,7 +76,8 @@ def time_coord(times: np.ndarray, omega: float) -> dict:
         "time": (
             "time",
             np.asarray(times, dtype=float),
-            {"long_name": "dimensionless time t", "units": "1", "forcing_period": 2 * np.pi / omega},
+            {"long_name": "dimensionless time t", "units": "1",
+             "forcing_period": 2 * np.pi / omega},
         )
     }
 

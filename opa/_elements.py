@@ -301,7 +301,7 @@ def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, 
     change of the assembled mean E[x] from the step before: NaN at the first step, which
     has none; the change is the error estimate of the step before it)."""
     if not (isinstance(max_elements, numbers.Integral) and not isinstance(max_elements, bool)
-            and not type(max_elements).__name__ in ("bool_", "bool")
+            and type(max_elements).__name__ not in ("bool_", "bool")
             and 1 <= max_elements <= MAX_ELEMENTS):
         raise ValueError(f"max_elements must be an integer in 1..{MAX_ELEMENTS}, got "
                          f"{max_elements!r}")

@@ -16,7 +16,8 @@ import numbers
 import warnings
 from dataclasses import InitVar, dataclass
 
-PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n", "x0", "v0")
+PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n",
+                   "x0", "v0")
 UNCERTAIN_PARAMETERS = ("mu", "a", "c")
 METHODS = ("dop853", "dp5")
 IMPULSE_MODELS = ("dirac", "pulse")

@@ -113,7 +113,8 @@ def simulate_opa(
     ``"adaptive"`` (edges at the splits of the sampled systems' impact sequences, then
     halving of the element with the largest variance share until it is below
     ``tolerance``, default 1e-6, or ``max_elements``, default 64, is reached; both are
-    refused without ``"adaptive"``, where they would have no effect). Each element runs its own OPA system
+    refused without ``"adaptive"``, where they would have no effect). Each element runs its own
+    OPA system
     of order N; the result holds the assembled ``x_mean, x_var, v_mean, v_var`` and the
     per-element coefficients, edges and probabilities. With ``elements`` and the System
     given by keywords, ``impact_law`` defaults to ``"saltation"``, the law whose elements

@@ -58,7 +58,7 @@ def layer(module: str) -> int:
         return LAYERS.index("compare")
     if module.startswith("mc"):
         return LAYERS.index("mc")
-    if module in ("opa", "opa._shims"):
+    if module in ("opa", "opa._shims", "opa.engine"):
         return LAYERS.index("facade")
     if module.startswith("opa.plots"):
         return LAYERS.index("plots")
@@ -165,6 +165,37 @@ def test_the_kernel_has_one_caller():
     everything else goes through its interface (``run``, ``run_batch``, ``Record``)."""
     importers = sorted(m for m in MODULES if any(t == "opa._kernel" for t, _ in imports(m)))
     assert importers == ["opa._run"]
+
+
+def _private_imports(module: str) -> list[str]:
+    """The ``from X import name`` of ``module`` that reach into another package's private
+    module (``opa._run``, ``opa.dynamics._sweep``, ``mc._ensemble``) or take a private
+    name (``_choice``) from another package."""
+    own = module.split(".")[0]
+    found = []
+    for node in ast.walk(TREES[module]):
+        if not isinstance(node, ast.ImportFrom) or node.level or not node.module:
+            continue
+        parts = node.module.split(".")
+        if parts[0] not in PACKAGES or parts[0] == own:
+            continue
+        if any(p.startswith("_") for p in parts[1:]):
+            found.append(f"from {node.module} import ...")
+        found += [f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
+    return found
+
+
+def test_packages_import_only_each_others_public_names():
+    """``mc`` and ``compare`` reach ``opa`` through its public modules (``opa.engine``,
+    ``opa.plots``, ``opa``) and ``compare`` reaches ``mc`` through ``mc``."""
+    found = {m: _private_imports(m) for m in MODULES if not m.startswith("opa")}
+    assert {m: f for m, f in found.items() if f} == {}
+    # the check sees a planted private import
+    TREES["planted"] = ast.parse("from opa._run import run\nfrom opa import _kernel\n")
+    try:
+        assert _private_imports("planted") == ["from opa._run import ...", "opa._kernel"]
+    finally:
+        del TREES["planted"]
 
 
 def test_no_import_cycles():

@@ -32,7 +32,8 @@ THEMES = {
     "tests/opa/cli/test_commands.py": "the happy path of every subcommand",
     "tests/mc/test_coef_sem.py": "standard errors of the Monte Carlo coefficients",
     "tests/mc/test_dask.py": "the Dask backend of simulate_mc",
-    "tests/compare/test_parts.py": "the trust map's parts on disk (compare._trustmap, opa._dataset.Store)",
+    "tests/compare/test_parts.py":
+        "the trust map's parts on disk (compare._trustmap, opa._dataset.Store)",
 }
 
 #: source modules without a test module of their own -> the test modules that cover them
@@ -68,13 +69,13 @@ NAMED_AS = {
 
 def source_modules() -> list[str]:
     return sorted(str(p.relative_to(ROOT)) for package in PACKAGES
-                  for p in (ROOT / package).rglob("_*.py")
+                  for p in (ROOT / package).rglob("*.py")
                   if p.name not in ("__init__.py", "__main__.py"))
 
 
 def mirror(source: str) -> str:
     path = Path(source)
-    return str(Path("tests") / path.parent / f"test_{path.stem[1:]}.py")
+    return str(Path("tests") / path.parent / f"test_{path.stem.removeprefix('_')}.py")
 
 
 def modules_of_tests() -> list[str]:

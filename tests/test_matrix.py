@@ -11,9 +11,9 @@ the impact sequence at these sigma, so the 12-node rule is accurate to far below
 tolerances. Measured before the tolerances were set (``python`` of this module's helpers):
 mean errors of K-element and adaptive runs <= 5e-5, 2e-3 of the spread; their variance
 within 1e-3 relative; one element under the saltation law: mean within 0.019 of the
-spread (a uncertain), variance within 0.5 %; under the paper's mean law: mean within 0.07 of the spread, its
-variance off by up to 170 % (the mean law leaves the deviation coefficients alone at the
-impact; the saltation law maps them).
+spread (a uncertain), variance within 0.5 %; under the paper's mean law: mean within 0.07 of
+the spread, its variance off by up to 170 % (the mean law leaves the deviation coefficients
+alone at the impact; the saltation law maps them).
 """
 
 from __future__ import annotations

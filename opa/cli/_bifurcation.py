@@ -108,7 +108,8 @@ def cmd_reproduce(args) -> int:
     names = list(FIGURES) if args.figure == "all" else [args.figure]
     start = time.perf_counter()
     paths = reproduce(args.figure, args.outdir, full=args.full, impulse=args.impulse,
-                      pulse_width=args.pulse_width, impulse_at_zero=args.impulse_at_zero, order=args.order, workers=args.workers,
+                      pulse_width=args.pulse_width, impulse_at_zero=args.impulse_at_zero,
+                      order=args.order, workers=args.workers,
                       scheduler=args.scheduler, progress=not args.quiet,
                       log=None if args.quiet else print)
     if not args.quiet:
@@ -176,7 +177,8 @@ def register(subparsers) -> None:
     g.add_argument("--period-tol", type=float, default=PERIOD_TOL, metavar="TOL",
                    help=f"relative tolerance of the stroboscopic repeat (default {PERIOD_TOL:g})")
     g.add_argument("--graze-velocity", type=float, default=MOTION_GRAZE_VELOCITY, metavar="V",
-                   help=f"impacts slower than V count as grazing (default {MOTION_GRAZE_VELOCITY:g})")
+                   help=f"impacts slower than V count as grazing (default "
+                        f"{MOTION_GRAZE_VELOCITY:g})")
     g.add_argument("--graze-gap", type=float, default=MOTION_GRAZE_GAP, metavar="D",
                    help="free-flight maxima within D of the wall count as grazing "
                         f"(default {MOTION_GRAZE_GAP:g})")

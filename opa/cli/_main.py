@@ -32,7 +32,6 @@ from opa.cli._flags import (
     _verify_flags,
     _summary_events,
     check_outputs,
-    given,
     refuse_given,
     options_from,
     system_from,

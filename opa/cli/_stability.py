@@ -71,7 +71,8 @@ def cmd_stability(args) -> int:
     )
     from opa.plots import plot_branches
     from opa._dataset import write_netcdf
-    from opa.dynamics._orbits import impulse_cycle, lyapunov_benettin, lyapunov_exponent, periodic_orbit
+    from opa.dynamics._orbits import (impulse_cycle, lyapunov_benettin, lyapunov_exponent,
+                                      periodic_orbit)
 
     system = _system(args)
     start = time.perf_counter()

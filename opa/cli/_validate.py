@@ -72,7 +72,8 @@ def register_validate(sub) -> None:
         help="the main job: the trust map of OPA against Monte Carlo, its boundary and why",
         description="Run OPA (N = 0..8, the mean, ensemble and saltation impact laws, both "
         "truncations; with --elements also multi-element OPA) beside Monte Carlo ensembles of "
-        "the true sampled impact systems over a grid of sigma and one model parameter; locate the trust boundary sigma* by bisection and the splits of "
+        "the true sampled impact systems over a grid of sigma and one model parameter; "
+        "locate the trust boundary sigma* by bisection and the splits of "
         "the sampled systems' impact sequences. With no arguments: the embedded default "
         "(section 3.2 set, omega in {3.98, 4.035, 4.09, 4.145, 4.2}, sigma from 0.005 to "
         "0.05, horizons of 10 and 50 forcing periods). Writes OUTDIR/validate.nc, "
@@ -124,7 +125,8 @@ def register_validate(sub) -> None:
     g.add_argument("--max-samples", type=positive_int, default=None, metavar="M",
                    help="samples are doubled up to M where the verdict hangs on the MC "
                         "noise (default 8192)")
-    g.add_argument("--seed", type=whole_number, default=None, metavar="K", help="random seed (default 0)")
+    g.add_argument("--seed", type=whole_number, default=None, metavar="K",
+                   help="random seed (default 0)")
     g.add_argument("--per-period", type=positive_int, default=None, metavar="K",
                    help="outputs per forcing period (default 8)")
     g.add_argument("--outdir", default=None, metavar="DIR", help="output folder (default results)")
@@ -172,7 +174,8 @@ def cmd_validate(args) -> int:
         args.config, model=model, solver=solver, parameter=parameter, values=values,
         sigmas=args.sigmas, orders=args.orders, uncertain=args.uncertain,
         distribution=args.distribution, elements=args.elements,
-        max_elements=args.max_elements, horizons=args.horizons, tolerance=args.tolerance, var_tolerance=args.var_tolerance,
+        max_elements=args.max_elements, horizons=args.horizons, tolerance=args.tolerance,
+        var_tolerance=args.var_tolerance,
         z=args.z, resolution=args.resolution, samples=args.samples,
         max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,
@@ -236,7 +239,8 @@ def register_converge(sub) -> None:
     g.add_argument("--order", type=whole_number, default=1, metavar="N",
                    help="OPA order of every element for the sweeps in K (default 1)")
     g.add_argument("--budgets", type=_order_list, default=None, metavar="B1,B2,...",
-                   help="element budgets of the adaptive runs (default 4,8,16,24,32,48,64,96,128,192,256)")
+                   help="element budgets of the adaptive runs "
+                        "(default 4,8,16,24,32,48,64,96,128,192,256)")
     g.add_argument("--uniform", type=_order_list, default=None, metavar="K1,K2,...",
                    help="element counts of the uniform runs (default 1,2,...,128)")
     g.add_argument("--reference", type=positive_int, default=65536, metavar="M",

@@ -460,7 +460,7 @@ def sweep(
             point.check_samples()
         tasks.append(PointTask(index=i, value=float(value), model=model, system=point,
                                options=options, source=source, **kw))
-    system, not_located = _locate_setup(locate, model, param, values, base, options)
+    system, not_located = locate_setup(locate, model, param, values, base, options)
     manifest = _settings(model, param, values, base, options,
                          {**kw, "continuation": continuation})
     out = None if out is None else os.fspath(out)
@@ -511,7 +511,7 @@ def sweep(
 # --------------------------------------------------------------------------- located points
 
 
-def _locate_setup(locate, model, param, values, base, options):
+def locate_setup(locate, model, param, values, base, options):
     """(ImpactSystem, None) when the sweep's bifurcations are to be located, else
     (None, why not). ``locate=True`` turns a reason into a ValueError."""
     from opa.dynamics._continuation import check_locatable

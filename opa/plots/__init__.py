@@ -2,6 +2,24 @@
 (``import opa`` does not import matplotlib)."""
 
 from opa.plots._branches import plot_branches
-from opa.plots._diagrams import plot_bifurcation, plot_run
+from opa.plots._diagrams import (
+    COLORS,
+    SECTION_LABELS,
+    describe_marks,
+    diagram,
+    draw_marks,
+    history,
+    located_marks,
+    plot_bifurcation,
+    plot_run,
+    portrait,
+    section_bars,
+    window,
+)
 
-__all__ = ["plot_bifurcation", "plot_branches", "plot_run"]
+__all__ = [
+    "plot_bifurcation", "plot_branches", "plot_run",
+    # the drawing blocks of the paper's figures (``compare._figures``)
+    "COLORS", "SECTION_LABELS", "describe_marks", "diagram", "draw_marks", "history",
+    "located_marks", "portrait", "section_bars", "window",
+]

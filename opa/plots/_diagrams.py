@@ -5,7 +5,7 @@ Colours name the model the same way in every figure: DMR black, EMR_0 orange, EM
 Monte Carlo mean green; Poincaré points are red.
 
 Bifurcation lines are drawn only from *located* bifurcations, the ones a sweep dataset
-lists in its ``bifurcation_*`` variables (:func:`_located_marks`); the brute-force period
+lists in its ``bifurcation_*`` variables (:func:`located_marks`); the brute-force period
 labels of a sweep are never turned into lines.
 """
 
@@ -191,7 +191,7 @@ def _kinds(ds: xr.Dataset, size: int) -> list[str]:
     return out
 
 
-def _located_marks(ds: xr.Dataset) -> list[tuple[float, str, bool]]:
+def located_marks(ds: xr.Dataset) -> list[tuple[float, str, bool]]:
     """Located bifurcations listed in a sweep (or branch) dataset, as drawn markers.
 
     Reads the parameter values from ``bifurcation_parameter`` (or ``bifurcation_value``,
@@ -298,12 +298,12 @@ def plot_bifurcation(ds: xr.Dataset, path: str, *, section: str = "both",
 
     Phase plane: stroboscopic x against the parameter; constraint plane: pre-impact
     velocity against the parameter. Vertical lines only at the located bifurcations the
-    dataset lists (:func:`_located_marks`); the title says which, or that there are none.
+    dataset lists (:func:`located_marks`); the title says which, or that there are none.
     """
     which = ["phase", "constraint"] if section == "both" else [section]
     fig, axes = plt.subplots(1, len(which), figsize=(5.5 * len(which) + 0.5, 4.2),
                              squeeze=False, layout="constrained")
-    marks = _located_marks(ds)
+    marks = located_marks(ds)
     for ax, kind in zip(axes[0], which):
         n = diagram(ax, ds, kind)
         ax.set_title(SECTION_LABELS[kind][1], fontsize=10)

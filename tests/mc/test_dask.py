@@ -39,7 +39,8 @@ def test_a_scheduler_that_does_not_answer_fails_in_connect_timeout_with_one_line
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        (dict(connect_timeout=0), r"connect_timeout must be a number of seconds in \(0, 86400\], got 0"),
+        (dict(connect_timeout=0),
+         r"connect_timeout must be a number of seconds in \(0, 86400\], got 0"),
         (dict(connect_timeout="5"), r"connect_timeout must be .* got '5'"),
         (dict(worker_timeout=-1), r"worker_timeout must be .* or None, got -1"),
         (dict(scheduler=8786), r"scheduler must be an address such as 'tcp://host:8786' or "

@@ -1,9 +1,10 @@
 """Tests for ``opa._model``: parameters, presets and the validation of bad input.
 
-README, 'Errors, limits and resuming': every invalid parameter gets one ``ValueError`` whose message names the
-parameter and quotes the value received (``"eta must be in (0, 1], got 1.3"``). The checks
-that live at the ``simulate_*`` boundary (pulse width against the impulse period, the
-order N, the output grid) are tested here too, since they are the same contract.
+README, 'Errors, limits and resuming': every invalid parameter gets one ``ValueError`` whose
+message names the parameter and quotes the value received
+(``"eta must be in (0, 1], got 1.3"``). The checks that live at the ``simulate_*`` boundary
+(pulse width against the impulse period, the order N, the output grid) are tested here too,
+since they are the same contract.
 """
 
 from __future__ import annotations

@@ -507,8 +507,10 @@ RUNAWAY = ["simulate", "opa", "--a", "-0.005", "--c", "-0.01", "--mu", "0.001", 
 # (category, argv, what the one line must name)
 BAD_CLI_31 = [
     # silently wrong: a fraction of an output interval, a figure over the dataset
-    ("silently wrong", ["simulate", "dmr", "--periods", "2.5", "--out", "p.nc"], ("periods", "2.5")),
-    ("silently wrong", ["simulate", "opa", "--periods", "2.5", "--out", "p.nc"], ("periods", "2.5")),
+    ("silently wrong", ["simulate", "dmr", "--periods", "2.5", "--out", "p.nc"],
+     ("periods", "2.5")),
+    ("silently wrong", ["simulate", "opa", "--periods", "2.5", "--out", "p.nc"],
+     ("periods", "2.5")),
     ("silently wrong", ["simulate", "mc", "--periods", "2.5", "--samples", "64", "--out", "p.nc"],
      ("periods", "2.5")),
     ("silently wrong", DMR + ["--out", "same.png", "--plot", "same.png"], ("--out", "--plot")),
@@ -524,7 +526,8 @@ BAD_CLI_31 = [
     ("wrongly accepted", DMR + ["--verify", "8"], "--verify"),
     ("wrongly accepted", DMR + ["--pulse-width", "0.2"], ("--pulse-width", "--impulse pulse")),
     ("wrongly accepted", OPA + ["--tolerance", "1e-3"], ("--tolerance", "--element-tolerance")),
-    ("wrongly accepted", OPA + ["--element-tolerance", "1e-3"], ("--element-tolerance", "adaptive")),
+    ("wrongly accepted", OPA + ["--element-tolerance", "1e-3"],
+     ("--element-tolerance", "adaptive")),
     ("wrongly accepted", OPA + ["--max-elements", "8"], ("--max-elements", "adaptive")),
     ("wrongly accepted", OPA + ["--elements", "4", "--max-elements", "8"], "--max-elements"),
     ("wrongly accepted", OPA + ["--samples", "64"], ("--samples", "simulate mc")),

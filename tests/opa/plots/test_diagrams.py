@@ -1,5 +1,5 @@
 """Tests for ``opa.plots._diagrams``: bifurcation lines come only from located
-bifurcations (``_located_marks``, ``plot_bifurcation``), never from brute-force period
+bifurcations (``located_marks``, ``plot_bifurcation``), never from brute-force period
 labels. The paper's figures, built from these blocks, are tested in
 ``tests/compare/test_figures.py``, which shares the helpers of this module.
 """
@@ -44,22 +44,22 @@ def sweep_like(values=(0.02, 0.05, 0.08), **variables) -> xr.Dataset:
 
 
 def test_located_marks_adapter():
-    assert P._located_marks(sweep_like()) == []
+    assert P.located_marks(sweep_like()) == []
     ds = sweep_like(bifurcation_parameter=("bifurcation", [0.06, 0.03, 0.5, np.nan]),
                     bifurcation_kind=("bifurcation", ["fold", "period-doubling", "fold",
                                                       "grazing"]))
-    assert P._located_marks(ds) == [(0.03, "period-doubling", True), (0.06, "fold", True)]
+    assert P.located_marks(ds) == [(0.03, "period-doubling", True), (0.06, "fold", True)]
     ds = sweep_like(bifurcation_c=("bifurcation", [0.04]),
                     bifurcation_kind=("bifurcation", np.array([3], dtype=np.int8)),
                     bifurcation_located=("bifurcation", np.array([0], dtype=np.int8)))
-    assert P._located_marks(ds) == [(0.04, "grazing", False)]
+    assert P.located_marks(ds) == [(0.04, "grazing", False)]
     assert P.mark_name("grazing", False) == "grazing (estimated)"
     # values without kinds still come out, as plain bifurcations
     ds = sweep_like(bifurcation_value=("bifurcation", [0.05]))
-    assert P._located_marks(ds) == [(0.05, "bifurcation", True)]
+    assert P.located_marks(ds) == [(0.05, "bifurcation", True)]
     # and a brute-force flag alone gives nothing
     ds = sweep_like(period_doubling=("c", [0, 1, 1]))
-    assert P._located_marks(ds) == []
+    assert P.located_marks(ds) == []
 
 
 def test_plot_bifurcation_draws_only_located_marks(tmp_path, monkeypatch):

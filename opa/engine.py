@@ -1,0 +1,77 @@
+"""The building blocks that the packages above ``opa`` (``mc``, ``compare``) build on:
+runs of the compiled kernel, the system and its law of xi, multi-element OPA, the splits
+of the sampled systems, the OPA surrogate, datasets and the one resume store, and the
+brute-force sweep. Users want ``opa``'s own public names; this module is the one door
+through which ``mc`` and ``compare`` reach ``opa``'s private modules (the architecture
+test forbids them ``from opa._x import``), so each name here is a commitment.
+"""
+
+from opa._basis import chebyshev_u, gauss_nodes, orthonormal, quadrature_order
+from opa._dataset import (
+    Store,
+    atomic_write,
+    check_opa_layout,
+    digest,
+    package_version,
+    provenance_attrs,
+    remove_store,
+    time_coord,
+    write_netcdf,
+)
+from opa._elements import (
+    MAX_ELEMENTS,
+    ElementBudgetWarning,
+    adaptive_edges,
+    collocate_element,
+    collocation,
+    global_coefficients,
+    run_elements,
+    true_runs,
+    uniform_edges,
+)
+from opa._measure import Measure, parse
+from opa._memory import check_memory
+from opa._model import (
+    MAX_GRID,
+    PARAMETER_NAMES,
+    Oscillator,
+    SolverOptions,
+    check_count,
+    check_instance,
+    check_order,
+    check_span,
+    preset,
+    time_grid,
+)
+from opa._run import SimulationError, output_times, run_batch
+from opa._simulate import opa_variants, simulate_dmr, simulate_opa
+from opa._splits import (
+    MAX_CROSSINGS,
+    MAX_SPLITS,
+    SPLIT_KINDS,
+    Split,
+    count_probabilities,
+    event_sequence,
+    scan_splits,
+)
+from opa._surrogate import run_measure, surrogate, surrogate_moments
+from opa._system import IMPULSE_FIELDS, System, as_system
+from opa.dynamics._orbits import MAX_CYCLE, impulse_cycle
+from opa.dynamics._sections import identify_motion, mean_state, phase_section
+from opa.dynamics._sweep import local_executor, locate_setup, summary_lines, sweep, sweep_times
+
+__all__ = [
+    "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE", "MAX_ELEMENTS",
+    "MAX_GRID", "MAX_SPLITS", "Measure", "Oscillator", "PARAMETER_NAMES", "SPLIT_KINDS",
+    "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
+    "as_system", "atomic_write", "chebyshev_u", "check_count", "check_instance",
+    "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",
+    "collocation", "count_probabilities", "digest", "event_sequence", "gauss_nodes",
+    "global_coefficients", "identify_motion", "impulse_cycle", "local_executor",
+    "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",
+    "package_version", "parse", "phase_section", "preset", "provenance_attrs",
+    "quadrature_order", "remove_store", "run_batch", "run_elements", "run_measure",
+    "scan_splits", "simulate_dmr", "simulate_opa", "summary_lines", "surrogate",
+    "surrogate_moments", "sweep", "sweep_times", "time_coord", "time_grid", "true_runs",
+    "uniform_edges", "write_netcdf",
+]
