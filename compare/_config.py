@@ -33,7 +33,6 @@ LAW_VARIANTS = tuple((law, "galerkin") for law in ELEMENT_LAWS)
 ELEMENT_TOLERANCE = 1e-6
 DEFAULT_MAX_ELEMENTS = 64
 CRITERIA = ("mean", "variance")
-PAPER_SIGMAS = (0.01, 0.014, 0.02, 0.03)
 
 # The swept parameter's default range for each of the paper's sets (sections 3.1-3.3).
 SWEEPS = {

@@ -161,11 +161,6 @@ def _law_flag(parser: argparse.ArgumentParser, *, elements: bool = True) -> None
                    help="with --elements adaptive: the element budget (default 64)")
 
 
-def _element_flags(parser: argparse.ArgumentParser) -> None:
-    """The law of xi and multi-element OPA (simulate opa)."""
-    _law_flag(parser)
-
-
 def _verify_flags(parser: argparse.ArgumentParser) -> None:
     """The paired Monte Carlo certificate of an OPA run (simulate opa only)."""
     g = parser.add_argument_group("certificate (simulate opa)")

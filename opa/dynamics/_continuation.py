@@ -62,7 +62,6 @@ from opa.dynamics._orbits import (
 xr = lazy("xarray")
 
 BIFURCATION_KINDS = ("period-doubling", "fold", "neimark-sacker", "grazing", "impulse-impact")
-PD, FOLD, NS, GRAZING, IMPULSE_IMPACT = range(5)
 FOLD_MULTIPLIER = 0.25  # a turn of the branch is a fold only with a multiplier this close to 1
 NEAR = 1e-2  # a branch end is put down to grazing / an impulse when these are this small
 # Hard bounds on the loops: step halvings of the corrector (from step down to min_step)
