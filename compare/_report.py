@@ -329,9 +329,19 @@ def run_failures(ds) -> list[str]:
                      if (~np.isfinite(row)).any()]
             when = (f"x_0 is NaN from t = {min(stops):.3g}–{max(stops):.3g} periods on"
                     if stops else "no finite error")
+            why = ""
+            if "opa_status" in ds:  # the kernel's reasons, counted
+                codes = ds.opa_status.values[:, :, v, :][:, :, ran[v]][bad]
+                names = dict(zip(ds.opa_status.attrs["flag_values"].tolist(),
+                                 ds.opa_status.attrs["flag_meanings"].split()))
+                tally = {}
+                for c in codes.tolist():
+                    tally[names.get(c, str(c))] = tally.get(names.get(c, str(c)), 0) + 1
+                why = "; " + ", ".join(f"{k.replace('_', ' ')} {n}" for k, n in
+                                       sorted(tally.items(), key=lambda kv: -kv[1]))
             out.append(f"{int(bad.sum())} of {bad.size} {name} runs over {float(H):g} periods "
                        f"did not finish: the OPA system's integration stopped before the "
-                       f"horizon ({when}); counted as 'does not agree'")
+                       f"horizon ({when}{why}); counted as 'does not agree'")
     return out
 
 
@@ -623,16 +633,23 @@ def findings(ds: xr.Dataset) -> list[str]:
     e_mean = ds.err_mean.values[..., 0, -1, 0]
     e_ens = ds.err_mean.values[..., 1, -1, 0]
     ratio = e_ens / e_mean
-    out.append(f"Ensemble against mean impact law (N = {nmax}, {float(ds.horizon[0]):g} "
-               f"periods): the ratio of their errors of x_0 ranges over "
-               f"{np.nanmin(ratio):.2g}…{np.nanmax(ratio):.2g} on the grid (median "
-               f"{np.nanmedian(ratio):.2g}).")
+    head = (f"Ensemble against mean impact law (N = {nmax}, {float(ds.horizon[0]):g} "
+            f"periods): the ratio of their errors of x_0 ")
+    if np.isfinite(ratio).any():
+        out.append(head + f"ranges over {np.nanmin(ratio):.2g}…{np.nanmax(ratio):.2g} on the "
+                          f"grid (median {np.nanmedian(ratio):.2g}).")
+    else:
+        out.append(head + "is known nowhere on the grid: a run of one of them stopped at "
+                          "every point (see the runs that did not finish).")
     if "mean/paper" in variants:  # the paper's truncation exists under the semicircle only
         paper = variants.index("mean/paper")
         trunc = np.abs(ds.err_mean.values[..., paper, -1, 0] - e_mean) / np.maximum(e_mean,
                                                                                      1e-300)
-        out.append(f"The paper's truncation (eq. (27)) against the Galerkin projection "
-                   f"changes that error by at most {np.nanmax(trunc):.1e} relative on the grid.")
+        head = "The paper's truncation (eq. (27)) against the Galerkin projection "
+        out.append(head + (f"changes that error by at most {np.nanmax(trunc):.1e} relative on "
+                           f"the grid." if np.isfinite(trunc).any() else
+                           "cannot be compared anywhere on the grid: the runs of one of them "
+                           "stopped at every point."))
     # variance
     for v in _laws(ds):
         frac = ds.agrees.values[:, :, v, -1, :, 1].mean(axis=(0, 1))

@@ -65,7 +65,7 @@ from compare._trust import bisect_boundary, first_disagreement, marginal, window
 from mc import simulate_mc
 from mc import semicircle_cdf
 from opa.engine import (
-    MAX_CROSSINGS, MAX_SPLITS, SPLIT_KINDS, adaptive_edges, collocate_element,
+    MAX_CROSSINGS, MAX_SPLITS, SPLIT_KINDS, STATUS_NAMES, adaptive_edges, collocate_element,
     count_probabilities, Measure, opa_variants, provenance_attrs, run_elements, scan_splits,
     simulate_dmr, simulate_opa, SimulationError, SolverOptions, Split, Store, System,
     time_grid, uniform_edges, write_netcdf,
@@ -89,6 +89,7 @@ class Point:
     elements: np.ndarray | None = None  # (variant,) elements at N = Nmax (0: failed)
     collocated: np.ndarray | None = None  # (variant,) of them computed by collocation
     failure: str = ""  # why a multi-element variant could not be run
+    status: np.ndarray | None = None  # (variant, N) kernel status of the OPA run (-1: not run)
 
 
 class _Map:
@@ -140,16 +141,18 @@ class _Map:
             start = time.perf_counter()
             system = cfg.system_at(value, sigma=sigma, order=order)
             if cfg.semicircle:
-                mean, var, first = opa_variants(system, list(cfg.single_variants), times,
-                                                cfg.options)
+                mean, var, first, status = opa_variants(system, list(cfg.single_variants),
+                                                        times, cfg.options)
             else:
                 whole = np.array([self.measure.lo, self.measure.hi])
                 run = element_variants(system, cfg.options, self.measure,
                                        [law for law, _ in cfg.single_variants],
                                        [whole] * len(cfg.single_variants), times)
                 mean, var, first = run["x_mean"], run["x_var"], run["first_impact"]
+                status = run["status"]
             self.opa_runs += 1
             return {"x_mean": mean, "x_var": var, "first_impact": first,
+                    "status": np.asarray(status, np.int64),
                     "seconds": time.perf_counter() - start}
 
         inputs = {"system": cfg.system_at(value, sigma=sigma, order=order),
@@ -221,6 +224,7 @@ class _Map:
         elements = np.zeros(V, np.int64)
         elements[:S] = 1
         collocated = np.zeros(V, np.int64)
+        status = np.full((V, N), -1, np.int64)
         T = osc.forcing_period
         seconds = 0.0
         failure = ""
@@ -228,6 +232,7 @@ class _Map:
             run = self._opa(osc, value, sigma, order, times)
             opa_mean[:S, k], opa_var[:S, k] = run["x_mean"], run["x_var"]
             first[:S, k] = run["first_impact"] / T
+            status[:S, k] = run["status"]
             seconds += run["seconds"]
             if cfg.element_laws and order == cfg.nmax:
                 run = self._elements(value, sigma, order, times)
@@ -235,6 +240,7 @@ class _Map:
                 first[S:, k] = run["first_impact"] / T
                 elements[S:] = run["elements"]
                 collocated[S:] = run["collocated"]
+                status[S:, k] = np.where(run["elements"] > 0, 0, -1)
                 failure = str(run["failure"])
                 seconds += run["seconds"]
                 if failure:
@@ -252,6 +258,7 @@ class _Map:
         point.elements = elements
         point.collocated = collocated
         point.failure = failure
+        point.status = status
         return point
 
     def _hangs_on_noise(self, point: Point) -> bool:
@@ -481,14 +488,15 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
     systems (:func:`opa._elements.collocate_element`, as ``simulate_opa`` does with
     elements). The first impact is the earliest of any element's mean (inf: none).
 
-    Returns a dict of x_mean, x_var, v_mean (L, T), first_impact (L,), elements (L,) and
-    collocated (L,): the elements computed by the fallback."""
+    Returns a dict of x_mean, x_var, v_mean (L, T), first_impact (L,), elements (L,),
+    collocated (L,): the elements computed by the fallback, and status (L,): the kernel
+    status of the first element that stopped and was not computed again (0: none)."""
     order = system.order
     L = len(laws)
     mean, var = np.empty((L, len(times))), np.empty((L, len(times)))
     v_mean = np.empty((L, len(times)))
     first, count = np.full(L, np.inf), np.zeros(L, np.int64)
-    collocated = np.zeros(L, np.int64)
+    collocated, status = np.zeros(L, np.int64), np.zeros(L, np.int64)
     for ell, (law, cuts) in enumerate(zip(laws, edges)):
         own = system.replace(impact_law=law, truncation="galerkin")
         cells = [measure.restrict(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
@@ -499,6 +507,8 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
                 run = collocate_element(own, options, cells[e], times=times)
                 out[e][:, : order + 1], out[e][:, order + 1:] = run.x_coef.T, run.v_coef.T
                 collocated[ell] += 1
+            elif run.status and not status[ell]:
+                status[ell] = run.status
             first[ell] = min(first[ell], runs[e].first_impact)
         E = len(cells)
         P = np.array([m.probability() for m in cells])
@@ -510,7 +520,7 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
         v_mean[ell] = P @ out[:, :, order + 1]
         count[ell] = E
     return {"x_mean": mean, "x_var": var, "v_mean": v_mean, "first_impact": first,
-            "elements": count, "collocated": collocated}
+            "elements": count, "collocated": collocated, "status": status}
 
 
 def _sequence(system, cfg, cache, value):
@@ -586,6 +596,10 @@ def count_distribution(centre, sigma, splits, count_at_centre, cdf=None,
 
 ONE = {"units": "1"}
 #: padding of the dimensions whose length differs between swept values or points
+#: the flag attributes of opa_status: the kernel's status codes and names, and -1 for a
+#: variant not run at that N
+STATUS_FLAGS = {"flag_values": np.arange(-1, len(STATUS_NAMES), dtype=np.int8),
+                "flag_meanings": " ".join(("not_run",) + STATUS_NAMES)}
 PADDING = {"probe_sigma": np.nan, "probe_agrees": -1, "split_value": np.nan,
            "split_kind": -1, "split_time": np.nan, "split_speed": np.nan, "split_left": -1,
            "split_right": -1, "count_prob": 0.0}
@@ -681,6 +695,10 @@ def point_dataset(cfg: ValidateConfig, value: float, point: Point, centre: float
         "first_impact": (vn, point.first_impact, {"long_name": "time of OPA's first impact",
                                                   "units": "forcing periods"}),
         "opa_x_mean": (vn + ("time",), point.opa_mean, {"long_name": "OPA mean x_0", **ONE}),
+        "opa_status": (vn, point.status.astype(np.int8),
+                       {"long_name": "how the OPA run ended: -1 not run, 0 finished, > 0 "
+                        "the kernel's reason to stop, named by flag_meanings (the curves are "
+                        "NaN after it)", **STATUS_FLAGS}),
         "opa_x_var": (vn + ("time",), point.opa_var, {"long_name": "OPA variance", **ONE}),
         "mc_x_mean": ("time", point.mc["x_mean"], {"long_name": "MC mean E[x]", **ONE}),
         "mc_x_var": ("time", point.mc["x_var"], {"long_name": "MC variance Var[x]", **ONE}),
@@ -868,8 +886,9 @@ def _details(cfg: ValidateConfig, sig: float) -> xr.Dataset:
     laws = ("mean", "ensemble")
     if cfg.semicircle:
         for law in laws:
+            # a run that stops (at a large sigma) is drawn up to where it stopped
             ds = simulate_opa(cfg.system_at(value, sigma=sig, order=cfg.nmax, impact_law=law),
-                              times=times, options=cfg.options)
+                              times=times, options=cfg.options, partial=True)
             curves[law] = (ds.x_mean.values, ds.v_mean.values)
     else:  # one element in the law's own basis
         measure = cfg.measure()

@@ -35,7 +35,7 @@ from opa._basis import quadrature_order
 from opa._measure import MAX_GAUSS, Measure
 from opa._model import check_count
 from opa._model import SolverOptions
-from opa._run import SimulationError, quadrature, run_batch, stack
+from opa._run import STATUS_NAMES, SimulationError, quadrature, run_batch, stack
 from opa._system import System
 
 MAX_ELEMENTS = 256
@@ -71,6 +71,7 @@ class ElementRun:
     failure: str = ""  # why the element's system stopped early ("" if it did not)
     method: str = "opa"  # or "collocation": its OPA system failed (see collocate_element)
     first_impact: float = np.inf  # of the element's mean (inf: none, or not logged)
+    status: int = 0  # the kernel's status code (opa._run.STATUS_NAMES; 0: finished)
 
     @property
     def var(self) -> np.ndarray:
@@ -114,6 +115,9 @@ def run_elements(system: System, options: SolverOptions, measures: list[Measure]
     reasons = [batch.message(e) if not batch.ok[e] else
                "" if np.isfinite(out[e]).all() else "the state became non-finite"
                for e in range(len(measures))]
+    status = [int(batch.status[e]) if not batch.ok[e] else
+              0 if not reasons[e] else STATUS_NAMES.index("diverged")
+              for e in range(len(measures))]
     failures = [f"element [{m.a:.6g}, {m.b:.6g}] of the OPA (N={order}) system stopped: "
                 f"{why}" if why else "" for m, why in zip(measures, reasons)]
     if not partial and any(failures):
@@ -124,7 +128,8 @@ def run_elements(system: System, options: SolverOptions, measures: list[Measure]
     return [ElementRun(m.a, m.b, m.probability(), out[e, :, : order + 1].T,
                        out[e, :, order + 1:].T, int(batch.rhs_evaluations[e]),
                        int(batch.impacts[e]), failures[e],
-                       first_impact=batch.events(e).first_impact() if events else np.inf)
+                       first_impact=batch.events(e).first_impact() if events else np.inf,
+                       status=status[e])
             for e, m in enumerate(measures)]
 
 

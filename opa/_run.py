@@ -497,7 +497,16 @@ class Batch:
 
 
 def status_message(status: int) -> str:
+    """What a kernel status means, in words ("ok" when the run finished)."""
     return K.STATUS_MESSAGES[int(status)]
+
+
+#: a short name of each kernel status, indexed by its code (``Batch.status``); datasets
+#: store the codes with these names as their flag meanings
+STATUS_NAMES = tuple(dict(sorted({
+    K.OK: "finished", K.MAX_STEPS: "step_limit", K.STEP_COLLAPSE: "step_collapse",
+    K.DIVERGED: "diverged", K.ESCAPED: "escaped", K.BAD_TIME: "bad_time",
+    K.SKIPPED: "skipped"}.items())).values())
 
 
 # ---------------------------------------------------------------------------- the runs

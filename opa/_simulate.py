@@ -206,10 +206,11 @@ def simulate_opa(
 
 def opa_variants(system: System, variants, times: np.ndarray, options: SolverOptions):
     """The OPA system under several (impact law, truncation) variants, in parallel: mean
-    and variance of x over ``times`` (NaN after a trajectory that could not be completed)
-    and the time of each variant's first impact (inf: none).
+    and variance of x over ``times`` (NaN after a trajectory that could not be completed),
+    the time of each variant's first impact (inf: none) and its kernel status (0: it
+    finished; ``opa._run.STATUS_NAMES`` names each code).
 
-    Returns (x_mean (V, T), x_var (V, T), first_impact (V,))."""
+    Returns (x_mean (V, T), x_var (V, T), first_impact (V,), status (V,))."""
     order = system.order
     inputs = stack([system.replace(impact_law=law, truncation=trunc).kernel_inputs(options)
                     for law, trunc in variants])
@@ -219,4 +220,4 @@ def opa_variants(system: System, variants, times: np.ndarray, options: SolverOpt
     first = np.array([batch.events(v).first_impact() for v in range(len(batch))])
     out = batch.states
     x = out[:, :, : order + 1]
-    return x[:, :, 0], (x[:, :, 1:] ** 2).sum(axis=2), first
+    return x[:, :, 0], (x[:, :, 1:] ** 2).sum(axis=2), first, batch.status

@@ -43,7 +43,7 @@ from opa._model import (
     preset,
     time_grid,
 )
-from opa._run import SimulationError, output_times, run_batch
+from opa._run import STATUS_NAMES, SimulationError, output_times, run_batch
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
     MAX_CROSSINGS,
@@ -63,6 +63,7 @@ from opa.dynamics._sweep import local_executor, locate_setup, summary_lines, swe
 __all__ = [
     "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE", "MAX_ELEMENTS",
     "MAX_GRID", "MAX_SPLITS", "Measure", "Oscillator", "PARAMETER_NAMES", "SPLIT_KINDS",
+    "STATUS_NAMES",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
     "as_system", "atomic_write", "chebyshev_u", "check_count", "check_instance",
     "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",

@@ -586,3 +586,29 @@ def test_single_value_map_has_sensible_limits(tiny, tmp_path, monkeypatch):
         stars = [ln for ln in ax.get_lines() if ln.get_label().startswith("σ* ")]
         assert stars and all(ln.get_marker() not in ("", "None", None) for ln in stars)
     _check_figure(fig, "single-value map")
+
+
+def test_runs_that_stop_carry_their_reason(tmp_path):
+    """At sigma = 5 the paper's OPA runs escape: the map keeps going, opa_status names the
+    kernel's reason exactly where the OPA curves turn NaN, the same reason a single
+    simulate_opa run gives, and the first screen counts the runs by that reason."""
+    from compare._report import first_screen
+
+    cfg = load_config(None, outdir=str(tmp_path), values=(3.98,), sigmas=(5.0,), orders=(2,),
+                      horizons=(4,), samples=64, max_samples=64, per_period=4, plots=False,
+                      frontier=False)
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+    status = ds.opa_status
+    names = dict(zip(status.attrs["flag_values"].tolist(), status.attrs["flag_meanings"].split()))
+    stopped = np.isnan(ds.opa_x_mean.values).any(axis=-1)
+    ran = status.values >= 0
+    assert ((status.values > 0) == stopped)[ran].all()
+    assert stopped.any() and (~stopped & ran).any()
+    v = list(ds.variant.values).index("mean/galerkin")
+    code = int(status.values[0, 0, v, 0])
+    assert names[code] == "escaped"
+    single = simulate_opa(cfg.system_at(3.98, sigma=5.0, order=2),
+                          times=time_grid(3.98, 4, 4), options=cfg.options, partial=True)
+    assert "escaped" in single.attrs["failure"]
+    screen = "\n".join(first_screen(ds))
+    assert "did not finish" in screen and "escaped" in screen
