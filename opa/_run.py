@@ -456,8 +456,9 @@ class Batch:
     """B runs made together (:func:`run_batch`): states (B, n_out, dim), each run's
     events, counters and status."""
 
-    def __init__(self, states, logs, counters):
+    def __init__(self, states, logs, counters, guarded=None):
         self.states = states
+        self._guarded = guarded
         self._logs = logs
         self._counters = counters
         self.status = counters[:, 0].copy()
@@ -487,7 +488,14 @@ class Batch:
 
     def message(self, b: int) -> str:
         """What became of run b, in words ("ok" when it finished)."""
-        return status_message(int(self.status[b]))
+        status = int(self.status[b])
+        if status == K.MAX_STEPS and self._guarded is not None and self._guarded[b] > 0:
+            return (f"stopped by the runaway guard after {int(self.steps[b])} steps (at most "
+                    f"{GUARD_PER_PERIOD} per forcing period, {GUARD_PER_TIME} per unit time, "
+                    f"{GUARD_FLOOR} in all): the step size collapsed, as when the state runs "
+                    f"away in finite time; check the parameters (e.g. the signs of a and c), "
+                    f"or give SolverOptions(max_steps=...) explicitly")
+        return status_message(status)
 
     def blank_failures(self) -> None:
         """Rows of a failed run that are not finite become NaN throughout."""
@@ -589,23 +597,28 @@ def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
 
 
 def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: int = 0,
-              stop_on_failure: bool = False) -> Batch:
+              stop_on_failure: bool = False, guard: bool = True) -> Batch:
     """B independent plain runs in parallel: run b starts from ``y0`` with the b-th
     system of ``inputs`` (:func:`stack`, :func:`sampled`). Each log keeps ``capacity``
     events. With ``stop_on_failure`` the runs not started after the first failure are
-    marked skipped. Each run depends on nothing but its own inputs, so the results do
-    not depend on the threads."""
+    marked skipped. ``guard``: the runaway guard (:func:`step_guard`) for each run whose
+    step limit is the default one. Each run depends on nothing but its own inputs, so the
+    results do not depend on the threads."""
     y0 = np.ascontiguousarray(y0, dtype=float)
     times = np.ascontiguousarray(times, dtype=float)
     B = len(inputs.p)
+    cfgs = np.array(inputs.cfg, dtype=np.int64)
+    guarded = np.zeros(B, np.int64)
+    if guard:
+        for b in np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS):
+            guarded[b] = cfgs[b, K.C_MAXSTEPS] = step_guard(times, inputs.p[b])
     out = np.empty((B, len(times), len(y0)))
     logs = np.empty((B, capacity, 3))
     counters = np.zeros((B, 5), dtype=np.int64)
     abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
     prepare_kernels(K.run_batch)
-    K.run_batch(y0, times, np.ascontiguousarray(inputs.p),
-                np.ascontiguousarray(inputs.cfg, dtype=np.int64),
+    K.run_batch(y0, times, np.ascontiguousarray(inputs.p), cfgs,
                 *(np.ascontiguousarray(a, dtype=float)
                   for a in (inputs.nodes, inputs.weights, inputs.basis)),
                 rtol, atol, out, logs, counters, abort)
-    return Batch(out, logs, counters)
+    return Batch(out, logs, counters, guarded)
