@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextvars
 import dataclasses
 import datetime as _dt
+import errno
 import functools
 import hashlib
 import json
@@ -226,11 +227,16 @@ def atomic_write(path: str | os.PathLike, write: Callable[[str], object], *,
         os.chmod(tmp, 0o666 & ~current_umask())
         _fsync(tmp, os.O_RDONLY)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as err:
         try:
             os.remove(tmp)
         except OSError:
             pass
+        if isinstance(err, (OSError, RuntimeError)):  # a full disk, netCDF's own errors:
+            # name the file asked for, not the temporary
+            code = getattr(err, "errno", None) or errno.EIO
+            why = getattr(err, "strerror", None) or str(err) or type(err).__name__
+            raise OSError(code, f"could not be written ({why})", path) from err
         raise
     try:  # make the rename itself durable
         _fsync(directory, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))

@@ -240,3 +240,28 @@ def test_remove_store_removes_only_what_a_store_holds(tmp_path):
     (tmp_path / "s" / "notes.txt").write_text("mine")
     remove_store(tmp_path / "s")
     assert os.listdir(tmp_path / "s") == ["notes.txt"]
+
+
+def test_a_write_that_fails_names_the_file_asked_for_and_leaves_nothing(tmp_path):
+    """A full disk (ENOSPC from the writer) or netCDF's own RuntimeError: one OSError
+    that names the path asked for (not the temporary), and no file left behind."""
+    import errno
+
+    from opa._dataset import atomic_write
+
+    target = tmp_path / "out.nc"
+
+    def full(tmp):
+        with open(tmp, "wb") as f:
+            f.write(b"partial")
+        raise OSError(errno.ENOSPC, "No space left on device", tmp)
+
+    def hdf(tmp):
+        raise RuntimeError("NetCDF: HDF error")
+
+    for write, code, text in ((full, errno.ENOSPC, "No space left"), (hdf, errno.EIO, "HDF")):
+        with pytest.raises(OSError) as raised:
+            atomic_write(target, write)
+        assert raised.value.filename == str(target) and raised.value.errno == code
+        assert text in raised.value.strerror
+        assert list(tmp_path.iterdir()) == []
