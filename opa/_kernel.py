@@ -1399,32 +1399,19 @@ def step_size(t, h, t_break, hmax, sticking, stick_hmax):
 
 
 @njit(cache=True, inline="always")
-def trial_step(two_d, method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
-               sticking, work, rtol, atol):
-    """Phase "trial step": one Runge-Kutta step of size h from (t, z), K[0] = f(t, z),
-    into z_new. Returns (err, margin, kx, kv, evaluations): the scaled error estimate, the
-    wall margin of the step (``wall_margin``) and, on the 2-D register path, the stages
-    (kx, kv, in registers: stored in K only when the dense output needs them).
+def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, atol):
+    """Phase "trial step" on the 2-D register path (the DMR, a Monte Carlo sample): one
+    DOP853 step of size h from (t, x, v) with f(t, x, v) = (k0x, k0v), every stage in a
+    scalar (``_stages2_dop853``) and the error estimate and wall margin from them
+    (``_error2``). Scalars only, in and out: an array argument, even of an inlined
+    function, costs reference-count updates, a third of a DMR step.
 
-    ``two_d`` (decided once per run) picks the register path of the two-dimensional
-    system: the stages stay in scalars and the step and its error estimate take no array
-    (an array argument costs reference-count updates); otherwise ``rk_step`` fills K."""
-    if two_d:
-        w = p[P_OMEGA]
-        x_old = z[0]
-        v_old = z[1]
-        xn, vn, kx, kv = _stages2_dop853(t, x_old, v_old, h, K[0, 0], K[0, 1], p[P_MU], p[P_A],
-                                         p[P_C], p[P_F], w, np.cos(w * t), np.sin(w * t),
-                                         force, sticking)
-        err, margin = _error2(h, x_old, v_old, xn, vn, K[0, 0], K[0, 1], kx, kv, rtol, atol)
-        z_new[0] = xn
-        z_new[1] = vn
-        return err, margin, kx, kv, last_stage(method)
-    evals = rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
-                    sticking, work)
-    err = error_norm(method, z, z_new, K, h, rtol, atol)
-    margin = wall_margin(K, last_stage(method), cfg[C_NCOEF], h)
-    return err, margin, _NO_STAGES, _NO_STAGES, evals
+    Returns (err, margin, x_new, v_new, kx, kv), kx and kv the stages 1-12 (the last
+    f(t + h, x_new, v_new)), stored in K only when the dense output needs them."""
+    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, np.cos(w * t),
+                                     np.sin(w * t), force, sticking)
+    err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
+    return err, margin, xn, vn, kx, kv
 
 
 @njit(cache=True, inline="always")
@@ -1579,24 +1566,6 @@ def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, node
     return 0
 
 
-@njit(cache=True, inline="always")
-def advance(two_d, z, z_new, K, kx, kv, last, sticking, delta, n):
-    """Phase "accept": the step's end state becomes z and f(t + h, z_new) (the stepper's
-    last stage) the next K[0]; while sticking the mean stays at rest on the wall."""
-    if two_d:
-        z[0] = z_new[0]
-        z[1] = z_new[1]
-        K[0, 0] = kx[11]
-        K[0, 1] = kv[11]
-    else:
-        for j in range(z.shape[0]):
-            z[j] = z_new[j]
-            K[0, j] = K[last, j]
-    if sticking:
-        z[0] = delta
-        z[n] = 0.0
-
-
 # ---------------------------------------------------------------------------
 # The driver
 @njit(cache=True)
@@ -1634,10 +1603,11 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     kick, sticking, release): a NaN or inf component ends the run with DIVERGED, a state
     component beyond ``escape_bound`` (of the start state) with ESCAPED.
 
-    The loop is the phases of the module docstring: the breakpoints at t (impulses,
-    outputs), ``resume``, then steps up to the next breakpoint, each a ``trial_step``
-    and, once accepted, the events inside it on its dense output (``wall_scan`` and
-    ``impact``, ``release``, ``free_flight_gap``) before ``advance``.
+    The loop is the phases of the module docstring: at each breakpoint ``impulses``,
+    ``store_outputs`` and ``resume``; then the steps up to the next breakpoint, each a
+    trial step (``register_step`` on the 2-D register path, else ``rk_step``) and, once
+    accepted, the events inside it on its dense output (``wall_scan`` then
+    ``impact_event``, ``release_event``, ``free_flight_gap``) before the state advances.
     """
     n = cfg[C_NCOEF]
     dim = 2 * n
@@ -1648,13 +1618,13 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     max_steps = cfg[C_MAXSTEPS]
     hmax = p[P_HMAX]
     stick_hmax = 2.0 * np.pi / p[P_OMEGA] / 32.0
-    use_impulses = p[P_F0] != 0.0
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
+    # the 2-D register path, decided once: its trial step takes and returns scalars only
     two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes)
-    # typed, not literal, constants: numba compiles a callee once per argument type, and
-    # a literal 0 or False is a type of its own
-    off = np.bool_(False)
+    mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
+    kx = kv = _NO_STAGES
+    off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
     K = np.empty((K_ROWS, size))
     K2 = np.empty((K_ROWS, size))
     F = np.empty((7, size))
@@ -1691,17 +1661,18 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
             break
         seg = max(k_out - 1, 0)  # the output interval being integrated (stats row)
         # ---- breakpoints at t
-        if use_impulses:
+        if t_imp <= t + snap or t >= force_end - snap:
             status, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts = impulses(
                 t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n_impacts,
                 p, cfg, snap, escape, stats, log)
             if status != OK:
                 break
-        k_out = store_outputs(t, z, m, dim, k_out, sticking, renormalise, t_out, out, stats,
-                              log_growth)
-        if k_out >= n_out:
-            break
-        seg = max(k_out - 1, 0)
+        if t_out[k_out] <= t:
+            k_out = store_outputs(t, z, m, dim, k_out, sticking, renormalise, t_out, out,
+                                  stats, log_growth)
+            if k_out >= n_out:
+                break
+            seg = k_out - 1
         t_break = next_breakpoint(t_out[k_out], t_imp, force_end, snap)
         sticking, n_events, evals = resume(t, z, m, force, sticking, seg, n_events, p, cfg,
                                            nodes, weights, U, K, work, stats, log)
@@ -1722,10 +1693,19 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                     break
                 status = STEP_COLLAPSE
                 break
-            err, margin, kx, kv, evals = trial_step(two_d, method, t, z, h_try, K, z_new, ztmp,
-                                                    m, p, cfg, nodes, weights, U, force,
-                                                    sticking, work, rtol, atol)
-            n_rhs += evals
+            # ---- trial step into z_new, K[last] = f(t + h_try, z_new)
+            if two_d:
+                err, margin, z_new[0], z_new[1], kx, kv = register_step(
+                    t, z[0], z[1], h_try, K[0, 0], K[0, 1], mu, a_lin, c_cub, f_amp, w, force,
+                    sticking, rtol, atol)
+                K[last, 0] = kx[11]
+                K[last, 1] = kv[11]
+                n_rhs += last
+            else:
+                n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, nodes, weights,
+                                 U, force, sticking, work)
+                err = error_norm(method, z, z_new, K, h_try, rtol, atol)
+                margin = wall_margin(K, last, n, h_try)
             n_steps += 1
             if want_stats:
                 stats[seg, S_STEPS] += 1.0
@@ -1787,9 +1767,14 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 if near_top:
                     n_rhs += free_flight_gap(method, t, z, h_try, seg, K, K2, F, z_top, ztmp, m,
                                              p, cfg, nodes, weights, U, force, work, stats)
-            # ---- accept
+            # ---- accept: advance to the step's end (held on the wall while sticking)
             t = t_break if is_last else t + h_try
-            advance(two_d, z, z_new, K, kx, kv, last, sticking, delta, n)
+            for j in range(size):
+                z[j] = z_new[j]
+                K[0, j] = K[last, j]
+            if sticking:
+                z[0] = delta
+                z[n] = 0.0
             h = h_next
             status = state_status(z, dim, escape)
             if status != OK:
