@@ -35,6 +35,21 @@ re-stepping exactly to it (Newton on full Runge-Kutta steps); the impact law app
 the reset to y and its saltation matrix to W; Dirac impulses and pulse switches are
 breakpoints at fixed times; chatter ends in sticking, which ends at release.
 
+The driver ``integrate`` is a loop over named phases, one function each (the section
+"The driver's phases"); a behaviour is found by its phase:
+
+- ``start_run``: outputs blanked, times and start state checked, impulse train placed;
+- at each breakpoint t (output, impulse or pulse end): ``impulses`` (pulses on and off,
+  Dirac impulses by ``kick``, a kick into the wall an impact at once), ``store_outputs``
+  (with Benettin's renormalisation of W), ``next_breakpoint``, and ``resume``
+  (f(t, y) for the next step; ``stick_or_release`` at t itself);
+- each step: ``step_size``, the trial step (``register_step`` on the 2-D register path,
+  chosen once per run; ``rk_step`` otherwise), the error control (``next_step_size``);
+- inside an accepted step, on its dense output (``step_dense``): ``wall_crossing`` (the
+  wall scan), ``impact_event`` (re-step to the wall, impact law and saltation matrix,
+  event log, ``chatter`` -> sticking); while sticking ``pulls_off`` and ``release_event``;
+  ``free_flight_gap`` (the gap statistics); then the state advances to the step's end.
+
 Kernels are pure functions of arrays and floats and return status codes; the Python
 layer (``opa._simulate``, ``opa.dynamics._orbits``) validates input, packs the parameters and
 turns codes into messages.
@@ -1214,6 +1229,16 @@ _NO_STAGES = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
+def allocate_scratch(size, dim, q):
+    """The driver's work arrays: stage rows K and K2 (re-steps), dense-output
+    coefficients F, trial state z_new, stage state ztmp, the state at a free-flight
+    maximum z_top, f before and after an impact, and the vector field's (6, Q) rows."""
+    return (np.empty((K_ROWS, size)), np.empty((K_ROWS, size)), np.empty((7, size)),
+            np.empty(size), np.empty(size), np.empty(size), np.empty(dim), np.empty(dim),
+            np.empty((6, q)))
+
+
+@njit(cache=True)
 def start_run(z, t, t_end, include_start, p, cfg, escape, snap, out, stats):
     """Phase "start": blank the outputs (NaN rows, empty statistics), check the times and
     the start state, and place the impulse train at t.
@@ -1306,31 +1331,17 @@ def impulses(t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n
     return OK, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts
 
 
-@njit(cache=True)
-def renormalise_tangent(z, dim, log_growth, i):
-    """Benettin's step at an output time: W (``z[dim:]``) scaled to unit Frobenius norm,
-    the log of the norm written to ``log_growth[i]``; a norm of 0 or inf (sticking
-    collapses W) gives -inf and restarts W from equal entries."""
-    size = z.shape[0]
-    norm = 0.0
-    for j in range(dim, size):
-        norm += z[j] * z[j]
-    norm = np.sqrt(norm)
-    if norm > 0.0 and norm < np.inf:
-        log_growth[i] = np.log(norm)
-        for j in range(dim, size):
-            z[j] /= norm
-    else:
-        log_growth[i] = -np.inf
-        for j in range(dim, size):
-            z[j] = 1.0 / np.sqrt(size - dim)
-
-
-@njit(cache=True)
+# numpy's error model (every divisor here is nonzero) and no call: nothing can raise, so
+# numba drops the reference counting of the array arguments, two atomic updates each per
+# call otherwise (a run with an output every few steps pays for it)
+@njit(cache=True, error_model="numpy")
 def store_outputs(t, z, m, dim, k_out, sticking, renormalise, t_out, out, stats, log_growth):
     """Phase "outputs" (a breakpoint at t): the state y is stored at every output time
     reached (``t_out[k_out] <= t``), with the sticking flag of the interval it closes and,
-    with ``renormalise``, Benettin's renormalisation of W. Returns the next k_out."""
+    with ``renormalise``, Benettin's step: W (``z[dim:]``) scaled to unit Frobenius norm
+    and the log of the norm written to ``log_growth`` (-inf when sticking collapsed W,
+    which then restarts from equal entries). Returns the next k_out."""
+    size = z.shape[0]
     while k_out < t_out.shape[0] and t_out[k_out] <= t:
         for j in range(dim):
             out[k_out, j] = z[j]
@@ -1338,7 +1349,18 @@ def store_outputs(t, z, m, dim, k_out, sticking, renormalise, t_out, out, stats,
             if stats.shape[0] > 0:
                 stats[k_out - 1, S_STICKING] = 1.0 if sticking else 0.0
             if renormalise and m > 0:
-                renormalise_tangent(z, dim, log_growth, k_out - 1)
+                norm = 0.0
+                for j in range(dim, size):
+                    norm += z[j] * z[j]
+                norm = np.sqrt(norm)
+                if norm > 0.0 and norm < np.inf:
+                    log_growth[k_out - 1] = np.log(norm)
+                    for j in range(dim, size):
+                        z[j] /= norm
+                else:
+                    log_growth[k_out - 1] = -np.inf
+                    for j in range(dim, size):
+                        z[j] = 1.0 / np.sqrt(size - dim)
         k_out += 1
     return k_out
 
@@ -1357,33 +1379,35 @@ def next_breakpoint(t_next_out, t_imp, force_end, snap):
     return t_break
 
 
-@njit(cache=True)
-def resume(t, z, m, force, sticking, seg, n_events, p, cfg, nodes, weights, U, K, work,
-           stats, log):
-    """Phase "resume" (after the breakpoints at t): f(t, z) into K[0] for the next step;
-    sticking ends here when the unconstrained acceleration already points away from the
-    wall, and starts here at rest on the wall with the net force into it (e.g. a start at
-    x_0 = delta, v_0 = 0, from which no impact will be detected).
+@njit(cache=True, inline="always")
+def contact_changes(sticking, acc, x0, v0, delta):
+    """Whether sticking ends or begins at a breakpoint (phase "resume"), from the
+    unconstrained acceleration ``acc`` of x_0 there: sticking ends when it points away from
+    the wall; it begins at rest on the wall (x_0 = delta, v_0 = 0, e.g. the start state,
+    from which no impact will be detected) with the net force into it."""
+    if sticking:
+        return acc < 0.0
+    return x0 >= delta and v0 == 0.0 and acc > 0.0
 
-    Returns (sticking, n_events, evaluations)."""
-    n = cfg[C_NCOEF]
-    acc = vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
-                       work)
-    evals = 1
-    if sticking and acc < 0.0:
+
+@njit(cache=True)
+def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, nodes, weights, U, K,
+                     work, stats, log):
+    """Phase "resume", where ``contact_changes``: sticking ends at t (EV_RELEASE) or
+    begins there (EV_STICK: the mean held at rest on the wall by ``_hold``), and f(t, z)
+    into K[0] again for the next step. Returns (sticking, n_events); one evaluation."""
+    if sticking:
         sticking = np.bool_(False)
         n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
-    elif not sticking and z[0] >= p[P_DELTA] and z[n] == 0.0 and acc > 0.0:
+    else:
         z[0] = p[P_DELTA]
-        _hold(z, m, n, cfg[C_LAW])
+        _hold(z, m, cfg[C_NCOEF], cfg[C_LAW])
         sticking = np.bool_(True)
         n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK))
         if stats.shape[0] > 0:
             stats[seg, S_STICKS] += 1.0
-    else:
-        return sticking, n_events, evals
     vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0], work)
-    return sticking, n_events, evals + 1
+    return sticking, n_events
 
 
 @njit(cache=True, inline="always")
@@ -1426,21 +1450,6 @@ def next_step_size(method, err, h_try, h, is_last):
 
 
 @njit(cache=True)
-def wall_scan(method, t, z, h, K, K2, F, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
-              work):
-    """Phase "wall scan": the first time in the accepted step (dense output F ready)
-    where x_0 reaches the wall (``wall_crossing``), refined by re-stepping exactly to it
-    (``restep_to``). Returns (hit, hh, evaluations); with hit, z_new holds the state at
-    the wall at t + hh."""
-    theta = wall_crossing(method, z[0], dense_column(F, np.int64(0)), h, p[P_DELTA])
-    if theta > 0.0:
-        hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h, theta, K, K2, z_new,
-                              ztmp, m, p, cfg, nodes, weights, U, force, work)
-        return True, hh, evals
-    return False, 0.0, 0
-
-
-@njit(cache=True)
 def chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U, f_minus, work):
     """Phase "chatter -> stick", after an impact slower than the chatter velocity
     (eta < 1): with the net force into the wall (acceleration g > 0 at rest there) the
@@ -1462,19 +1471,25 @@ def chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U, f_minus, work):
 
 
 @njit(cache=True)
-def impact_event(t, z, z_wall, m, force, seg, n_events, n_impacts, p, cfg, nodes, weights, U, K,
-           f_minus, f_plus, work, stats, log, escape):
-    """Phase "impact": the state at the wall (``z_wall``, at t) takes the impact law on y
-    and its saltation matrix on W (``_impact``); the impact is logged (EV_IMPACT, or
-    EV_GRAZE below EVENT_GRAZE_VELOCITY, with the pre-impact velocity v-) and counted, an
-    impact slower than the chatter velocity may end in sticking (``chatter``), and the
-    state is checked (near grazing the saltation matrix, which divides by v-, can
-    overflow). Then f(t, z) into K[0] for the next step.
+def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impacts, p, cfg,
+                 nodes, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log, escape):
+    """Phase "impact": x_0 reaches the wall at theta h into the accepted step from t
+    (``wall_crossing`` on its dense output). The state there is a re-step exactly to it
+    (``restep_to``: Newton on full Runge-Kutta steps, into z_new); it takes the impact
+    law on y and its saltation matrix on W (``_impact``); the impact is logged (EV_IMPACT,
+    or EV_GRAZE below EVENT_GRAZE_VELOCITY, with the pre-impact velocity v-) and counted;
+    an impact slower than the chatter velocity may end in sticking (``chatter``); the state
+    is checked (near grazing the saltation matrix, which divides by v-, can overflow).
+    Then f(t, z) into K[0] for the next step.
 
-    Returns (status, sticking, n_events, n_impacts, evaluations)."""
+    Returns (t, status, sticking, n_events, n_impacts, evaluations), t the impact time."""
+    hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h, theta, K, K2, z_new, ztmp,
+                          m, p, cfg, nodes, weights, U, force, work)
+    t = t + hh
     for j in range(z.shape[0]):
-        z[j] = z_wall[j]
-    v_minus, evals = _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work)
+        z[j] = z_new[j]
+    v_minus, e = _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work)
+    evals += e
     n_impacts += 1
     kind = np.int64(EV_GRAZE if v_minus < EVENT_GRAZE_VELOCITY else EV_IMPACT)
     n_events = _log_event(log, n_events, t, v_minus, kind)
@@ -1497,7 +1512,7 @@ def impact_event(t, z, z_wall, m, force, seg, n_events, n_impacts, p, cfg, nodes
         vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
                      work)
         evals += 1
-    return status, sticking, n_events, n_impacts, evals
+    return t, status, sticking, n_events, n_impacts, evals
 
 
 @njit(cache=True)
@@ -1606,7 +1621,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     The loop is the phases of the module docstring: at each breakpoint ``impulses``,
     ``store_outputs`` and ``resume``; then the steps up to the next breakpoint, each a
     trial step (``register_step`` on the 2-D register path, else ``rk_step``) and, once
-    accepted, the events inside it on its dense output (``wall_scan`` then
+    accepted, the events inside it on its dense output (``wall_crossing`` then
     ``impact_event``, ``release_event``, ``free_flight_gap``) before the state advances.
     """
     n = cfg[C_NCOEF]
@@ -1625,16 +1640,8 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
     kx = kv = _NO_STAGES
     off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
-    K = np.empty((K_ROWS, size))
-    K2 = np.empty((K_ROWS, size))
-    F = np.empty((7, size))
-    z_new = np.empty(size)
-    ztmp = np.empty(size)
-    z_top = np.empty(size)
-    f_minus = np.empty(dim)
-    f_plus = np.empty(dim)
-    work = np.empty((6, nodes.shape[0]))
-
+    K, K2, F, z_new, ztmp, z_top, f_minus, f_plus, work = allocate_scratch(size, dim,
+                                                                          nodes.shape[0])
     t = t_out[0]
     t_end = t_out[n_out - 1]
     escape = escape_bound(z[:dim], p)
@@ -1645,22 +1652,18 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
         return status, 0, 0, 0, 0
     sticking = off
     n_events = np.int64(0)
-    n_impacts = 0
-    n_steps = 0
-    n_rhs = 0
+    n_impacts = n_steps = n_rhs = k_out = n_passes = 0
     h = 0.0
-    k_out = 0
-    # Every pass of the outer loop takes a step or passes a breakpoint (output, impulse,
-    # pulse end) closer than round-off; the cap only matters for the latter, e.g. impulse
-    # times denser than the resolution of t, which would otherwise loop without a step.
-    n_passes = 0
     while True:
+        # Every pass takes a step or passes a breakpoint closer than round-off; the cap
+        # only matters for the latter, e.g. impulse times denser than the resolution of t,
+        # which would otherwise loop without a step.
         n_passes += 1
         if n_passes > 2 * (max_steps + n_out):
             status = MAX_STEPS
             break
         seg = max(k_out - 1, 0)  # the output interval being integrated (stats row)
-        # ---- breakpoints at t
+        # ---- breakpoints at t: impulses (and pulse ends), outputs
         if t_imp <= t + snap or t >= force_end - snap:
             status, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts = impulses(
                 t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n_impacts,
@@ -1674,11 +1677,15 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 break
             seg = k_out - 1
         t_break = next_breakpoint(t_out[k_out], t_imp, force_end, snap)
-        sticking, n_events, evals = resume(t, z, m, force, sticking, seg, n_events, p, cfg,
-                                           nodes, weights, U, K, work, stats, log)
-        n_rhs += evals
-        if h == 0.0:
-            # Initial step: a fraction of the interval, then let the controller adapt.
+        # ---- resume: f(t, z) for the next step; sticking may end or begin at t itself
+        acc = vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
+                           work)
+        n_rhs += 1
+        if contact_changes(sticking, acc, z[0], z[n], delta):
+            sticking, n_events = stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg,
+                                                  nodes, weights, U, K, work, stats, log)
+            n_rhs += 1
+        if h == 0.0:  # the first step: a fraction of the interval, then the controller's
             h = min(1e-3, 0.01 * (t_break - t) + 1e-12)
 
         # ---- steps up to t_break
@@ -1698,8 +1705,6 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
                 err, margin, z_new[0], z_new[1], kx, kv = register_step(
                     t, z[0], z[1], h_try, K[0, 0], K[0, 1], mu, a_lin, c_cub, f_amp, w, force,
                     sticking, rtol, atol)
-                K[last, 0] = kx[11]
-                K[last, 1] = kv[11]
                 n_rhs += last
             else:
                 n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, nodes, weights,
@@ -1721,57 +1726,56 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
             h_next = next_step_size(method, err, h_try, h, is_last)
 
             # ---- events inside the accepted step, on its dense output
-            if sticking:
+            if sticking:  # sticking ends inside the step?
                 n_rhs += 1
-                if pulls_off(t + h_try, z_new, force, p, cfg, nodes, weights, U, f_plus, work):
-                    n_rhs += step_dense(two_d, kx, kv, method, t, z, z_new, h_try, K, F, ztmp,
-                                        m, p, cfg, nodes, weights, U, force, sticking, work)
-                    t, status, n_events, evals = release_event(method, t, h_try, z, m, force,
-                                                               n_events, p, cfg, nodes,
-                                                               weights, U, K, F, ztmp, f_plus,
-                                                               work, log, escape)
-                    n_rhs += evals
-                    sticking = off
-                    if status != OK:
-                        break
-                    h = h_next
-                    if t >= t_break:
-                        t = t_break
-                        break
-                    continue
-            else:
+                jump = pulls_off(t + h_try, z_new, force, p, cfg, nodes, weights, U, f_plus, work)
+                near_wall = near_top = off
+            else:  # an impact, or a free-flight maximum closer than the smallest gap so far?
+                jump = off
                 near_wall = may_reach_wall(z[0], z_new[0], margin, delta)
-                # a maximum of x_0 in the step that may come closer than the smallest gap
                 near_top = want_stats and K[0, 0] > 0.0 and may_reach_wall(
                     z[0], z_new[0], margin, delta - stats[seg, S_GAP])
-                if near_wall or near_top:
-                    n_rhs += step_dense(two_d, kx, kv, method, t, z, z_new, h_try, K, F, ztmp,
-                                        m, p, cfg, nodes, weights, U, force, sticking, work)
-                if near_wall:
-                    hit, hh, evals = wall_scan(method, t, z, h_try, K, K2, F, z_new, ztmp, m, p,
-                                               cfg, nodes, weights, U, force, work)
+            if jump or near_wall or near_top:
+                n_rhs += step_dense(two_d, kx, kv, method, t, z, z_new, h_try, K, F, ztmp, m, p,
+                                    cfg, nodes, weights, U, force, sticking, work)
+            if jump:
+                t, status, n_events, evals = release_event(method, t, h_try, z, m, force,
+                                                           n_events, p, cfg, nodes, weights, U,
+                                                           K, F, ztmp, f_plus, work, log, escape)
+                n_rhs += evals
+                sticking = off
+            elif near_wall:
+                theta = wall_crossing(method, z[0], dense_column(F, np.int64(0)), h_try, delta)
+                jump = theta > 0.0
+                if jump:
+                    t, status, sticking, n_events, n_impacts, evals = impact_event(
+                        method, t, h_try, theta, z, z_new, m, force, seg, n_events, n_impacts, p,
+                        cfg, nodes, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log,
+                        escape)
                     n_rhs += evals
-                    if hit:
-                        t = t + hh
-                        status, sticking, n_events, n_impacts, evals = impact_event(
-                            t, z, z_new, m, force, seg, n_events, n_impacts, p, cfg, nodes,
-                            weights, U, K, f_minus, f_plus, work, stats, log, escape)
-                        n_rhs += evals
-                        if status != OK:
-                            break
-                        h = max(h_next * 0.5, 1e-10)
-                        if t >= t_break:
-                            t = t_break
-                            break
-                        continue
-                if near_top:
-                    n_rhs += free_flight_gap(method, t, z, h_try, seg, K, K2, F, z_top, ztmp, m,
-                                             p, cfg, nodes, weights, U, force, work, stats)
+                    h_next = max(h_next * 0.5, 1e-10)
+            if jump:  # the state jumped at t inside the step: resume stepping from there
+                if status != OK:
+                    break
+                h = h_next
+                if t >= t_break:
+                    t = t_break
+                    break
+                continue
+            if near_top:
+                n_rhs += free_flight_gap(method, t, z, h_try, seg, K, K2, F, z_top, ztmp, m, p,
+                                         cfg, nodes, weights, U, force, work, stats)
             # ---- accept: advance to the step's end (held on the wall while sticking)
             t = t_break if is_last else t + h_try
-            for j in range(size):
-                z[j] = z_new[j]
-                K[0, j] = K[last, j]
+            if two_d:
+                z[0] = z_new[0]
+                z[1] = z_new[1]
+                K[0, 0] = kx[11]
+                K[0, 1] = kv[11]
+            else:
+                for j in range(size):
+                    z[j] = z_new[j]
+                    K[0, j] = K[last, j]
             if sticking:
                 z[0] = delta
                 z[n] = 0.0

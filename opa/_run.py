@@ -106,10 +106,10 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "dense_state": (i8, f8, v, m, v),
         "free_flight_maximum": (i8, f8, column, f8),
         # the driver's phases that call no vector field
+        "allocate_scratch": (i8, i8, i8),
         "start_run": (v, f8, f8, b1, v, iv, f8, f8, m, m),
         "kick": (f8, v, i8, f8, b1, i8, i8, i8, v, iv, m, m),
         "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, f8, f8, m, m),
-        "renormalise_tangent": (v, i8, v, i8),
         "store_outputs": (f8, v, i8, i8, i8, b1, b1, v, m, m, v),
     }
     main = {  # the vector field, everything that calls it, and a few leaves
@@ -127,10 +127,10 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "step_dense": (b1, stages, stages, i8, f8, v, v, f8, m, m, v, i8) + system
         + (f8, b1, m),
         # the driver's phases that call the vector field
-        "resume": (f8, v, i8, f8, b1, i8, i8) + system + (m, m, m, m),
-        "wall_scan": (i8, f8, v, f8, m, m, m, v, v, i8) + system + (f8, m),
+        "stick_or_release": (f8, v, i8, f8, b1, i8, i8) + system + (m, m, m, m),
         "chatter": (f8, v, i8, f8, f8) + system + (v, m),
-        "impact_event": (f8, v, v, i8, f8, i8, i8, i8) + system + (m, v, v, m, m, m, f8),
+        "impact_event": (i8, f8, f8, f8, v, v, i8, f8, i8, i8, i8) + system
+        + (m, m, v, v, v, m, m, m, f8),
         "pulls_off": (f8, v, f8) + system + (v, m),
         "release_event": (i8, f8, f8, v, i8, f8, i8) + system + (m, m, v, v, m, m, f8),
         "free_flight_gap": (i8, f8, v, f8, i8, m, m, m, v, v, i8) + system + (f8, m, m),
