@@ -35,14 +35,15 @@ re-stepping exactly to it (Newton on full Runge-Kutta steps); the impact law app
 the reset to y and its saltation matrix to W; Dirac impulses and pulse switches are
 breakpoints at fixed times; chatter ends in sticking, which ends at release.
 
-The driver ``integrate`` is a loop over named phases, one function each (the section
-"The driver's phases"); a behaviour is found by its phase:
+The driver ``integrate`` is a loop over named phases, each a function of the section
+"The driver's phases" (or of the steppers and the wall scan it calls); a behaviour is
+found by its phase:
 
 - ``start_run``: outputs blanked, times and start state checked, impulse train placed;
 - at each breakpoint t (output, impulse or pulse end): ``impulses`` (pulses on and off,
   Dirac impulses by ``kick``, a kick into the wall an impact at once), ``store_outputs``
-  (with Benettin's renormalisation of W), ``next_breakpoint``, and ``resume``
-  (f(t, y) for the next step; ``stick_or_release`` at t itself);
+  (and Benettin's ``renormalise_tangent``), ``next_breakpoint``, then the resume:
+  f(t, y) for the next step, and ``stick_or_release`` where ``contact_changes`` at t;
 - each step: ``step_size``, the trial step (``register_step`` on the 2-D register path,
   chosen once per run; ``rk_step`` otherwise), the error control (``next_step_size``);
 - inside an accepted step, on its dense output (``step_dense``): ``wall_crossing`` (the
@@ -1331,38 +1332,44 @@ def impulses(t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n
     return OK, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts
 
 
-# numpy's error model (every divisor here is nonzero) and no call: nothing can raise, so
-# numba drops the reference counting of the array arguments, two atomic updates each per
-# call otherwise (a run with an output every few steps pays for it)
-@njit(cache=True, error_model="numpy")
-def store_outputs(t, z, m, dim, k_out, sticking, renormalise, t_out, out, stats, log_growth):
+# No call and nothing that can raise: numba then drops the reference counting of the
+# array arguments (two atomic updates each per call otherwise), and the function is small
+# enough for LLVM to inline into the driver (a call per output cost 8 % of a run with 20
+# outputs per forcing period).
+@njit(cache=True)
+def store_outputs(t, z, dim, k_out, sticking, t_out, out, stats):
     """Phase "outputs" (a breakpoint at t): the state y is stored at every output time
-    reached (``t_out[k_out] <= t``), with the sticking flag of the interval it closes and,
-    with ``renormalise``, Benettin's step: W (``z[dim:]``) scaled to unit Frobenius norm
-    and the log of the norm written to ``log_growth`` (-inf when sticking collapsed W,
-    which then restarts from equal entries). Returns the next k_out."""
-    size = z.shape[0]
+    reached (``t_out[k_out] <= t``), with the sticking flag of the interval it closes.
+    Returns the next k_out."""
     while k_out < t_out.shape[0] and t_out[k_out] <= t:
         for j in range(dim):
             out[k_out, j] = z[j]
-        if k_out >= 1:
-            if stats.shape[0] > 0:
-                stats[k_out - 1, S_STICKING] = 1.0 if sticking else 0.0
-            if renormalise and m > 0:
-                norm = 0.0
-                for j in range(dim, size):
-                    norm += z[j] * z[j]
-                norm = np.sqrt(norm)
-                if norm > 0.0 and norm < np.inf:
-                    log_growth[k_out - 1] = np.log(norm)
-                    for j in range(dim, size):
-                        z[j] /= norm
-                else:
-                    log_growth[k_out - 1] = -np.inf
-                    for j in range(dim, size):
-                        z[j] = 1.0 / np.sqrt(size - dim)
+        if k_out >= 1 and stats.shape[0] > 0:
+            stats[k_out - 1, S_STICKING] = 1.0 if sticking else 0.0
         k_out += 1
     return k_out
+
+
+@njit(cache=True)
+def renormalise_tangent(z, dim, k_first, k_stop, log_growth):
+    """Phase "outputs" with ``renormalise``: Benettin's step at each output time
+    t_out[k], k_first <= k < k_stop (k >= 1): W (``z[dim:]``) scaled to unit Frobenius
+    norm, the log of the norm written to ``log_growth[k - 1]`` (-inf when sticking
+    collapsed W, which then restarts from equal entries)."""
+    size = z.shape[0]
+    for k in range(max(k_first, 1), k_stop):
+        norm = 0.0
+        for j in range(dim, size):
+            norm += z[j] * z[j]
+        norm = np.sqrt(norm)
+        if norm > 0.0 and norm < np.inf:
+            log_growth[k - 1] = np.log(norm)
+            for j in range(dim, size):
+                z[j] /= norm
+        else:
+            log_growth[k - 1] = -np.inf
+            for j in range(dim, size):
+                z[j] = 1.0 / np.sqrt(size - dim)
 
 
 @njit(cache=True, inline="always")
@@ -1619,7 +1626,7 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     component beyond ``escape_bound`` (of the start state) with ESCAPED.
 
     The loop is the phases of the module docstring: at each breakpoint ``impulses``,
-    ``store_outputs`` and ``resume``; then the steps up to the next breakpoint, each a
+    ``store_outputs`` and the resume; then the steps up to the next breakpoint, each a
     trial step (``register_step`` on the 2-D register path, else ``rk_step``) and, once
     accepted, the events inside it on its dense output (``wall_crossing`` then
     ``impact_event``, ``release_event``, ``free_flight_gap``) before the state advances.
@@ -1671,8 +1678,10 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
             if status != OK:
                 break
         if t_out[k_out] <= t:
-            k_out = store_outputs(t, z, m, dim, k_out, sticking, renormalise, t_out, out,
-                                  stats, log_growth)
+            k_stored = k_out
+            k_out = store_outputs(t, z, dim, k_out, sticking, t_out, out, stats)
+            if renormalise and m > 0:
+                renormalise_tangent(z, dim, k_stored, k_out, log_growth)
             if k_out >= n_out:
                 break
             seg = k_out - 1

@@ -110,7 +110,8 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "start_run": (v, f8, f8, b1, v, iv, f8, f8, m, m),
         "kick": (f8, v, i8, f8, b1, i8, i8, i8, v, iv, m, m),
         "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, f8, f8, m, m),
-        "store_outputs": (f8, v, i8, i8, i8, b1, b1, v, m, m, v),
+        "store_outputs": (f8, v, i8, i8, b1, v, m, m),
+        "renormalise_tangent": (v, i8, i8, i8, v),
     }
     main = {  # the vector field, everything that calls it, and a few leaves
         "vector_field": (v, i8) + system + (f8, b1, v, m),
