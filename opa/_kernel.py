@@ -1658,8 +1658,8 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     if status != OK:
         return status, 0, 0, 0, 0
     sticking = off
-    n_events = np.int64(0)
-    n_impacts = n_steps = n_rhs = k_out = n_passes = 0
+    n_events = n_impacts = k_out = np.int64(0)  # typed: passed to the phases
+    n_steps = n_rhs = n_passes = 0
     h = 0.0
     while True:
         # Every pass takes a step or passes a breakpoint closer than round-off; the cap
