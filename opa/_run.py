@@ -106,12 +106,9 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "dense_state": (i8, f8, v, m, v),
         "free_flight_maximum": (i8, f8, column, f8),
         # the driver's phases that call no vector field
-        "allocate_scratch": (i8, i8, i8),
         "start_run": (v, f8, f8, b1, v, iv, f8, f8, m, m),
-        "kick": (f8, v, i8, f8, b1, i8, i8, i8, v, iv, m, m),
         "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, f8, f8, m, m),
         "store_outputs": (f8, v, i8, i8, b1, v, m, m),
-        "renormalise_tangent": (v, i8, i8, i8, v),
     }
     main = {  # the vector field, everything that calls it, and a few leaves
         "vector_field": (v, i8) + system + (f8, b1, v, m),
@@ -129,7 +126,6 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         + (f8, b1, m),
         # the driver's phases that call the vector field
         "stick_or_release": (f8, v, i8, f8, b1, i8, i8) + system + (m, m, m, m),
-        "chatter": (f8, v, i8, f8, f8) + system + (v, m),
         "impact_event": (i8, f8, f8, f8, v, v, i8, f8, i8, i8, i8) + system
         + (m, m, v, v, v, m, m, m, f8),
         "pulls_off": (f8, v, f8) + system + (v, m),
