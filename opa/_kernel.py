@@ -36,8 +36,8 @@ the reset to y and its saltation matrix to W; Dirac impulses and pulse switches 
 breakpoints at fixed times; chatter ends in sticking, which ends at release.
 
 The driver ``integrate`` is a loop over named phases, each a function of the section
-"The driver's phases" (or of the steppers and the wall scan it calls); a behaviour is
-found by its phase:
+"The driver's phases" (some inlined) or of the steppers and the wall scan; a behaviour
+is found by its phase:
 
 - ``start_run``: outputs blanked, times and start state checked, impulse train placed;
 - at each breakpoint t (output, impulse or pulse end): ``impulses`` (pulses on and off,
@@ -1223,11 +1223,12 @@ def first_impulse(t0, include_start, T1, at_zero):
 # ---------------------------------------------------------------------------
 # The driver's phases (the map is in the module docstring). Each is a function of its
 # own, compiled once (``opa._run.callee_signatures`` lists the argument types with which
-# ``integrate`` calls it); the tiny ones of the step loop, which take scalars only, and a
-# few with one caller are inlined (fewer functions to compile cold). The rare phases take
-# the arrays they touch and return the scalars they change. An array argument costs two
-# atomic reference-count updates per call (also when inlined) unless the function calls
-# nothing and cannot raise: the hot path passes none.
+# ``integrate`` calls it), or inlined: the tiny ones of the step loop, which take scalars
+# only, and those that call the vector field (a function of its own would link and
+# optimise the vector field once more: seconds of a cold start). The rare phases take the
+# arrays they touch and return the scalars they change. An array argument costs two
+# atomic reference-count updates per call, also when inlined, unless the function calls
+# nothing and cannot raise (``store_outputs``): the register path's step takes none.
 _NO_STAGES = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
@@ -1399,7 +1400,7 @@ def contact_changes(sticking, acc, x0, v0, delta):
     return x0 >= delta and v0 == 0.0 and acc > 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, nodes, weights, U, K,
                      work, stats, log):
     """Phase "resume", where ``contact_changes``: sticking ends at t (EV_RELEASE) or
@@ -1479,7 +1480,7 @@ def chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U, f_minus, work):
     return False, t
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impacts, p, cfg,
                  nodes, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log, escape):
     """Phase "impact": x_0 reaches the wall at theta h into the accepted step from t
@@ -1524,7 +1525,7 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
     return t, status, sticking, n_events, n_impacts, evals
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def pulls_off(t, z, force, p, cfg, nodes, weights, U, f_plus, work):
     """Whether the unconstrained acceleration of the mean at rest on the wall turns away
     from it at the state z at t (the release condition of sticking); one evaluation."""
@@ -1533,7 +1534,7 @@ def pulls_off(t, z, force, p, cfg, nodes, weights, U, f_plus, work):
     return acc < 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def release_event(method, t, h, z, m, force, n_events, p, cfg, nodes, weights, U, K, F, ztmp,
             f_plus, work, log, escape):
     """Phase "release": sticking ends inside the accepted step from t (its dense output F
@@ -1574,7 +1575,7 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, nodes, weights, U
     return t, status, n_events, evals
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, nodes, weights,
                     U, force, work, stats):
     """Phase "gap statistics": the highest maximum of x_0 inside the accepted step (dense

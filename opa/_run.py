@@ -105,7 +105,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "wall_crossing": (i8, f8, column, f8, f8),
         "dense_state": (i8, f8, v, m, v),
         "free_flight_maximum": (i8, f8, column, f8),
-        # the driver's phases that call no vector field
+        # the driver's phases that call no vector field (those that do are inlined)
         "start_run": (v, f8, f8, b1, v, iv, f8, f8, m, m),
         "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, f8, f8, m, m),
         "store_outputs": (f8, v, i8, i8, b1, v, m, m),
@@ -124,13 +124,6 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "dense_prepare": (i8, f8, v, v, f8, m, m, v, i8) + system + (f8, b1, m),
         "step_dense": (b1, stages, stages, i8, f8, v, v, f8, m, m, v, i8) + system
         + (f8, b1, m),
-        # the driver's phases that call the vector field
-        "stick_or_release": (f8, v, i8, f8, b1, i8, i8) + system + (m, m, m, m),
-        "impact_event": (i8, f8, f8, f8, v, v, i8, f8, i8, i8, i8) + system
-        + (m, m, v, v, v, m, m, m, f8),
-        "pulls_off": (f8, v, f8) + system + (v, m),
-        "release_event": (i8, f8, f8, v, i8, f8, i8) + system + (m, m, v, v, m, m, f8),
-        "free_flight_gap": (i8, f8, v, f8, i8, m, m, m, v, v, i8) + system + (f8, m, m),
     }
     return {"main": main, "helper": helper}
 
