@@ -35,6 +35,22 @@ re-stepping exactly to it (Newton on full Runge-Kutta steps); the impact law app
 the reset to y and its saltation matrix to W; Dirac impulses and pulse switches are
 breakpoints at fixed times; chatter ends in sticking, which ends at release.
 
+The driver ``integrate`` is a loop over named phases, each a function of the section
+"The driver's phases" (some inlined) or of the steppers and the wall scan; a behaviour
+is found by its phase:
+
+- ``start_run``: outputs blanked, times and start state checked, impulse train placed;
+- at each breakpoint t (output, impulse or pulse end): ``impulses`` (pulses on and off,
+  Dirac impulses by ``kick``, a kick into the wall an impact at once), ``store_outputs``
+  (and Benettin's ``renormalise_tangent``), ``next_breakpoint``, then the resume:
+  f(t, y) for the next step, and ``stick_or_release`` where ``contact_changes`` at t;
+- each step: ``step_size``, the trial step (``register_step`` on the 2-D register path,
+  chosen once per run; ``rk_step`` otherwise), the error control (``next_step_size``);
+- inside an accepted step, on its dense output (``step_dense``): ``wall_crossing`` (the
+  wall scan), ``impact_event`` (re-step to the wall, impact law and saltation matrix,
+  event log, ``chatter`` -> sticking); while sticking ``pulls_off`` and ``release_event``;
+  ``free_flight_gap`` (the gap statistics); then the state advances to the step's end.
+
 Kernels are pure functions of arrays and floats and return status codes; the Python
 layer (``opa._simulate``, ``opa.dynamics._orbits``) validates input, packs the parameters and
 turns codes into messages.
@@ -799,12 +815,12 @@ def dense_prepare2(t, z, z_new, h, K, F, p, force, sticking):
 
 
 @njit(cache=True)
-def step_dense(two_d, stored, kx, kv, method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes,
-               weights, U, force, sticking, work):
-    """``dense_prepare`` for the step the driver just took: the 2-D loop's stages kx, kv
-    are stored in K first when they are still only in registers (``stored`` false);
-    ``dense_prepare`` itself picks the 2-D path."""
-    if two_d and not stored:
+def step_dense(two_d, kx, kv, method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U,
+               force, sticking, work):
+    """``dense_prepare`` for the step the driver just took (once per step at most): on the
+    2-D register path (``two_d``) the stages kx, kv, until now only in registers, are
+    stored in K first; ``dense_prepare`` itself picks the 2-D path."""
+    if two_d:
         store_stages2(K, kx, kv)
     return dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U,
                          force, sticking, work)
@@ -1205,6 +1221,377 @@ def first_impulse(t0, include_start, T1, at_zero):
 
 
 # ---------------------------------------------------------------------------
+# The driver's phases (the map is in the module docstring). Each is a function of its
+# own, compiled once (``opa._run.callee_signatures`` lists the argument types with which
+# ``integrate`` calls it), or inlined: the tiny ones of the step loop, which take scalars
+# only, and those that call the vector field (a function of its own would link and
+# optimise the vector field once more: seconds of a cold start). The rare phases take the
+# arrays they touch and return the scalars they change. An array argument costs two
+# atomic reference-count updates per call, also when inlined, unless the function calls
+# nothing and cannot raise (``store_outputs``): the register path's step takes none.
+_NO_STAGES = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@njit(cache=True, inline="always")
+def allocate_scratch(size, dim, q):
+    """The driver's work arrays: stage rows K and K2 (re-steps), dense-output
+    coefficients F, trial state z_new, stage state ztmp, the state at a free-flight
+    maximum z_top, f before and after an impact, and the vector field's (6, Q) rows."""
+    return (np.empty((K_ROWS, size)), np.empty((K_ROWS, size)), np.empty((7, size)),
+            np.empty(size), np.empty(size), np.empty(size), np.empty(dim), np.empty(dim),
+            np.empty((6, q)))
+
+
+@njit(cache=True)
+def start_run(z, t, t_end, include_start, p, cfg, escape, snap, out, stats):
+    """Phase "start": blank the outputs (NaN rows, empty statistics), check the times and
+    the start state, and place the impulse train at t.
+
+    Returns (status, j_imp, t_imp, force, force_end): the first impulse not yet applied
+    (index and time; t_imp = inf without impulses) and the pulse force on at t with its end
+    (a pulse that started before t may still be on)."""
+    for i in range(stats.shape[0]):
+        stats[i, S_IMPACTS] = 0.0
+        stats[i, S_MIN_VELOCITY] = np.inf
+        stats[i, S_STICKS] = 0.0
+        stats[i, S_STEPS] = 0.0
+        stats[i, S_STICKING] = 0.0
+        stats[i, S_GAP] = np.inf
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[i, j] = np.nan
+    use_impulses = p[P_F0] != 0.0
+    T1 = 2.0 * np.pi / p[P_OMEGA1]
+    at_zero = cfg[C_AT_ZERO] != 0
+    status = OK
+    j_imp = 0
+    if not (abs(t) < np.inf and abs(t_end) < np.inf):
+        status = BAD_TIME  # a NaN end time would never be reached
+    elif use_impulses:
+        j_imp = first_impulse(t, include_start, T1, at_zero)
+        if j_imp < 0:
+            status = BAD_TIME  # impulse index beyond exact integers
+    if status == OK and state_status(z, 2 * cfg[C_NCOEF], escape) != OK:
+        status = DIVERGED
+    t_imp = j_imp * T1 if use_impulses else np.inf
+    force = 0.0
+    force_end = np.inf
+    if status == OK and use_impulses and cfg[C_IMPULSE] == IMPULSE_PULSE and j_imp >= 1:
+        j_prev = j_imp - 1
+        if j_prev >= (0 if at_zero else 1) and t < j_prev * T1 + p[P_TAU] - snap:
+            force = impulse_strength(j_prev * T1, p)
+            force_end = j_prev * T1 + p[P_TAU]
+    return status, j_imp, t_imp, force, force_end
+
+
+@njit(cache=True, inline="always")
+def kick(t, z, m, strength, sticking, seg, n_events, n_impacts, p, cfg, stats, log):
+    """Phase "kick": a Dirac impulse adds ``strength`` to v_0 at t. A kick into the wall
+    while the mean rests on it is an impact at once (``_reflect``: a fixed-time jump, so W
+    takes only the reset's Jacobian), logged EV_KICK with the kicked velocity; a kick that
+    leaves the mean moving ends sticking (EV_RELEASE). Returns (sticking, n_events,
+    n_impacts)."""
+    n = cfg[C_NCOEF]
+    z[n] += strength
+    if z[0] >= p[P_DELTA] and z[n] > 0.0:
+        v_kick = z[n]
+        _reflect(z, m, n, p[P_ETA], cfg[C_LAW] != LAW_MEAN)
+        n_events = _log_event(log, n_events, t, v_kick, np.int64(EV_KICK))
+        n_impacts += 1
+        if seg < stats.shape[0]:
+            stats[seg, S_IMPACTS] += 1.0
+    if sticking and z[n] != 0.0:
+        sticking = np.bool_(False)
+        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
+    return sticking, n_events, n_impacts
+
+
+@njit(cache=True)
+def impulses(t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n_impacts, p,
+             cfg, snap, escape, stats, log):
+    """Phase "impulses" (a breakpoint at t): the pulse that ends at t switches off, and
+    every impulse due by t (within ``snap``) acts: a pulse switches on (force and end
+    time), a Dirac impulse kicks (``kick``; the state is checked after each).
+
+    Returns (status, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts)."""
+    pulse_model = cfg[C_IMPULSE] == IMPULSE_PULSE
+    if pulse_model and t >= force_end - snap:
+        force = 0.0
+        force_end = np.inf
+    T1 = 2.0 * np.pi / p[P_OMEGA1]
+    while t_imp <= t + snap:
+        strength = impulse_strength(t_imp, p)
+        if pulse_model:
+            force = strength
+            force_end = t_imp + p[P_TAU]
+        else:
+            sticking, n_events, n_impacts = kick(t, z, m, strength, sticking, seg, n_events,
+                                                 n_impacts, p, cfg, stats, log)
+            status = state_status(z, 2 * cfg[C_NCOEF], escape)
+            if status != OK:
+                return status, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts
+        j_imp += 1
+        t_imp = j_imp * T1
+    return OK, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts
+
+
+# No call and nothing that can raise: numba then drops the reference counting of the
+# array arguments (two atomic updates each per call otherwise), and the function is small
+# enough for LLVM to inline into the driver (a call per output cost 8 % of a run with 20
+# outputs per forcing period).
+@njit(cache=True)
+def store_outputs(t, z, dim, k_out, sticking, t_out, out, stats):
+    """Phase "outputs" (a breakpoint at t): the state y is stored at every output time
+    reached (``t_out[k_out] <= t``), with the sticking flag of the interval it closes.
+    Returns the next k_out."""
+    while k_out < t_out.shape[0] and t_out[k_out] <= t:
+        for j in range(dim):
+            out[k_out, j] = z[j]
+        if k_out >= 1 and stats.shape[0] > 0:
+            stats[k_out - 1, S_STICKING] = 1.0 if sticking else 0.0
+        k_out += 1
+    return k_out
+
+
+@njit(cache=True, inline="always")
+def renormalise_tangent(z, dim, k_first, k_stop, log_growth):
+    """Phase "outputs" with ``renormalise``: Benettin's step at each output time
+    t_out[k], k_first <= k < k_stop (k >= 1): W (``z[dim:]``) scaled to unit Frobenius
+    norm, the log of the norm written to ``log_growth[k - 1]`` (-inf when sticking
+    collapsed W, which then restarts from equal entries)."""
+    size = z.shape[0]
+    for k in range(max(k_first, 1), k_stop):
+        norm = 0.0
+        for j in range(dim, size):
+            norm += z[j] * z[j]
+        norm = np.sqrt(norm)
+        if norm > 0.0 and norm < np.inf:
+            log_growth[k - 1] = np.log(norm)
+            for j in range(dim, size):
+                z[j] /= norm
+        else:
+            log_growth[k - 1] = -np.inf
+            for j in range(dim, size):
+                z[j] = 1.0 / np.sqrt(size - dim)
+
+
+@njit(cache=True, inline="always")
+def next_breakpoint(t_next_out, t_imp, force_end, snap):
+    """The next fixed time to step to exactly: output, impulse or pulse end (one within
+    ``snap`` before the output time is the output time; see SNAP)."""
+    t_break = t_next_out
+    if t_imp < t_break:
+        t_break = t_imp
+    if force_end < t_break:
+        t_break = force_end
+    if t_next_out - t_break <= snap:
+        t_break = t_next_out
+    return t_break
+
+
+@njit(cache=True, inline="always")
+def contact_changes(sticking, acc, x0, v0, delta):
+    """Whether sticking ends or begins at a breakpoint (phase "resume"), from the
+    unconstrained acceleration ``acc`` of x_0 there: sticking ends when it points away from
+    the wall; it begins at rest on the wall (x_0 = delta, v_0 = 0, e.g. the start state,
+    from which no impact will be detected) with the net force into it."""
+    if sticking:
+        return acc < 0.0
+    return x0 >= delta and v0 == 0.0 and acc > 0.0
+
+
+@njit(cache=True, inline="always")
+def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, nodes, weights, U, K,
+                     work, stats, log):
+    """Phase "resume", where ``contact_changes``: sticking ends at t (EV_RELEASE) or
+    begins there (EV_STICK: the mean held at rest on the wall by ``_hold``), and f(t, z)
+    into K[0] again for the next step. Returns (sticking, n_events); one evaluation."""
+    if sticking:
+        sticking = np.bool_(False)
+        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
+    else:
+        z[0] = p[P_DELTA]
+        _hold(z, m, cfg[C_NCOEF], cfg[C_LAW])
+        sticking = np.bool_(True)
+        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK))
+        if stats.shape[0] > 0:
+            stats[seg, S_STICKS] += 1.0
+    vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0], work)
+    return sticking, n_events
+
+
+@njit(cache=True, inline="always")
+def step_size(t, h, t_break, hmax, sticking, stick_hmax):
+    """The step to try from t: h within the largest step (T/32 while sticking), cut to
+    end exactly at the breakpoint. Returns (h_try, is_last)."""
+    h_lim = min(h, hmax)
+    if sticking:
+        h_lim = min(h_lim, stick_hmax)
+    if t + h_lim >= t_break:
+        return t_break - t, np.bool_(True)
+    return h_lim, np.bool_(False)
+
+
+@njit(cache=True, inline="always")
+def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, atol):
+    """Phase "trial step" on the 2-D register path (the DMR, a Monte Carlo sample): one
+    DOP853 step of size h from (t, x, v) with f(t, x, v) = (k0x, k0v), every stage in a
+    scalar (``_stages2_dop853``) and the error estimate and wall margin from them
+    (``_error2``). Scalars only, in and out: an array argument, even of an inlined
+    function, costs reference-count updates, a third of a DMR step.
+
+    Returns (err, margin, x_new, v_new, kx, kv), kx and kv the stages 1-12 (the last
+    f(t + h, x_new, v_new)), stored in K only when the dense output needs them."""
+    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, np.cos(w * t),
+                                     np.sin(w * t), force, sticking)
+    err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
+    return err, margin, xn, vn, kx, kv
+
+
+@njit(cache=True, inline="always")
+def next_step_size(method, err, h_try, h, is_last):
+    """The step after an accepted one (err <= 1): the controller's factor, and at a
+    breakpoint no smaller than the step the controller had asked for."""
+    if err == 0.0:
+        factor = MAX_FACTOR
+    else:
+        factor = min(MAX_FACTOR, SAFETY * step_factor(method, err))
+    return max(h_try * factor, h if is_last else 0.0)
+
+
+@njit(cache=True, inline="always")
+def chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U, f_minus, work):
+    """Phase "chatter -> stick", after an impact slower than the chatter velocity
+    (eta < 1): with the net force into the wall (acceleration g > 0 at rest there) the
+    bounces that would follow, of speeds eta^k v-, accumulate after
+    2 eta v- / (g (1 - eta)) (flights 2 eta^k v- / g); the mean is put at rest on the wall
+    (``_hold``) and sticks from then. Otherwise the impact law's rebound stands.
+
+    Returns (sticking, the time the sticking starts); one evaluation."""
+    n = cfg[C_NCOEF]
+    eta = p[P_ETA]
+    z[n] = 0.0
+    acc = vector_field(z, np.int64(0), p, cfg, nodes, weights, U, forcing(t, p, force),
+                       np.bool_(False), f_minus, work)
+    if acc > 0.0:
+        _hold(z, m, n, cfg[C_LAW])
+        return True, t + 2.0 * eta * v_minus / (acc * (1.0 - eta))
+    z[n] = -eta * v_minus
+    return False, t
+
+
+@njit(cache=True, inline="always")
+def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impacts, p, cfg,
+                 nodes, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log, escape):
+    """Phase "impact": x_0 reaches the wall at theta h into the accepted step from t
+    (``wall_crossing`` on its dense output). The state there is a re-step exactly to it
+    (``restep_to``: Newton on full Runge-Kutta steps, into z_new); it takes the impact
+    law on y and its saltation matrix on W (``_impact``); the impact is logged (EV_IMPACT,
+    or EV_GRAZE below EVENT_GRAZE_VELOCITY, with the pre-impact velocity v-) and counted;
+    an impact slower than the chatter velocity may end in sticking (``chatter``); the state
+    is checked (near grazing the saltation matrix, which divides by v-, can overflow).
+    Then f(t, z) into K[0] for the next step.
+
+    Returns (t, status, sticking, n_events, n_impacts, evaluations), t the impact time."""
+    hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h, theta, K, K2, z_new, ztmp,
+                          m, p, cfg, nodes, weights, U, force, work)
+    t = t + hh
+    for j in range(z.shape[0]):
+        z[j] = z_new[j]
+    v_minus, e = _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work)
+    evals += e
+    n_impacts += 1
+    kind = np.int64(EV_GRAZE if v_minus < EVENT_GRAZE_VELOCITY else EV_IMPACT)
+    n_events = _log_event(log, n_events, t, v_minus, kind)
+    want_stats = stats.shape[0] > 0
+    if want_stats:
+        stats[seg, S_IMPACTS] += 1.0
+        if v_minus < stats[seg, S_MIN_VELOCITY]:
+            stats[seg, S_MIN_VELOCITY] = v_minus
+    sticking = False
+    if p[P_ETA] < 1.0 and v_minus < p[P_CHATTER_V]:
+        sticking, t_stick = chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U,
+                                    f_minus, work)
+        evals += 1
+        if sticking:
+            n_events = _log_event(log, n_events, t_stick, 0.0, np.int64(EV_STICK))
+            if want_stats:
+                stats[seg, S_STICKS] += 1.0
+    status = state_status(z, 2 * cfg[C_NCOEF], escape)
+    if status == OK:
+        vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
+                     work)
+        evals += 1
+    return t, status, sticking, n_events, n_impacts, evals
+
+
+@njit(cache=True, inline="always")
+def pulls_off(t, z, force, p, cfg, nodes, weights, U, f_plus, work):
+    """Whether the unconstrained acceleration of the mean at rest on the wall turns away
+    from it at the state z at t (the release condition of sticking); one evaluation."""
+    acc = vector_field(z, np.int64(0), p, cfg, nodes, weights, U, forcing(t, p, force),
+                       np.bool_(False), f_plus, work)
+    return acc < 0.0
+
+
+@njit(cache=True, inline="always")
+def release_event(method, t, h, z, m, force, n_events, p, cfg, nodes, weights, U, K, F, ztmp,
+            f_plus, work, log, escape):
+    """Phase "release": sticking ends inside the accepted step from t (its dense output F
+    ready), where the unconstrained acceleration at rest on the wall turns away from it
+    (``pulls_off``), located by bisection to 1e-13 in time; the state there, held on the
+    wall, leaves it (EV_RELEASE). Then f(t, z) into K[0] for the next step.
+
+    Returns (t, status, n_events, evaluations)."""
+    n = cfg[C_NCOEF]
+    delta = p[P_DELTA]
+    lo = 0.0
+    hi = 1.0
+    evals = 0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        dense_state(method, mid, z, F, ztmp)
+        ztmp[0] = delta
+        ztmp[n] = 0.0
+        evals += 1
+        if pulls_off(t + mid * h, ztmp, force, p, cfg, nodes, weights, U, f_plus, work):
+            hi = mid
+        else:
+            lo = mid
+        if (hi - lo) * h < 1e-13:
+            break
+    dense_state(method, hi, z, F, ztmp)
+    t = t + hi * h
+    for j in range(z.shape[0]):
+        z[j] = ztmp[j]
+    z[0] = delta
+    z[n] = 0.0
+    n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
+    status = state_status(z, 2 * n, escape)
+    if status == OK:
+        vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), np.bool_(False),
+                     K[0], work)
+        evals += 1
+    return t, status, n_events, evals
+
+
+@njit(cache=True, inline="always")
+def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, nodes, weights,
+                    U, force, work, stats):
+    """Phase "gap statistics": the highest maximum of x_0 inside the accepted step (dense
+    output F ready; ``free_flight_maximum``), refined by re-stepping exactly to it
+    (``restep_to``) when it comes closer to the wall than the interval's smallest gap so
+    far (``stats[seg, S_GAP]``). Returns the evaluations."""
+    gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)), p[P_DELTA])
+    if gap < stats[seg, S_GAP]:
+        _, evals = restep_to(method, np.int64(MAXIMUM_ROOT), t, z, h, theta, K, K2, z_top,
+                             ztmp, m, p, cfg, nodes, weights, U, force, work)
+        stats[seg, S_GAP] = p[P_DELTA] - z_top[0]
+        return evals
+    return 0
+
+
+# ---------------------------------------------------------------------------
 # The driver
 @njit(cache=True)
 def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U, rtol, atol,
@@ -1240,226 +1627,96 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     The state is checked after every accepted step and every jump (impact, impulse
     kick, sticking, release): a NaN or inf component ends the run with DIVERGED, a state
     component beyond ``escape_bound`` (of the start state) with ESCAPED.
+
+    The loop is the phases of the module docstring: at each breakpoint ``impulses``,
+    ``store_outputs`` and the resume; then the steps up to the next breakpoint, each a
+    trial step (``register_step`` on the 2-D register path, else ``rk_step``) and, once
+    accepted, the events inside it on its dense output (``wall_crossing`` then
+    ``impact_event``, ``release_event``, ``free_flight_gap``) before the state advances.
     """
     n = cfg[C_NCOEF]
     dim = 2 * n
     size = z.shape[0]
-    q = nodes.shape[0]
     method = cfg[C_METHOD]
     last = last_stage(method)
     delta = p[P_DELTA]
-    eta = p[P_ETA]
-    law = cfg[C_LAW]
     max_steps = cfg[C_MAXSTEPS]
-    chatter_v = p[P_CHATTER_V]
     hmax = p[P_HMAX]
-    pulse_model = cfg[C_IMPULSE] == IMPULSE_PULSE
-    tau = p[P_TAU]
-    use_impulses = p[P_F0] != 0.0
-    T1 = 2.0 * np.pi / p[P_OMEGA1]
     stick_hmax = 2.0 * np.pi / p[P_OMEGA] / 32.0
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
+    # the 2-D register path, decided once: its trial step takes and returns scalars only
     two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes)
-    mu = p[P_MU]
-    a_lin = p[P_A]
-    c_cub = p[P_C]
-    f_amp = p[P_F]
-    w = p[P_OMEGA]
-    kx = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    kv = kx
-    stored = np.bool_(True)
-    # typed, not literal, constants: numba compiles a callee once per argument type, and
-    # a literal 0 or False is a type of its own
-    m0 = np.int64(0)
-    off = np.bool_(False)
-    on = np.bool_(True)
-
-    K = np.empty((K_ROWS, size))
-    K2 = np.empty((K_ROWS, size))
-    F = np.empty((7, size))
-    z_new = np.empty(size)
-    ztmp = np.empty(size)
-    z_top = np.empty(size)
-    f_minus = np.empty(dim)
-    f_plus = np.empty(dim)
-    work = np.empty((6, q))
-
-    for i in range(stats.shape[0]):
-        stats[i, S_IMPACTS] = 0.0
-        stats[i, S_MIN_VELOCITY] = np.inf
-        stats[i, S_STICKS] = 0.0
-        stats[i, S_STEPS] = 0.0
-        stats[i, S_STICKING] = 0.0
-        stats[i, S_GAP] = np.inf
-    for i in range(out.shape[0]):
-        for j in range(out.shape[1]):
-            out[i, j] = np.nan
-
+    mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
+    kx = kv = _NO_STAGES
+    off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
+    K, K2, F, z_new, ztmp, z_top, f_minus, f_plus, work = allocate_scratch(size, dim,
+                                                                          nodes.shape[0])
     t = t_out[0]
     t_end = t_out[n_out - 1]
     escape = escape_bound(z[:dim], p)
     snap = SNAP * max(1.0, abs(t_end))
-    at_zero = cfg[C_AT_ZERO] != 0
-    status = OK
-    j_imp = 0
-    if not (abs(t) < np.inf and abs(t_end) < np.inf):
-        status = BAD_TIME  # a NaN end time would never be reached
-    elif use_impulses:
-        j_imp = first_impulse(t, include_start, T1, at_zero)
-        if j_imp < 0:
-            status = BAD_TIME  # impulse index beyond exact integers
-    if status == OK and state_status(z, dim, escape) != OK:
-        status = DIVERGED
+    status, j_imp, t_imp, force, force_end = start_run(z, t, t_end, include_start, p, cfg,
+                                                       escape, snap, out, stats)
     if status != OK:
         return status, 0, 0, 0, 0
-    t_imp = j_imp * T1 if use_impulses else np.inf
-    force = 0.0
-    force_end = np.inf
-    if use_impulses and pulse_model and j_imp >= 1:
-        # a pulse that started before t0 may still be on
-        j_prev = j_imp - 1
-        if j_prev >= (0 if at_zero else 1) and t < j_prev * T1 + tau - snap:
-            force = impulse_strength(j_prev * T1, p)
-            force_end = j_prev * T1 + tau
     sticking = off
-    n_events = np.int64(0)
-    n_impacts = 0
-    n_steps = 0
-    n_rhs = 0
+    n_events = n_impacts = k_out = np.int64(0)  # typed: passed to the phases
+    n_steps = n_rhs = n_passes = 0
     h = 0.0
-    k_out = 0
-    seg = 0  # the output interval being integrated (stats row)
-    # Every pass of the outer loop takes a step or passes a breakpoint (output, impulse,
-    # pulse end) closer than round-off; the cap only matters for the latter, e.g. impulse
-    # times denser than the resolution of t, which would otherwise loop without a step.
-    n_passes = 0
     while True:
+        # Every pass takes a step or passes a breakpoint closer than round-off; the cap
+        # only matters for the latter, e.g. impulse times denser than the resolution of t,
+        # which would otherwise loop without a step.
         n_passes += 1
         if n_passes > 2 * (max_steps + n_out):
             status = MAX_STEPS
             break
-        # ---- breakpoints at time t: pulse end, impulses, outputs
-        if use_impulses:
-            if pulse_model and t >= force_end - snap:
-                force = 0.0
-                force_end = np.inf
-            while t_imp <= t + snap:
-                strength = impulse_strength(t_imp, p)
-                if pulse_model:
-                    force = strength
-                    force_end = t_imp + tau
-                else:
-                    z[n] += strength
-                    if z[0] >= delta and z[n] > 0.0:
-                        # kicked into the wall while on it: the impact law at once (a
-                        # fixed-time jump: W takes only the reset's Jacobian)
-                        v_kick = z[n]
-                        _reflect(z, m, n, eta, law != LAW_MEAN)
-                        n_events = _log_event(log, n_events, t, v_kick, np.int64(EV_KICK))
-                        n_impacts += 1
-                        if want_stats and seg < stats.shape[0]:
-                            stats[seg, S_IMPACTS] += 1.0
-                    if sticking and z[n] != 0.0:
-                        sticking = off
-                        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
-                    status = state_status(z, dim, escape)
-                    if status != OK:
-                        break
-                j_imp += 1
-                t_imp = j_imp * T1
+        seg = max(k_out - 1, 0)  # the output interval being integrated (stats row)
+        # ---- breakpoints at t: impulses (and pulse ends), outputs
+        if t_imp <= t + snap or t >= force_end - snap:
+            status, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts = impulses(
+                t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n_impacts,
+                p, cfg, snap, escape, stats, log)
             if status != OK:
                 break
-        while k_out < n_out and t_out[k_out] <= t:
-            for j in range(dim):
-                out[k_out, j] = z[j]
-            if k_out >= 1:
-                if want_stats:
-                    stats[k_out - 1, S_STICKING] = 1.0 if sticking else 0.0
-                if renormalise and m > 0:
-                    norm = 0.0
-                    for j in range(dim, size):
-                        norm += z[j] * z[j]
-                    norm = np.sqrt(norm)
-                    if norm > 0.0 and norm < np.inf:
-                        log_growth[k_out - 1] = np.log(norm)
-                        for j in range(dim, size):
-                            z[j] /= norm
-                    else:
-                        log_growth[k_out - 1] = -np.inf
-                        for j in range(dim, size):
-                            z[j] = 1.0 / np.sqrt(size - dim)
-            k_out += 1
+        if t_out[k_out] <= t:
+            k_stored = k_out
+            k_out = store_outputs(t, z, dim, k_out, sticking, t_out, out, stats)
+            if renormalise and m > 0:
+                renormalise_tangent(z, dim, k_stored, k_out, log_growth)
+            if k_out >= n_out:
+                break
             seg = k_out - 1
-        if k_out >= n_out:
-            break
-        t_break = t_out[k_out]
-        if t_imp < t_break:
-            t_break = t_imp
-        if force_end < t_break:
-            t_break = force_end
-        if t_out[k_out] - t_break <= snap:
-            t_break = t_out[k_out]
-
-        release = vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking,
-                               K[0], work)
+        t_break = next_breakpoint(t_out[k_out], t_imp, force_end, snap)
+        # ---- resume: f(t, z) for the next step; sticking may end or begin at t itself
+        acc = vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
+                           work)
         n_rhs += 1
-        if sticking and release < 0.0:
-            sticking = off
-            n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
-            vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
-                         work)
+        if contact_changes(sticking, acc, z[0], z[n], delta):
+            sticking, n_events = stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg,
+                                                  nodes, weights, U, K, work, stats, log)
             n_rhs += 1
-        elif not sticking and z[0] >= delta and z[n] == 0.0 and release > 0.0:
-            # at rest on the wall with the net force into it (e.g. x0 = delta, v0 = 0):
-            # no impact will be detected from here, so start sticking now
-            z[0] = delta
-            _hold(z, m, n, law)
-            sticking = on
-            n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK))
-            if want_stats:
-                stats[seg, S_STICKS] += 1.0
-            vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
-                         work)
-            n_rhs += 1
-        if h == 0.0:
-            # Initial step: a fraction of the interval, then let the controller adapt.
+        if h == 0.0:  # the first step: a fraction of the interval, then the controller's
             h = min(1e-3, 0.01 * (t_break - t) + 1e-12)
 
-        # ---- integrate up to t_break
+        # ---- steps up to t_break
         while t < t_break:
             if n_steps >= max_steps:
                 status = MAX_STEPS
                 break
-            h_lim = min(h, hmax)
-            if sticking:
-                h_lim = min(h_lim, stick_hmax)
-            is_last = off
-            if t + h_lim >= t_break:
-                h_try = t_break - t
-                is_last = on
-            else:
-                h_try = h_lim
+            h_try, is_last = step_size(t, h, t_break, hmax, sticking, stick_hmax)
             if h_try <= 1e-14 * max(1.0, abs(t)):
                 if is_last:
                     t = t_break
                     break
                 status = STEP_COLLAPSE
                 break
+            # ---- trial step into z_new, K[last] = f(t + h_try, z_new)
             if two_d:
-                # the register path: the stages stay in scalars (K's rows are stored only
-                # when the dense output needs them), and the step and its error estimate
-                # take no array (an array argument costs reference-count updates)
-                x_old = z[0]
-                v_old = z[1]
-                xn, vn, kx, kv = _stages2_dop853(t, x_old, v_old, h_try, K[0, 0], K[0, 1], mu,
-                                                 a_lin, c_cub, f_amp, w, np.cos(w * t),
-                                                 np.sin(w * t), force, sticking)
-                err, margin = _error2(h_try, x_old, v_old, xn, vn, K[0, 0], K[0, 1], kx, kv,
-                                      rtol, atol)
-                z_new[0] = xn
-                z_new[1] = vn
-                stored = off
+                err, margin, z_new[0], z_new[1], kx, kv = register_step(
+                    t, z[0], z[1], h_try, K[0, 0], K[0, 1], mu, a_lin, c_cub, f_amp, w, force,
+                    sticking, rtol, atol)
                 n_rhs += last
             else:
                 n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, nodes, weights,
@@ -1469,140 +1726,58 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
             n_steps += 1
             if want_stats:
                 stats[seg, S_STEPS] += 1.0
-            if not (err < np.inf):
+            if not (err < np.inf):  # a non-finite trial: retry a quarter as long
                 h = 0.25 * h_try
                 if h < 1e-14 * max(1.0, abs(t)):
                     status = DIVERGED
                     break
                 continue
-            if err > 1.0:
+            if err > 1.0:  # rejected
                 h = h_try * max(MIN_FACTOR, SAFETY * step_factor(method, err))
                 continue
-            # accepted
-            if err == 0.0:
-                factor = MAX_FACTOR
-            else:
-                factor = min(MAX_FACTOR, SAFETY * step_factor(method, err))
-            h_next = max(h_try * factor, h if is_last else 0.0)
+            h_next = next_step_size(method, err, h_try, h, is_last)
 
-            prepared = off
-            if not sticking and may_reach_wall(z[0], z_new[0], margin, delta):
-                n_rhs += step_dense(two_d, stored, kx, kv, method, t, z, z_new, h_try, K, F,
-                                    ztmp, m, p, cfg, nodes, weights, U, force, sticking, work)
-                stored = on
-                prepared = on
-                theta = wall_crossing(method, z[0], dense_column(F, np.int64(0)), h_try, delta)
-                if theta > 0.0:
-                    hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h_try, theta, K,
-                                          K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
-                                          work)
-                    n_rhs += evals
-                    # z_new holds the state at the wall
-                    t = t + hh
-                    for j in range(size):
-                        z[j] = z_new[j]
-                    v_minus, evals = _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus,
-                                             f_plus, work)
-                    n_rhs += evals
-                    n_impacts += 1
-                    kind = np.int64(EV_GRAZE if v_minus < EVENT_GRAZE_VELOCITY else EV_IMPACT)
-                    n_events = _log_event(log, n_events, t, v_minus, kind)
-                    if want_stats:
-                        stats[seg, S_IMPACTS] += 1.0
-                        if v_minus < stats[seg, S_MIN_VELOCITY]:
-                            stats[seg, S_MIN_VELOCITY] = v_minus
-                    # chatter: impacts too slow to resolve with a net force into the wall
-                    if eta < 1.0 and v_minus < chatter_v:
-                        z[n] = 0.0
-                        drive = forcing(t, p, force)
-                        acc = vector_field(z, m0, p, cfg, nodes, weights, U, drive, off, f_minus,
-                                           work)
-                        n_rhs += 1
-                        if acc > 0.0:
-                            t_acc = t + 2.0 * eta * v_minus / (acc * (1.0 - eta))
-                            _hold(z, m, n, law)
-                            sticking = on
-                            n_events = _log_event(log, n_events, t_acc, 0.0, np.int64(EV_STICK))
-                            if want_stats:
-                                stats[seg, S_STICKS] += 1.0
-                        else:
-                            z[n] = -eta * v_minus
-                    # the saltation matrix divides by v_0-: near grazing W can overflow
-                    status = state_status(z, dim, escape)
-                    if status != OK:
-                        break
-                    vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking,
-                                 K[0], work)
-                    n_rhs += 1
-                    h = max(h_next * 0.5, 1e-10)
-                    if t >= t_break:
-                        t = t_break
-                        break
-                    continue
-            elif sticking:
-                # sticking: release when the unconstrained acceleration turns away from the wall
-                drive = forcing(t + h_try, p, force)
-                rel_end = vector_field(z_new, m0, p, cfg, nodes, weights, U, drive, off, f_plus,
-                                       work)
+            # ---- events inside the accepted step, on its dense output
+            if sticking:  # sticking ends inside the step?
                 n_rhs += 1
-                if rel_end < 0.0:
-                    n_rhs += step_dense(two_d, stored, kx, kv, method, t, z, z_new, h_try, K, F,
-                                        ztmp, m, p, cfg, nodes, weights, U, force, sticking, work)
-                    stored = on
-                    lo = 0.0
-                    hi = 1.0
-                    for _ in range(60):
-                        mid = 0.5 * (lo + hi)
-                        dense_state(method, mid, z, F, ztmp)
-                        ztmp[0] = delta
-                        ztmp[n] = 0.0
-                        r = vector_field(ztmp, m0, p, cfg, nodes, weights, U,
-                                         forcing(t + mid * h_try, p, force), off, f_plus, work)
-                        n_rhs += 1
-                        if r < 0.0:
-                            hi = mid
-                        else:
-                            lo = mid
-                        if (hi - lo) * h_try < 1e-13:
-                            break
-                    dense_state(method, hi, z, F, ztmp)
-                    t = t + hi * h_try
-                    for j in range(size):
-                        z[j] = ztmp[j]
-                    z[0] = delta
-                    z[n] = 0.0
-                    sticking = off
-                    n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
-                    status = state_status(z, dim, escape)
-                    if status != OK:
-                        break
-                    vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking,
-                                 K[0], work)
-                    n_rhs += 1
-                    h = h_next
-                    if t >= t_break:
-                        t = t_break
-                        break
-                    continue
-
-            if want_stats and not sticking and K[0, 0] > 0.0:
-                # a maximum of x_0 inside the step: the free-flight gap (only where it can
-                # come closer to the wall than the smallest gap so far)
-                if may_reach_wall(z[0], z_new[0], margin,
-                                  delta - stats[seg, S_GAP]):
-                    if not prepared:
-                        n_rhs += step_dense(two_d, stored, kx, kv, method, t, z, z_new, h_try,
-                                            K, F, ztmp, m, p, cfg, nodes, weights, U, force,
-                                            sticking, work)
-                        stored = on
-                    gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)),
-                                                     delta)
-                    if gap < stats[seg, S_GAP]:
-                        _, evals = restep_to(method, np.int64(MAXIMUM_ROOT), t, z, h_try,
-                                             theta, K, K2, z_top, ztmp, m, p, cfg, nodes,
-                                             weights, U, force, work)
-                        n_rhs += evals
-                        stats[seg, S_GAP] = delta - z_top[0]
+                jump = pulls_off(t + h_try, z_new, force, p, cfg, nodes, weights, U, f_plus, work)
+                near_wall = near_top = off
+            else:  # an impact, or a free-flight maximum closer than the smallest gap so far?
+                jump = off
+                near_wall = may_reach_wall(z[0], z_new[0], margin, delta)
+                near_top = want_stats and K[0, 0] > 0.0 and may_reach_wall(
+                    z[0], z_new[0], margin, delta - stats[seg, S_GAP])
+            if jump or near_wall or near_top:
+                n_rhs += step_dense(two_d, kx, kv, method, t, z, z_new, h_try, K, F, ztmp, m, p,
+                                    cfg, nodes, weights, U, force, sticking, work)
+            if jump:
+                t, status, n_events, evals = release_event(method, t, h_try, z, m, force,
+                                                           n_events, p, cfg, nodes, weights, U,
+                                                           K, F, ztmp, f_plus, work, log, escape)
+                n_rhs += evals
+                sticking = off
+            elif near_wall:
+                theta = wall_crossing(method, z[0], dense_column(F, np.int64(0)), h_try, delta)
+                jump = theta > 0.0
+                if jump:
+                    t, status, sticking, n_events, n_impacts, evals = impact_event(
+                        method, t, h_try, theta, z, z_new, m, force, seg, n_events, n_impacts, p,
+                        cfg, nodes, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log,
+                        escape)
+                    n_rhs += evals
+                    h_next = max(h_next * 0.5, 1e-10)
+            if jump:  # the state jumped at t inside the step: resume stepping from there
+                if status != OK:
+                    break
+                h = h_next
+                if t >= t_break:
+                    t = t_break
+                    break
+                continue
+            if near_top:
+                n_rhs += free_flight_gap(method, t, z, h_try, seg, K, K2, F, z_top, ztmp, m, p,
+                                         cfg, nodes, weights, U, force, work, stats)
+            # ---- accept: advance to the step's end (held on the wall while sticking)
             t = t_break if is_last else t + h_try
             if two_d:
                 z[0] = z_new[0]

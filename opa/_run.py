@@ -111,6 +111,10 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "wall_crossing": (i8, f8, column, f8, f8),
         "dense_state": (i8, f8, v, m, v),
         "free_flight_maximum": (i8, f8, column, f8),
+        # the driver's phases that call no vector field (those that do are inlined)
+        "start_run": (v, f8, f8, b1, v, iv, f8, f8, m, m),
+        "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, f8, f8, m, m),
+        "store_outputs": (f8, v, i8, i8, b1, v, m, m),
     }
     main = {  # the vector field, everything that calls it, and a few leaves
         "vector_field": (v, i8) + system + (f8, b1, v, m),
@@ -124,7 +128,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "rk_step": (i8, f8, v, f8, m, v, v, i8) + system + (f8, b1, m),
         "restep_to": (i8, i8, f8, v, f8, f8, m, m, v, v, i8) + system + (f8, m),
         "dense_prepare": (i8, f8, v, v, f8, m, m, v, i8) + system + (f8, b1, m),
-        "step_dense": (b1, b1, stages, stages, i8, f8, v, v, f8, m, m, v, i8) + system
+        "step_dense": (b1, stages, stages, i8, f8, v, v, f8, m, m, v, i8) + system
         + (f8, b1, m),
     }
     return {"main": main, "helper": helper}

@@ -382,3 +382,141 @@ def test_the_wall_margin_bounds_the_rise_inside_a_step(h, method):
         ends = max(y0[0], y_new[0])
         assert true_top - ends <= margin
         assert dense_top - ends <= margin
+
+
+# --------------------------------------------------------------------------- the phases
+# The driver's phases one at a time, on cases with closed forms: a mass in free flight
+# (x'' = 0) or pushed by a constant force g (mu = a = c = 0, f = g, omega tiny), and
+# x'' = cos t at rest on the wall.
+ETA, G = 0.5, 1.0
+
+
+def phase_system(osc):
+    """(p, cfg, nodes, weights, U, work) of the DMR of ``osc`` (the one-node rule)."""
+    p, cfg = pack_parameters(osc, opa.SolverOptions())
+    nodes, weights, U = kernel_quadrature(quadrature(0))
+    return p, cfg, nodes, weights, U, np.empty((6, 1))
+
+
+def free_mass(f=0.0, omega=1e-6):
+    return opa.Oscillator(mu=0.0, a=0.0, c=0.0, f=f, omega=omega, eta=ETA, delta=0.0, F0=0.0,
+                          x0=-0.5, v0=0.0)
+
+
+@pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
+def test_the_impact_phase_restepping_to_the_wall_reflects_the_velocity(method):
+    """Free flight x = -0.5 + 2 t reaches the wall at t = 0.25, halfway through a step
+    of 0.5: the impact phase re-steps there (exact for a straight line), applies
+    v+ = -eta v-, logs the impact with v- and sets K[0] = f(t, y+)."""
+    p, cfg, nodes, weights, U, work = phase_system(free_mass())
+    cfg[K.C_METHOD] = method
+    z, z_new, ztmp = np.array([-0.5, 2.0]), np.empty(2), np.empty(2)
+    stages, stages2 = np.zeros((K.K_ROWS, 2)), np.zeros((K.K_ROWS, 2))
+    stages[0] = [2.0, 0.0]  # f(0, z)
+    f_minus, f_plus = np.empty(2), np.empty(2)
+    stats = np.zeros((1, K.N_STATS))
+    stats[0, K.S_MIN_VELOCITY] = np.inf
+    log = np.zeros((4, 3))
+    t, status, sticking, n_events, n_impacts, evals = K.impact_event(
+        method, 0.0, 0.5, 0.5, z, z_new, 0, 0.0, 0, 0, 0, p, cfg, nodes, weights, U, stages,
+        stages2, ztmp, f_minus, f_plus, work, stats, log, np.inf)
+    assert status == K.OK and not sticking and (n_events, n_impacts) == (1, 1)
+    assert t == pytest.approx(0.25, abs=1e-14)
+    np.testing.assert_allclose(z, [0.0, -ETA * 2.0], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(log[0], [t, 2.0, K.EV_IMPACT], rtol=1e-14)
+    assert stats[0, K.S_IMPACTS] == 1.0 and stats[0, K.S_MIN_VELOCITY] == pytest.approx(2.0)
+    np.testing.assert_allclose(stages[0], [-ETA * 2.0, 0.0], rtol=0, atol=1e-14)
+    assert evals >= K.last_stage(method) + 1
+
+
+@pytest.mark.parametrize("g", [G, -G])
+def test_the_chatter_phase_sticks_at_the_accumulation_time(g):
+    """After an impact at v- (below the chatter velocity) with a constant force g into
+    the wall, the bounces of speeds eta^k v- last 2 eta^k v- / g each, together
+    2 eta v- / (g (1 - eta)): the mean sticks then. Pulled away (g < 0), the rebound
+    v+ = -eta v- stands."""
+    p, cfg, nodes, weights, U, work = phase_system(free_mass(f=g))
+    v_minus = 1e-7
+    z = np.array([0.0, -ETA * v_minus])  # after the impact law
+    sticking, t_stick = K.chatter(1.0, z, 0, v_minus, 0.0, p, cfg, nodes, weights, U,
+                                  np.empty(2), work)
+    if g > 0:
+        assert sticking
+        assert t_stick == pytest.approx(1.0 + 2 * ETA * v_minus / (g * (1 - ETA)), rel=1e-12)
+        np.testing.assert_array_equal(z, [0.0, 0.0])
+    else:
+        assert not sticking
+        np.testing.assert_array_equal(z, [0.0, -ETA * v_minus])
+
+
+@pytest.mark.parametrize("strength", [0.4, -0.5])
+def test_the_kick_phase_at_rest_on_the_wall(strength):
+    """A kick into the wall while the mean rests on it is an impact at once (v = -eta
+    kick, logged EV_KICK with the kick); either kick ends the sticking (EV_RELEASE)."""
+    p, cfg, *_ = phase_system(free_mass())
+    z = np.array([0.0, 0.0])
+    stats, log = np.zeros((1, K.N_STATS)), np.zeros((4, 3))
+    sticking, n_events, n_impacts = K.kick(2.0, z, 0, strength, True, 0, 0, 0, p, cfg, stats,
+                                           log)
+    into = strength > 0
+    assert not sticking and n_impacts == int(into) and stats[0, K.S_IMPACTS] == int(into)
+    assert z[1] == (-ETA * strength if into else strength)
+    kinds = [K.EV_KICK, K.EV_RELEASE] if into else [K.EV_RELEASE]
+    np.testing.assert_array_equal(log[:n_events, 2], kinds)
+    if into:
+        np.testing.assert_array_equal(log[0, :2], [2.0, strength])
+
+
+def test_the_release_phase_finds_where_the_force_turns():
+    """x'' = cos t held on the wall over a step from 1 to 2.5: released at t = pi/2,
+    where the force turns away from the wall, at rest there, with K[0] = f(t, y)."""
+    p, cfg, nodes, weights, U, work = phase_system(free_mass(f=1.0, omega=1.0))
+    method, t0, h = K.METHOD_DOP853, 1.0, 1.5
+    z, z_new, ztmp = np.zeros(2), np.empty(2), np.empty(2)
+    stages, F = np.zeros((K.K_ROWS, 2)), np.empty((7, 2))
+    K.rk_step(method, t0, z, h, stages, z_new, ztmp, 0, p, cfg, nodes, weights, U, 0.0, True,
+              work)
+    K.dense_prepare(method, t0, z, z_new, h, stages, F, ztmp, 0, p, cfg, nodes, weights, U,
+                    0.0, True, work)
+    assert K.pulls_off(t0 + h, z_new, 0.0, p, cfg, nodes, weights, U, np.empty(2), work)
+    assert not K.pulls_off(t0, z, 0.0, p, cfg, nodes, weights, U, np.empty(2), work)
+    log = np.zeros((2, 3))
+    t, status, n_events, evals = K.release_event(method, t0, h, z, 0, 0.0, 0, p, cfg, nodes,
+                                                 weights, U, stages, F, ztmp, np.empty(2),
+                                                 work, log, np.inf)
+    assert status == K.OK and n_events == 1 and evals > 30
+    assert t == pytest.approx(math.pi / 2, abs=1e-12)
+    np.testing.assert_array_equal(z, [0.0, 0.0])
+    np.testing.assert_array_equal(log[0], [t, 0.0, K.EV_RELEASE])
+    np.testing.assert_allclose(stages[0], [0.0, math.cos(t)], rtol=0, atol=1e-15)
+
+
+def test_the_outputs_phase_stores_and_renormalises():
+    """Every output time reached is stored with the interval's sticking flag; Benettin's
+    step scales W to unit norm and logs the growth, or -inf (W restarted from equal
+    entries) when sticking collapsed it."""
+    z = np.array([1.0, 2.0, 3.0, 4.0, 0.0, 0.0])  # y (2) and W (2 x 2)
+    t_out = np.array([0.0, 1.0, 1.0 + 1e-9, 2.0])
+    out, stats = np.full((4, 2), np.nan), np.zeros((3, K.N_STATS))
+    k = K.store_outputs(1.0, z, 2, 1, True, t_out, out, stats)
+    assert k == 2 and np.isnan(out[0]).all() and np.isnan(out[2:]).all()
+    np.testing.assert_array_equal(out[1], [1.0, 2.0])
+    assert stats[0, K.S_STICKING] == 1.0 and stats[1, K.S_STICKING] == 0.0
+    growth = np.zeros(3)
+    K.renormalise_tangent(z, 2, 1, 3, growth)
+    assert growth[0] == pytest.approx(math.log(5.0)) and growth[1] == pytest.approx(0.0)
+    np.testing.assert_allclose(z[2:], [0.6, 0.8, 0.0, 0.0])
+    z[2:] = 0.0
+    K.renormalise_tangent(z, 2, 3, 4, growth)
+    assert growth[2] == -np.inf
+    np.testing.assert_array_equal(z[2:], np.full(4, 0.5))
+
+
+@pytest.mark.parametrize("sticking, acc, x0, v0, changes", [
+    (True, -1.0, 0.0, 0.0, True), (True, 1.0, 0.0, 0.0, False),
+    (False, 1.0, 0.0, 0.0, True), (False, 1.0, 0.0, 1e-9, False),
+    (False, 1.0, -1e-9, 0.0, False), (False, -1.0, 0.0, 0.0, False)])
+def test_the_contact_at_a_breakpoint(sticking, acc, x0, v0, changes):
+    """Sticking ends at a breakpoint when the force turns away from the wall, and begins
+    there only at rest on the wall with the force into it."""
+    assert K.contact_changes(sticking, acc, x0, v0, 0.0) == changes
