@@ -393,9 +393,8 @@ ETA, G = 0.5, 1.0
 
 def phase_system(osc):
     """(p, cfg, nodes, weights, U, work) of the DMR of ``osc`` (the one-node rule)."""
-    p, cfg = pack_parameters(osc, opa.SolverOptions())
-    nodes, weights, U = kernel_quadrature(quadrature(0))
-    return p, cfg, nodes, weights, U, np.empty((6, 1))
+    inputs = kernel_inputs(osc, opa.SolverOptions())
+    return (inputs.p, inputs.cfg, *rule(inputs), np.empty((6, 1)))
 
 
 def free_mass(f=0.0, omega=1e-6):
