@@ -156,13 +156,14 @@ def test_a_weak_spring_is_not_an_escape():
 
 
 def test_an_ensemble_stops_at_its_first_failed_sample():
-    """c < 0: the first escaping sample fails the chunk; the rest are skipped, so the
-    ensemble fails in about the time of one sample, not of all of them."""
+    """c < 0: the first sample that runs away fails the chunk (the runaway guard ends it
+    before its state escapes); the rest are skipped, so the ensemble fails in about the
+    time of one sample, not of all of them."""
     from mc import simulate_mc
     from opa._run import SimulationError
 
     start = time.perf_counter()
-    with pytest.raises(SimulationError, match="escaped"):
+    with pytest.raises(SimulationError, match="runaway guard"):
         simulate_mc(Oscillator(c=-1.0), sigma=0.01, samples=256, periods=10, progress=False)
     assert time.perf_counter() - start < 30
 
