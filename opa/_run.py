@@ -494,7 +494,7 @@ class Batch:
         """What became of run b, in words ("ok" when it finished)."""
         status = int(self.status[b])
         if status == K.MAX_STEPS and self._guarded is not None and self._guarded[b] > 0:
-            return (f"stopped by the runaway guard after {int(self.steps[b])} steps (at most "
+            return (f"the runaway guard ended it after {int(self.steps[b])} steps (at most "
                     f"{GUARD_PER_PERIOD} per forcing period, {GUARD_PER_TIME} per unit time, "
                     f"{GUARD_FLOOR} in all): the step size collapsed, as when the state runs "
                     f"away in finite time; check the parameters (e.g. the signs of a and c), "
