@@ -49,6 +49,7 @@ TESTED_IN = {
     "mc/_source.py": ("tests/opa/test_shims.py",),
     "compare/_report.py": ("tests/compare/test_trustmap.py",),
     "compare/_config.py": ("tests/compare/test_trustmap.py",),
+    "compare/_mapdata.py": ("tests/compare/test_trustmap.py", "tests/compare/test_trust.py"),
 }
 
 #: what a covering test module must contain to name the source module
@@ -64,6 +65,7 @@ NAMED_AS = {
     "mc/_source.py": "sweep_source",
     "compare/_report.py": "write_report",
     "compare/_config.py": "load_config",
+    "compare/_mapdata.py": "compare._mapdata",
 }
 
 

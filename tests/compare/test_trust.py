@@ -16,7 +16,7 @@ from compare._trust import (
     running_rms,
     window_errors,
 )
-from compare._trustmap import count_distribution
+from compare._mapdata import count_distribution
 from opa._splits import Split
 from tests.truths import semicircle_mass
 

@@ -342,7 +342,7 @@ def test_the_law_map_has_both_verdicts(tiny_law):
 
 def test_law_map_counts_use_the_law_of_xi(tiny_law):
     """The impact-count distribution integrates the uniform law between the splits."""
-    from compare._trustmap import count_distribution
+    from compare._mapdata import count_distribution
     from opa._splits import Split
 
     _, ds, _ = tiny_law
