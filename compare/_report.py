@@ -698,6 +698,15 @@ def _fig_legend(fig, handles, labels, ncol):
     return legend
 
 
+def _axes_legend(fig, axes, ncol):
+    """:func:`_fig_legend` of every entry of ``axes``."""
+    handles, labels = [], []
+    for ax in axes:
+        hh, ll = ax.get_legend_handles_labels()
+        handles, labels = handles + hh, labels + ll
+    return _fig_legend(fig, handles, labels, ncol)
+
+
 def plot_map(ds, path, *, size=None):
     """Per horizon (rows) the mean and the variance (columns): the error at every grid point
     against the tolerance (diverging colours centred on it), the verdicts of the paper's
@@ -853,11 +862,7 @@ def plot_error_vs_order(ds, path, q=0, *, size=None):
             if r == len(picks) - 1:
                 ax.set_xlabel("N")
         axes[r, 0].set_ylabel("RMS error of x_0")
-    handles, labels = [], []
-    for ax in axes.flat:
-        hh, ll = ax.get_legend_handles_labels()
-        handles, labels = handles + hh, labels + ll
-    _fig_legend(fig, handles, labels, 4)
+    _axes_legend(fig, axes.flat, 4)
     fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}: RMS error of x_0 against N "
                  f"(variants offset in N)", fontsize=10)
     fig.savefig(path, dpi=120)
@@ -1029,11 +1034,7 @@ def plot_frontier(conv, path, *, size=None):
     for ax in axes:
         ax.axhline(conv.attrs["reference_sem"], color="k", ls=":", lw=1,
                    label="reference SE")
-    handles, labels = [], []
-    for ax in axes:
-        hh, ll = ax.get_legend_handles_labels()
-        handles, labels = handles + hh, labels + ll
-    _fig_legend(fig, handles, labels, 4)
+    _axes_legend(fig, axes, 4)
     fig.suptitle(f"σ = {conv.attrs['sigma']:g}, ω = {conv.attrs['omega']:g}, "
                  f"{conv.attrs['periods']:g} periods: error against K, N and cost", fontsize=10)
     fig.savefig(path, dpi=120)

@@ -225,6 +225,13 @@ GUARD_PER_PERIOD = 20_000
 GUARD_PER_TIME = 1_000
 
 
+_GUARD_LIMITS = (f"(at most {GUARD_PER_PERIOD} per forcing period, {GUARD_PER_TIME} per unit "
+                 f"time, {GUARD_FLOOR} in all)")
+_GUARD_ADVICE = ("The step size collapsed, as when the state runs away in finite time: check "
+                 "the parameters (e.g. the signs of a and c); a run that truly needs more "
+                 "steps can give SolverOptions(max_steps=...) explicitly.")
+
+
 def step_guard(times, p) -> int:
     """Steps the runaway guard allows over ``times`` (module constants above)."""
     span = float(times[-1] - times[0]) if len(times) else 0.0
@@ -301,15 +308,6 @@ class Inputs:
     nodes: np.ndarray
     weights: np.ndarray
     basis: np.ndarray
-
-    @property
-    def coefficients(self) -> int:
-        """N + 1: the number of coefficients of x (and of v)."""
-        return int(np.asarray(self.cfg)[..., K.C_NCOEF].flat[0])
-
-    @property
-    def dim(self) -> int:
-        return 2 * self.coefficients
 
 
 def pack(values: dict, *, order: int, max_steps: int, impulse_at_zero: bool,
@@ -494,11 +492,8 @@ class Batch:
         """What became of run b, in words ("ok" when it finished)."""
         status = int(self.status[b])
         if status == K.MAX_STEPS and self._guarded is not None and self._guarded[b] > 0:
-            return (f"the runaway guard ended it after {int(self.steps[b])} steps (at most "
-                    f"{GUARD_PER_PERIOD} per forcing period, {GUARD_PER_TIME} per unit time, "
-                    f"{GUARD_FLOOR} in all): the step size collapsed, as when the state runs "
-                    f"away in finite time; check the parameters (e.g. the signs of a and c), "
-                    f"or give SolverOptions(max_steps=...) explicitly")
+            return (f"the runaway guard ended it after {int(self.steps[b])} steps "
+                    f"{_GUARD_LIMITS}. {_GUARD_ADVICE}")
         return status_message(status)
 
     def blank_failures(self) -> None:
@@ -589,12 +584,8 @@ def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
     if status == K.MAX_STEPS and limit is not None:
         size = float(np.max(np.abs(z))) if np.isfinite(z).all() else float("inf")
         return (f"{label} stopped by the runaway guard: {n_steps} steps by t = {t_last:.6g} "
-                f"of {times[-1]:.6g} (at most {GUARD_PER_PERIOD} per forcing period, "
-                f"{GUARD_PER_TIME} per unit time, {GUARD_FLOOR} in all), the state's largest "
-                f"component {size:.3g}, {n_impacts} impacts. The step size collapsed, as "
-                f"when the state runs away in finite time: check the parameters (e.g. the "
-                f"signs of a and c); a run that truly needs more steps can give "
-                f"SolverOptions(max_steps=...) explicitly.")
+                f"of {times[-1]:.6g} {_GUARD_LIMITS}, the state's largest component "
+                f"{size:.3g}, {n_impacts} impacts. {_GUARD_ADVICE}")
     return (f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
             f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} impacts). "
             f"{advice(status)}")

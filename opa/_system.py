@@ -256,9 +256,7 @@ class System:
         if values is None:
             mean = float(getattr(self.oscillator, self.uncertain))
             values = mean + self.sigma * np.asarray(xi, dtype=float)
-        one = self.replace(sigma=0.0, order=0, truncation="galerkin", impact_law="mean",
-                           distribution=None)
-        return sampled(one.kernel_inputs(options), self.uncertain, values)
+        return sampled(self.deterministic().kernel_inputs(options), self.uncertain, values)
 
     def initial_state(self, initial=None) -> np.ndarray:
         """The start of a run: x_0 = x0, v_0 = v0 and the higher coefficients 0, or
