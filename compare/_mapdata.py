@@ -37,6 +37,8 @@ class Point:
     collocated: np.ndarray | None = None  # (variant,) of them computed by collocation
     failure: str = ""  # why a multi-element variant could not be run
     status: np.ndarray | None = None  # (variant, N) kernel status of the OPA run (-1: not run)
+    reduction: np.ndarray | None = None  # (variant, N) Var(x) / Var(x - x_hat): pairing's gain
+    hangs: np.ndarray | None = None  # (variant, N, horizon, criterion) verdict hangs on noise
 
 
 @dataclass

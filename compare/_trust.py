@@ -43,11 +43,22 @@ def first_disagreement(t: np.ndarray, err: np.ndarray, scale: np.ndarray, sem: n
     return float(t[bad[0]]) if len(bad) else float("inf")
 
 
-def marginal(err, scale, sem, *, tol: float, z: float, floor: float, upto: int) -> bool:
+def marginal(err, scale, sem, *, tol: float, z: float, floor: float, upto: int,
+             upper: float | None = None) -> bool:
     """Whether the verdict over the first ``upto`` outputs hangs on the MC noise: it
-    differs between no allowance for the noise and twice the allowance."""
+    differs between no allowance for the noise and an allowance of ``upper`` standard
+    errors (default ``2 z``). So a verdict is decided when OPA agrees even without the
+    allowance, or disagrees even with ``upper`` standard errors allowed.
+
+    >>> scale, sem = np.ones(4), np.full(4, 0.01)
+    >>> marginal(np.full(4, 0.155), scale, sem, tol=0.1, z=3.0, floor=0.0, upto=4)
+    True
+    >>> marginal(np.full(4, 0.155), scale, sem, tol=0.1, z=3.0, floor=0.0, upto=4, upper=5.0)
+    False
+    """
+    upper = 2 * z if upper is None else upper
     strict = excess(err[:upto], scale[:upto], sem[:upto], tol=tol, z=0.0, floor=floor)
-    loose = excess(err[:upto], scale[:upto], sem[:upto], tol=tol, z=2 * z, floor=floor)
+    loose = excess(err[:upto], scale[:upto], sem[:upto], tol=tol, z=upper, floor=floor)
     return bool((strict <= 0).all()) != bool((loose <= 0).all())  # NaN: never marginal
 
 

@@ -62,14 +62,22 @@ import xarray as xr
 from compare._config import ELEMENT_TOLERANCE, ValidateConfig, noise_floor
 from compare._mapdata import (HorizonSplits, Point, combine, point_dataset, splits_from_arrays,
                               splits_to_arrays, value_dataset)
+from compare._pairs import REPLICATES, Control, Pairs, pair_point
+from compare._phases import PhaseClock
 from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
-from mc import simulate_mc
+from mc import sample_xi, simulate_mc
 from opa.engine import (
-    MAX_CROSSINGS, MAX_SPLITS, adaptive_edges, collocate_element,
+    MAX_CROSSINGS, MAX_SPLITS, adaptive_edges, collocate_element, true_runs,
     Measure, opa_variants, provenance_attrs, run_elements, scan_splits,
     simulate_dmr, simulate_opa, SimulationError, SolverOptions, Store, System,
     time_grid, uniform_edges, write_netcdf,
 )
+
+#: a verdict hangs on the noise while OPA fails without the allowance for the noise but
+#: agrees with z + NOISE_BAND standard errors allowed (compare._trust.marginal): a
+#: disagreement more than NOISE_BAND SE past the verdict's own allowance is decided
+NOISE_BAND = 2.0
+
 
 class _Map:
     """The computation for one configuration (one object so that caches are shared)."""
@@ -82,32 +90,101 @@ class _Map:
         self.floor = noise_floor(cfg.options)
         self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
         self.mc_runs = 0
+        self.true_runs = 0
         self.opa_runs = 0
         self.bar = None
         self.measure = cfg.measure()  # one object: its recurrences are cached
+        self.clock = PhaseClock()
+
+    def _timed(self, phase: str, compute):
+        """``compute`` with its time charged to ``phase`` (:class:`compare._phases.PhaseClock`)."""
+        def timed():
+            with self.clock(phase):
+                return compute()
+        return timed
 
     def _name(self, value, sigma=None) -> str:
         name = f"{self.cfg.parameter}{value:g}"
         return name if sigma is None else f"{name}_sigma{sigma:.6g}"
 
     # -- one point ---------------------------------------------------------------------
-    def _mc(self, osc, value, sigma, samples, times):
+    def _ensemble(self, value, sigma, samples, times, previous=None) -> dict:
+        """The true sampled systems at ``samples`` scrambled Sobol' points in
+        ``REPLICATES`` replicates: x (M, T) with replicate r in rows r M/R .. (r+1) M/R - 1,
+        xi (M,), impacts (M,), rhs and wall seconds. The points at 2M contain those at M
+        (each replicate's Sobol' sequence goes on), so given the ensemble at M/2
+        (``previous``) only the new half is run; the result is the same to the bit."""
+        with self.clock("Monte Carlo runs"):
+            return self._run_ensemble(value, sigma, samples, times, previous)
+
+    def _run_ensemble(self, value, sigma, samples, times, previous) -> dict:
         cfg = self.cfg
+        start = time.perf_counter()
+        system = cfg.system_at(value, sigma=sigma, order=0)
+        self.mc_runs += 1
+        if previous is None or cfg.scheduler is not None:
+            ds = simulate_mc(system, samples=samples, sampler="sobol", seed=cfg.seed,
+                             replicates=REPLICATES, times=times, options=cfg.options,
+                             keep_paths=True, scheduler=cfg.scheduler, progress=False)
+            self.true_runs += samples
+            return {"x": ds.x.values, "xi": ds.xi.values, "impacts": ds.n_impacts.values,
+                    "rhs": int(ds.attrs["rhs_evaluations"]),
+                    "seconds": time.perf_counter() - start}
+        xi, _ = sample_xi("sobol", samples, cfg.seed, REPLICATES, distribution=self.measure
+                          if not cfg.semicircle else None)
+        R, half = REPLICATES, samples // (2 * REPLICATES)
+        new = xi.reshape(R, 2 * half)[:, half:].ravel()
+        paths, rhs, impacts = true_runs(system, cfg.options, new, times,
+                                        what="Monte Carlo sample", impacts=True)
+        self.true_runs += len(new)
+
+        def merge(old, fresh):
+            old, fresh = np.asarray(old), np.asarray(fresh)
+            return np.concatenate([old.reshape(R, half, *old.shape[1:]),
+                                   fresh.reshape(R, half, *fresh.shape[1:])],
+                                  axis=1).reshape(samples, *old.shape[1:])
+
+        return {"x": merge(previous["x"], paths[:, :, 0]), "xi": merge(previous["xi"], new),
+                "impacts": merge(previous["impacts"], impacts),
+                "rhs": previous["rhs"] + rhs, "seconds": time.perf_counter() - start}
+
+    def _round(self, value, sigma, samples, times, opa_inputs, controls, probabilities,
+               opa_mean, opa_var, first, state: dict) -> dict:
+        """One round of the point's Monte Carlo: the ensemble of ``samples`` true systems,
+        paired with every OPA run (:func:`compare._pairs.pair_point`) and judged
+        (:meth:`_judge`). The part keeps the verdicts, the reference curves and the paired
+        errors over time with their standard errors (what the next round's decision
+        needs), not the paths. ``state["paths"]``: the last ensemble computed in this process, which
+        the next round extends."""
+        cfg = self.cfg
+        T = cfg.oscillator_at(value).forcing_period
+        shape = opa_mean.shape[:2]
 
         def compute():
-            start = time.perf_counter()
-            ds = simulate_mc(cfg.system_at(value, sigma=sigma, order=0), samples=samples,
-                             sampler="sobol", seed=cfg.seed, times=times, options=cfg.options,
-                             scheduler=cfg.scheduler, progress=False)
-            self.mc_runs += 1
-            return ds.drop_vars(["xi", "weight", "sample", "n_impacts"]).assign_attrs(
-                impacts_min=int(ds.n_impacts.min()), impacts_max=int(ds.n_impacts.max()),
-                wall_seconds=time.perf_counter() - start)
+            previous = state.get("paths")
+            if previous is not None and len(previous["xi"]) != samples // 2:
+                previous = None
+            ens = self._ensemble(value, sigma, samples, times, previous)
+            state["paths"] = ens
+            pairs = pair_point(ens["x"], ens["xi"], controls, self.measure, probabilities,
+                               shape)
+            judged = self._judge(pairs, opa_mean, opa_var, first, times / T)
+            ref = pairs.reference
+            return {**judged, "x_mean": ref["x_mean"], "x_var": ref["x_var"],
+                    "x_sem": ref["x_sem"], "x_var_sem": ref["x_var_sem"],
+                    "control": np.array(ref["control"] or (-1, -1), np.int64),
+                    "reduction": pairs.reduction,
+                    "hangs": self._hangs(pairs),
+                    "impacts": np.array([ens["impacts"].min(), ens["impacts"].max()]),
+                    "rhs": ens["rhs"], "seconds": ens["seconds"]}
 
         inputs = {"system": cfg.system_at(value, sigma=sigma, order=0), "samples": samples,
-                  "sampler": "sobol", "seed": cfg.seed, "times": times, "options": cfg.options}
-        return self.parts.get(f"mc_{self._name(value, sigma)}_M{samples}", inputs, compute,
-                               ".nc")
+                  "sampler": "sobol", "seed": cfg.seed, "replicates": REPLICATES,
+                  "times": times, "options": cfg.options, "opa": opa_inputs,
+                  "criterion": [cfg.tolerance, cfg.var_tolerance, cfg.z, self.floor,
+                                list(cfg.horizons)]}
+        return self.parts.get(f"mc_{self._name(value, sigma)}_M{samples}", inputs,
+                              self._timed("pairs and verdicts", compute))
 
     def _opa(self, osc, value, sigma, order, times) -> dict:
         """Every single-element variant of OPA at one N: x_mean, x_var (variant, output),
@@ -120,23 +197,29 @@ class _Map:
             start = time.perf_counter()
             system = cfg.system_at(value, sigma=sigma, order=order)
             if cfg.semicircle:
-                mean, var, first, status = opa_variants(system, list(cfg.single_variants),
-                                                        times, cfg.options)
+                mean, var, first, status, coef = opa_variants(
+                    system, list(cfg.single_variants), times, cfg.options, coefficients=True)
             else:
                 whole = np.array([self.measure.lo, self.measure.hi])
                 run = element_variants(system, cfg.options, self.measure,
                                        [law for law, _ in cfg.single_variants],
                                        [whole] * len(cfg.single_variants), times)
                 mean, var, first = run["x_mean"], run["x_var"], run["first_impact"]
-                status = run["status"]
+                status, coef = run["status"], np.concatenate(run["x_coef"])
             self.opa_runs += 1
             return {"x_mean": mean, "x_var": var, "first_impact": first,
-                    "status": np.asarray(status, np.int64),
+                    "status": np.asarray(status, np.int64), "x_coef": coef,
                     "seconds": time.perf_counter() - start}
 
-        inputs = {"system": cfg.system_at(value, sigma=sigma, order=order),
-                  "variants": cfg.single_variants, "times": times, "options": cfg.options}
-        return self.parts.get(f"opa_{self._name(value, sigma)}_N{order}", inputs, compute)
+        return self.parts.get(f"opa_{self._name(value, sigma)}_N{order}",
+                              self._opa_inputs(value, sigma, order, times),
+                              self._timed("OPA runs", compute))
+
+    def _opa_inputs(self, value, sigma, order, times) -> dict:
+        cfg = self.cfg
+        return {"system": cfg.system_at(value, sigma=sigma, order=order),
+                "variants": cfg.single_variants, "times": times, "options": cfg.options,
+                "stores": "coefficients"}
 
     def _elements(self, value, sigma, order, times) -> dict:
         """The multi-element variants at one N (one per law of ``cfg.element_laws``):
@@ -155,7 +238,7 @@ class _Map:
             mean, var = np.full((L, len(times)), np.nan), np.full((L, len(times)), np.nan)
             first, count = np.full(L, np.nan), np.zeros(L, np.int64)
             collocated = np.zeros(L, np.int64)
-            failures = []
+            failures, coefficients = [], {}
             for ell, law in enumerate(cfg.element_laws):
                 try:
                     if cfg.elements == "adaptive":
@@ -174,19 +257,26 @@ class _Map:
                 mean[ell], var[ell] = run["x_mean"][0], run["x_var"][0]
                 first[ell], count[ell] = run["first_impact"][0], run["elements"][0]
                 collocated[ell] = run["collocated"][0]
+                coefficients[f"x_coef_{ell}"] = run["x_coef"][0]
+                coefficients[f"edges_{ell}"] = np.asarray(edges, float)
             self.opa_runs += 1
             return {"x_mean": mean, "x_var": var, "first_impact": first, "elements": count,
                     "collocated": collocated, "failure": " | ".join(failures),
-                    "seconds": time.perf_counter() - start}
+                    "seconds": time.perf_counter() - start, **coefficients}
 
-        inputs = {"system": cfg.system_at(value, sigma=sigma, order=order),
-                  "laws": cfg.element_laws, "elements": cfg.elements,
-                  "budget": cfg.budget if cfg.elements == "adaptive" else None,
-                  "tolerance": ELEMENT_TOLERANCE, "fallback": "collocation", "times": times,
-                  "options": cfg.options}
-        return self.parts.get(f"elements_{self._name(value, sigma)}_N{order}", inputs, compute)
+        return self.parts.get(f"elements_{self._name(value, sigma)}_N{order}",
+                              self._elements_inputs(value, sigma, order, times),
+                              self._timed("multi-element OPA runs", compute))
 
-    def evaluate(self, value: float, sigma: float, orders=None) -> Point:
+    def _elements_inputs(self, value, sigma, order, times) -> dict:
+        cfg = self.cfg
+        return {"system": cfg.system_at(value, sigma=sigma, order=order),
+                "laws": cfg.element_laws, "elements": cfg.elements,
+                "budget": cfg.budget if cfg.elements == "adaptive" else None,
+                "tolerance": ELEMENT_TOLERANCE, "fallback": "collocation", "times": times,
+                "options": cfg.options, "stores": "coefficients"}
+
+    def evaluate(self, value: float, sigma: float, orders=None, focus=None) -> Point:
         """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts.
 
         The multi-element variants run at N = Nmax only (NaN at the other N). The point's
@@ -207,12 +297,17 @@ class _Map:
         T = osc.forcing_period
         seconds = 0.0
         failure = ""
+        controls, probabilities = {}, {}
+        whole = np.array([self.measure.lo, self.measure.hi])
         for k, order in enumerate(orders):  # the variants of one N run in parallel
             run = self._opa(osc, value, sigma, order, times)
             opa_mean[:S, k], opa_var[:S, k] = run["x_mean"], run["x_var"]
             first[:S, k] = run["first_impact"] / T
             status[:S, k] = run["status"]
             seconds += run["seconds"]
+            for v in range(S):
+                controls[v, k] = Control(run["x_coef"][v][None], whole, cfg.semicircle)
+                probabilities[v, k] = np.ones(1)
             if cfg.element_laws and order == cfg.nmax:
                 run = self._elements(value, sigma, order, times)
                 opa_mean[S:, k], opa_var[S:, k] = run["x_mean"], run["x_var"]
@@ -222,47 +317,79 @@ class _Map:
                 status[S:, k] = np.where(run["elements"] > 0, 0, -1)
                 failure = str(run["failure"])
                 seconds += run["seconds"]
+                for ell in range(len(cfg.element_laws)):
+                    if f"x_coef_{ell}" in run:
+                        cuts = run[f"edges_{ell}"]
+                        controls[S + ell, k] = Control(run[f"x_coef_{ell}"], cuts)
+                        probabilities[S + ell, k] = np.array([
+                            self.measure.restrict(a, b).probability()
+                            for a, b in zip(cuts[:-1], cuts[1:])])
                 if failure:
                     self.log(f"{self._name(value, sigma)}, N = {order}: multi-element "
                              f"variant not run ({failure})")
-        samples = cfg.samples
+        opa_inputs = [self._opa_inputs(value, sigma, order, times) for order in orders]
+        if cfg.element_laws and cfg.nmax in orders:
+            opa_inputs.append(self._elements_inputs(value, sigma, cfg.nmax, times))
+        samples, state, mc_seconds = cfg.samples, {}, 0.0
         while True:
-            mc = self._mc(osc, value, sigma, samples, times)
-            seconds += float(mc.attrs["wall_seconds"])
-            point = self._judge(sigma, samples, mc, opa_mean, opa_var, first, times / T)
-            if samples * 2 > cfg.max_samples or not self._hangs_on_noise(point):
+            judged = self._round(value, sigma, samples, times, opa_inputs, controls,
+                                 probabilities, opa_mean, opa_var, first, state)
+            mc_seconds += float(judged["seconds"])
+            if samples * 2 > cfg.max_samples or not self._hangs_on_noise(judged, focus):
                 break
             samples *= 2
-        point.seconds = seconds
+        control = tuple(int(i) for i in judged["control"])
+        mc = {name: judged[name] for name in ("x_mean", "x_var", "x_sem", "x_var_sem")}
+        mc.update(impacts=tuple(int(i) for i in judged["impacts"]),
+                  seconds=mc_seconds, rhs=int(judged["rhs"]),
+                  control=None if control[0] < 0 else control)
+        point = Point(sigma, samples, mc, opa_mean, opa_var, first, judged["errors"],
+                      judged["pre"], judged["disagree"],
+                      judged["disagree"][:, :, None, :] > np.array(cfg.horizons)[None, None,
+                                                                                 :, None],
+                      reduction=judged["reduction"], hangs=judged["hangs"])
+        point.seconds = seconds + mc_seconds
         point.elements = elements
         point.collocated = collocated
         point.failure = failure
         point.status = status
         return point
 
-    def _hangs_on_noise(self, point: Point) -> bool:
-        cfg, k = self.cfg, -1  # the verdict that sigma* hangs on: N = Nmax
-        mc = point.mc
-        sd = np.sqrt(np.maximum(mc["x_var"], 0.0))
-        for v in range(len(cfg.variants)):
-            e_mean = point.opa_mean[v, k] - mc["x_mean"]
-            e_var = point.opa_var[v, k] - mc["x_var"]
-            for n in self.n_h:
-                if marginal(e_mean, sd, mc["x_sem"], tol=cfg.tolerance, z=cfg.z,
-                            floor=self.floor, upto=n):
-                    return True
-                if marginal(e_var, mc["x_var"], mc["x_var_sem"], tol=cfg.var_tolerance,
-                            z=cfg.z, floor=self.floor**2, upto=n):
-                    return True
-        return False
-
-    def _judge(self, sigma, samples, mc_ds, opa_mean, opa_var, first, periods) -> Point:
+    def _hangs(self, pairs: Pairs) -> np.ndarray:
+        """(variant, N, horizon, criterion): whether that verdict hangs on the noise
+        (:func:`compare._trust.marginal`, up to ``z + NOISE_BAND`` standard errors)."""
         cfg = self.cfg
-        mc = {name: mc_ds[name].values for name in ("x_mean", "x_var", "x_sem", "x_var_sem")}
-        mc["impacts"] = (int(mc_ds.attrs["impacts_min"]), int(mc_ds.attrs["impacts_max"]))
-        mc["seconds"] = float(mc_ds.attrs["wall_seconds"])
-        mc["rhs"] = int(mc_ds.attrs["rhs_evaluations"])
-        sd = np.sqrt(np.maximum(mc["x_var"], 0.0))
+        x_var = pairs.reference["x_var"]
+        checks = ((pairs.err_mean, pairs.err_mean_se, np.sqrt(x_var), cfg.tolerance,
+                   self.floor),
+                  (pairs.err_var, pairs.err_var_se, x_var, cfg.var_tolerance, self.floor**2))
+        V, N = pairs.err_mean.shape[:2]
+        hangs = np.zeros((V, N, len(cfg.horizons), 2), bool)
+        for (v, k, h, c), _ in np.ndenumerate(hangs):
+            err, sem, scale, tol, floor = checks[c]
+            hangs[v, k, h, c] = marginal(err[v, k], scale, sem[v, k], tol=tol, z=cfg.z,
+                                         floor=floor, upto=self.n_h[h],
+                                         upper=cfg.z + NOISE_BAND)
+        return hangs
+
+    def _hangs_on_noise(self, judged: dict, focus=None) -> bool:
+        """Whether any verdict of the round hangs on the noise, or with ``focus`` =
+        (variant, horizon, criterion) that verdict at N = Nmax, the one a bisection probe
+        decides."""
+        hangs = judged["hangs"]
+        if focus is None:
+            return bool(hangs.any())
+        v, h, c = focus
+        return bool(hangs[v, -1, h, c])
+
+    def _judge(self, pairs: Pairs, opa_mean, opa_var, first, periods) -> dict:
+        """The verdicts at one point from the paired estimates (:mod:`compare._pairs`):
+        each variant's errors with their own standard errors, scaled by the reference
+        spread and variance. Returns errors (variant, N, horizon, criterion, 3), pre
+        (variant, N) and disagree (variant, N, criterion)."""
+        cfg = self.cfg
+        x_var = pairs.reference["x_var"]
+        sd = np.sqrt(x_var)
         V, N = opa_mean.shape[:2]
         H = len(cfg.horizons)
         errors = np.empty((V, N, H, 2, 3))
@@ -271,8 +398,9 @@ class _Map:
         for v in range(V):
             for k in range(N):
                 checks = (
-                    (opa_mean[v, k] - mc["x_mean"], sd, mc["x_sem"], cfg.tolerance, self.floor),
-                    (opa_var[v, k] - mc["x_var"], mc["x_var"], mc["x_var_sem"],
+                    (pairs.err_mean[v, k], sd, pairs.err_mean_se[v, k], cfg.tolerance,
+                     self.floor),
+                    (pairs.err_var[v, k], x_var, pairs.err_var_se[v, k],
                      cfg.var_tolerance, self.floor**2),
                 )
                 for c, (err, scale, sem, tol, floor) in enumerate(checks):
@@ -281,12 +409,9 @@ class _Map:
                     for h, n in enumerate(self.n_h):
                         errors[v, k, h, c] = window_errors(err, scale, sem, n)
                 before = periods < first[v, k]
-                e0 = opa_mean[v, k][before] - mc["x_mean"][before]
+                e0 = pairs.err_mean[v, k][before]
                 pre[v, k] = float(np.sqrt(np.mean(e0**2))) if before.any() else np.nan
-        horizons = np.array(cfg.horizons)
-        agrees = disagree[:, :, None, :] > horizons[None, None, :, None]
-        return Point(sigma, samples, mc, opa_mean, opa_var, first, errors, pre, disagree,
-                     agrees)
+        return {"errors": errors, "pre": pre, "disagree": disagree}
 
     # -- one value of the swept parameter ------------------------------------------------
     def splits(self, value: float) -> tuple[float, list[HorizonSplits]]:
@@ -323,7 +448,8 @@ class _Map:
                   "sigmas": [min(cfg.sigmas), max(cfg.sigmas)], "horizons": cfg.horizons,
                   "tol": cfg.split_resolution, "per_period": cfg.per_period,
                   "options": cfg.options, "limits": [MAX_SPLITS, MAX_CROSSINGS]}
-        stored = self.parts.get(f"splits_{self._name(value)}", inputs, compute)
+        stored = self.parts.get(f"splits_{self._name(value)}", inputs,
+                                self._timed("split scans", compute))
         return centre, splits_from_arrays(stored)
 
     def boundary(self, value, grid: dict[float, Point]):
@@ -339,19 +465,28 @@ class _Map:
                 for c in range(C):
                     def agrees(s, v=v, h=h, c=c):
                         s = float(np.round(s, 12))
-                        if s not in probes:
-                            probes[s] = self.evaluate(value, s, orders=(cfg.nmax,))
+                        known = probes.get(s)
+                        # a probe another bisection made may hang on the noise for this
+                        # verdict: its rounds go on (the ones done are read back)
+                        if known is None or (known.hangs[v, -1, h, c]
+                                             and known.samples * 2 <= cfg.max_samples):
+                            probes[s] = self.evaluate(value, s, orders=(cfg.nmax,),
+                                                      focus=(v, h, c))
                             self._tick()
                         return bool(probes[s].agrees[v, k, h, c])
 
                     known = sorted(probes)
+                    for s in known:  # the probes of other bisections, decided for this one
+                        if s not in grid:
+                            agrees(s)
                     failing = [s for s in known if not probes[s].agrees[v, k, h, c]]
                     if not failing:
                         star[v, h, c] = (known[-1], np.nan)  # agrees at every sigma tried
                         continue
                     hi = failing[0]
                     lo = max([s for s in known if s < hi], default=0.0)
-                    lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
+                    with self.clock("bisection"):
+                        lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
                     # the probes are stored under sigma rounded to 12 digits
                     star[v, h, c] = (np.round(lo, 12), np.round(hi, 12))
                     steps[v, h, c] = n
@@ -363,6 +498,13 @@ class _Map:
             self.bar.update(1)
 
     def run(self) -> xr.Dataset:
+        """The map's dataset, with the phase table of this run (``phase_*`` attributes:
+        seconds not charged to a named phase go to "other": parts read back, loops)."""
+        with self.clock("other"):
+            ds = self._run()
+        return ds.assign_attrs(self.clock.attrs())
+
+    def _run(self) -> xr.Dataset:
         from tqdm.auto import tqdm
 
         cfg = self.cfg
@@ -386,21 +528,27 @@ class _Map:
                     grid[float(sigma)] = self.evaluate(value, float(sigma))
                     bar.update(1)
                 star, steps, probes = self.boundary(value, grid)
-                points.append([point_dataset(cfg, value, grid[float(s)], centre, scans, cdf)
-                               for s in cfg.sigmas])
-                values.append(value_dataset(cfg, value, centre, scans, star, steps, probes))
+                with self.clock("assembly"):
+                    points.append([point_dataset(cfg, value, grid[float(s)], centre, scans,
+                                                 cdf) for s in cfg.sigmas])
+                    values.append(value_dataset(cfg, value, centre, scans, star, steps,
+                                                probes))
                 first = grid if first is None else first
         self.bar = None
-        ds = combine(cfg, points, values)
+        with self.clock("assembly"):
+            ds = combine(cfg, points, values)
         ds = xr.merge([ds, self.details(first)], combine_attrs="drop_conflicts")
         if cfg.frontier:
             self.log("cost-accuracy frontier at the largest sigma ...")
-            ds = xr.merge([ds, frontier(cfg, parts=self.parts)], combine_attrs="drop_conflicts")
+            with self.clock("frontier"):
+                ds = xr.merge([ds, frontier(cfg, parts=self.parts)],
+                              combine_attrs="drop_conflicts")
         ds.attrs.update(_attrs(cfg))
         ds = ds.rename({"value": cfg.parameter})  # the sweep dimension (docs/datasets.md)
         # what this run did (the rest of the dataset is the same for a rerun)
         ds.attrs["wall_seconds"] = time.perf_counter() - start
         ds.attrs["mc_runs_computed"] = self.mc_runs
+        ds.attrs["true_runs_computed"] = self.true_runs
         ds.attrs["opa_runs_computed"] = self.opa_runs
         ds.attrs["parts_computed"] = self.parts.computed
         ds.attrs["parts_set_aside"] = self.parts.set_aside
@@ -415,7 +563,8 @@ class _Map:
                   "horizons": cfg.horizons, "per_period": cfg.per_period, "seed": cfg.seed,
                   "dense_per_period": DENSE_PER_PERIOD, "options": cfg.options}
         return self.parts.get(f"details_{self._name(value, sigma)}", inputs,
-                              lambda: _details(cfg, sigma), ".nc")
+                              self._timed("phase portraits", lambda: _details(cfg, sigma)),
+                              ".nc")
 
 
 FRONTIER_BUDGETS = (8, 16, 32, 64)
@@ -468,14 +617,17 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
     elements). The first impact is the earliest of any element's mean (inf: none).
 
     Returns a dict of x_mean, x_var, v_mean (L, T), first_impact (L,), elements (L,),
-    collocated (L,): the elements computed by the fallback, and status (L,): the kernel
-    status of the first element that stopped and was not computed again (0: none)."""
+    collocated (L,): the elements computed by the fallback, status (L,): the kernel
+    status of the first element that stopped and was not computed again (0: none), and
+    x_coef: per law the elements' coefficients x_j (E, N+1, T), the surrogate's
+    (:func:`opa._surrogate.surrogate_values`)."""
     order = system.order
     L = len(laws)
     mean, var = np.empty((L, len(times))), np.empty((L, len(times)))
     v_mean = np.empty((L, len(times)))
     first, count = np.full(L, np.inf), np.zeros(L, np.int64)
     collocated, status = np.zeros(L, np.int64), np.zeros(L, np.int64)
+    coefficients = []
     for ell, (law, cuts) in enumerate(zip(laws, edges)):
         own = system.replace(impact_law=law, truncation="galerkin")
         cells = [measure.restrict(a, b) for a, b in zip(cuts[:-1], cuts[1:])]
@@ -498,8 +650,10 @@ def element_variants(system: System, options: SolverOptions, measure: Measure, l
         var[ell] = np.maximum(P @ (s + (m - mean[ell]) ** 2), 0.0)
         v_mean[ell] = P @ out[:, :, order + 1]
         count[ell] = E
+        coefficients.append(out[:, :, : order + 1].transpose(0, 2, 1).copy())
     return {"x_mean": mean, "x_var": var, "v_mean": v_mean, "first_impact": first,
-            "elements": count, "collocated": collocated, "status": status}
+            "elements": count, "collocated": collocated, "status": status,
+            "x_coef": coefficients}
 
 
 def _sequence(system, cfg, cache, value):

@@ -133,10 +133,12 @@ def run_elements(system: System, options: SolverOptions, measures: list[Measure]
             for e, m in enumerate(measures)]
 
 
-def true_runs(system: System, options: SolverOptions, xi, times, *, what: str):
+def true_runs(system: System, options: SolverOptions, xi, times, *, what: str,
+              impacts: bool = False):
     """The true sampled impact systems at the points ``xi`` of the uncertain variable:
-    paths (M, T, 2) of x and x' and the right-hand sides used. A system that cannot be
-    completed raises :class:`SimulationError` naming ``what`` and its xi."""
+    paths (M, T, 2) of x and x' and the right-hand sides used (with ``impacts``, also
+    each system's number of impacts (M,)). A system that cannot be completed raises
+    :class:`SimulationError` naming ``what`` and its xi."""
     xi = np.asarray(xi, dtype=float)
     batch = run_batch(system.sampled_inputs(options, xi=xi), system.deterministic()
                       .initial_state(), times, rtol=options.rtol, atol=options.atol,
@@ -144,7 +146,8 @@ def true_runs(system: System, options: SolverOptions, xi, times, *, what: str):
     if not batch.ok.all():
         m = int(np.flatnonzero(batch.failed)[0])
         raise SimulationError(f"{what} xi = {xi[m]:.6g} stopped: {batch.message(m)}")
-    return batch.states, int(batch.rhs_evaluations.sum())
+    rhs = int(batch.rhs_evaluations.sum())
+    return (batch.states, rhs, batch.impacts) if impacts else (batch.states, rhs)
 
 
 def collocate_element(system: System, options: SolverOptions, measure: Measure, *,

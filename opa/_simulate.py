@@ -204,13 +204,16 @@ def simulate_opa(
     return ds
 
 
-def opa_variants(system: System, variants, times: np.ndarray, options: SolverOptions):
+def opa_variants(system: System, variants, times: np.ndarray, options: SolverOptions, *,
+                 coefficients: bool = False):
     """The OPA system under several (impact law, truncation) variants, in parallel: mean
     and variance of x over ``times`` (NaN after a trajectory that could not be completed),
     the time of each variant's first impact (inf: none) and its kernel status (0: it
     finished; ``opa._run.STATUS_NAMES`` names each code).
 
-    Returns (x_mean (V, T), x_var (V, T), first_impact (V,), status (V,))."""
+    Returns (x_mean (V, T), x_var (V, T), first_impact (V,), status (V,)), and with
+    ``coefficients`` the coefficients x_j (V, N+1, T) of the surrogate
+    (:func:`opa._surrogate.surrogate_values`; NaN where the mean is)."""
     order = system.order
     inputs = stack([system.replace(impact_law=law, truncation=trunc).kernel_inputs(options)
                     for law, trunc in variants])
@@ -220,4 +223,5 @@ def opa_variants(system: System, variants, times: np.ndarray, options: SolverOpt
     first = np.array([batch.events(v).first_impact() for v in range(len(batch))])
     out = batch.states
     x = out[:, :, : order + 1]
-    return x[:, :, 0], (x[:, :, 1:] ** 2).sum(axis=2), first, batch.status
+    moments = x[:, :, 0], (x[:, :, 1:] ** 2).sum(axis=2), first, batch.status
+    return (*moments, x.transpose(0, 2, 1).copy()) if coefficients else moments

@@ -65,22 +65,39 @@ def surrogate(ds, xi, *, measure: Measure | None = None) -> tuple[np.ndarray, np
         raise ValueError(f"xi must lie in the law's support [{edges[0]:g}, {edges[-1]:g}], "
                          f"got values in [{xi.min():g}, {xi.max():g}]")
     x_coef, v_coef = ds.element_x_coef.values, ds.element_v_coef.values  # (K, N+1, T)
-    order = x_coef.shape[1] - 1
-    x_hat = np.empty((xi.size, x_coef.shape[2]))
-    v_hat = np.empty_like(x_hat)
-    # the element of each point: the last edge closes the last element
+    closed = (len(edges) == 2 and measure.name == "semicircle"
+              and ds.attrs.get("distribution", "semicircle") == "semicircle")
+    return (surrogate_values(x_coef, edges, measure, xi, closed_form=closed),
+            surrogate_values(v_coef, edges, measure, xi, closed_form=closed))
+
+
+def surrogate_values(coef: np.ndarray, edges, measure: Measure, xi: np.ndarray, *,
+             closed_form: bool = False) -> np.ndarray:
+    """``sum_j coef[k, j] phi_j^(k)(xi)`` at the points ``xi`` (M,): (M, T).
+
+    ``coef`` (K, N+1, T): the coefficients of K elements cut at ``edges`` (K + 1), each in
+    the orthonormal basis of ``measure`` conditioned on its element; ``closed_form``: one
+    element in the Chebyshev polynomials U_j (the paper's single-element semicircle OPA).
+    A point on an inner edge belongs to the element on its right; the last edge closes
+    the last element. NaN coefficients (a run that stopped) give NaN from there on.
+
+    >>> coef = np.array([[[1.0], [2.0]]])        # x_hat = 1 + 2 U_1(xi) = 1 + 4 xi
+    >>> surrogate_values(coef, [-1.0, 1.0], None, np.array([0.5]), closed_form=True)
+    array([[3.]])
+    """
+    coef = np.asarray(coef, dtype=float)
+    edges = np.asarray(edges, dtype=float)
+    order = coef.shape[1] - 1
+    out = np.empty((xi.size, coef.shape[2]))
     which = np.clip(np.searchsorted(edges, xi, side="right") - 1, 0, len(edges) - 2)
-    single_semicircle = (len(edges) == 2 and measure.name == "semicircle"
-                         and ds.attrs.get("distribution", "semicircle") == "semicircle")
     for k in np.unique(which):
         here = which == k
-        if single_semicircle:  # the closed-form basis the single-element OPA runs in
+        if closed_form:
             phi = chebyshev_u(order, xi[here])
         else:
             phi = measure.restrict(float(edges[k]), float(edges[k + 1])).basis(order, xi[here])
-        x_hat[here] = phi.T @ x_coef[k]
-        v_hat[here] = phi.T @ v_coef[k]
-    return x_hat, v_hat
+        out[here] = phi.T @ coef[k]
+    return out
 
 
 def surrogate_moments(ds) -> dict[str, np.ndarray]:
@@ -96,4 +113,4 @@ def surrogate_moments(ds) -> dict[str, np.ndarray]:
     return out
 
 
-__all__ = ["run_measure", "surrogate", "surrogate_moments"]
+__all__ = ["run_measure", "surrogate", "surrogate_moments", "surrogate_values"]

@@ -54,7 +54,7 @@ from opa._splits import (
     event_sequence,
     scan_splits,
 )
-from opa._surrogate import run_measure, surrogate, surrogate_moments
+from opa._surrogate import run_measure, surrogate, surrogate_moments, surrogate_values
 from opa._system import IMPULSE_FIELDS, System, as_system
 from opa.dynamics._orbits import MAX_CYCLE, impulse_cycle
 from opa.dynamics._sections import identify_motion, mean_state, phase_section
@@ -73,6 +73,6 @@ __all__ = [
     "package_version", "parse", "phase_section", "preset", "provenance_attrs",
     "quadrature_order", "remove_store", "run_batch", "run_elements", "run_measure",
     "scan_splits", "simulate_dmr", "simulate_opa", "summary_lines", "surrogate",
-    "surrogate_moments", "sweep", "sweep_times", "time_coord", "time_grid", "true_runs",
-    "uniform_edges", "write_netcdf",
+    "surrogate_moments", "surrogate_values", "sweep", "sweep_times", "time_coord",
+    "time_grid", "true_runs", "uniform_edges", "write_netcdf",
 ]

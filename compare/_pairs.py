@@ -1,0 +1,185 @@
+"""The trust map's verdicts from paired runs: every OPA variant as its own control variate.
+
+At a grid point the map runs M true sampled systems at scrambled Sobol' points xi_m in R
+replicates (``mc.simulate_mc`` with ``keep_paths``). Every OPA run there -- each variant
+(impact law x truncation, or multi-element law) at each N -- defines the surrogate
+x_hat(t, xi) (:func:`opa._surrogate.surrogate_values`), whose mean E[x_hat] = x_0 and
+second moment are exact. Paired with the same M true systems
+(:func:`compare._verify.paired_estimates`), the differences ``x - x_hat`` give
+
+* OPA's error of the mean, ``x_0 - E[x] = -E[x - x_hat]``, and of the variance,
+  ``Var[x_hat] - Var_cv[x]``, each without bias and with the standard error of *that*
+  difference, which shrinks as the variant gets better: a good variant is certified by a
+  few runs, a bad one is refuted by a few (the MC noise no longer sets the verdict);
+* the reference E[x], Var[x] (the spread and variance the criterion scales with, and the
+  curves the figures draw): the control-variate estimate of the control whose estimate of
+  E[x] has the smallest standard error, among the plain ensemble (no control) and every
+  variant at the highest N whose run finished.
+
+No model and no xarray: arrays in, arrays out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from opa.engine import Measure, surrogate_values
+
+#: independent scramblings of the Sobol' points; the spread of their estimates is the
+#: standard error (randomised QMC)
+REPLICATES = 16
+
+
+@dataclass(frozen=True)
+class Control:
+    """One OPA run as a control: its coefficients x_j (K, N+1, T) on K elements cut at
+    ``edges``, in the closed-form Chebyshev U basis (``closed_form``, the paper's
+    single-element semicircle OPA) or the orthonormal basis of the law conditioned on each
+    element."""
+
+    coef: np.ndarray
+    edges: np.ndarray
+    closed_form: bool = False
+
+    def moments(self, probability: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The exact E[x_hat] and E[x_hat^2] (T,), with the elements' probabilities."""
+        P = np.asarray(probability, float) / np.sum(probability)
+        return P @ self.coef[:, 0], P @ (self.coef**2).sum(axis=1)
+
+
+@dataclass
+class Pairs:
+    """The paired estimates of one grid point over (variant, N, output)."""
+
+    err_mean: np.ndarray  # x_0 - E[x]
+    err_mean_se: np.ndarray
+    err_var: np.ndarray  # Var[x_hat] - Var_cv[x]
+    err_var_se: np.ndarray
+    reduction: np.ndarray  # (variant, N): Var(x) / Var(x - x_hat) summed over the outputs
+    reference: dict  # x_mean, x_var, x_sem, x_var_sem (T,) and control (variant, N) or None
+
+
+def pair_point(x: np.ndarray, xi: np.ndarray, controls: dict, measure: Measure,
+               probabilities: dict, shape: tuple[int, int],
+               replicates: int = REPLICATES) -> Pairs:
+    """Paired estimates for every control at one grid point.
+
+    ``x`` (M, T): the true systems at ``xi`` (M,), replicate r holding rows
+    ``r M/R .. (r+1) M/R - 1``; ``controls``: (variant, N index) -> :class:`Control`
+    (missing: not run, NaN); ``probabilities``: (variant, N index) -> element
+    probabilities (K,); ``shape``: (variants, Ns). A control with NaN coefficients (a run
+    that stopped) gives NaN estimates from where it stopped: it disagrees there.
+
+    The estimates are those of :func:`compare._verify.paired_estimates` (per replicate
+    r: ``d_r = mean_r(x - x_hat)``, ``q_r = mean_r(x^2 - x_hat^2)``), formed without the
+    (M, T) surrogate: x_hat is linear in the coefficients, so ``mean_r(x_hat)`` and
+    ``mean_r(x_hat^2)`` follow from the replicate means of the basis values and of their
+    products, computed once per basis (:class:`_Moments`) and shared by every N.
+    """
+    V, N = shape
+    M, T = x.shape
+    n = M // replicates
+    if M % replicates or replicates < 2:
+        raise ValueError(f"{M} points cannot form {replicates} replicates of equal size")
+    out = {name: np.full((V, N, T), np.nan)
+           for name in ("err_mean", "err_mean_se", "err_var", "err_var_se")}
+    reduction = np.full((V, N), np.nan)
+    x_r = x.reshape(replicates, n, T)
+    x1, x2 = x_r.mean(axis=1), (x_r**2).mean(axis=1)  # (R, T)
+    plain = _estimates(x1, x2, np.zeros(T), np.zeros(T), np.zeros_like(x1),
+                       np.zeros_like(x1))
+    best, best_se, best_key = plain, _rms(plain["mean_se"]), None
+    total = float(np.var(x, axis=0).sum())
+    cache: dict = {}
+    for (v, k), control in controls.items():
+        key = (control.closed_form, tuple(np.asarray(control.edges, float)))
+        if key not in cache:
+            cache[key] = _Moments(x, xi, control, measure, replicates,
+                                  max(c.coef.shape[1] for c in controls.values()))
+        moments = cache[key]
+        mean, second = control.moments(probabilities[(v, k)])
+        h1, h2, cross = moments.of(control.coef)
+        with np.errstate(invalid="ignore"):
+            est = _estimates(x1, x2, mean, second, h1, h2)
+        out["err_mean"][v, k] = -est["d"]
+        out["err_mean_se"][v, k] = est["d_se"]
+        out["err_var"][v, k] = (second - mean**2) - est["var"]
+        out["err_var_se"][v, k] = est["var_se"]
+        # Var(x - x_hat) over the M points, summed over the outputs
+        d_all = x1.mean(axis=0) - h1.mean(axis=0)
+        spread = float((x2.mean(axis=0) - 2 * cross + h2.mean(axis=0) - d_all**2).sum())
+        reduction[v, k] = total / spread if spread > 0 else (np.nan if np.isnan(spread)
+                                                             else np.inf)
+        if k == N - 1 and np.isfinite(est["mean"]).all() and np.isfinite(est["var"]).all():
+            se = _rms(est["mean_se"])
+            if se < best_se:
+                best, best_se, best_key = est, se, (v, k)
+    reference = {"x_mean": best["mean"], "x_var": np.maximum(best["var"], 0.0),
+                 "x_sem": best["mean_se"], "x_var_sem": best["var_se"], "control": best_key}
+    return Pairs(out["err_mean"], out["err_mean_se"], out["err_var"], out["err_var_se"],
+                 reduction, reference)
+
+
+def _estimates(x1, x2, mean, second, h1, h2) -> dict:
+    """Per-replicate control-variate estimates from the replicate means of x, x^2 (x1,
+    x2) and of x_hat, x_hat^2 (h1, h2), all (R, T), with the exact E[x_hat] = ``mean``
+    and E[x_hat^2] = ``second``: as :func:`compare._verify.paired_estimates`."""
+    R = x1.shape[0]
+    d = x1 - h1
+    mean_r = mean + d
+    var_r = second + (x2 - h2) - mean_r**2
+    out = {}
+    for name, per_replicate in (("d", d), ("mean", mean_r), ("var", var_r)):
+        out[name] = per_replicate.mean(axis=0)
+        out[f"{name}_se"] = per_replicate.std(axis=0, ddof=1) / np.sqrt(R)
+    return out
+
+
+class _Moments:
+    """The replicate means of one basis at the points: ``b1[r, k, j] = mean_r(1_k phi_j)``,
+    ``b2[r, k, j, l] = mean_r(1_k phi_j phi_l)`` (element k's indicator 1_k) and
+    ``g[k, j, t] = mean(1_k phi_j x(t))`` over all M points, up to degree ``J - 1``."""
+
+    def __init__(self, x, xi, control: Control, measure: Measure, replicates: int, J: int):
+        M = len(xi)
+        edges = np.asarray(control.edges, float)
+        K = len(edges) - 1
+        # each point's element (the last edge closes the last element) and basis values
+        which = np.clip(np.searchsorted(edges, xi, side="right") - 1, 0, K - 1)
+        phi = np.zeros((M, K, J))
+        for k in np.unique(which):
+            here = which == k
+            phi[here, k] = _basis(edges[k], edges[k + 1], measure, xi[here], J,
+                                  control.closed_form)
+        n = M // replicates
+        phi_r = phi.reshape(replicates, n, K, J)
+        self.b1 = phi_r.mean(axis=1)
+        self.b2 = np.einsum("rmkj,rmkl->rkjl", phi_r, phi_r) / n
+        self.g = (phi.reshape(M, K * J).T @ x).reshape(K, J, -1) / M
+
+    def of(self, coef: np.ndarray):
+        """Replicate means of x_hat and x_hat^2 (R, T) and mean(x x_hat) (T,) for the
+        coefficients (K, N+1, T)."""
+        J = coef.shape[1]
+        h1 = np.einsum("rkj,kjt->rt", self.b1[:, :, :J], coef)
+        h2 = np.einsum("rkjl,kjt,klt->rt", self.b2[:, :, :J, :J], coef, coef,
+                       optimize=True)
+        cross = np.einsum("kjt,kjt->t", self.g[:, :J], coef)
+        return h1, h2, cross
+
+
+def _basis(a: float, b: float, measure: Measure, xi: np.ndarray, J: int,
+           closed_form: bool) -> np.ndarray:
+    """phi_0 .. phi_{J-1} at ``xi`` (len(xi), J): the orthonormal basis of ``measure`` on
+    [a, b] (or the Chebyshev U_j)."""
+    unit = np.eye(J)[None, :, :]  # coefficients picking each phi_j: (1, J, J as "time")
+    return surrogate_values(unit, [a, b], measure, xi, closed_form=closed_form)
+
+
+def _rms(a: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.square(a))))
+
+
+__all__ = ["Control", "Pairs", "REPLICATES", "pair_point"]
