@@ -75,6 +75,20 @@ def window_errors(err: np.ndarray, scale: np.ndarray, sem: np.ndarray,
     return rms, in_se, rel
 
 
+def window_errors_all(err: np.ndarray, scale: np.ndarray, sem: np.ndarray,
+                      upto: int) -> np.ndarray:
+    """:func:`window_errors` for many curves at once: ``err``, ``sem`` (..., T), ``scale``
+    (T,); returns (..., 3)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rms = np.sqrt(np.mean(err[..., :upto] ** 2, axis=-1))
+        se = sem[..., :upto]
+        se_rms = np.where(np.isfinite(se).all(-1), np.sqrt(np.mean(se**2, axis=-1)), np.nan)
+        sc = float(np.sqrt(np.mean(scale[:upto] ** 2)))
+        in_se = np.where(se_rms > 0, rms / np.where(se_rms > 0, se_rms, 1.0), np.inf)
+        rel = rms / sc if sc > 0 else np.where(rms == 0, 0.0, np.inf)
+    return np.stack(np.broadcast_arrays(rms, in_se, rel), axis=-1)
+
+
 def bisect_boundary(agrees: Callable[[float], bool], lo: float, hi: float,
                     resolution: float, *, max_steps: int = 60) -> tuple[float, float, int]:
     """Locate the change from "agrees" (at ``lo``) to "does not" (at ``hi``) by bisection.
@@ -100,4 +114,4 @@ def bisect_boundary(agrees: Callable[[float], bool], lo: float, hi: float,
 
 
 __all__ = ["bisect_boundary", "excess", "first_disagreement", "marginal", "running_rms",
-           "window_errors"]
+           "window_errors", "window_errors_all"]

@@ -64,7 +64,7 @@ from compare._mapdata import (HorizonSplits, Point, combine, point_dataset, spli
                               splits_to_arrays, value_dataset)
 from compare._pairs import REPLICATES, Control, Pairs, pair_point
 from compare._phases import PhaseClock
-from compare._trust import bisect_boundary, first_disagreement, marginal, window_errors
+from compare._trust import bisect_boundary, excess, window_errors_all
 from mc import sample_xi, simulate_mc
 from opa.engine import (
     MAX_CROSSINGS, MAX_SPLITS, adaptive_edges, collocate_element, true_runs,
@@ -355,21 +355,27 @@ class _Map:
         point.status = status
         return point
 
-    def _hangs(self, pairs: Pairs) -> np.ndarray:
-        """(variant, N, horizon, criterion): whether that verdict hangs on the noise
-        (:func:`compare._trust.marginal`, up to ``z + NOISE_BAND`` standard errors)."""
+    def _checks(self, pairs: Pairs):
+        """Per criterion (mean, variance): the paired errors and their standard errors
+        (variant, N, output), the scale and the tolerance and floor of the criterion."""
         cfg = self.cfg
         x_var = pairs.reference["x_var"]
-        checks = ((pairs.err_mean, pairs.err_mean_se, np.sqrt(x_var), cfg.tolerance,
-                   self.floor),
-                  (pairs.err_var, pairs.err_var_se, x_var, cfg.var_tolerance, self.floor**2))
+        return ((pairs.err_mean, pairs.err_mean_se, np.sqrt(x_var), cfg.tolerance,
+                 self.floor),
+                (pairs.err_var, pairs.err_var_se, x_var, cfg.var_tolerance, self.floor**2))
+
+    def _hangs(self, pairs: Pairs) -> np.ndarray:
+        """(variant, N, horizon, criterion): whether that verdict hangs on the noise
+        (:func:`compare._trust.marginal` with ``upper = z + NOISE_BAND``, for every
+        verdict at once: the running RMS up to an output does not depend on later ones)."""
+        cfg = self.cfg
         V, N = pairs.err_mean.shape[:2]
         hangs = np.zeros((V, N, len(cfg.horizons), 2), bool)
-        for (v, k, h, c), _ in np.ndenumerate(hangs):
-            err, sem, scale, tol, floor = checks[c]
-            hangs[v, k, h, c] = marginal(err[v, k], scale, sem[v, k], tol=tol, z=cfg.z,
-                                         floor=floor, upto=self.n_h[h],
-                                         upper=cfg.z + NOISE_BAND)
+        for c, (err, sem, scale, tol, floor) in enumerate(self._checks(pairs)):
+            strict = excess(err, scale, sem, tol=tol, z=0.0, floor=floor) <= 0
+            loose = excess(err, scale, sem, tol=tol, z=cfg.z + NOISE_BAND, floor=floor) <= 0
+            for h, n in enumerate(self.n_h):
+                hangs[:, :, h, c] = strict[..., :n].all(-1) != loose[..., :n].all(-1)
         return hangs
 
     def _hangs_on_noise(self, judged: dict, focus=None) -> bool:
@@ -385,32 +391,26 @@ class _Map:
     def _judge(self, pairs: Pairs, opa_mean, opa_var, first, periods) -> dict:
         """The verdicts at one point from the paired estimates (:mod:`compare._pairs`):
         each variant's errors with their own standard errors, scaled by the reference
-        spread and variance. Returns errors (variant, N, horizon, criterion, 3), pre
-        (variant, N) and disagree (variant, N, criterion)."""
+        spread and variance (:mod:`compare._trust`'s criterion and window errors, for
+        every variant and N at once). Returns errors (variant, N, horizon, criterion, 3),
+        pre (variant, N) and disagree (variant, N, criterion)."""
         cfg = self.cfg
-        x_var = pairs.reference["x_var"]
-        sd = np.sqrt(x_var)
         V, N = opa_mean.shape[:2]
         H = len(cfg.horizons)
         errors = np.empty((V, N, H, 2, 3))
         disagree = np.empty((V, N, 2))
-        pre = np.empty((V, N))
-        for v in range(V):
-            for k in range(N):
-                checks = (
-                    (pairs.err_mean[v, k], sd, pairs.err_mean_se[v, k], cfg.tolerance,
-                     self.floor),
-                    (pairs.err_var[v, k], x_var, pairs.err_var_se[v, k],
-                     cfg.var_tolerance, self.floor**2),
-                )
-                for c, (err, scale, sem, tol, floor) in enumerate(checks):
-                    disagree[v, k, c] = first_disagreement(periods, err, scale, sem, tol=tol,
-                                                           z=cfg.z, floor=floor)
-                    for h, n in enumerate(self.n_h):
-                        errors[v, k, h, c] = window_errors(err, scale, sem, n)
-                before = periods < first[v, k]
-                e0 = pairs.err_mean[v, k][before]
-                pre[v, k] = float(np.sqrt(np.mean(e0**2))) if before.any() else np.nan
+        for c, (err, sem, scale, tol, floor) in enumerate(self._checks(pairs)):
+            # not <= 0 rather than > 0: a run that stopped (NaN) disagrees from there
+            bad = ~(excess(err, scale, sem, tol=tol, z=cfg.z, floor=floor) <= 0)
+            disagree[:, :, c] = np.where(bad.any(-1), periods[np.argmax(bad, axis=-1)],
+                                         np.inf)
+            for h, n in enumerate(self.n_h):
+                errors[:, :, h, c] = window_errors_all(err, scale, sem, n)
+        with np.errstate(invalid="ignore"):
+            before = periods[None, None, :] < first[:, :, None]
+            square = np.where(before, pairs.err_mean**2, 0.0)
+            count = before.sum(-1)
+            pre = np.where(count > 0, np.sqrt(square.sum(-1) / np.maximum(count, 1)), np.nan)
         return {"errors": errors, "pre": pre, "disagree": disagree}
 
     # -- one value of the swept parameter ------------------------------------------------

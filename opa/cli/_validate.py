@@ -121,7 +121,8 @@ def register_validate(sub) -> None:
     g.add_argument("--resolution", type=float, default=None, metavar="DS",
                    help="bisection resolution of sigma* (default 1e-3)")
     g.add_argument("--samples", type=positive_int, default=None, metavar="M",
-                   help="Sobol samples per ensemble (default 1024)")
+                   help="Sobol samples of a point's first round, paired with every OPA "
+                   "run (default 128; 16 replicates)")
     g.add_argument("--max-samples", type=positive_int, default=None, metavar="M",
                    help="samples are doubled up to M where the verdict hangs on the MC "
                         "noise (default 8192)")

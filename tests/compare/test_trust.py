@@ -15,6 +15,7 @@ from compare._trust import (
     marginal,
     running_rms,
     window_errors,
+    window_errors_all,
 )
 from compare._mapdata import count_distribution
 from opa._splits import Split
@@ -220,3 +221,19 @@ def test_a_horizon_split_in_the_grid_is_named_even_below_sigma_star():
     assert "every sample makes the same impacts" not in text
     assert "one more impact within 1e-4 time units of the horizon's end" in text
     assert "σ ≥ 0.0045" in text and "4 → 5 impacts" in text
+
+
+def test_window_errors_of_many_curves_are_those_of_each_curve():
+    rng = np.random.default_rng(2)
+    err = rng.normal(size=(3, 4, 20))
+    sem = np.abs(rng.normal(size=(3, 4, 20)))
+    err[0, 1, 5:] = np.nan  # a run that stopped
+    sem[1, 2, 3] = np.nan  # an unknown standard error
+    sem[2, 3] = 0.0  # no noise at all
+    err[2, 0] = 0.0
+    for scale in (np.abs(rng.normal(size=20)), np.zeros(20)):
+        for upto in (1, 7, 20):
+            got = window_errors_all(err, scale, sem, upto)
+            for idx in np.ndindex(3, 4):
+                np.testing.assert_allclose(got[idx], window_errors(err[idx], scale, sem[idx],
+                                                                   upto), rtol=1e-12)
