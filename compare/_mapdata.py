@@ -182,16 +182,16 @@ def point_dataset(cfg: ValidateConfig, value: float, point: Point, centre: float
     vn = ("variant", "N")
     vnh = vn + ("horizon",)
     data = {
-        "err_mean": (vnh, e[..., 0, 0], {"long_name": "RMS error of x_0 against the MC mean",
-                                         **ONE}),
-        "err_mean_se": (vnh, e[..., 0, 1], {"long_name": "RMS error of x_0 in RMS MC standard "
-                                            "errors", **ONE}),
+        "err_mean": (vnh, e[..., 0, 0], {"long_name": "RMS error of x_0 against E[x] (paired "
+                                         "estimate)", **ONE}),
+        "err_mean_se": (vnh, e[..., 0, 1], {"long_name": "RMS error of x_0 in RMS standard "
+                                            "errors of its paired estimate", **ONE}),
         "err_mean_rel": (vnh, e[..., 0, 2], {"long_name": "RMS error of x_0 relative to the "
                                              "RMS MC spread", **ONE}),
         "err_var": (vnh, e[..., 1, 0], {"long_name": "RMS error of the OPA variance against "
                                         "the MC variance", **ONE}),
-        "err_var_se": (vnh, e[..., 1, 1], {"long_name": "RMS variance error in RMS MC "
-                                           "standard errors", **ONE}),
+        "err_var_se": (vnh, e[..., 1, 1], {"long_name": "RMS variance error in RMS standard "
+                                           "errors of its paired estimate", **ONE}),
         "err_var_rel": (vnh, e[..., 1, 2], {"long_name": "RMS variance error relative to the "
                                             "RMS MC variance", **ONE}),
         "agrees": (vnh + ("criterion",), point.agrees.astype(np.int8),
@@ -209,13 +209,25 @@ def point_dataset(cfg: ValidateConfig, value: float, point: Point, centre: float
                         "the kernel's reason to stop, named by flag_meanings (the curves are "
                         "NaN after it)", **STATUS_FLAGS}),
         "opa_x_var": (vn + ("time",), point.opa_var, {"long_name": "OPA variance", **ONE}),
-        "mc_x_mean": ("time", point.mc["x_mean"], {"long_name": "MC mean E[x]", **ONE}),
-        "mc_x_var": ("time", point.mc["x_var"], {"long_name": "MC variance Var[x]", **ONE}),
+        "mc_x_mean": ("time", point.mc["x_mean"], {"long_name": "MC mean E[x] (control "
+                                                   "variate: mc_control)", **ONE}),
+        "mc_x_var": ("time", point.mc["x_var"], {"long_name": "MC variance Var[x] (control "
+                                                 "variate: mc_control)", **ONE}),
         "mc_x_sem": ("time", point.mc["x_sem"], {"long_name": "MC standard error of E[x]",
                                                  **ONE}),
         "mc_x_var_sem": ("time", point.mc["x_var_sem"],
                          {"long_name": "MC standard error of Var[x]", **ONE}),
-        "mc_samples": ((), np.int64(point.samples), {"long_name": "MC samples used", **ONE}),
+        "mc_control": ((), np.int64(-1 if point.mc.get("control") is None
+                                    else point.mc["control"][0]),
+                       {"long_name": "variant (at N = Nmax) whose control-variate estimate "
+                        "is mc_x_mean and mc_x_var; -1: the plain ensemble", **ONE}),
+        "pair_reduction": (vn, np.full(point.opa_mean.shape[:2], np.nan)
+                           if point.reduction is None else point.reduction,
+                           {"long_name": "Var(x) / Var(x - x_hat) over the point's ensemble: "
+                            "how much pairing with the run narrows its error bar", **ONE}),
+        "mc_samples": ((), np.int64(point.samples), {"long_name": "MC samples of the last "
+                                                     "round (true systems paired with "
+                                                     "every OPA run)", **ONE}),
         "mc_impacts_min": ((), np.int64(point.mc["impacts"][0]),
                            {"long_name": "fewest impacts of an MC sample (longest horizon)",
                             **ONE}),

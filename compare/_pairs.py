@@ -157,7 +157,8 @@ class _Moments:
         phi_r = phi.reshape(replicates, n, K, J)
         self.b1 = phi_r.mean(axis=1)
         self.b2 = np.einsum("rmkj,rmkl->rkjl", phi_r, phi_r) / n
-        self.g = (phi.reshape(M, K * J).T @ x).reshape(K, J, -1) / M
+        # as (T, M) @ (M, KJ): the fast order of the product on this machine's BLAS
+        self.g = (x.T @ phi.reshape(M, K * J)).T.reshape(K, J, -1) / M
 
     def of(self, coef: np.ndarray):
         """Replicate means of x_hat and x_hat^2 (R, T) and mean(x x_hat) (T,) for the

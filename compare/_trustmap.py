@@ -95,6 +95,7 @@ class _Map:
         self.bar = None
         self.measure = cfg.measure()  # one object: its recurrences are cached
         self.clock = PhaseClock()
+        self.ensembles: dict = {}  # (value, sigma) -> the last ensemble run (this value only)
 
     def _timed(self, phase: str, compute):
         """``compute`` with its time charged to ``phase`` (:class:`compare._phases.PhaseClock`)."""
@@ -152,9 +153,9 @@ class _Map:
                opa_mean, opa_var, first, state: dict) -> dict:
         """One round of the point's Monte Carlo: the ensemble of ``samples`` true systems,
         paired with every OPA run (:func:`compare._pairs.pair_point`) and judged
-        (:meth:`_judge`). The part keeps the verdicts, the reference curves and the paired
-        errors over time with their standard errors (what the next round's decision
-        needs), not the paths. ``state["paths"]``: the last ensemble computed in this process, which
+        (:meth:`_judge`). The part keeps the verdicts, the reference curves and which
+        verdicts hang on the noise (what the next round's decision needs), not the paths:
+        ``state["paths"]`` holds the last ensemble run at the point in this process, which
         the next round extends."""
         cfg = self.cfg
         T = cfg.oscillator_at(value).forcing_period
@@ -330,7 +331,9 @@ class _Map:
         opa_inputs = [self._opa_inputs(value, sigma, order, times) for order in orders]
         if cfg.element_laws and cfg.nmax in orders:
             opa_inputs.append(self._elements_inputs(value, sigma, cfg.nmax, times))
-        samples, state, mc_seconds = cfg.samples, {}, 0.0
+        # the last ensemble this process ran at the point, which a next round extends
+        state = self.ensembles.setdefault((value, sigma), {})
+        samples, mc_seconds = cfg.samples, 0.0
         while True:
             judged = self._round(value, sigma, samples, times, opa_inputs, controls,
                                  probabilities, opa_mean, opa_var, first, state)
@@ -528,6 +531,7 @@ class _Map:
                     grid[float(sigma)] = self.evaluate(value, float(sigma))
                     bar.update(1)
                 star, steps, probes = self.boundary(value, grid)
+                self.ensembles.clear()
                 with self.clock("assembly"):
                     points.append([point_dataset(cfg, value, grid[float(s)], centre, scans,
                                                  cdf) for s in cfg.sigmas])
