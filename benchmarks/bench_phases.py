@@ -1,0 +1,109 @@
+"""Where the main job's time goes, and how much of it is serial (issue 29, item 1).
+
+``opa-mc validate`` runs in a fresh process at 1, 2 and all threads (``NUMBA_NUM_THREADS``:
+the kernel's parallel batches; BLAS is held at one thread), warm (numba's cache filled by
+a first run, a fresh output folder), and each run's phase table is read from ``validate.nc``
+(:class:`compare._phases.PhaseClock`: exclusive wall and CPU seconds per phase; the
+figures and files after the dataset are the "report", timed as the process's wall time
+minus the map's). Per phase it prints wall and CPU seconds at each thread count, the
+speed-up, and the serial fraction f of Amdahl's law, ``T_n = T_1 (f + (1 - f) / n)``,
+fitted from T_1 and T_n:
+
+    f = (T_n / T_1 - 1 / n) / (1 - 1 / n)
+
+The default map is ``slow``; the smoke run (CI) takes a tiny map through the same path.
+
+    python -m pytest -s benchmarks/bench_phases.py -m slow     # the default map
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+TINY = ["--values", "3.98", "--sigmas", "0.01,0.03", "--orders", "0:2", "--horizons", "2,4",
+        "--samples", "64", "--max-samples", "128", "--no-frontier", "--no-plots"]
+
+
+def _run(args, outdir, threads: int) -> dict:
+    env = dict(os.environ, MPLBACKEND="Agg",
+               NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS="1",
+               OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "opa.cli", "validate", "--quiet",
+                           "--outdir", str(outdir), *args], env=env, capture_output=True,
+                          text=True)
+    wall = time.perf_counter() - start
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    with xr.open_dataset(os.path.join(outdir, "validate.nc")) as ds:
+        attrs = dict(ds.attrs)
+    names = attrs["phase_names"].split(",")
+    table = {name: (float(w), float(c)) for name, w, c in zip(
+        names, np.atleast_1d(attrs["phase_wall_seconds"]),
+        np.atleast_1d(attrs["phase_cpu_seconds"]))}
+    mapped = sum(w for w, _ in table.values())
+    table["report and start-up"] = (wall - mapped, float("nan"))
+    return {"wall": wall, "phases": table}
+
+
+def serial_fraction(t1: float, tn: float, n: int) -> float:
+    """Amdahl's serial fraction from the times at 1 and n threads.
+
+    >>> serial_fraction(10.0, 5.0, 2), serial_fraction(10.0, 10.0, 2)
+    (0.0, 1.0)
+    """
+    return (tn / t1 - 1.0 / n) / (1.0 - 1.0 / n)
+
+
+def _table(runs: dict[int, dict]) -> str:
+    counts = sorted(runs)
+    phases = sorted(runs[counts[0]]["phases"], key=lambda p: -runs[counts[0]]["phases"][p][0])
+    head = "| phase | " + " | ".join(f"wall {n} thr (CPU)" for n in counts)
+    head += " | speed-up | serial fraction |"
+    lines = [head, "|" + "---|" * (len(counts) + 3)]
+    for name in phases + ["total"]:
+        if name == "total":
+            cells = [(runs[n]["wall"], float("nan")) for n in counts]
+        else:
+            cells = [runs[n]["phases"].get(name, (0.0, 0.0)) for n in counts]
+        t1, tn, n = cells[0][0], cells[-1][0], counts[-1]
+        speed = t1 / tn if tn > 0 else float("nan")
+        frac = serial_fraction(t1, tn, n) if t1 > 0 and n > 1 else float("nan")
+        text = " | ".join(f"{w:.2f} ({c:.2f})" for w, c in cells)
+        lines.append(f"| {name} | {text} | {speed:.2f} | {frac:.2f} |")
+    return "\n".join(lines)
+
+
+def _phases(tmp_path, args, counts):
+    _run(args, tmp_path / "fill", max(counts))  # fill numba's cache: warm runs below
+    runs = {n: _run(args, tmp_path / f"run-{n}", n) for n in counts}
+    print(f"\nload average {os.getloadavg()[0]:.2f} after the runs; "
+          f"{os.cpu_count()} cores\n" + _table(runs))
+    return runs
+
+
+def _counts():
+    cores = os.cpu_count() or 1
+    return sorted({1, min(2, cores), cores})
+
+
+def test_phases_tiny(tmp_path):
+    """The smoke run: a tiny map at 1 and 2 threads; every phase the map names is there,
+    and the phases add up to the map's wall time."""
+    runs = _phases(tmp_path, TINY, [1, 2])
+    for run in runs.values():
+        assert {"Monte Carlo runs", "OPA runs", "split scans", "pairs and verdicts"} \
+            <= set(run["phases"])
+        assert all(w >= 0 for w, _ in run["phases"].values())
+
+
+@pytest.mark.slow
+def test_phases_default(tmp_path):
+    """The embedded default map at 1, 2 and all threads."""
+    _phases(tmp_path, [], _counts())
