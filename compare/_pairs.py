@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mc import cv_estimates
 from opa.engine import Measure, surrogate_values
 
 #: independent scramblings of the Sobol' points; the spread of their estimates is the
@@ -88,7 +89,7 @@ def pair_point(x: np.ndarray, xi: np.ndarray, controls: dict, measure: Measure,
     reduction = np.full((V, N), np.nan)
     x_r = x.reshape(replicates, n, T)
     x1, x2 = x_r.mean(axis=1), (x_r**2).mean(axis=1)  # (R, T)
-    plain = _estimates(x1, x2, np.zeros(T), np.zeros(T), np.zeros_like(x1),
+    plain = cv_estimates(x1, x2, np.zeros(T), np.zeros(T), np.zeros_like(x1),
                        np.zeros_like(x1))
     best, best_se, best_key = plain, _rms(plain["mean_se"]), None
     total = float(np.var(x, axis=0).sum())
@@ -102,7 +103,7 @@ def pair_point(x: np.ndarray, xi: np.ndarray, controls: dict, measure: Measure,
         mean, second = control.moments(probabilities[(v, k)])
         h1, h2, cross = moments.of(control.coef)
         with np.errstate(invalid="ignore"):
-            est = _estimates(x1, x2, mean, second, h1, h2)
+            est = cv_estimates(x1, x2, mean, second, h1, h2)
         out["err_mean"][v, k] = -est["d"]
         out["err_mean_se"][v, k] = est["d_se"]
         out["err_var"][v, k] = (second - mean**2) - est["var"]
@@ -120,21 +121,6 @@ def pair_point(x: np.ndarray, xi: np.ndarray, controls: dict, measure: Measure,
                  "x_sem": best["mean_se"], "x_var_sem": best["var_se"], "control": best_key}
     return Pairs(out["err_mean"], out["err_mean_se"], out["err_var"], out["err_var_se"],
                  reduction, reference)
-
-
-def _estimates(x1, x2, mean, second, h1, h2) -> dict:
-    """Per-replicate control-variate estimates from the replicate means of x, x^2 (x1,
-    x2) and of x_hat, x_hat^2 (h1, h2), all (R, T), with the exact E[x_hat] = ``mean``
-    and E[x_hat^2] = ``second``: as :func:`compare._verify.paired_estimates`."""
-    R = x1.shape[0]
-    d = x1 - h1
-    mean_r = mean + d
-    var_r = second + (x2 - h2) - mean_r**2
-    out = {}
-    for name, per_replicate in (("d", d), ("mean", mean_r), ("var", var_r)):
-        out[name] = per_replicate.mean(axis=0)
-        out[f"{name}_se"] = per_replicate.std(axis=0, ddof=1) / np.sqrt(R)
-    return out
 
 
 class _Moments:

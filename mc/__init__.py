@@ -1,6 +1,7 @@
 """mc: sampling and Monte Carlo ensembles of the true sampled impact systems."""
 
 from mc._checkpoint import remove_checkpoint
+from mc._control import cv_estimates
 from mc._ensemble import DaskError, simulate_mc
 from mc._source import sweep_source
 from mc._sampling import SAMPLERS, sample_xi, semicircle_cdf, semicircle_ppf
@@ -14,4 +15,5 @@ __all__ = [
     "semicircle_ppf",
     "SAMPLERS",
     "sweep_source",
+    "cv_estimates",
 ]

@@ -35,6 +35,7 @@ import numpy as np
 import xarray as xr
 
 from mc._checkpoint import Checkpoint, stats_arrays
+from mc._control import check_control, controlled
 from mc._sampling import check_sampler, sample_xi
 from opa.engine import (
     IMPULSE_FIELDS, as_system, chebyshev_u, check_instance, check_memory, digest, orthonormal,
@@ -225,6 +226,7 @@ def simulate_mc(
     connect_timeout: float = 5.0,
     worker_timeout: float | None = 60.0,
     log: Callable[[str], object] | None = None,
+    control: xr.Dataset | None = None,
     **fields,
 ) -> xr.Dataset:
     """Monte Carlo ensemble of the sampled impact system, eq. (1), p = p_bar + sigma xi.
@@ -264,6 +266,10 @@ def simulate_mc(
         ever started) before the run fails with :class:`DaskError`; None waits forever.
     log : callable taking one line, for damaged checkpoint files and resume notes;
         default: ``warnings.warn`` for damage and silence otherwise.
+    control : an OPA run of the same system (:func:`opa.simulate_opa`, any K, any law) as
+        a control variate (:mod:`mc._control`): adds ``cv_x_mean``, ``cv_x_var`` with
+        their standard errors and the attribute ``variance_reduction``. Needs ``sobol``
+        with R >= 2 replicates; the output times default to the run's.
 
     Returns
     -------
@@ -316,12 +322,18 @@ def simulate_mc(
     if scheduler is not None and not isinstance(scheduler, str):
         _connect(scheduler, connect_timeout)  # only checks that it is a Client
     system.check_samples()
+    if control is not None:
+        times = check_control(control, system, times)
     times = output_times(oscillator, periods, per_period, times)
     T = len(times)
     if sampler != "sobol":
         replicates = 1
     elif replicates is None:
         replicates = 16 if samples % 16 == 0 and samples >= 64 else 1
+    if control is not None and replicates < 2:
+        raise ValueError(f"control needs sampler='sobol' with replicates >= 2 (its "
+                         f"standard errors are the replicates' spread), got sampler="
+                         f"{sampler!r}, replicates={replicates}")
     size = min(_chunk_size(T, chunk_size), samples)
     if keep_paths:
         check_memory("keep_paths", samples * T * 2 * 8,
@@ -387,8 +399,12 @@ def simulate_mc(
     finally:
         if own:
             client.close()
-    return _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,
-                    replicates, "semicircle" if measure is None else measure.name)
+    ds = _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,
+                  replicates, "semicircle" if measure is None else measure.name)
+    if control is not None:
+        ds = controlled(ds, total.x_rep, total.x2_rep, total.rep_weight, xi, replicates,
+                        control)
+    return ds
 
 
 def _check_dask_timeouts(connect_timeout, worker_timeout) -> None:
