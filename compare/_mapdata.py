@@ -39,6 +39,7 @@ class Point:
     status: np.ndarray | None = None  # (variant, N) kernel status of the OPA run (-1: not run)
     reduction: np.ndarray | None = None  # (variant, N) Var(x) / Var(x - x_hat): pairing's gain
     hangs: np.ndarray | None = None  # (variant, N, horizon, criterion) verdict hangs on noise
+    evaluated: np.ndarray | None = None  # (horizon,) the horizons the point's runs reach
 
 
 @dataclass
@@ -266,11 +267,12 @@ def point_dataset(cfg: ValidateConfig, value: float, point: Point, centre: float
 
 def value_dataset(cfg: ValidateConfig, value: float, centre: float,
                   scans: list[HorizonSplits], star: np.ndarray, steps: np.ndarray,
-                  probes: dict[float, Point]) -> xr.Dataset:
+                  probes: dict[float, np.ndarray]) -> xr.Dataset:
     """One swept value of the map, over ``value`` of length 1: sigma* by bisection
     (``star``: (variant, horizon, criterion, 2) bracket, ``steps``), every sigma evaluated
-    (``probes``) with its verdict at N = Nmax, and the splits of the sampled systems'
-    event sequences per horizon (``scans``, about ``centre``)."""
+    (``probes``: sigma -> its verdicts (variant, horizon, criterion) at N = Nmax, -1 where
+    not formed), and the splits of the sampled systems' event sequences per horizon
+    (``scans``, about ``centre``)."""
     T = cfg.oscillator_at(value).forcing_period
     H = len(cfg.horizons)
     nan = lambda *shape: np.full(shape, np.nan)  # noqa: E731
@@ -296,7 +298,7 @@ def value_dataset(cfg: ValidateConfig, value: float, centre: float,
             sleft[h, j], sright[h, j] = sp.left, sp.right
     ordered = sorted(probes.items())
     probe_sigma = np.array([sig for sig, _ in ordered], float)
-    probe_agrees = np.array([point.agrees[:, -1] for _, point in ordered], np.int8)
+    probe_agrees = np.array([verdicts for _, verdicts in ordered], np.int8)
     kinds = {"flag_values": np.arange(len(SPLIT_KINDS), dtype=np.int8),
              "flag_meanings": " ".join(k.replace(" ", "_") for k in SPLIT_KINDS),
              "units": "1"}

@@ -95,7 +95,8 @@ class _Map:
         self.bar = None
         self.measure = cfg.measure()  # one object: its recurrences are cached
         self.clock = PhaseClock()
-        self.ensembles: dict = {}  # (value, sigma) -> the last ensemble run (this value only)
+        # (value, sigma, outputs) -> the last ensemble run there (this value only)
+        self.ensembles: dict = {}
 
     def _timed(self, phase: str, compute):
         """``compute`` with its time charged to ``phase`` (:class:`compare._phases.PhaseClock`)."""
@@ -277,15 +278,21 @@ class _Map:
                 "tolerance": ELEMENT_TOLERANCE, "fallback": "collocation", "times": times,
                 "options": cfg.options, "stores": "coefficients"}
 
-    def evaluate(self, value: float, sigma: float, orders=None, focus=None) -> Point:
+    def evaluate(self, value: float, sigma: float, orders=None, focus=None,
+                 horizon: int | None = None) -> Point:
         """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts.
 
-        The multi-element variants run at N = Nmax only (NaN at the other N). The point's
-        wall time is that of its runs (OPA, and every Monte Carlo ensemble it took), as
-        stored in the parts: a reused point reports what it cost."""
+        The multi-element variants run at N = Nmax only (NaN at the other N). With
+        ``horizon`` (an index into ``cfg.horizons``) everything runs up to that horizon
+        only, and the verdicts of the longer horizons are not formed (a bisection probe
+        of that horizon's sigma*). The point's wall time is that of its runs (OPA, and
+        every Monte Carlo ensemble it took), as stored in the parts: a reused point
+        reports what it cost."""
         cfg = self.cfg
         osc = cfg.oscillator_at(value)
-        times = time_grid(osc.omega, max(cfg.horizons), cfg.per_period)
+        end = max(cfg.horizons) if horizon is None else cfg.horizons[horizon]
+        times = time_grid(osc.omega, end, cfg.per_period)
+        evaluated = np.array([n <= len(times) for n in self.n_h])
         orders = cfg.orders if orders is None else orders
         S, V, N = len(cfg.single_variants), len(cfg.variants), len(orders)
         opa_mean = np.full((V, N, len(times)), np.nan)
@@ -332,7 +339,7 @@ class _Map:
         if cfg.element_laws and cfg.nmax in orders:
             opa_inputs.append(self._elements_inputs(value, sigma, cfg.nmax, times))
         # the last ensemble this process ran at the point, which a next round extends
-        state = self.ensembles.setdefault((value, sigma), {})
+        state = self.ensembles.setdefault((value, sigma, len(times)), {})
         samples, mc_seconds = cfg.samples, 0.0
         while True:
             judged = self._round(value, sigma, samples, times, opa_inputs, controls,
@@ -346,11 +353,12 @@ class _Map:
         mc.update(impacts=tuple(int(i) for i in judged["impacts"]),
                   seconds=mc_seconds, rhs=int(judged["rhs"]),
                   control=None if control[0] < 0 else control)
+        agrees = judged["disagree"][:, :, None, :] > np.array(cfg.horizons)[None, None, :,
+                                                                              None]
         point = Point(sigma, samples, mc, opa_mean, opa_var, first, judged["errors"],
-                      judged["pre"], judged["disagree"],
-                      judged["disagree"][:, :, None, :] > np.array(cfg.horizons)[None, None,
-                                                                                 :, None],
-                      reduction=judged["reduction"], hangs=judged["hangs"])
+                      judged["pre"], judged["disagree"], agrees & evaluated[:, None],
+                      reduction=judged["reduction"], hangs=judged["hangs"],
+                      evaluated=evaluated)
         point.seconds = seconds + mc_seconds
         point.elements = elements
         point.collocated = collocated
@@ -378,7 +386,8 @@ class _Map:
             strict = excess(err, scale, sem, tol=tol, z=0.0, floor=floor) <= 0
             loose = excess(err, scale, sem, tol=tol, z=cfg.z + NOISE_BAND, floor=floor) <= 0
             for h, n in enumerate(self.n_h):
-                hangs[:, :, h, c] = strict[..., :n].all(-1) != loose[..., :n].all(-1)
+                if n <= err.shape[-1]:  # a horizon past the point's outputs: not judged
+                    hangs[:, :, h, c] = strict[..., :n].all(-1) != loose[..., :n].all(-1)
         return hangs
 
     def _hangs_on_noise(self, judged: dict, focus=None) -> bool:
@@ -408,7 +417,8 @@ class _Map:
             disagree[:, :, c] = np.where(bad.any(-1), periods[np.argmax(bad, axis=-1)],
                                          np.inf)
             for h, n in enumerate(self.n_h):
-                errors[:, :, h, c] = window_errors_all(err, scale, sem, n)
+                errors[:, :, h, c] = (window_errors_all(err, scale, sem, n)
+                                      if n <= err.shape[-1] else np.nan)
         with np.errstate(invalid="ignore"):
             before = periods[None, None, :] < first[:, :, None]
             square = np.where(before, pairs.err_mean**2, 0.0)
@@ -456,15 +466,21 @@ class _Map:
         return centre, splits_from_arrays(stored)
 
     def boundary(self, value, grid: dict[float, Point]):
-        """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection."""
+        """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection.
+
+        A bisection of horizon h's sigma* starts from the grid's verdicts and probes with
+        runs up to h only (``evaluate(..., horizon=h)``); the probes of one horizon serve
+        all its bisections. Returns the brackets, the steps, and every sigma evaluated
+        with its verdicts (variant, horizon, criterion) at N = Nmax (-1: not formed)."""
         cfg = self.cfg
         k = -1  # N = Nmax; the probes run that order only
-        probes: dict[float, Point] = dict(grid)
         V, H, C = len(cfg.variants), len(cfg.horizons), 2
         star = np.full((V, H, C, 2), np.nan)
         steps = np.zeros((V, H, C), dtype=np.int64)
-        for v in range(V):
-            for h in range(H):
+        verdicts = {s: point.agrees[:, k].astype(np.int8) for s, point in grid.items()}
+        for h in range(H):
+            probes: dict[float, Point] = dict(grid)
+            for v in range(V):
                 for c in range(C):
                     def agrees(s, v=v, h=h, c=c):
                         s = float(np.round(s, 12))
@@ -474,7 +490,7 @@ class _Map:
                         if known is None or (known.hangs[v, -1, h, c]
                                              and known.samples * 2 <= cfg.max_samples):
                             probes[s] = self.evaluate(value, s, orders=(cfg.nmax,),
-                                                      focus=(v, h, c))
+                                                      focus=(v, h, c), horizon=h)
                             self._tick()
                         return bool(probes[s].agrees[v, k, h, c])
 
@@ -493,7 +509,11 @@ class _Map:
                     # the probes are stored under sigma rounded to 12 digits
                     star[v, h, c] = (np.round(lo, 12), np.round(hi, 12))
                     steps[v, h, c] = n
-        return star, steps, probes
+            for s, point in probes.items():
+                if s not in grid:
+                    row = verdicts.setdefault(s, np.full((V, H, C), -1, np.int8))
+                    row[:, h] = point.agrees[:, k, h]
+        return star, steps, verdicts
 
     def _tick(self):
         if self.bar is not None:
