@@ -91,6 +91,7 @@ class _Map:
         self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
         self.mc_runs = 0
         self.true_runs = 0
+        self.true_periods = 0.0  # forcing periods integrated by those runs
         self.opa_runs = 0
         self.bar = None
         self.measure = cfg.measure()  # one object: its recurrences are cached
@@ -129,6 +130,7 @@ class _Map:
                              replicates=REPLICATES, times=times, options=cfg.options,
                              keep_paths=True, scheduler=cfg.scheduler, progress=False)
             self.true_runs += samples
+            self.true_periods += samples * float(times[-1]) / system.oscillator.forcing_period
             return {"x": ds.x.values, "xi": ds.xi.values, "impacts": ds.n_impacts.values,
                     "rhs": int(ds.attrs["rhs_evaluations"]),
                     "seconds": time.perf_counter() - start}
@@ -139,6 +141,7 @@ class _Map:
         paths, rhs, impacts = true_runs(system, cfg.options, new, times,
                                         what="Monte Carlo sample", impacts=True)
         self.true_runs += len(new)
+        self.true_periods += len(new) * float(times[-1]) / system.oscillator.forcing_period
 
         def merge(old, fresh):
             old, fresh = np.asarray(old), np.asarray(fresh)
@@ -573,6 +576,7 @@ class _Map:
         ds.attrs["wall_seconds"] = time.perf_counter() - start
         ds.attrs["mc_runs_computed"] = self.mc_runs
         ds.attrs["true_runs_computed"] = self.true_runs
+        ds.attrs["true_periods_computed"] = self.true_periods
         ds.attrs["opa_runs_computed"] = self.opa_runs
         ds.attrs["parts_computed"] = self.parts.computed
         ds.attrs["parts_set_aside"] = self.parts.set_aside

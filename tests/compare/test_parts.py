@@ -22,8 +22,9 @@ SMALL = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1), horizons=(4,), 
              max_samples=64, per_period=4, frontier=False)
 # what differs between two runs by nature: when and how long this run took, what it did
 RUN_ATTRS = ("history", "wall_seconds", "mc_runs_computed", "opa_runs_computed",
-             "true_runs_computed", "parts_computed", "parts_set_aside", "phase_names",
-             "phase_wall_seconds", "phase_cpu_seconds", "phase_calls")
+             "true_runs_computed", "true_periods_computed", "parts_computed",
+             "parts_set_aside", "phase_names", "phase_wall_seconds", "phase_cpu_seconds",
+             "phase_calls")
 INTEGRATORS = {
     trustmap: ("opa_variants", "simulate_mc", "simulate_opa", "simulate_dmr", "scan_splits",
                "_sequence", "element_variants", "adaptive_edges", "true_runs"),
