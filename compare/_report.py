@@ -187,8 +187,8 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
     reach = complete_within(ds, q, h)
     cut = ""
     if reach < smax:
-        cut = (f"; the scan's limit of splits was reached, so splits and impact counts are "
-               f"known only for |{unc} − {_g(nominal(ds))}| < {reach:.2g}")
+        cut = (f"; the scan's limit of splits cut the list short, so splits and impact counts "
+               f"are known only for |{unc} − {_g(nominal(ds))}| < {reach:.2g}")
     if sp is not None and sp["distance"] >= reach:
         sp = None
     if sp is None:
@@ -441,7 +441,7 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
                     sp = None
                 row += ([f"{sp['distance']:.6f}", sp["kind"], f"{sp['time']:.2f}"] if sp else
                         [f"none ≤ {_g(smax)}" if reach >= smax else
-                         f"none < {reach:.2g} (limit reached)", "", ""])
+                         f"none < {reach:.2g} (list cut by the limit)", "", ""])
             rows.append(row)
     if criterion == 0:
         title = (f"Trust boundary σ*: the largest σ at which OPA (N = {int(ds.N.max())}) agrees "
@@ -508,7 +508,8 @@ def count_table(ds: xr.Dataset, h: int, *, markdown: bool = True) -> str:
                 if unknown > 0:
                     cell += (f"; INCOMPLETE: {unknown:.3g} of the samples lie beyond the "
                              f"located splits (|{_unc(ds)} − {_g(nominal(ds))}| ≥ "
-                             f"{complete_within(ds, q, h):.2g}, the split limit was reached)")
+                             f"{complete_within(ds, q, h):.2g}: the split limit cut the list "
+                             f"short)")
                 rows.append([_g(float(value)), _g(float(sigma)), cell])
     title = (f"Impact counts up to {float(ds.horizon[h]):g} periods (exact where the split "
              f"list is complete, else marked INCOMPLETE; points where every sample makes the "

@@ -67,7 +67,8 @@ from compare._phases import PhaseClock
 from compare._trust import bisect_boundary, excess, window_errors_all
 from mc import sample_xi, simulate_mc
 from opa.engine import (
-    MAX_CROSSINGS, MAX_SPLITS, adaptive_edges, collocate_element, true_runs,
+    CHATTER_WINDOW, MAX_CROSSINGS, MAX_SPLITS, MIN_SPLITS, adaptive_edges, collocate_element,
+    true_runs,
     Measure, opa_variants, provenance_attrs, run_elements, scan_splits,
     simulate_dmr, simulate_opa, SimulationError, SolverOptions, Store, System,
     time_grid, uniform_edges, write_netcdf,
@@ -440,14 +441,21 @@ class _Map:
         def compute():
             smax = max(cfg.sigmas)
             T = osc.forcing_period
-            cache: dict = {"t_end": max(cfg.horizons) * T}
-            found = {}
+            found, runs, longest = {}, {}, None
+            # the longest horizon first; a shorter one reuses its runs (they hold the events
+            # up to the shorter horizon) and bisects with runs to its own horizon, and the
+            # chatter window past it (a burst at the horizon is told from both sides, as
+            # in the longer runs)
             for h in sorted(cfg.horizons, reverse=True):
+                cache = {**runs, "t_end": (h + (CHATTER_WINDOW if runs else 0.0)) * T}
                 found[h] = scan_splits(
                     cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax,
                     centre + smax, h * T,
                     tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache,
-                    outputs=time_grid(osc.omega, h, cfg.per_period))
+                    outputs=time_grid(osc.omega, h, cfg.per_period),
+                    needed_within=cfg.sigmas)
+                runs, longest = cache, longest or cache
+            cache = longest
             seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache,
                                                         centre)
             scans = []
@@ -463,7 +471,8 @@ class _Map:
         inputs = {"system": cfg.system_at(value), "uncertain": cfg.uncertain,
                   "sigmas": [min(cfg.sigmas), max(cfg.sigmas)], "horizons": cfg.horizons,
                   "tol": cfg.split_resolution, "per_period": cfg.per_period,
-                  "options": cfg.options, "limits": [MAX_SPLITS, MAX_CROSSINGS]}
+                  "options": cfg.options, "limits": [MAX_SPLITS, MAX_CROSSINGS, MIN_SPLITS],
+                  "needed_within": list(cfg.sigmas), "runs": ["own horizon", CHATTER_WINDOW]}
         stored = self.parts.get(f"splits_{self._name(value)}", inputs,
                                 self._timed("split scans", compute))
         return centre, splits_from_arrays(stored)

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from bisect import bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,9 @@ MAX_SPLITS = 1024
 # of its own, and a cause needs only the nearest (the default map spent 18 s of its
 # profile on a thousand of them over 50 periods); the radius they cover is reported.
 MAX_CROSSINGS = 64
+# The nearest splits a scan with needed_within keeps locating before it stops early (the
+# limit before the complete split lists: a cause needs only the nearest).
+MIN_SPLITS = 64
 # Brackets bisected together in one wave of order="nearest" (one parallel batch of runs
 # per level of the bisection).
 WAVE = 16
@@ -67,6 +71,9 @@ WAVE = 16
 SPLIT_GRAZE_SPEED = 1e-3
 # Impacts within a tenth of a forcing period around a change that make it a chatter burst.
 CHATTER_BURST = 4
+# Half the width of that window, in forcing periods; the runs go this far past the horizon,
+# so that a burst at the horizon is told from its impacts on both sides.
+CHATTER_WINDOW = 0.05
 # An extra event this close to the horizon's end slides across it (time units).
 HORIZON_SLACK = 1e-4
 # Two runs whose corresponding events are further apart in time than this share of a
@@ -178,7 +185,9 @@ class SplitScan:
     in increasing value; ``truncated``: whether the limit ``limit`` left brackets
     unopened; ``complete_within``: every change with ``|p - center| < complete_within``
     is in ``splits`` (``inf``: every change the scan sees over [lo, hi]);
-    ``crossings_within``: the same for ``crossings``.
+    ``crossings_within``: the same for ``crossings``; ``stopped_early``: whether the scan
+    stopped before the limit because it could no longer become complete within the next
+    radius of ``needed_within`` (the radii asked of it, increasing; empty: none asked).
     """
 
     splits: list[Split]
@@ -187,10 +196,12 @@ class SplitScan:
     complete_within: float
     crossings_within: float
     limit: int
+    stopped_early: bool = False
+    needed_within: tuple[float, ...] = ()
 
 
 def _burst(a: EventSequence, b: EventSequence, t: float, period: float) -> bool:
-    near = [np.sum(np.abs(x.time - t) <= 0.05 * period) for x in (a, b)]
+    near = [np.sum(np.abs(x.time - t) <= CHATTER_WINDOW * period) for x in (a, b)]
     return max(near) >= CHATTER_BURST
 
 
@@ -279,6 +290,8 @@ def scan_splits(
     order: str = "nearest",
     outputs=None,
     max_crossings: int = MAX_CROSSINGS,
+    needed_within=None,
+    min_splits: int = MIN_SPLITS,
 ) -> SplitScan:
     """Every change of the event sequence up to ``horizon`` for ``parameter`` in [lo, hi],
     and (with ``outputs``, the output times) every value where an impact time crosses an
@@ -303,6 +316,27 @@ def scan_splits(
     complete_within`` is in the list (``inf`` when nothing was cut off). With
     ``order="nearest"`` that radius is as large as the limit allows.
 
+    **The early stop.** ``needed_within`` (a radius or several: the sigmas the list serves,
+    as the ensemble at sigma is counted in full where ``complete_within >= sigma``) lets
+    the scan stop before the limit where the limit would cut the list short of the radius
+    anyway: once the smallest of these radii that the list is not yet complete within
+    can no longer be reached by ``max_splits``, the scan stops before the next wave,
+    though not before ``min_splits`` splits are located (the nearest, which the causes
+    use). ``stopped_early`` says that it did; ``truncated`` and ``complete_within``
+    report the brackets left over as above. The rule is exact, not a guess. A bracket
+    whose ends have different signatures (:meth:`EventSequence.signature`) keeps a
+    sub-bracket with different signatures at every level of its bisection, so it yields
+    at least one split; if it lies wholly within the radius r of ``center``, so do its
+    sub-brackets, and the scan must bisect them all to become complete within r. Before
+    each wave the scan bisects such sub-brackets of the brackets left over within r
+    breadth first, one level per parallel batch (runs it needs anyway if it is to become
+    complete within r), and counts them; when the splits located plus these brackets
+    exceed ``max_splits``, the scan without the early stop cannot become complete within r
+    either. So the list is complete within every radius of ``needed_within`` that the
+    scan without the early stop is complete within, and where it does not stop it is that
+    scan. (Changes whose two sides differ only in event times, most of them over long
+    horizons, are not counted: a bracket of those can come to nothing.)
+
     **Output crossings.** Between two neighbouring runs with the same events (no split
     between them) each impact time moves continuously with ``p``; where it passes an
     output time t_j (0 < t_j < horizon), x(t_j, p) has a kink in ``p`` (one side is
@@ -315,8 +349,9 @@ def scan_splits(
     ``complete_within`` for the splits. As for splits, two crossings of one output time
     between neighbouring runs cancel and are not seen.
 
-    ``cache`` (value -> EventSequence) lets calls for several horizons share runs; the
-    runs go to the largest horizon asked of the cache's first call.
+    ``cache`` (value -> EventSequence) lets calls for several horizons share runs: the
+    runs go to ``cache["t_end"]`` (default: the first call's horizon), and a run to a
+    later time serves a shorter horizon as well.
     """
     if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
         raise ValueError(f"need finite lo < hi, got [{lo}, {hi}]")
@@ -339,6 +374,15 @@ def scan_splits(
     if not (isinstance(max_crossings, numbers.Integral)
             and not isinstance(max_crossings, bool) and max_crossings >= 1):
         raise ValueError(f"max_crossings must be an integer >= 1, got {max_crossings!r}")
+    needed = () if needed_within is None else np.atleast_1d(needed_within)
+    if not all(isinstance(r, numbers.Real) and not isinstance(r, (bool, np.bool_)) and r > 0
+               for r in needed):
+        raise ValueError(f"needed_within must be a radius > 0, several, or None, got "
+                         f"{needed_within!r}")
+    needed = tuple(sorted({float(r) for r in needed}))
+    if not (isinstance(min_splits, numbers.Integral) and not isinstance(min_splits, bool)
+            and min_splits >= 0):
+        raise ValueError(f"min_splits must be an integer >= 0, got {min_splits!r}")
     if order not in ("nearest", "generation"):
         raise ValueError(f"order must be 'nearest' or 'generation', got {order!r}")
     if not (isinstance(horizon, numbers.Real) and math.isfinite(horizon) and horizon > 0):
@@ -359,13 +403,35 @@ def scan_splits(
     def ensure(values) -> None:
         """Run every value not in the cache, in one parallel batch."""
         todo = sorted({float(v) for v in values if float(v) not in cache})
-        for v, sq in zip(todo, event_sequences(system, options, parameter, todo, t_end)):
-            cache[v] = sq
+        if todo:
+            for v, sq in zip(todo, event_sequences(system, options, parameter, todo, t_end)):
+                cache[v] = sq
 
     slack = TIME_SLACK * oscillator.forcing_period
+    # what EventSequence.same_as compares, per value: the signature up to the horizon
+    # and the event times there (the look-ahead and the waves compare each run often)
+    seen: dict[float, tuple[tuple, np.ndarray]] = {}
 
-    def differ(x: float, y: float) -> bool:
-        return not seq(x).same_as(seq(y), horizon, slack)
+    def seen_at(x: float) -> tuple[tuple, np.ndarray]:
+        if x not in seen:
+            sq = seq(x)
+            n = int(np.searchsorted(sq.time, horizon, side="right"))
+            seen[x] = (sq.signature(horizon), sq.time[:n])
+        return seen[x]
+
+    def differ(x: float, y: float) -> bool:  # not seq(x).same_as(seq(y), horizon, slack)
+        (sx, tx), (sy, ty) = seen_at(x), seen_at(y)
+        return sx != sy or not bool(np.all(np.abs(tx - ty) <= slack))
+
+    def bisect(a: float, b: float) -> list[tuple[float, float]]:
+        """The brackets one bisection level below [a, b] (its midpoint run): the half
+        with the change, or both halves where the midpoint has a third sequence."""
+        m = 0.5 * (a + b)
+        if not differ(m, a):
+            return [(m, b)]
+        if not differ(m, b):
+            return [(a, m)]
+        return [(a, m), (m, b)]
 
     values = [float(v) for v in np.linspace(lo, hi, scan)]
     ensure(values)
@@ -380,8 +446,55 @@ def scan_splits(
         x, y = bracket[-2:]
         return 0.0 if x <= center <= y else min(abs(x - center), abs(y - center))
 
+    # the early stop (see the docstring): the look-ahead's brackets, with ends of
+    # different signatures, inside the brackets left over
+    ahead: list[tuple[float, float]] = []
+
+    def certain(x: float, y: float) -> bool:
+        return seen_at(x)[0] != seen_at(y)[0]
+
+    def owed(r: float) -> list[tuple[float, float]]:
+        """Brackets the scan has yet to bisect to become complete within r, each of which
+        yields a split: those of the look-ahead inside the brackets left over within r,
+        and the brackets left over with none of them inside, where certain."""
+        spans = sorted(br[1:] for br in pending if distance(br) < r)
+        starts = [x for x, _ in spans]
+        found: dict[tuple[float, float], list] = {span: [] for span in spans}
+        for x, y in ahead:
+            i = bisect_right(starts, x) - 1
+            if i >= 0 and y <= spans[i][1]:
+                found[spans[i]].append((x, y))
+        return [node for span, nodes in found.items()
+                for node in (nodes or ([span] if certain(*span) else []))]
+
+    def reachable(r: float) -> bool:
+        """Whether the list can still become complete within r by max_splits: bisects the
+        look-ahead's brackets within r, breadth first (a level per parallel batch), until
+        they exceed the splits left or are all shorter than tol."""
+        nonlocal ahead
+        while True:
+            ahead = owed(r)
+            whole = sum(max(abs(x - center), abs(y - center)) < r for x, y in ahead)
+            if len(splits) + whole > max_splits:
+                return False
+            opening = {(x, y) for x, y in ahead if y - x > tol and distance((x, y)) < r}
+            if not opening:
+                return True
+            ensure(0.5 * (x + y) for x, y in opening)
+            ahead = [sub for node in ahead
+                     for sub in (bisect(*node) if node in opening else [node])
+                     if certain(*sub)]
+
     splits: list[Split] = []
+    hopeless = stopped_early = False
     while pending and len(splits) < max_splits:
+        if needed and not hopeless:
+            within = min(distance(br) for br in pending)
+            aim = next((r for r in needed if r > within), None)
+            hopeless = aim is not None and not reachable(aim)
+        if hopeless and len(splits) >= min_splits:
+            stopped_early = True
+            break
         if order == "generation":
             pending.sort(key=lambda br: (br[0], distance(br)))
             size = max_splits - len(splits)
@@ -396,18 +509,11 @@ def scan_splits(
                 break
             ensure(0.5 * (br[1] + br[2]) for br in open_)
             for br in open_:
-                gen, a, b = br
-                m = 0.5 * (a + b)
-                if not differ(m, a):
-                    br[1] = m
-                elif not differ(m, b):
-                    br[2] = m
-                elif distance((a, m)) <= distance((m, b)):  # a third sequence
-                    pending.append((gen + 1, m, b))
-                    br[2] = m
-                else:
-                    pending.append((gen + 1, a, m))
-                    br[1] = m
+                halves = bisect(br[1], br[2])
+                if len(halves) == 2:  # a third sequence: the nearer half stays in the wave
+                    halves.sort(key=distance)
+                    pending.append((br[0] + 1, *halves[1]))
+                br[1:] = halves[0]
         for _, a, b in wave:
             if not differ(a, b):  # event times that moved fast, continuously: no split
                 continue
@@ -421,7 +527,8 @@ def scan_splits(
         crossings, crossings_within = _output_crossings(
             seq, ensure, differ, [v for v in cache if isinstance(v, float) and lo <= v <= hi],
             outputs, horizon, tol, center, within, max_crossings)
-    return SplitScan(splits, crossings, bool(pending), within, crossings_within, max_splits)
+    return SplitScan(splits, crossings, bool(pending), within, crossings_within, max_splits,
+                     stopped_early, needed)
 
 
 def _output_crossings(seq, ensure, differ, points, outputs, horizon, tol, center, within,
@@ -429,19 +536,29 @@ def _output_crossings(seq, ensure, differ, points, outputs, horizon, tol, center
     """The crossings of output times by impact times between neighbouring runs with the
     same events (see :func:`scan_splits`), nearest to ``center`` first."""
     points = sorted(v for v in points if abs(v - center) <= within)
+    impacts: dict[float, np.ndarray] = {}
+
+    def impacts_of(x: float) -> np.ndarray:
+        """Indices of the impacts up to the horizon in the events of run x."""
+        if x not in impacts:
+            sq = seq(x)
+            n = int(np.searchsorted(sq.time, horizon, side="right"))
+            impacts[x] = np.flatnonzero([k == _IMPACT for k in sq.kind[:n]])
+        return impacts[x]
+
     tasks = []  # [distance, a, b, impact index, output time, sign of t_i(a) - t_j]
     for x, y in zip(points[:-1], points[1:]):
-        if differ(x, y):
+        if differ(x, y):  # else the same events: the impacts correspond one to one
             continue
-        sx, sy = seq(x), seq(y)
-        n = int(np.searchsorted(sx.time, horizon, side="right"))
-        for i in range(n):
-            if sx.kind[i] != _IMPACT:
-                continue
-            t0, t1 = sorted((float(sx.time[i]), float(sy.time[i])))
-            for tj in outputs[(outputs > t0) & (outputs < t1)]:
-                d = 0.0 if x <= center <= y else min(abs(x - center), abs(y - center))
-                tasks.append([d, x, y, i, float(tj), math.copysign(1.0, sx.time[i] - tj)])
+        idx = impacts_of(x)
+        tx, ty = seq(x).time[idx], seq(y).time[idx]
+        # the outputs strictly between the two times of each impact
+        first = np.searchsorted(outputs, np.minimum(tx, ty), side="right")
+        stop = np.searchsorted(outputs, np.maximum(tx, ty), side="left")
+        for k in np.flatnonzero(stop > first):
+            d = 0.0 if x <= center <= y else min(abs(x - center), abs(y - center))
+            for tj in outputs[first[k]:stop[k]]:
+                tasks.append([d, x, y, int(idx[k]), float(tj), math.copysign(1.0, tx[k] - tj)])
     tasks.sort(key=lambda task: task[0])
     radius = within
     if len(tasks) > limit:
@@ -505,6 +622,6 @@ def count_probabilities(splits, center: float, sigma: float, count_at_center: in
     return prob, unknown
 
 
-__all__ = ["EventSequence", "MAX_CROSSINGS", "MAX_SPLITS", "SPLIT_KINDS", "Split", "SplitScan",
-           "count_probabilities", "event_sequence", "event_sequences", "find_splits",
-           "scan_splits"]
+__all__ = ["CHATTER_WINDOW", "EventSequence", "MAX_CROSSINGS", "MAX_SPLITS", "MIN_SPLITS",
+           "SPLIT_KINDS", "Split", "SplitScan", "count_probabilities", "event_sequence",
+           "event_sequences", "find_splits", "scan_splits"]

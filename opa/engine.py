@@ -46,8 +46,10 @@ from opa._model import (
 from opa._run import STATUS_NAMES, SimulationError, output_times, run_batch
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
+    CHATTER_WINDOW,
     MAX_CROSSINGS,
     MAX_SPLITS,
+    MIN_SPLITS,
     SPLIT_KINDS,
     Split,
     count_probabilities,
@@ -61,9 +63,9 @@ from opa.dynamics._sections import identify_motion, mean_state, phase_section
 from opa.dynamics._sweep import local_executor, locate_setup, summary_lines, sweep, sweep_times
 
 __all__ = [
-    "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE", "MAX_ELEMENTS",
-    "MAX_GRID", "MAX_SPLITS", "Measure", "Oscillator", "PARAMETER_NAMES", "SPLIT_KINDS",
-    "STATUS_NAMES",
+    "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
+    "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
+    "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
     "as_system", "atomic_write", "chebyshev_u", "check_count", "check_instance",
     "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",

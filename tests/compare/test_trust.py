@@ -202,9 +202,9 @@ def test_a_reached_split_limit_is_said_and_the_counts_marked_incomplete():
 
     ds = _map([], [], [], complete=0.0042, unknown=0.3)
     text = cause(ds, 0, 0)
-    assert "limit of splits was reached" in text and "< 0.0042" in text
+    assert "limit of splits cut the list short" in text and "< 0.0042" in text
     assert "≤ 0.05" not in text
-    assert "limit reached" in boundary_table(ds)
+    assert "cut by the limit" in boundary_table(ds)
     table = count_table(ds, 0)
     assert "INCOMPLETE: 0.3 of the samples" in table
 

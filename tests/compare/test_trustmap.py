@@ -232,6 +232,49 @@ def cfg_parameter(ds):
     return ds.attrs["parameter"]
 
 
+def test_each_horizon_bisects_with_runs_to_its_own_horizon(tmp_path, monkeypatch):
+    """The split scans of one value: the longest horizon first, then the shorter one with
+    runs to its own horizon (and the chatter window past it), not to the longest; each
+    asked to be complete within every sigma. The longest horizon's scan is cut here (a
+    limit of 8), so the shorter one bisects runs of its own: its splits are those of its
+    scan alone, and the counts at the centre those of one run to the longest horizon."""
+    import compare._trustmap as trustmap
+    import opa._splits as splits
+
+    cfg = load_config(None, outdir=str(tmp_path), **{**TINY, "horizons": (8, 12)})
+    T = cfg.oscillator_at(3.98).forcing_period
+    calls, ends = [], []
+    real_scan, real_runs = trustmap.scan_splits, splits.event_sequences
+
+    def scan(*args, **kw):
+        calls.append((round(args[5] / T, 9), round(kw["cache"]["t_end"] / T, 9),
+                      kw["needed_within"]))
+        return real_scan(*args, **kw, **({"max_splits": 8} if len(calls) == 1 else {}))
+
+    def runs(system, options, parameter, values, t_end):
+        ends.append((calls[-1][0], round(t_end / T, 9)))
+        return real_runs(system, options, parameter, values, t_end)
+
+    monkeypatch.setattr(trustmap, "scan_splits", scan)
+    monkeypatch.setattr(splits, "event_sequences", runs)
+    centre, scans = trustmap._Map(cfg, progress=False, log=lambda *a: None).splits(3.98)
+    monkeypatch.undo()
+    short = 8 + splits.CHATTER_WINDOW
+    assert calls == [(12, 12, cfg.sigmas), (8, short, cfg.sigmas)]
+    assert scans[1].truncated and not scans[0].truncated
+    assert {end for h, end in ends if h == 12} == {12}
+    assert {end for h, end in ends if h == 8} == {short}
+    alone = splits.scan_splits(cfg.system_at(3.98), cfg.options, "mu", centre - 0.03,
+                               centre + 0.03, 8 * T, center=centre,
+                               tol=cfg.split_resolution * 0.01, cache={"t_end": short * T})
+    assert alone.splits
+    assert ([(s.value, s.kind, s.left, s.right) for s in scans[0].splits
+             if s.kind != "output crossing"]
+            == [(s.value, s.kind, s.left, s.right) for s in alone.splits])
+    run = splits.event_sequence(cfg.system_at(3.98), cfg.options, 12 * T)
+    assert [scan.count for scan in scans] == [run.count(8 * T), run.count(12 * T)]
+
+
 def test_sweep_dimension_is_named_after_the_parameter(tiny):
     _, ds, _ = tiny
     assert "omega" in ds.dims and "value" not in ds.dims

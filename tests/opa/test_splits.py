@@ -1,8 +1,10 @@
 """The split detector against a grazing established with the scipy reference alone
 (tests/reference_splits.py), and its classification on constructed event sequences; the
 complete split list and its impact-count table against a brute scan of deterministic runs
-(weighted by the semicircle law), the reported limit, and an impact crossing an output
-time against the scipy reference (issue 24)."""
+(weighted by the semicircle law), the reported limit and the early stop short of it, and
+an impact crossing an output time against the scipy reference (issue 24)."""
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -241,6 +243,69 @@ def test_the_default_limit_is_documented_and_find_splits_reports_it():
     assert truncated and len(splits) >= 4
 
 
+# -- the early stop (needed_within) --------------------------------------------------------
+def _listed(splits, r):
+    """What the count tables and the causes read off a list within r of mu = 0.8."""
+    return [(s.value, s.tol, s.kind, s.left, s.right) for s in splits if abs(s.value - 0.8) < r]
+
+
+def test_the_early_stop_keeps_a_list_that_can_be_completed_whole(complete_398):
+    """Where the scan can become complete within the radii asked it does not stop early:
+    it is the same scan, whichever radii (the limit reaches the whole ensemble)."""
+    H = 10 * _map_osc(3.98).forcing_period
+    for needed in (SIGMA, (0.005, 0.01, SIGMA)):
+        scan = scan_splits(_map_osc(3.98), MAP_OPTIONS, "mu", 0.8 - SIGMA, 0.8 + SIGMA, H,
+                           tol=1e-8, center=0.8, needed_within=needed)
+        assert not scan.stopped_early and scan.needed_within == tuple(np.atleast_1d(needed))
+        assert replace(scan, needed_within=()) == complete_398
+
+
+def test_the_early_stop_gives_up_a_radius_the_limit_cannot_reach(brute_398, complete_398):
+    """With a limit of 24 the 10-period list cannot reach sigma = 0.03 (it holds more than
+    64 changes): the scan stops early, and where it says it is complete its counts are the
+    brute scan's; a radius the scan without the early stop reaches is reached."""
+    mu, counts, H = brute_398
+    args = (_map_osc(3.98), MAP_OPTIONS, "mu", 0.8 - SIGMA, 0.8 + SIGMA, H)
+    cut = scan_splits(*args, tol=1e-8, center=0.8, max_splits=24)
+    assert cut.truncated and not cut.stopped_early and 0 < cut.complete_within < SIGMA
+    early = scan_splits(*args, tol=1e-8, center=0.8, max_splits=24, min_splits=8,
+                        needed_within=(0.5 * cut.complete_within, SIGMA))
+    assert early.stopped_early and early.truncated
+    assert 8 <= len(early.splits) < 24
+    r = early.complete_within
+    assert 0.5 * cut.complete_within <= r <= cut.complete_within
+    assert _listed(early.splits, r) == _listed(complete_398.splits, r)
+    inside = np.abs(mu - 0.8) < r
+    np.testing.assert_array_equal(_predicted(early.splits, mu[inside]), counts[inside])
+    # a radius it can reach: the same scan as without the early stop
+    reach = scan_splits(*args, tol=1e-8, center=0.8, max_splits=24, min_splits=8,
+                        needed_within=0.5 * cut.complete_within)
+    assert not reach.stopped_early
+    assert replace(reach, needed_within=()) == cut
+
+
+def test_the_early_stop_over_a_long_horizon():
+    """50 forcing periods, |mu - 0.8| < 0.002: the changes are too dense for a limit of 48
+    to reach 0.002. The early stop says so, and within its radius the list is that of the
+    scan without it."""
+    osc = _map_osc(3.98)
+    args = (osc, MAP_OPTIONS, "mu", 0.798, 0.802, 50 * osc.forcing_period)
+    full = scan_splits(*args, tol=1e-8, center=0.8, max_splits=48)
+    assert full.truncated and full.complete_within < 0.002 and len(full.splits) == 48
+    early = scan_splits(*args, tol=1e-8, center=0.8, max_splits=48, min_splits=8,
+                        needed_within=0.002)
+    assert early.stopped_early and early.truncated and early.needed_within == (0.002,)
+    assert 8 <= len(early.splits) < 48
+    r = early.complete_within
+    assert 0 < r <= full.complete_within
+    assert _listed(early.splits, r) == _listed(full.splits, r) != []
+    # without the floor it stops before the first wave: nothing located, complete within
+    # the distance of the nearest bracket
+    bare = scan_splits(*args, tol=1e-8, center=0.8, max_splits=48, min_splits=0,
+                       needed_within=0.002)
+    assert bare.stopped_early and bare.splits == [] and bare.complete_within < r
+
+
 def test_count_probabilities_by_hand():
     splits = [Split(0.78, 1e-9, "grazing", 5.0, 1e-5, 4, 3),
               Split(0.79, 1e-9, "output crossing", 6.0, 0.5, 3, 3),
@@ -272,6 +337,12 @@ def test_count_probabilities_rejects_bad_input(kwargs, needle):
     (dict(max_splits=0), "max_splits"), (dict(max_splits=2.5), "max_splits"),
     (dict(scan=1), "scan"), (dict(outputs=[1.0, float("nan")]), "outputs"),
     (dict(order="random"), "order"),
+    (dict(needed_within=0.0), "needed_within"), (dict(needed_within=-0.01), "needed_within"),
+    (dict(needed_within=float("nan")), "needed_within"),
+    (dict(needed_within=[0.01, 0.0]), "needed_within"),
+    (dict(needed_within=True), "needed_within"), (dict(needed_within="0.01"), "needed_within"),
+    (dict(min_splits=-1), "min_splits"), (dict(min_splits=2.5), "min_splits"),
+    (dict(min_splits=True), "min_splits"),
 ])
 def test_scan_splits_rejects_bad_input(kwargs, needle):
     with pytest.raises(ValueError, match=needle):
