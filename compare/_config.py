@@ -78,6 +78,10 @@ class ValidateConfig:
     z: float = 3.0
     resolution: float = 1e-3
     split_resolution: float = 1e-6
+    # the most splits one scan locates over each horizon longer than the shortest (the
+    # shortest: opa._splits.MAX_SPLITS); past it the list is complete only within a
+    # radius, reported, and the impact counts beyond it are marked unknown
+    long_splits: int = 128
     outdir: str = "results"
     plots: bool = True
     scheduler: str | None = None
@@ -91,7 +95,7 @@ class ValidateConfig:
 
     def __post_init__(self):
         self._check_law()
-        for name in ("samples", "max_samples", "per_period", "seed"):
+        for name in ("samples", "max_samples", "per_period", "seed", "long_splits"):
             value = getattr(self, name)
             if not isinstance(value, numbers.Integral) or isinstance(value, bool):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
@@ -146,6 +150,8 @@ class ValidateConfig:
             raise ValueError(f"samples must be a multiple of 16 and >= 64, got {self.samples}")
         if self.max_samples < self.samples:
             raise ValueError(f"max_samples must be >= samples, got {self.max_samples}")
+        if self.long_splits < 1:
+            raise ValueError(f"long_splits must be >= 1, got {self.long_splits}")
         for name in ("tolerance", "var_tolerance", "resolution", "split_resolution"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):

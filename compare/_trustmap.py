@@ -453,7 +453,8 @@ class _Map:
                     centre + smax, h * T,
                     tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache,
                     outputs=time_grid(osc.omega, h, cfg.per_period),
-                    needed_within=cfg.sigmas)
+                    needed_within=cfg.sigmas,
+                    max_splits=MAX_SPLITS if h == min(cfg.horizons) else cfg.long_splits)
                 runs, longest = cache, longest or cache
             cache = longest
             seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache,
@@ -471,7 +472,8 @@ class _Map:
         inputs = {"system": cfg.system_at(value), "uncertain": cfg.uncertain,
                   "sigmas": [min(cfg.sigmas), max(cfg.sigmas)], "horizons": cfg.horizons,
                   "tol": cfg.split_resolution, "per_period": cfg.per_period,
-                  "options": cfg.options, "limits": [MAX_SPLITS, MAX_CROSSINGS, MIN_SPLITS],
+                  "options": cfg.options,
+                  "limits": [MAX_SPLITS, cfg.long_splits, MAX_CROSSINGS, MIN_SPLITS],
                   "needed_within": list(cfg.sigmas), "runs": ["own horizon", CHATTER_WINDOW]}
         stored = self.parts.get(f"splits_{self._name(value)}", inputs,
                                 self._timed("split scans", compute))
@@ -809,6 +811,7 @@ def _attrs(cfg: ValidateConfig) -> dict:
         max_samples=int(cfg.max_samples), per_period=int(cfg.per_period),
         tolerance=float(cfg.tolerance), var_tolerance=float(cfg.var_tolerance), z=float(cfg.z),
         resolution=float(cfg.resolution), split_resolution=float(cfg.split_resolution),
+        long_splits=int(cfg.long_splits),
         floor=noise_floor(cfg.options),
         criterion_text=(
             "agrees over H when, at every output t <= H, the running RMS error <= tol x the "

@@ -126,6 +126,10 @@ def register_validate(sub) -> None:
     g.add_argument("--max-samples", type=positive_int, default=None, metavar="M",
                    help="samples are doubled up to M where the verdict hangs on the MC "
                         "noise (default 8192)")
+    g.add_argument("--long-splits", type=positive_int, default=None, metavar="K",
+                   help="the most splits located per value over each horizon but the "
+                        "shortest (default 128; the shortest: 1024); past it the impact "
+                        "counts are marked incomplete")
     g.add_argument("--seed", type=whole_number, default=None, metavar="K",
                    help="random seed (default 0)")
     g.add_argument("--per-period", type=positive_int, default=None, metavar="K",
@@ -179,6 +183,7 @@ def cmd_validate(args) -> int:
         var_tolerance=args.var_tolerance,
         z=args.z, resolution=args.resolution, samples=args.samples,
         max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
+        long_splits=args.long_splits,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,
         frontier=False if args.no_frontier else None, **impulse,
     )

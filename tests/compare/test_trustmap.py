@@ -232,6 +232,25 @@ def cfg_parameter(ds):
     return ds.attrs["parameter"]
 
 
+def test_the_longer_horizons_locate_at_most_long_splits(tmp_path, monkeypatch):
+    """The shortest horizon's scan may locate MAX_SPLITS, each longer one long_splits."""
+    import compare._trustmap as trustmap
+    from opa._splits import MAX_SPLITS
+
+    cfg = load_config(None, outdir=str(tmp_path), **{**TINY, "horizons": (4, 8, 12)},
+                      long_splits=5)
+    limits = {}
+    real_scan = trustmap.scan_splits
+
+    def scan(*args, **kw):
+        limits[round(args[5] / cfg.oscillator_at(3.98).forcing_period, 9)] = kw["max_splits"]
+        return real_scan(*args, **kw)
+
+    monkeypatch.setattr(trustmap, "scan_splits", scan)
+    trustmap._Map(cfg, progress=False, log=lambda *a: None).splits(3.98)
+    assert limits == {12: 5, 8: 5, 4: MAX_SPLITS}
+
+
 def test_each_horizon_bisects_with_runs_to_its_own_horizon(tmp_path, monkeypatch):
     """The split scans of one value: the longest horizon first, then the shorter one with
     runs to its own horizon (and the chatter window past it), not to the longest; each
@@ -249,7 +268,7 @@ def test_each_horizon_bisects_with_runs_to_its_own_horizon(tmp_path, monkeypatch
     def scan(*args, **kw):
         calls.append((round(args[5] / T, 9), round(kw["cache"]["t_end"] / T, 9),
                       kw["needed_within"]))
-        return real_scan(*args, **kw, **({"max_splits": 8} if len(calls) == 1 else {}))
+        return real_scan(*args, **{**kw, **({"max_splits": 8} if len(calls) == 1 else {})})
 
     def runs(system, options, parameter, values, t_end):
         ends.append((calls[-1][0], round(t_end / T, 9)))
@@ -306,6 +325,8 @@ def test_config_errors_name_the_key(tmp_path):
         load_config(None, preset="3.4")
     with pytest.raises(ValueError, match="values are needed"):
         load_config(None, parameter="f")
+    with pytest.raises(ValueError, match="long_splits must be >= 1, got 0"):
+        load_config(None, long_splits=0)
     for key, value, message in (("z", "3", "z must be a number"),
                                 ("max_samples", "x", "max_samples must be an integer"),
                                 ("outdir", 3, "outdir must be a non-empty string")):
@@ -326,9 +347,10 @@ def test_config_errors_name_the_key(tmp_path):
     (["--horizons", "0"], "horizons"),
     (["--sweep", "omega=4:3.9:0"], None),  # argparse: exits 2 on its own
     (["--tolerance", "-1"], "tolerance"),
+    (["--long-splits", "0"], "--long-splits"),
 ])
 def test_cli_bad_input_exits_2_with_one_line(argv, needle, tmp_path, capsys):
-    if needle is None:  # argparse's own check
+    if needle is None or needle.startswith("--"):  # argparse's own check
         with pytest.raises(SystemExit) as excinfo:
             main(["validate", "--outdir", str(tmp_path / "r"), *argv])
         assert excinfo.value.code == 2
