@@ -5,7 +5,16 @@ trajectories are ``opa.dynamics``' public names, re-exported as they are; the fi
 (``opa.plots``) are imported only when drawn.
 """
 
-from opa import dynamics as _dynamics
+import os as _os
+
+# numba's OpenMP threads sleep between parallel regions instead of spinning: the kernel
+# runs many small batches (the levels of a split scan's or an ensemble's bisections), and
+# spinning threads made them 3.5x slower on a loaded 2-core machine (issue 29; large
+# batches take the same time either way). Set before numba starts its threads; the
+# user's own setting wins.
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from opa import dynamics as _dynamics  # noqa: E402
 from opa.dynamics import *  # noqa: F403 -- exactly opa.dynamics.__all__ (sweep: see _shims)
 from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, triple_product
 from opa._dataset import write_netcdf

@@ -111,3 +111,20 @@ def test_no_helper_without_a_python_to_start(monkeypatch):
     monkeypatch.setattr(_run, "callee_signatures", lambda: {"main": {}, "helper": {}})
     _run.compile_callees()
     assert started == []
+
+
+def test_importing_opa_lets_the_kernel_threads_sleep_unless_told_otherwise():
+    """opa sets OMP_WAIT_POLICY=PASSIVE before numba starts its OpenMP threads, and keeps
+    a value the user set (a fresh process each)."""
+    import os
+    import subprocess
+    import sys
+
+    code = "import os, opa; print(os.environ['OMP_WAIT_POLICY'])"
+    env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                         text=True, check=True).stdout.strip()
+    assert out == "PASSIVE"
+    out = subprocess.run([sys.executable, "-c", code], env=env | {"OMP_WAIT_POLICY": "ACTIVE"},
+                         capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "ACTIVE"
