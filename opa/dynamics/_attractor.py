@@ -40,6 +40,7 @@ import numpy as np
 from opa._model import SolverOptions
 from opa._run import STATUS_NAMES, Events, Inputs, run_batch
 from opa._system import System
+from opa.dynamics._orbits import impulse_cycle
 from opa.dynamics._sections import PERIOD_TOL, impacts_per_period, period_label
 
 #: a run is settled when its stroboscopic points repeat to this (relative) tolerance
@@ -134,6 +135,7 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
     carry one; a run leaves the batch once its type is decided."""
     osc = system.oscillator
     T, delta = osc.forcing_period, osc.delta
+    cycle = impulse_cycle(osc) or 1  # periods are multiples of the forcing's cycle
     s = settings
     total = s.transient + s.record
     states = np.asarray(states, dtype=float)
@@ -192,7 +194,7 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
             if result[b] is not None:
                 continue
             result[b] = _decide(b, k, total, W, strobe[b, :k], impacts[b], complete[b], y[b],
-                                T, delta, s, phase, growth, lam_early)
+                                T, delta, s, phase, growth, lam_early, cycle)
             if result[b] is None:
                 twin_on[b] = phase[b] in ("early", "final")
                 if twin_on[b]:
@@ -204,7 +206,7 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
 
 
 def _decide(b, k, total, W, history, impacts, complete, y, T, delta, s, phase, growth,
-            lam_early) -> Attractor | None:
+            lam_early, cycle) -> Attractor | None:
     """The attractor of run b after k periods, or None to go on (updating its twin's
     ``phase``, ``growth`` and ``lam_early``)."""
     window = history[k - W:k]
@@ -220,7 +222,8 @@ def _decide(b, k, total, W, history, impacts, complete, y, T, delta, s, phase, g
     periodic = _period_within(window, s.period_tol)
     lam = (_exponent(growth[b], T) if growth[b] else lam_early[b]) if k == total else math.nan
     if k >= 4 * s.record or k == total:
-        p = _approached_period(history, window, s.period_tol, final=k == total)
+        p = _approached_period(history, window, s.period_tol, final=k == total,
+                               cycle=cycle)
         # (without a period within tol, a flip approach does not outvote chaos)
         if p and (periodic or not lam > s.chaos_threshold):
             return _periodic(window, p, impacts, complete, k, T, delta, y, settled=k < total)
@@ -366,19 +369,21 @@ def _flip_fit(history: np.ndarray, q: int, scale: float):
 
 
 def _approached_period(history: np.ndarray, window: np.ndarray, tol: float, *,
-                       final: bool) -> int:
+                       final: bool, cycle: int = 1) -> int:
     """The period of a run that has not settled to ``settle_tol`` (0: none): the smallest
     p within ``tol`` over the window (a sweep's rule), halved while the run approaches
-    the orbit of half the period (``_flip_fit``: eps > 0). Before the ``final`` decision
-    an approach counts only when most of its decay is exponential (eps at least half the
-    last rate), so that a run still in the algebraic decay at a doubling is not called
-    early; 0 then unless the period is halved. Without a p within ``tol`` (``final``
-    only), the smallest q with a flip fit of eps > 0."""
+    the orbit of half the period (``_flip_fit``: eps > 0; the half a multiple of the
+    forcing's ``cycle``). Before the ``final`` decision an approach counts only when most
+    of its decay is exponential (eps at least half the last rate), so that a run still in
+    the algebraic decay at a doubling is not called early; 0 then unless the period is
+    halved. Without a p within ``tol`` (``final`` only), the smallest multiple q of the
+    cycle with a flip fit of eps > 0 whose repeat distance at q is already below 5 % of
+    the section's size."""
     scale = _scale(window)
     p = _smallest_period(window, tol, scale)
     halved = False
     if p:
-        while p % 2 == 0:
+        while p % (2 * cycle) == 0:
             fit = _flip_fit(history, p // 2, scale)
             if fit is None or fit[0] <= (0.5 * fit[1] if not final else 0.0):
                 break
@@ -387,11 +392,27 @@ def _approached_period(history: np.ndarray, window: np.ndarray, tol: float, *,
         return p if final or halved else 0
     if not final:
         return 0
-    for q in range(1, len(window) // 4 + 1):
+    for q in range(cycle, len(window) // 4 + 1, cycle):
+        if repeat_distance(window[-4 * q:], q).max() > 0.05 * scale:
+            continue
         fit = _flip_fit(history, q, scale)
         if fit is not None and fit[0] > 0:
             return q
     return 0
+
+
+def same_attractor(a: Attractor, b: Attractor, tol: float = 1e-3) -> bool:
+    """Whether two runs found the same attractor: the same type and, for periodic ones,
+    the same orbit (every point of each within ``tol`` of the section's size of a point
+    of the other). Two chaotic or quasi-periodic runs of the same type count as the same
+    (nothing here tells their attractors apart)."""
+    if a.type != b.type:
+        return False
+    if not (a.periodic and b.periodic) or len(a.points) == 0 or len(b.points) == 0:
+        return True
+    scale = max(float(np.abs(a.points).max()), float(np.abs(b.points).max()), 1e-300)
+    gap = np.abs(a.points[:, None, :] - b.points[None, :, :]).max(axis=2)
+    return bool(gap.min(axis=1).max() <= tol * scale and gap.min(axis=0).max() <= tol * scale)
 
 
 def _periodic(window, p, impacts, complete, k, T, delta, y, *, settled) -> Attractor:
@@ -420,4 +441,5 @@ def initial_states(oscillator, extra: int) -> np.ndarray:
 
 
 __all__ = ["Attractor", "CHAOS_THRESHOLD", "NON_PERIODIC", "SETTLE_TOL", "Settings",
-           "initial_states", "row", "sample_inputs", "settle", "settle_batch"]
+           "initial_states", "row", "same_attractor", "sample_inputs", "settle",
+           "settle_batch"]

@@ -47,6 +47,7 @@ from opa.dynamics._attractor import (
     NON_PERIODIC,
     Settings,
     initial_states,
+    same_attractor,
     sample_inputs,
     settle_batch,
 )
@@ -171,10 +172,13 @@ def compute_slice(task: SliceTask) -> dict:
     mc_other = [at(xi[checked], state=st) for st in others]
     interval_other = []
     for _, _, kind, i in intervals:
-        alt = sorted({r[j].type for r in mid_other for j in _members(intervals, i, mid_found)}
-                     - {kind})
-        interval_other.append("|".join(alt))
-    mc_coexist = np.array([any(r[j].type != mc[j].type for r in mc_other)
+        alt = set()
+        for j in _members(intervals, i, mid_found):
+            for r in mid_other:
+                if not same_attractor(r[j], mid_found[j]):
+                    alt.add(r[j].type if r[j].type != kind else f"{kind} (another orbit)")
+        interval_other.append("|".join(sorted(alt)))
+    mc_coexist = np.array([any(not same_attractor(r[j], mc[j]) for r in mc_other)
                            for j in range(len(checked))], dtype=np.int8)
     cdf = measure.cdf
     prob = {}

@@ -14,6 +14,7 @@ from opa.dynamics._attractor import (
     Settings,
     _flip_fit,
     initial_states,
+    same_attractor,
     sample_inputs,
     settle,
     settle_batch,
@@ -35,14 +36,15 @@ def one(oscillator, mu=None, state=None, **settings):
     return settle(system, row, start, options=OPTIONS, settings=Settings(**settings))
 
 
-def reference(osc, periods, *, state=None, rtol=1e-10):
+def reference(osc, periods, *, state=None, rtol=1e-10, impulse_at_zero=True):
     """The scipy reference's stroboscopic points (x, v) at k T, k = 0 .. periods."""
     model = {k: getattr(osc, k) for k in ("mu", "a", "c", "f", "omega", "eta", "delta", "F0",
                                           "a1", "omega1", "n", "x0", "v0")}
     if state is not None:
         model["x0"], model["v0"] = state
     T = 2 * np.pi / osc.omega
-    r = reference_trajectory(**model, t_out=np.arange(periods + 1) * T, rtol=rtol, atol=rtol)
+    r = reference_trajectory(**model, t_out=np.arange(periods + 1) * T, rtol=rtol, atol=rtol,
+                             impulse_at_zero=impulse_at_zero)
     return np.stack([r["x"], r["v"]], axis=1)
 
 
@@ -164,6 +166,36 @@ def test_early_stop_agrees_with_the_full_horizon():
         s = run(inputs, np.array([osc.x0, osc.v0]), np.arange(2065) * osc.forcing_period,
                 rtol=1e-10, atol=1e-10).states[-64:]
         assert detect_period(s[:, 0], s[:, 1])[0] == a.period
+
+
+def test_coexisting_orbits_of_one_type_are_told_apart_and_scipy_keeps_each():
+    """Section 3.1 with the paper's impulses (F0 = 0.1), c = 0.07, mu = 0.8: two stable
+    14T orbits coexist (docs/stability.md: one folds at c = 0.0711811408, the other at
+    0.0735900439). From (x0, v0) and from (-0.5, -1) the runs settle on different orbits
+    of the same label; ``same_attractor`` tells them apart. scipy, from each run's final
+    state (a multiple of the 14-period cycle: the clock restarts in phase), stays on its
+    orbit for 28 periods (repeat every 14 to 1e-6), the two orbits are 1e-2 apart, and a
+    kick of 1e-4 off each is smaller after two cycles than after one (each attracts; slowly,
+    near its fold)."""
+    osc = preset("3.1").replace(c=0.07)
+    system = System(osc, sigma=0.0, order=0)
+    starts = np.array([[osc.x0, osc.v0], [-0.5, -1.0]])
+    a, b = settle_batch(system, sample_inputs(system, OPTIONS, [0.8, 0.8]), starts,
+                        options=OPTIONS)
+    assert a.type == b.type == "14/14"
+    assert not same_attractor(a, b) and same_attractor(a, a)
+    orbits = []
+    for found in (a, b):
+        assert found.periods % 14 == 0
+        s = reference(osc, 28, state=found.state, impulse_at_zero=False)
+        assert np.abs(s[14:] - s[:-14]).max() < 1e-6
+        orbits.append(s[:14])
+        kicked = reference(osc, 28, state=found.state + np.array([-1e-4, 0.0]),
+                           impulse_at_zero=False)
+        off = np.abs(kicked - s).max(axis=1)
+        assert off[28] < off[14]  # the kick dies down from one cycle to the next
+    gap = np.abs(orbits[0][:, None] - orbits[1][None]).max(axis=2).min(axis=1).max()
+    assert gap > 1e-2
 
 
 def test_initial_states_are_inside_the_wall():

@@ -91,6 +91,17 @@ def test_where_continuation_cannot_follow_monte_carlo_decides():
     assert np.all(ds.mc_lyapunov.values[0][chaotic] > 0.01)
 
 
+def test_coexisting_attractors_are_reported():
+    """The paper's impulses (F0 = 0.1), c = 0.07, sigma = 0.01: the two 14T orbits of
+    tests/opa/dynamics/test_attractor.py (checked there with scipy) coexist over the whole
+    support; from the other initial states the interval's middle and the checked samples
+    reach the other orbit, and the law mass whose attractor depends on the start is 1."""
+    ds = stochastic_diagram(preset("3.1"), "c", [0.07], sigma=0.01, samples=8, coexist=8)
+    assert "14/14 (another orbit)" in str(ds.interval_other.values[0, 0])
+    assert float(ds.coexist_probability[0]) == pytest.approx(1.0)
+    assert float(ds.mc_coexist[0]) > 0
+
+
 @pytest.mark.parametrize("kw, message", [
     (dict(sigma=0.0), "sigma must be a positive number"),
     (dict(sigma=0.03, samples=1), "samples must be 0 or an integer >= 2"),
