@@ -59,8 +59,10 @@ if TYPE_CHECKING:  # scipy.stats loads scipy.optimize: not at import opa
 
 #: the continuation's probabilities agree with Monte Carlo within this many binomial SE
 AGREEMENT_SE = 3.0
-#: points of xi classified first, to seed the continuation
+#: points of xi classified first, to seed the continuation (equal steps of the CDF), and
+#: where the two more sit at the ends of the support (this fraction of its length inside)
 GRID = 9
+GRID_END = 1e-3
 #: longest period (in impulse cycles) of a grid attractor that seeds the continuation:
 #: the windows of long periods inside chaos are not followed (they cost seconds each and
 #: the value is sampled anyway)
@@ -132,39 +134,65 @@ def compute_slice(task: SliceTask) -> dict:
         return attractors(osc, task.uncertain, centre + sigma * np.asarray(xi, dtype=float),
                           options=task.options, settings=s, state=state)
 
-    grid = measure.ppf((np.arange(GRID) + 0.5) / GRID)
+    # the grid: equal steps of the CDF, and both ends of the support (a type confined to
+    # a thin layer at an end is seeded too)
+    ends = [lo + GRID_END * (hi - lo), hi - GRID_END * (hi - lo)]
+    grid = np.sort(np.concatenate([measure.ppf((np.arange(GRID) + 0.5) / GRID), ends]))
     grid_found = at(grid)
     cycle = impulse_cycle(osc) or 1
-    seeds = [(centre + sigma * x, a.state, a.periods * T, a.points)
-             for x, a in zip(grid, grid_found) if a.periodic and a.type not in NON_PERIODIC
-             and a.period <= MAX_SEED_PERIOD * cycle]
-    note, found = "", []
-    if not seeds:
-        note = "no periodic attractor on the grid to continue"
-    else:
+
+    def seeds_of(xis, found_):
+        return [(centre + sigma * x, a.state, a.periods * T, a.points)
+                for x, a in zip(xis, found_) if a.periodic and a.type not in NON_PERIODIC
+                and a.period <= MAX_SEED_PERIOD * cycle]
+
+    def continuation(seeds):
+        """(note, located (xi, kind) in the support)"""
+        if not seeds:
+            return "no periodic attractor on the grid to continue", []
         try:
             located = locate_bifurcations(osc, task.uncertain, centre + sigma * lo,
                                           centre + sigma * hi, options=task.options,
                                           seeds=seeds, xtol=task.xtol * sigma)
-            found = sorted(((p.value - centre) / sigma, p.kind) for p in located)
-            found = [(x, k) for x, k in found if lo < x < hi]
         except ValueError as err:  # e.g. no common period of the forcing
-            note = f"continuation refused: {err}"
-    edges = [lo, *[x for x, _ in found], hi]
-    mids = [0.5 * (a + b) for a, b in zip(edges[:-1], edges[1:])]
-    mid_found = at(mids)
-    intervals, boundaries = [], []
-    start = edges[0]
-    for i, a in enumerate(mid_found):  # merge neighbours of the same type
-        last = i == len(mid_found) - 1
-        if last or mid_found[i + 1].type != a.type:
-            intervals.append((start, edges[i + 1], a.type, i))
-            if not last:
-                boundaries.append((edges[i + 1], found[i][1]))
-                start = edges[i + 1]
+            return f"continuation refused: {err}", []
+        found_ = sorted(((p.value - centre) / sigma, p.kind) for p in located)
+        return "", [(x, k) for x, k in found_ if lo < x < hi]
+
+    def intervals_of(found_):
+        """(intervals (lo, hi, type, last mid), boundaries, mids, their attractors)"""
+        edges = [lo, *[x for x, _ in found_], hi]
+        mids_ = [0.5 * (a + b) for a, b in zip(edges[:-1], edges[1:])]
+        mid_found_ = at(mids_)
+        intervals_, boundaries_ = [], []
+        start = edges[0]
+        for i, a in enumerate(mid_found_):  # merge neighbours of the same type
+            last = i == len(mid_found_) - 1
+            if last or mid_found_[i + 1].type != a.type:
+                intervals_.append((start, edges[i + 1], a.type, i))
+                if not last:
+                    boundaries_.append((edges[i + 1], found_[i][1]))
+                    start = edges[i + 1]
+        return intervals_, boundaries_, mids_, mid_found_
+
+    seeds = seeds_of(grid, grid_found)
+    note, found = continuation(seeds)
+    intervals, boundaries, mids, mid_found = intervals_of(found)
     rng = np.random.default_rng(task.seed)
     xi = measure.ppf(rng.random(task.samples)) if task.samples else np.zeros(0)
     mc = at(xi)
+    mc_types = [a.type for a in mc]
+    known = {kind for _, _, kind, _ in intervals}
+    missed = [j for j, a in enumerate(mc) if a.type not in known]
+    if not note and missed and len(missed) > 1:
+        # samples on a periodic type no interval has: a branch the grid did not seed;
+        # continue from a few of them too (the nearest to each end of their range)
+        picks = sorted({missed[0], missed[-1], *[j for j in missed
+                                                  if mc_types[j] != mc_types[missed[0]]][:2]})
+        extra = seeds_of(xi[picks], [mc[j] for j in picks])
+        if extra:
+            note, found = continuation(seeds + extra)
+            intervals, boundaries, mids, mid_found = intervals_of(found)
     # coexisting attractors: the same points from other initial states
     others = initial_states(osc, task.extra_states)[1:]
     checked = np.arange(min(task.coexist, task.samples))
@@ -184,7 +212,6 @@ def compute_slice(task: SliceTask) -> dict:
     prob = {}
     for a, b, kind, _ in intervals:
         prob[kind] = prob.get(kind, 0.0) + float(cdf(b) - cdf(a))
-    mc_types = [a.type for a in mc]
     counts = {k: mc_types.count(k) for k in set(mc_types)}
     unseen = {k: n for k, n in counts.items() if k not in prob}
     if not note and any(k in NON_PERIODIC for k in prob):
@@ -220,8 +247,20 @@ def compute_slice(task: SliceTask) -> dict:
         "mc_settled": np.array([a.settled for a in mc], dtype=np.int8),
         "mc_points": points,
         "mc_coexist": mc_coexist,
+        "mc_mismatch": _mismatch(xi, mc_types, intervals),
         "cpu_seconds": time.process_time() - clock,
     }
+
+
+def _mismatch(xi, types, intervals) -> int:
+    """How many samples have a type other than that of the interval holding their xi."""
+    count = 0
+    for x, kind in zip(xi, types):
+        for a, b, interval_kind, _ in intervals:
+            if a <= x <= b:
+                count += kind != interval_kind
+                break
+    return count
 
 
 def _members(intervals, i, mid_found) -> list[int]:
@@ -530,6 +569,9 @@ def _dataset(slices, parameter, values, system, options, measure, settings, seed
             [float(np.mean(s["mc_coexist"])) if checked else np.nan for s in slices]), {
             "long_name": f"share of the first {checked} samples whose type depends on the "
             "initial state", **one}),
+        "mc_mismatch": (parameter, np.array([int(s["mc_mismatch"]) for s in slices]), {
+            "long_name": "samples whose type is not that of the interval (between the "
+            "located boundaries) holding their xi", **one}),
         "mc_xi": (dims_s, padded("mc_xi", np.nan, float), {
             "long_name": "xi of each Monte Carlo sample", **one}),
         "mc_type": (dims_s, padded("mc_type", "", object).astype(str), {
