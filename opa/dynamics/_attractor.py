@@ -95,6 +95,7 @@ class Attractor:
     periods: int = 0  # forcing periods integrated
     lyapunov: float = math.nan  # largest exponent per unit time (NaN: not estimated)
     points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # (k, 2) x, v
+    residual: float = 0.0  # largest repeat distance at the period over the last window
     state: np.ndarray = field(default_factory=lambda: np.zeros(2))  # the state at the end
 
     @property
@@ -403,16 +404,18 @@ def _approached_period(history: np.ndarray, window: np.ndarray, tol: float, *,
 
 def same_attractor(a: Attractor, b: Attractor, tol: float = 1e-3) -> bool:
     """Whether two runs found the same attractor: the same type and, for periodic ones,
-    the same orbit (every point of each within ``tol`` of the section's size of a point
-    of the other). Two chaotic or quasi-periodic runs of the same type count as the same
-    (nothing here tells their attractors apart)."""
+    the same orbit (every point of each within ``tol`` of the section's size, plus both
+    runs' residuals, of a point of the other: a run settled on its approach is still that
+    far from its orbit). Two chaotic or quasi-periodic runs of the same type count as the
+    same (nothing here tells their attractors apart)."""
     if a.type != b.type:
         return False
     if not (a.periodic and b.periodic) or len(a.points) == 0 or len(b.points) == 0:
         return True
     scale = max(float(np.abs(a.points).max()), float(np.abs(b.points).max()), 1e-300)
+    reach = tol * scale + a.residual + b.residual
     gap = np.abs(a.points[:, None, :] - b.points[None, :, :]).max(axis=2)
-    return bool(gap.min(axis=1).max() <= tol * scale and gap.min(axis=0).max() <= tol * scale)
+    return bool(gap.min(axis=1).max() <= reach and gap.min(axis=0).max() <= reach)
 
 
 def _periodic(window, p, impacts, complete, k, T, delta, y, *, settled) -> Attractor:
@@ -426,7 +429,8 @@ def _periodic(window, p, impacts, complete, k, T, delta, y, *, settled) -> Attra
     resting = np.all(window[:, 0] >= delta - 1e-12) and np.all(window[:, 1] == 0.0)
     kind = "sticking" if resting else period_label(p, count)
     return Attractor(kind, period=p, impacts=count, settled=settled, periods=k,
-                     points=window[-p:].copy(), state=y.copy())
+                     points=window[-p:].copy(), state=y.copy(),
+                     residual=float(repeat_distance(window, p).max()) if p < W else 0.0)
 
 
 def initial_states(oscillator, extra: int) -> np.ndarray:
