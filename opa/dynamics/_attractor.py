@@ -1,33 +1,47 @@
 """The attractor one deterministic system settles on, classified as soon as it has settled.
 
-A run from an initial state is integrated in chunks of ``check`` forcing periods; after
-each chunk the stroboscopic points of the last ``record`` periods (fewer while the run is
-younger) are examined:
+Runs advance together in chunks of ``check`` forcing periods (``settle_batch``: one
+parallel kernel call per chunk for the whole batch; ``record`` periods per chunk after
+``4 record``); after each chunk the stroboscopic points of each run are examined and a run
+leaves the batch once its type is known:
 
 * **settled periodic**: the smallest p for which the points repeat,
-  ``|s_{k+p} - s_k| <= settle_tol max|s|`` over at least two repeats, with a repeat
-  distance that does not grow from the older to the newer half of the window (a run
-  drifting away from an unstable orbit does not count). The run stops there; its type
-  is the label ``z = n/p`` (n = p forcing periods, the impacts in one repeat), or
-  ``sticking`` when it rests on the wall at every point of the window.
-* **chaotic**: a twin run, ``d0`` away, is carried beside every run that has not settled
-  after ``lyapunov_after`` periods and renormalised after every chunk (Benettin's
-  two-trajectory estimate of the largest Lyapunov exponent, as ``lyapunov_benettin``,
-  with plain kernel runs). Once it has run ``lyapunov_periods`` periods with an exponent
-  above ``chaos_threshold`` (per unit time) the run stops: ``chaotic``.
-* otherwise the run goes on to ``transient + record`` periods and the last ``record``
-  are classified as by a sweep (``detect_period`` at ``period_tol``): a period there is
-  ``n/p`` (not settled: converging more slowly than ``settle_tol`` asks); without one the
-  twin's exponent over the last ``lyapunov_periods`` decides, ``chaotic`` above the
-  threshold, else ``quasi-periodic`` (no period within the record and no exponential
-  divergence: a torus, a period longer than ``record / 2``, or a transient slower than
-  the horizon).
+  ``|s_{k+p} - s_k| <= settle_tol max|s|`` over at least two repeats (on the last
+  ``2 check`` points, then on the last ``record``), with a repeat distance that does not
+  grow from the older to the newer half of the window (a run drifting away from an
+  unstable orbit does not count), and not still approaching the orbit of half the
+  period. Its type is the label ``z = n/p`` (n = p forcing periods, the impacts in one
+  repeat; ``n/?`` when the count is not steady), or ``sticking`` when it rests on the
+  wall at every point of the window.
+* **the approach through a multiplier near -1.** Near a period doubling a run approaches
+  its period-q orbit as an alternating deviation, and looks period-2q to any tolerance
+  long before it looks period-q (a fixed 1000-period transient calls such runs 2q). The
+  deviation obeys the flip normal form ``x -> -(1 - eps) x + beta x^3``; its decay rate
+  against its amplitude squared (``_flip_fit``, over the last half of the run) gives eps:
+  eps > 0 is the approach to q (decided early once most of the decay is exponential),
+  eps < 0 the approach to the 2q-cycle.
+* **chaotic**: a twin run, ``d0`` away, is carried beside a run with no period within
+  ``TWIN_GATE`` after ``lyapunov_after`` periods and renormalised after every chunk
+  (Benettin's two-trajectory estimate of the largest Lyapunov exponent, as
+  ``lyapunov_benettin``, with plain kernel runs). Once it has run ``lyapunov_periods``
+  periods with an exponent above ``chaos_threshold`` (per unit time, ``CHAOS_THRESHOLD``)
+  the run stops: ``chaotic``.
+* otherwise the run goes on to ``transient + record`` periods and its last ``record``
+  are classified: a period within ``period_tol`` (a sweep's rule; halved while the flip
+  fit says the run approaches half of it) is ``n/p``, not settled; without one a twin
+  over the last ``lyapunov_periods`` decides: ``chaotic`` above the threshold, else
+  ``quasi-periodic`` (no period within the record and no exponential divergence: a
+  torus, a period longer than ``record / 2``, or a transient slower than the horizon).
+* when the forcing has no common period (impulses incommensurate with the forcing, or
+  a common period longer than ``record / 2``) no stroboscopic period exists: the twin
+  alone decides, early (chaotic above the threshold, ``quasi-periodic`` below minus the
+  threshold: nearby runs converge on a forced torus) or at the horizon.
 * a run the kernel cannot finish is ``escape`` (the state left every bound) or
   ``failed`` (step limit, step collapse).
 
-Settling early is what makes a thousand samples per control value affordable: most runs
-of section 3.1 settle to 1e-6 within 50 to 200 periods, where a fixed transient of 1000
-periods would integrate every run to the end.
+Settling early is what makes a thousand samples per control value affordable: in section
+3.1 (F0 = 0) a run takes 168 periods on average over c in [0.01, 0.1] (docs/stochastic.md),
+where a fixed transient integrates 1064.
 """
 
 from __future__ import annotations
@@ -136,7 +150,11 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
     carry one; a run leaves the batch once its type is decided."""
     osc = system.oscillator
     T, delta = osc.forcing_period, osc.delta
-    cycle = impulse_cycle(osc) or 1  # periods are multiples of the forcing's cycle
+    # periods are multiples of the forcing's cycle; None: it has none (and, with the
+    # record holding at most record / 2, neither has a cycle longer than that)
+    cycle = impulse_cycle(osc)
+    if cycle is not None and cycle > settings.record // 2:
+        cycle = None
     s = settings
     total = s.transient + s.record
     states = np.asarray(states, dtype=float)
@@ -209,20 +227,21 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
 def _decide(b, k, total, W, history, impacts, complete, y, T, delta, s, phase, growth,
             lam_early, cycle) -> Attractor | None:
     """The attractor of run b after k periods, or None to go on (updating its twin's
-    ``phase``, ``growth`` and ``lam_early``)."""
+    ``phase``, ``growth`` and ``lam_early``). ``cycle`` None: the forcing has no common
+    period, no stroboscopic period exists, and the exponent alone decides."""
     window = history[k - W:k]
     # settled: first on the last 2 check periods (periods up to check, clear of the
     # transient sooner), then on the whole window
-    for span in dict.fromkeys((min(2 * s.check, W), W)):
+    for span in dict.fromkeys((min(2 * s.check, W), W)) if cycle else ():
         if span >= 2 * s.check or k == total:
             p = _settled_period(history[k - span:k], s.settle_tol,
                                 final=span == s.record or k == total)
             if p:
                 return _periodic(history[k - span:k], p, impacts, complete, k, T, delta, y,
                                  settled=True)
-    periodic = _period_within(window, s.period_tol)
+    periodic = _period_within(window, s.period_tol) if cycle else 0
     lam = (_exponent(growth[b], T) if growth[b] else lam_early[b]) if k == total else math.nan
-    if k >= 4 * s.record or k == total:
+    if cycle and (k >= 4 * s.record or k == total):
         p = _approached_period(history, window, s.period_tol, final=k == total,
                                cycle=cycle)
         # (without a period within tol, a flip approach does not outvote chaos)
@@ -236,10 +255,14 @@ def _decide(b, k, total, W, history, impacts, complete, y, T, delta, s, phase, g
         if lam_early[b] > s.chaos_threshold and not periodic:
             return Attractor("chaotic", settled=True, periods=k, lyapunov=lam_early[b],
                              points=window.copy(), state=y.copy())
+        if cycle is None and lam_early[b] < -s.chaos_threshold:
+            # no period can exist, and nearby runs converge: a forced torus
+            return Attractor("quasi-periodic", settled=True, periods=k,
+                             lyapunov=lam_early[b], points=window.copy(), state=y.copy())
         phase[b] = "paused"
     if (phase[b] == "" and k >= s.lyapunov_after or phase[b] == "paused"
-            and k >= total - s.lyapunov_periods) and not _period_within(
-                history[k - min(W, 2 * s.check):k], TWIN_GATE):
+            and k >= total - s.lyapunov_periods) and not (cycle and _period_within(
+                history[k - min(W, 2 * s.check):k], TWIN_GATE)):
         # a twin only beside a run without a period in sight: one that converges
         # slowly to a period needs no exponent
         phase[b] = "early" if phase[b] == "" else "final"
