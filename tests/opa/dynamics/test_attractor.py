@@ -85,9 +85,8 @@ def test_a_quasi_periodic_run_under_an_incommensurate_impulse_train():
     """Section 3.3 (F0 = 0.1) at omega = 4 + 0.1 sqrt(2): the impulses every 2 pi and the
     forcing period 2 pi / omega have no common period, and the forced motion is stable:
     quasi-periodic, decided early by a negative exponent. scipy: no repeat within 1e-4
-    for any
-    p <= 32 over 64 periods after 66, and a perturbation of 1e-7 at t = 0 shrinks (the slope of
-    its log over the first 30 periods is below -threshold)."""
+    for any p <= 32 over 64 periods after 66, and a perturbation of 1e-7 at t = 0 shrinks
+    (the slope of its log over the first 30 periods is below -threshold)."""
     osc = preset("3.3").replace(omega=4 + 0.1 * math.sqrt(2.0))
     a = one(osc, transient=300)
     assert a.type == "quasi-periodic" and a.settled and a.periods < 300
