@@ -67,6 +67,8 @@ APPROACH_RATIO = 0.25
 #: a twin (for the Lyapunov exponent) runs only beside a run with no period within this
 #: relative tolerance: one that converges to a period, however slowly, needs no exponent
 TWIN_GATE = 1e-2
+#: two runs that have not both settled count as on one orbit within this (relative)
+UNSETTLED_TOL = 1e-2
 #: the types that are not periodic labels "n/p"
 NON_PERIODIC = ("quasi-periodic", "chaotic", "sticking", "escape", "failed")
 
@@ -429,13 +431,16 @@ def same_attractor(a: Attractor, b: Attractor, tol: float = 1e-3) -> bool:
     """Whether two runs found the same attractor: the same type and, for periodic ones,
     the same orbit (every point of each within ``tol`` of the section's size, plus both
     runs' residuals, of a point of the other: a run settled on its approach is still that
-    far from its orbit). Two chaotic or quasi-periodic runs of the same type count as the
-    same (nothing here tells their attractors apart)."""
+    far from its orbit; a run that has not settled, ``UNSETTLED_TOL``). Two chaotic or
+    quasi-periodic runs of the same type count as the same (nothing here tells their
+    attractors apart)."""
     if a.type != b.type:
         return False
     if not (a.periodic and b.periodic) or len(a.points) == 0 or len(b.points) == 0:
         return True
     scale = max(float(np.abs(a.points).max()), float(np.abs(b.points).max()), 1e-300)
+    if not (a.settled and b.settled):
+        tol = max(tol, UNSETTLED_TOL)  # still on its way, slower than its residual says
     reach = tol * scale + a.residual + b.residual
     gap = np.abs(a.points[:, None, :] - b.points[None, :, :]).max(axis=2)
     return bool(gap.min(axis=1).max() <= reach and gap.min(axis=0).max() <= reach)
