@@ -1837,3 +1837,19 @@ def run_batch(y0, t_out, P, cfgs, nodes, weights, U, rtol, atol, out, logs, coun
             counters[b, j] = res[j]
         if res[0] != OK and abort[0] == 0:
             abort[0] = 1
+
+
+@njit(cache=True, parallel=True)
+def run_batch_from(Y0, include_start, t_out, P, cfgs, nodes, weights, U, rtol, atol, out,
+                   logs, counters):
+    """B plain runs in parallel, as ``run_batch`` but each from its own state ``Y0[b]``
+    (B, dim), with the impulse at ``t_out[0]`` applied only if ``include_start`` (runs
+    resumed mid-way, as the attractor classification's chunks are). Every run is made."""
+    B = P.shape[0]
+    for b in prange(B):
+        z = Y0[b].copy()
+        res = integrate(z, np.int64(0), t_out, include_start, np.bool_(False), P[b], cfgs[b],
+                        nodes[b], weights[b], U[b], rtol, atol, out[b],
+                        np.empty((0, N_STATS)), np.empty(0), logs[b])
+        for j in range(5):
+            counters[b, j] = res[j]

@@ -475,6 +475,11 @@ class Batch:
         """Run b's events (as many as the log's capacity holds)."""
         return Events.of(self._logs[b, :min(int(self._counters[b, 1]), self._logs.shape[1])])
 
+    def log(self, b: int) -> np.ndarray:
+        """Run b's raw event log (as many rows as the capacity holds; :meth:`Events.of`
+        decodes it), a copy."""
+        return self._logs[b, :min(int(self._counters[b, 1]), self._logs.shape[1])].copy()
+
     def log_complete(self, b: int) -> bool:
         """Whether run b's events all fit in the log."""
         return int(self._counters[b, 1]) <= self._logs.shape[1]
@@ -592,24 +597,39 @@ def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
 
 
 def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: int = 0,
-              stop_on_failure: bool = False, guard: bool = True) -> Batch:
-    """B independent plain runs in parallel: run b starts from ``y0`` with the b-th
-    system of ``inputs`` (:func:`stack`, :func:`sampled`). Each log keeps ``capacity``
-    events. With ``stop_on_failure`` the runs not started after the first failure are
-    marked skipped. ``guard``: the runaway guard (:func:`step_guard`) for each run whose
-    step limit is the default one. Each run depends on nothing but its own inputs, so the
-    results do not depend on the threads."""
+              stop_on_failure: bool = False, guard: bool = True,
+              include_start: bool = True) -> Batch:
+    """B independent plain runs in parallel: run b starts from ``y0`` (or ``y0[b]`` when
+    it has shape (B, dim)) with the b-th system of ``inputs`` (:func:`stack`,
+    :func:`sampled`). Each log keeps ``capacity`` events. With ``stop_on_failure`` the
+    runs not started after the first failure are marked skipped (not with states of
+    their own). ``guard``: the runaway guard (:func:`step_guard`) for each run whose step
+    limit is the default one. ``include_start``: as for :func:`run` (False: runs resumed
+    mid-way; not with ``stop_on_failure``). Each run depends on nothing but its own
+    inputs, so the results do not depend on the threads."""
     y0 = np.ascontiguousarray(y0, dtype=float)
     times = np.ascontiguousarray(times, dtype=float)
     B = len(inputs.p)
+    own_states = y0.ndim == 2 or not include_start
+    if own_states and stop_on_failure:
+        raise ValueError("stop_on_failure needs one start state and include_start")
     cfgs = np.array(inputs.cfg, dtype=np.int64)
     guarded = np.zeros(B, np.int64)
     if guard:
         for b in np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS):
             guarded[b] = cfgs[b, K.C_MAXSTEPS] = step_guard(times, inputs.p[b])
-    out = np.empty((B, len(times), len(y0)))
+    dim = y0.shape[-1]
+    out = np.empty((B, len(times), dim))
     logs = np.empty((B, capacity, 3))
     counters = np.zeros((B, 5), dtype=np.int64)
+    if own_states:
+        prepare_kernels(K.run_batch_from)
+        K.run_batch_from(np.ascontiguousarray(np.broadcast_to(y0, (B, dim))),
+                         bool(include_start), times, np.ascontiguousarray(inputs.p), cfgs,
+                         *(np.ascontiguousarray(a, dtype=float)
+                           for a in (inputs.nodes, inputs.weights, inputs.basis)),
+                         rtol, atol, out, logs, counters)
+        return Batch(out, logs, counters, guarded)
     abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
     prepare_kernels(K.run_batch)
     K.run_batch(y0, times, np.ascontiguousarray(inputs.p), cfgs,

@@ -33,15 +33,30 @@ def register_stochastic(sub) -> None:
                    help="the uncertain parameter (default mu)")
     g.add_argument("--distribution", default=None, metavar="LAW",
                    help="law of xi: semicircle (default), uniform, beta:A,B, normal-trunc:K")
-    g.add_argument("--samples", type=whole_number, default=256, metavar="M",
-                   help="Monte Carlo samples classified at each value (0: none; default 256)")
+    g.add_argument("--samples", type=whole_number, default=1024, metavar="M",
+                   help="Monte Carlo samples classified at each value (0: none; default 1024)")
     g.add_argument("--seed", type=whole_number, default=0, metavar="K",
                    help="random seed of the samples (default 0)")
     g.add_argument("--transient", type=positive_int, default=1000, metavar="P",
-                   help="forcing periods dropped before a run is classified (default 1000: "
-                        "near a period doubling the transient decays slowly)")
+                   help="the longest transient: a run that has not settled on a period (to "
+                        "1e-6) or shown chaos by then is classified from its last --record "
+                        "periods (default 1000; most runs settle within 50 to 300)")
     g.add_argument("--record", type=positive_int, default=64, metavar="P",
-                   help="forcing periods recorded to find the period (default 64)")
+                   help="forcing periods examined for the period, at most P/2 (default 64)")
+    g.add_argument("--extra-states", type=whole_number, default=2, metavar="K",
+                   help="other initial states from which the interval middles and the first "
+                        "--coexist samples are classified too, to find coexisting attractors "
+                        "(default 2; 0: none)")
+    g.add_argument("--coexist", type=whole_number, default=None, metavar="M",
+                   help="samples classified from the other initial states too (default 64)")
+    g.add_argument("--emr", action="store_true",
+                   help="also sweep the EMR (OPA N = --emr-order at the same sigma) and draw "
+                        "the paper's diagram beside the stochastic one")
+    g.add_argument("--emr-order", type=positive_int, default=None, metavar="N",
+                   help="order of the EMR's OPA system (default 4; with --emr)")
+    g.add_argument("--workers", type=positive_int, default=2, metavar="W",
+                   help="local worker processes, one control value each at a time "
+                        "(default 2; 1: in process)")
     _solver_flags(p)
     _output_flags(p, parts=True)
     p.set_defaults(func=cmd_stochastic)
@@ -51,7 +66,16 @@ def cmd_stochastic(args) -> int:
     from opa.cli._flags import check_outputs, options_from, oscillator_from
     from opa.dynamics._stochastic import stochastic_diagram
 
-    check_outputs(args)  # refuses --keep-parts without --out too
+    check_outputs(args)  # refuses --keep-parts without --out too; --workers bound
+    if args.record < 4:
+        raise ValueError(f"--record must be at least 4 periods, got {args.record}")
+    if args.samples == 1:
+        raise ValueError("--samples must be 0 or at least 2, got 1")
+    if args.extra_states == 0 and args.coexist is not None:
+        raise ValueError("--coexist has no effect with --extra-states 0")
+    coexist = 64 if args.coexist is None else args.coexist
+    if args.emr_order is not None and not args.emr:
+        raise ValueError("--emr-order has no effect without --emr")
     name, values, _ = parse_sweep(
         args.sweep, names=tuple(n for n in PARAMETER_NAMES
                                 if n not in (args.uncertain, "x0", "v0")))
@@ -62,6 +86,9 @@ def cmd_stochastic(args) -> int:
                             distribution=args.distribution, samples=args.samples,
                             seed=args.seed, options=options_from(args),
                             transient=args.transient, record=args.record,
+                            extra_states=args.extra_states, coexist=coexist,
+                            emr=args.emr, emr_order=args.emr_order or 4,
+                            workers=args.workers,
                             parts=f"{args.out}.parts" if args.out else None, log=log)
     elapsed = time.perf_counter() - start
     if args.out:
@@ -98,6 +125,11 @@ def summary(ds) -> list[str]:
                   if p > 0]
         how = "sampled" if int(ds.method[i]) else "continuation"
         agree = {1: "", 0: "; MC DISAGREES", -1: ""}[int(ds.agree[i])]
+        both = float(ds.coexist_probability[i])
+        shown = float(ds.mc_coexist[i])
+        if both > 0 or shown > 0:
+            agree += (f"; type depends on the initial state: {both:.3f} of the law, "
+                      f"{shown:.3f} of the samples checked")
         lines.append(f"{param} = {value:.6g}: {', '.join(shares)} ({how}{agree})")
     return lines
 

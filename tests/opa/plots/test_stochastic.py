@@ -1,5 +1,7 @@
-"""The stochastic diagram's figure: one line per attractor type that occurs, drawn from
-the dataset's probabilities, the boundaries in xi below, labelled axes, written to disk."""
+"""The stochastic diagram's figure: the samples' Poincaré points shaded by probability (a
+law per control value: mass 1 per column, on the orbit's points), one line per attractor
+type drawn from the dataset's probabilities, the boundaries in xi, the EMR beside them,
+labelled axes, written to disk."""
 
 from __future__ import annotations
 
@@ -9,30 +11,61 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 
 from opa import preset  # noqa: E402
 from opa.dynamics import stochastic_diagram  # noqa: E402
-from opa.plots._stochastic import draw_stochastic, plot_stochastic  # noqa: E402
+from opa.plots._stochastic import draw_stochastic, plot_stochastic, section_density  # noqa: E402
 
 
-def test_the_figure_draws_the_probabilities_and_boundaries(tmp_path):
-    ds = stochastic_diagram(preset("3.1", F0=0.0), "c", [0.0396996668, 0.05], sigma=0.03,
-                            samples=16, transient=500)
-    fig = draw_stochastic(ds)
+@pytest.fixture(scope="module")
+def diagram():
+    return stochastic_diagram(preset("3.1", F0=0.0), "c", [0.0396996668, 0.05], sigma=0.03,
+                              samples=16, extra_states=0, emr=True)
+
+
+def test_the_shaded_points_are_a_law_per_control_value(diagram):
+    """Each column holds mass 1; at c = 0.05 (2/2 for every xi, a 2-point orbit whose
+    points move little with xi) the mass sits on two narrow clusters of x."""
+    c_edges, x_edges, mass = section_density(diagram)
+    assert mass.shape == (2, len(x_edges) - 1) and len(c_edges) == 3
+    np.testing.assert_allclose(mass.sum(axis=1), 1.0, atol=1e-12)
+    x = diagram.mc_x.sel(c=0.05).values
+    centres = 0.5 * (x_edges[1:] + x_edges[:-1])
+    heavy = centres[mass[1] > 0]
+    assert np.all(np.min(np.abs(heavy[:, None] - np.nanmean(x[:, :2], axis=0)[None]),
+                         axis=1) < 0.05)
+
+
+def test_the_figure_draws_the_probabilities_boundaries_and_emr(diagram, tmp_path):
+    fig = draw_stochastic(diagram)
     try:
-        ax_p, ax_b = fig.axes[:2]
+        ax_pts, ax_emr, ax_p, ax_b = fig.axes[:4]
         lines = {line.get_label(): line for line in ax_p.get_lines()
                  if not line.get_label().startswith("_")}
         assert set(lines) == {"2/2", "4/4"}
         for kind, line in lines.items():
-            np.testing.assert_array_equal(line.get_ydata(), ds.probability.sel(type=kind))
+            np.testing.assert_array_equal(line.get_ydata(), diagram.probability.sel(type=kind))
         marks = [line for line in ax_b.get_lines() if line.get_label() == "period-doubling"]
         assert len(marks) == 1 and abs(marks[0].get_ydata()[0]) < 1e-6
-        for ax in (ax_p, ax_b):
+        drawn = ax_emr.get_lines()[0].get_ydata()
+        finite = diagram.emr_x.values[np.isfinite(diagram.emr_x.values)]
+        np.testing.assert_array_equal(np.sort(drawn), np.sort(finite))
+        for ax in (ax_pts, ax_emr, ax_p, ax_b):
             assert ax.get_ylabel()
         assert ax_b.get_xlabel() == "control parameter c"
     finally:
         plt.close(fig)
     path = tmp_path / "s.png"
-    plot_stochastic(ds, str(path))
+    plot_stochastic(diagram, str(path))
     assert path.stat().st_size > 10_000
+
+
+def test_the_figure_without_samples_or_emr(tmp_path):
+    ds = stochastic_diagram(preset("3.1", F0=0.0), "c", [0.05], sigma=0.03, samples=0,
+                            extra_states=0)
+    fig = draw_stochastic(ds)
+    try:
+        assert len(fig.axes) == 3
+    finally:
+        plt.close(fig)
