@@ -70,11 +70,11 @@ def _paired(x, x_hat, mean_hat, second_hat):
 
 
 def _check_point(cfg, ds, q, s, ens, runs):
-    """The map's verdicts at grid point (q, s) against the paired estimates of ``runs``
-    ((variant, N index) -> an OPA dataset) with the ensemble's paths: each variant's errors
-    with their own standard errors, scaled by the reference E[x], Var[x] of the control
-    (the plain ensemble, or a variant at the highest N) whose E[x] has the smallest RMS
-    standard error."""
+    """The map's verdicts at grid point (q, s) from ``runs`` ((variant, N index) -> an OPA
+    dataset) and the ensemble's paths: the reference E[x], Var[x] is the control-variate
+    estimate of the control (the plain ensemble, or a run at the highest N, paired here
+    with the ensemble) whose E[x] has the smallest RMS standard error; every run's errors
+    are against it, with its standard errors."""
     x, xi = ens.x.values, ens.xi.values
     zero = np.zeros(x.shape[1])
     best = _paired(x, np.zeros_like(x), zero, zero)
@@ -97,20 +97,20 @@ def _check_point(cfg, ds, q, s, ens, runs):
     np.testing.assert_allclose(ds.mc_x_mean.values[q, s], best["mean"], rtol=0, atol=1e-12)
     var = np.maximum(best["var"], 0.0)
     floor = 10 * (cfg.options.rtol + cfg.options.atol)
-    for (v, k), p in pairs.items():
+    for (v, k), run in runs.items():
+        # every run against the reference, whose standard errors are the errors' own
+        err = run.x_mean.values - best["mean"]
+        verr = run.x_var.values - best["var"]
         for h, H in enumerate(cfg.horizons):
             n = int(round(H * cfg.per_period)) + 1
             assert ds.agrees.values[q, s, v, k, h, 0] == _agrees(
-                p["err_mean"], np.sqrt(var), p["err_mean_se"], n, cfg.tolerance, cfg.z,
-                floor), (v, k, h)
+                err, np.sqrt(var), best["mean_se"], n, cfg.tolerance, cfg.z, floor), (v, k, h)
             assert ds.agrees.values[q, s, v, k, h, 1] == _agrees(
-                p["err_var"], var, p["err_var_se"], n, cfg.var_tolerance, cfg.z,
-                floor**2), (v, k, h)
+                verr, var, best["var_se"], n, cfg.var_tolerance, cfg.z, floor**2), (v, k, h)
             np.testing.assert_allclose(ds.err_mean.values[q, s, v, k, h],
-                                       rms(p["err_mean"][:n]), rtol=1e-7)
+                                       rms(err[:n]), rtol=1e-7)
             np.testing.assert_allclose(ds.err_mean_rel.values[q, s, v, k, h],
-                                       rms(p["err_mean"][:n]) / rms(np.sqrt(var[:n])),
-                                       rtol=1e-7)
+                                       rms(err[:n]) / rms(np.sqrt(var[:n])), rtol=1e-7)
 
 
 @pytest.mark.parametrize("q", [0, 1])
