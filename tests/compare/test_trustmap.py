@@ -720,3 +720,21 @@ def test_runs_that_stop_carry_their_reason(tmp_path):
     assert "escaped" in single.attrs["failure"]
     screen = "\n".join(first_screen(ds))
     assert "did not finish" in screen and "escaped" in screen
+
+
+@pytest.mark.parametrize("distribution", ["semicircle", "uniform"])
+def test_a_doubled_ensemble_equals_one_run_whole(tmp_path, distribution):
+    """A round that doubles runs only the new Sobol' points (each replicate's sequence goes
+    on) and gives, bit for bit, the ensemble run whole at that size."""
+    import compare._trustmap as trustmap
+
+    cfg = load_config(None, outdir=str(tmp_path), distribution=distribution, **TINY)
+    m = trustmap._Map(cfg, progress=False, log=lambda *a: None)
+    times = time_grid(3.98, max(cfg.horizons), cfg.per_period)
+    half = m._ensemble(3.98, 0.03, 64, times)
+    grown = m._ensemble(3.98, 0.03, 128, times, previous=half)
+    whole = m._ensemble(3.98, 0.03, 128, times)
+    assert m.true_runs == 64 + 64 + 128  # the doubling ran only its new half
+    for name in ("x", "xi", "impacts"):
+        np.testing.assert_array_equal(grown[name], whole[name])
+    assert grown["rhs"] == whole["rhs"]
