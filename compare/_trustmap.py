@@ -188,7 +188,8 @@ class _Map:
                   "sampler": "sobol", "seed": cfg.seed, "replicates": REPLICATES,
                   "times": times, "options": cfg.options, "opa": opa_inputs,
                   "criterion": [cfg.tolerance, cfg.var_tolerance, cfg.z, self.floor,
-                                list(cfg.horizons)]}
+                                list(cfg.horizons), NOISE_BAND],
+                  "estimator": "every run against the best control-variate reference"}
         return self.parts.get(f"mc_{self._name(value, sigma)}_M{samples}", inputs,
                               self._timed("pairs and verdicts", compute))
 
