@@ -46,7 +46,7 @@ import numpy as np
 import xarray as xr
 
 from compare._trust import first_disagreement, marginal
-from mc import sample_xi
+from mc import cv_estimates, sample_xi
 from opa.engine import (
     PARAMETER_NAMES, check_memory, check_opa_layout, Oscillator, run_measure, SolverOptions,
     surrogate, surrogate_moments, System, true_runs,
@@ -115,12 +115,8 @@ def paired_estimates(x: np.ndarray, x_hat: np.ndarray, replicates: int,
         raise ValueError(f"{M} points cannot form {replicates} replicates of equal size")
     d = (x - x_hat).reshape(replicates, -1, T).mean(axis=1)
     q = (x**2 - x_hat**2).reshape(replicates, -1, T).mean(axis=1)
-    mean_r = surrogate_mean + d
-    var_r = surrogate_second + q - mean_r**2
-    out = {}
-    for name, per_replicate in (("d", d), ("mean", mean_r), ("var", var_r)):
-        out[name] = per_replicate.mean(axis=0)
-        out[f"{name}_se"] = per_replicate.std(axis=0, ddof=1) / math.sqrt(replicates)
+    zero = np.zeros_like(d)  # d and q are already the paired replicate means
+    out = cv_estimates(d, q, surrogate_mean, surrogate_second, zero, zero)
     var_d = float(np.var(x - x_hat, axis=0).sum())
     out["variance_reduction"] = float(np.var(x, axis=0).sum()) / var_d if var_d > 0 \
         else math.inf

@@ -9,9 +9,9 @@ import os as _os
 
 # numba's OpenMP threads sleep between parallel regions instead of spinning: the kernel
 # runs many small batches (the levels of a split scan's or an ensemble's bisections), and
-# spinning threads made them 3.5x slower on a loaded 2-core machine (issue 29; large
-# batches take the same time either way). Set before numba starts its threads; the
-# user's own setting wins.
+# spinning threads made one split scan 3.5x slower on a loaded 2-core machine (issue 29;
+# a 2048-sample ensemble took the same time either way). Set before numba starts its
+# threads; the user's own setting wins.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from opa import dynamics as _dynamics  # noqa: E402
