@@ -3,13 +3,21 @@
 Section 3.2, omega = 3.98, sigma = 0.05, 10 forcing periods, 8 outputs per period
 (issue 25's target case): the 64-element adaptive ME-OPA (saltation law, N = 1) is the
 control; ``compare.verify(run, samples=M, sequential=False)`` gives E_cv[x] from M true
-systems, and a plain Sobol ensemble of the same M (``mc.simulate_mc``) gives E[x]. Both
-against a 2^16-sample Sobol reference (seed 1; the runs use other seeds). The table of
-RMS errors against M is printed (``-s``); the timing is of one certificate at M = 512.
+systems (stratified by element: the 65 edges, then jittered groups of 4), and a plain
+Sobol ensemble of the same M (``mc.simulate_mc``) gives E[x].
+
+The reference is the same control-variate estimate from 2^16 true systems at other
+points (seed 1); a plain 2^16-sample Sobol ensemble (seed 1) must agree with it within
+4 joint standard errors at every output, so the reference does not lean on the control.
 
     python -m pytest -s benchmarks/bench_verify.py
 
-The smoke mode (CI) runs 2 periods, 16 elements, M = 64 and a 4096-sample reference.
+prints the table of RMS errors against M (one seed), then the calibration at M = 512
+over 100 seeds: the RMS error, the RMS standard error and the coverage of the 95 %
+Student-t intervals; the timing is of one certificate at M = 512.
+
+The smoke mode (CI) runs 2 periods, 16 elements, M = 128, a 4096-sample reference and
+5 seeds.
 """
 
 from __future__ import annotations
@@ -21,6 +29,7 @@ import pytest
 
 from benchmarks.conftest import smoke_mode
 from compare import verify
+from compare._verify import interval_halfwidth
 from mc import simulate_mc
 from opa import Oscillator, simulate_opa
 from opa._elements import ElementBudgetWarning
@@ -30,29 +39,41 @@ from opa._model import time_grid
 @pytest.fixture(scope="module")
 def case(request):
     smoke = smoke_mode(request.config)
-    periods, budget, counts, reference = ((2, 16, (64,), 4096) if smoke else
-                                          (10, 64, (128, 256, 512, 1024, 2048), 65536))
+    periods, budget, counts, reference, seeds = (
+        (2, 16, (128,), 4096, 5) if smoke else
+        (10, 64, (128, 256, 512, 1024, 2048), 65536, 100))
     osc = Oscillator(omega=3.98)
     times = time_grid(3.98, periods, 8)
-    ref = simulate_mc(osc, sigma=0.05, samples=reference, sampler="sobol", seed=1, order=0,
-                      times=times, progress=False)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ElementBudgetWarning)
         control = simulate_opa(osc, sigma=0.05, order=1, elements="adaptive",
                                max_elements=budget, times=times)
-    return dict(osc=osc, times=times, ref=ref, control=control, counts=counts)
+    ref = verify(control, samples=reference, max_samples=reference, seed=1,
+                 sequential=False)
+    plain = simulate_mc(osc, sigma=0.05, samples=reference, sampler="sobol", seed=1,
+                        order=0, times=times, progress=False)
+    return dict(osc=osc, times=times, ref=ref, plain=plain, control=control, counts=counts,
+                seeds=seeds, calibrate=counts[min(2, len(counts) - 1)])
 
 
 def _rms(a) -> float:
     return float(np.sqrt(np.mean(np.asarray(a) ** 2)))
 
 
+def test_the_reference_agrees_with_plain_sobol(case):
+    ref, plain = case["ref"], case["plain"]
+    print(f"\nreference: RMS SE {_rms(ref.cv_x_mean_sem):.2g} (control variate, "
+          f"{ref.attrs['verify_samples']} runs); plain Sobol of as many: RMS SE "
+          f"{_rms(plain.x_sem):.2g}, RMS difference {_rms(plain.x_mean - ref.cv_x_mean):.2g}")
+    gap = np.abs(plain.x_mean.values - ref.cv_x_mean.values)
+    assert np.all(gap <= 4 * np.hypot(plain.x_sem.values, ref.cv_x_mean_sem.values) + 1e-12)
+
+
 def test_error_against_true_runs(case):
     """The table: RMS error of E[x] against the reference, control variate and plain
-    Sobol at the same number of true runs, with the reference's own noise."""
-    ref = case["ref"].x_mean.values
-    print(f"\nreference noise (RMS SE of the 2^16 run): {_rms(case['ref'].x_sem):.2g}")
-    print("| true runs | control variate | its RMS SE | plain Sobol | its RMS SE |")
+    Sobol at the same number of true runs (one seed)."""
+    ref = case["ref"].cv_x_mean.values
+    print("\n| true runs | control variate | its RMS SE | plain Sobol | its RMS SE |")
     print("|---|---|---|---|---|")
     for M in case["counts"]:
         cv = verify(case["control"], samples=M, sequential=False, seed=2)
@@ -64,8 +85,30 @@ def test_error_against_true_runs(case):
         assert _rms(cv.cv_x_mean_sem) < _rms(plain.x_sem)
 
 
+def test_calibration_over_seeds(case):
+    """At M = 512 over many seeds: the RMS error (over seeds and outputs), the RMS
+    standard error, and how often the 95 % t-interval holds the reference."""
+    ref, M = case["ref"], case["calibrate"]
+    errors, ses, hits = [], [], []
+    for seed in range(100, 100 + case["seeds"]):
+        cv = verify(case["control"], samples=M, sequential=False, seed=seed)
+        err = cv.cv_x_mean.values - ref.cv_x_mean.values
+        se = np.hypot(cv.cv_x_mean_sem.values, ref.cv_x_mean_sem.values)
+        half = interval_halfwidth(se, cv.cv_x_mean_dof.values)
+        errors.append(err)
+        ses.append(cv.cv_x_mean_sem.values)
+        hits.append(np.abs(err[1:]) <= half[1:])  # t = 0: every sample at x0, no noise
+    errors, hits = np.array(errors), np.array(hits)
+    per_seed = np.sqrt(np.mean(errors**2, axis=1))
+    print(f"\n{case['seeds']} seeds at {M} true runs: RMS error {_rms(errors):.2e} "
+          f"(per seed: median {np.median(per_seed):.2e}, largest {per_seed.max():.2e}), "
+          f"RMS SE {_rms(ses):.2e}, coverage of the 95 % t-intervals {hits.mean():.3f} "
+          f"(lowest output {hits.mean(axis=0).min():.2f})")
+    assert _rms(errors) <= 3 * _rms(ses)  # the standard errors are of the right size
+
+
 def test_certificate_timing(benchmark, case):
-    M = case["counts"][min(2, len(case["counts"]) - 1)]
+    M = case["calibrate"]
     benchmark.group = "certificate of the 64-element run"
     benchmark.pedantic(lambda: verify(case["control"], samples=M, sequential=False, seed=2),
                        rounds=3, iterations=1, warmup_rounds=1)

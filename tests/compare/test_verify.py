@@ -62,7 +62,7 @@ def test_estimates_are_unbiased_and_their_intervals_cover_95_percent():
         xi, _ = mc.sample_xi("sobol", 256, seed, 16)
         est = paired_estimates(g(xi), g_hat(xi), 16, HAT_MEAN, HAT_SECOND)
         for name, truth in (("mean", mean), ("var", var)):
-            half = interval_halfwidth(est[f"{name}_se"], 16)
+            half = interval_halfwidth(est[f"{name}_se"], 15)
             hits[name].append(np.abs(est[name] - truth) <= half)
             values[name].append(est[name])
     for name, truth in (("mean", mean), ("var", var)):
@@ -108,9 +108,10 @@ def test_a_good_run_agrees_and_a_bad_one_does_not(reference):
     kw = dict(sigma=0.05, periods=10, per_period=4)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the element budget ends the refinement
-        good = verify(simulate_opa(osc, order=1, elements="adaptive", **kw), samples=256)
+        good = verify(simulate_opa(osc, order=1, elements="adaptive", **kw), samples=512)
     bad = verify(simulate_opa(osc, order=4, **kw), samples=256)
     assert good.attrs["verdict"] == "agrees" and good.attrs["variance_reduction"] > 100
+    assert good.attrs["verify_replicates"] == 0  # stratified by element
     assert bad.attrs["verdict"] == "disagrees" and bad.attrs["verdict_mean"] == "disagrees"
     assert np.isfinite(bad.attrs["first_disagreement_mean"])
     for v in (good, bad):
@@ -148,33 +149,56 @@ EDGES = np.array([-1.0, -0.5, 0.1, 0.35, 1.0])
 
 
 def test_stratified_estimates_are_unbiased_and_their_intervals_cover_95_percent():
-    """Strata = elements of the semicircle law with a kink of g inside one: 1000 seeds of
-    a pilot of 2 points per element that sets the allocation of 120 fresh points (2 per
-    element, half the rest Neyman, half proportional, as compare.verify draws them); the
-    normal 95 % intervals cover the true mean and variance (scipy quad) in 93-97 % of
-    the seeds."""
-    from compare._verify import neyman_allocation, stratified_estimates
+    """Strata = elements of the semicircle law with a kink of g inside one, cut into
+    jittered groups of 4 as compare.verify draws them: 60 groups, one per element and the
+    rest half by P_k times the misfit at the element's ends, half by P_k; over 1000 seeds
+    Student's t 95 % intervals with the Welch-Satterthwaite degrees of freedom cover the
+    true mean and variance (scipy quad) in 93-97 %."""
+    from compare._verify import GROUP, group_allocation, stratified_estimates
     from opa._measure import semicircle
 
     mean, var = _truth()
     law = semicircle()
     elements = [law.restrict(a, b) for a, b in zip(EDGES[:-1], EDGES[1:])]
     P = np.array([e.probability() for e in elements])
+    misfit = np.sqrt(np.mean((g(EDGES) - g_hat(EDGES)) ** 2, axis=1))
+    groups = group_allocation(60, P, np.maximum(misfit[:-1], misfit[1:]))
+    assert groups.sum() == 60 and groups.min() >= 1
     hits = {"mean": [], "var": []}
     for seed in range(1000):  # the coverage's own noise at 400 seeds is 1.1 %
         rng = np.random.default_rng(seed)
-        pts = [e.ppf(rng.random(2)) for e in elements]
-        spread = [float(np.sqrt(np.mean(np.var(g(p) - g_hat(p), axis=0, ddof=1))))
-                  for p in pts]
-        counts = 2 + neyman_allocation(56, P, spread) + neyman_allocation(56, P, np.ones(4))
-        pts = [e.ppf(rng.random(n)) for e, n in zip(elements, counts)]
-        est = stratified_estimates([g(p) for p in pts], [g_hat(p) for p in pts], P,
-                                   HAT_MEAN, HAT_SECOND)
+        pts = np.concatenate([
+            e.ppf((np.repeat(np.arange(n), GROUP) + rng.random(GROUP * n)) / n)
+            for e, n in zip(elements, groups)]).reshape(-1, GROUP)
+        est = stratified_estimates([g(p) for p in pts], [g_hat(p) for p in pts],
+                                   np.repeat(P / groups, groups), HAT_MEAN, HAT_SECOND)
         for name, truth in (("mean", mean), ("var", var)):
-            hits[name].append(np.abs(est[name] - truth) <= 1.96 * est[f"{name}_se"])
+            half = interval_halfwidth(est[f"{name}_se"], est[f"{name}_dof"])
+            hits[name].append(np.abs(est[name] - truth) <= half)
     for name in hits:
         coverage = np.mean(hits[name], axis=0)
         assert np.all((coverage >= 0.93) & (coverage <= 0.97)), (name, coverage)
+
+
+def test_the_edge_indicator_is_the_misfit_at_the_element_ends():
+    """edge_indicator against the surrogate evaluated at the ends of each element of a
+    4-element run (the right end just inside, so that the element's own polynomial
+    answers), and the true systems at the edges from an ensemble run at those points."""
+    from compare._verify import edge_indicator, system_of
+    from opa.engine import run_measure, surrogate, true_runs
+
+    run = simulate_opa(Oscillator(omega=3.98), sigma=0.05, order=2, periods=3,
+                       per_period=4, elements=4)
+    system, options = system_of(run)
+    edges = run.element_edges.values
+    paths, _ = true_runs(system, options, edges, run.time.values, what="edge")
+    got = edge_indicator(run.element_x_coef.values, edges, run_measure(run), paths[:, :, 0])
+    left = surrogate(run, edges[:-1])[0]
+    right = surrogate(run, edges[1:] - 1e-13 * np.diff(edges))[0]
+    want = np.maximum(np.sqrt(np.mean((paths[:-1, :, 0] - left) ** 2, axis=1)),
+                      np.sqrt(np.mean((paths[1:, :, 0] - right) ** 2, axis=1)))
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    assert np.all(got > 0)
 
 
 def test_neyman_allocation_follows_p_times_s():
