@@ -1,17 +1,20 @@
 """Where the main job's time goes, and how much of it is serial (issue 29, item 1).
 
-``opa-mc validate`` runs in a fresh process at 1, 2 and all threads (``NUMBA_NUM_THREADS``:
-the kernel's parallel batches; BLAS is held at one thread), warm (numba's cache filled by
-a first run, a fresh output folder), and each run's phase table is read from ``validate.nc``
-(:class:`compare._phases.PhaseClock`: exclusive wall and CPU seconds per phase; the
-figures and files after the dataset are the "report", timed as the process's wall time
-minus the map's). Per phase it prints wall and CPU seconds at each thread count, the
-speed-up, and the serial fraction f of Amdahl's law, ``T_n = T_1 (f + (1 - f) / n)``,
-fitted from T_1 and T_n:
+``opa-mc validate --workers 1`` runs in a fresh process at 1, 2 and all threads
+(``NUMBA_NUM_THREADS``: the kernel's parallel batches; BLAS is held at one thread),
+warm (numba's cache filled by a first run, a fresh output folder), and each run's phase
+table is read from ``validate.nc`` (:class:`compare._phases.PhaseClock`: exclusive wall
+and CPU seconds per phase; the figures and files after the dataset are the "report",
+timed as the process's wall time minus the map's). Per phase it prints wall and CPU
+seconds at each thread count, the speed-up, and the serial fraction f of Amdahl's law,
+``T_n = T_1 (f + (1 - f) / n)``, fitted from T_1 and T_n:
 
     f = (T_n / T_1 - 1 / n) / (1 - 1 / n)
 
-The default map is ``slow``; the smoke run (CI) takes a tiny map through the same path.
+The default map is ``slow``; it is also run on one worker process per core (``--workers``,
+:mod:`compare._scaleout`), whose wall time gives the speed-up and the parallel efficiency
+``T_1 / (n T_n)`` of the whole map. The smoke run (CI) takes a tiny map through the same
+path.
 
     python -m pytest -s benchmarks/bench_phases.py -m slow     # the default map
 """
@@ -31,13 +34,14 @@ TINY = ["--values", "3.98", "--sigmas", "0.01,0.03", "--orders", "0:2", "--horiz
         "--samples", "64", "--max-samples", "128", "--no-frontier", "--no-plots"]
 
 
-def _run(args, outdir, threads: int) -> dict:
+def _run(args, outdir, threads: int, workers: int = 1) -> dict:
     env = dict(os.environ, MPLBACKEND="Agg",
                NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS="1",
                OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-m", "opa.cli", "validate", "--quiet",
-                           "--outdir", str(outdir), *args], env=env, capture_output=True,
+                           "--outdir", str(outdir), "--workers", str(workers), *args],
+                          env=env, capture_output=True,
                           text=True)
     wall = time.perf_counter() - start
     assert proc.returncode == 0, proc.stderr[-2000:]
@@ -80,11 +84,24 @@ def _table(runs: dict[int, dict]) -> str:
     return "\n".join(lines)
 
 
-def _phases(tmp_path, args, counts):
+def _phases(tmp_path, args, counts, pool: int = 1):
+    """The table at ``counts`` threads in one process; with ``pool`` > 1 also the map on
+    ``pool`` worker processes sharing all the cores (``--workers``), whose wall time is
+    set against one thread: speed-up and parallel efficiency T_1 / (n T_n)."""
     _run(args, tmp_path / "fill", max(counts))  # fill numba's cache: warm runs below
     runs = {n: _run(args, tmp_path / f"run-{n}", n) for n in counts}
+    text = _table(runs)
+    if pool > 1:
+        cores = max(counts)
+        pooled = _run(args, tmp_path / "pool", cores, workers=pool)
+        t1 = runs[1]["wall"]
+        text += (f"\n\n--workers {pool} ({cores} cores): wall {pooled['wall']:.2f} s, "
+                 f"speed-up {t1 / pooled['wall']:.2f} over one thread, parallel efficiency "
+                 f"{t1 / (cores * pooled['wall']):.2f} (one process at {cores} threads: "
+                 f"{t1 / runs[cores]['wall']:.2f}, "
+                 f"{t1 / (cores * runs[cores]['wall']):.2f})")
     print(f"\nload average {os.getloadavg()[0]:.2f} after the runs; "
-          f"{os.cpu_count()} cores\n" + _table(runs))
+          f"{os.cpu_count()} cores\n" + text)
     return runs
 
 
@@ -105,5 +122,6 @@ def test_phases_tiny(tmp_path):
 
 @pytest.mark.slow
 def test_phases_default(tmp_path):
-    """The embedded default map at 1, 2 and all threads."""
-    _phases(tmp_path, [], _counts())
+    """The embedded default map at 1, 2 and all threads in one process, and on one
+    worker process per core (at most 6: five values and the frontier)."""
+    _phases(tmp_path, [], _counts(), pool=min(os.cpu_count() or 1, 6))

@@ -85,6 +85,10 @@ class ValidateConfig:
     outdir: str = "results"
     plots: bool = True
     scheduler: str | None = None
+    # local processes for the swept values and the frontier (compare._scaleout): 1 runs
+    # them one after the other in this process, numba's threads sharing the cores; 0:
+    # one per core up to the number of tasks where there are at least 3 (auto_workers)
+    workers: int = 0
     frontier: bool = True
     # the law of xi (a name of opa._measure.DISTRIBUTIONS) and the multi-element variants:
     # None (single element only), K >= 2 equal-probability elements, or "adaptive" with a
@@ -93,14 +97,28 @@ class ValidateConfig:
     elements: int | str | None = None
     max_elements: int | None = None
 
+    @property
+    def processes(self) -> int:
+        """The local processes the map runs on (``workers``, 0 resolved by
+        :func:`compare._scaleout.auto_workers`)."""
+        from compare._scaleout import auto_workers
+
+        if self.workers:
+            return int(self.workers)
+        return auto_workers(len(self.values) + bool(self.frontier))
+
     def __post_init__(self):
         self._check_law()
-        for name in ("samples", "max_samples", "per_period", "seed", "long_splits"):
+        for name in ("samples", "max_samples", "per_period", "seed", "long_splits",
+                     "workers"):
             value = getattr(self, name)
             if not isinstance(value, numbers.Integral) or isinstance(value, bool):
                 raise ValueError(f"{name} must be an integer, got {value!r}")
             if not -2**53 <= value <= 2**53:
                 raise ValueError(f"{name} must be at most 2^53, got {value}")
+        if not 0 <= self.workers <= 4 * (os.cpu_count() or 1):
+            raise ValueError(f"workers must be between 0 (auto) and "
+                             f"{4 * (os.cpu_count() or 1)} (4 per CPU), got {self.workers}")
         if self.scheduler is not None and (not isinstance(self.scheduler, str)
                                            or not self.scheduler.strip()):
             raise ValueError(f"scheduler must be an address such as tcp://host:8786, got "

@@ -62,6 +62,10 @@ class ConvergenceConfig:
     single_nodes: tuple[int, ...] = (1, 2, 4, 8, 16)
     mc_samples: tuple[int, ...] = (256, 512, 1024, 2048, 4096, 8192, 16384, 32768)
     reference: int = 65536
+    #: the reference: "sobol" (``reference`` scrambled Sobol samples) or "control" (the
+    #: control-variate estimate of ``reference`` true systems paired with the adaptive
+    #: ME-OPA of ``order_budget`` elements, saltation law: compare.verify, stratified)
+    reference_method: str = "sobol"
     seed: int = 1
     outdir: str = "results-elements"
     allow_negative: bool = False
@@ -89,6 +93,12 @@ class ConvergenceConfig:
             raise ValueError("budgets and mc_samples must not be empty")
         if self.reference < 1024:
             raise ValueError(f"reference must be >= 1024 samples, got {self.reference}")
+        if self.reference_method not in ("sobol", "control"):
+            raise ValueError(f"reference_method must be 'sobol' or 'control', got "
+                             f"{self.reference_method!r}")
+        if self.reference_method == "control" and self.reference & (self.reference - 1):
+            raise ValueError(f"a control-variate reference draws a power of two of true "
+                             f"systems, got reference = {self.reference}")
 
 
 def _rms(a) -> float:
@@ -119,6 +129,9 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
                 "periods": cfg.periods, "per_period": cfg.per_period,
                 "allow_negative": cfg.allow_negative, "reference": cfg.reference,
                 "seed": cfg.seed}
+    if cfg.reference_method == "control":
+        settings["reference_control"] = {"budget": int(cfg.order_budget),
+                                         "order": int(cfg.order)}
     if (cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero) != ("dirac", 0.1, True):
         settings["impulse"] = [cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero]
 
@@ -126,15 +139,40 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
         spec = {**settings, "run": name, **spec}
         return compute() if memo is None else memo(name, spec, compute)
 
+    controls = []  # the control run, computed once when a row needs it
+
+    def control_run():
+        if not controls:
+            t = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ElementBudgetWarning)
+                controls.append(simulate_opa(
+                    base.replace(order=cfg.order, impact_law="saltation"),
+                    elements="adaptive", tolerance=1e-14, max_elements=cfg.order_budget,
+                    **common))
+            controls.append(time.perf_counter() - t)
+        return controls
+
     def reference():
         t0 = time.perf_counter()
+        if cfg.reference_method == "control":
+            control, control_seconds = control_run()
+            t0 -= control_seconds
+            cv = verify(control, samples=cfg.reference, max_samples=cfg.reference,
+                        sequential=False, seed=cfg.seed)
+            return {"x_mean": cv.cv_x_mean.values, "x_var": cv.cv_x_var.values,
+                    "x_sem": cv.cv_x_mean_sem.values,
+                    "rhs": int(control.attrs["rhs_evaluations"])
+                    + int(cv.attrs["verify_rhs_evaluations"]),
+                    "seconds": time.perf_counter() - t0}
         ref = simulate_mc(base.replace(order=0), samples=cfg.reference, sampler="sobol",
                           seed=cfg.seed, progress=False, **common)
         return {"x_mean": ref.x_mean.values, "x_var": ref.x_var.values,
                 "x_sem": ref.x_sem.values, "rhs": int(ref.attrs["rhs_evaluations"]),
                 "seconds": time.perf_counter() - t0}
 
-    log(f"reference: {cfg.reference} Sobol samples ...")
+    log(f"reference: {reference_text(cfg.reference, cfg.reference_method, cfg.order_budget)}"
+        f" ...")
     ref = run("reference", {}, reference)
     m_ref, sd_ref = ref["x_mean"], np.sqrt(ref["x_var"])
     floor = _rms(ref["x_sem"])
@@ -243,20 +281,6 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
             rows.append((name, "true system", int(m), 0, result["error"], result["sd_error"],
                          result["rhs"], result["rhs"], result["seconds"]))
     log("control variates on the adaptive ME-OPA (saltation law) ...")
-    controls = []  # the control run, computed once when a row needs it
-
-    def control_run():
-        if not controls:
-            t = time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ElementBudgetWarning)
-                controls.append(simulate_opa(
-                    base.replace(order=cfg.order, impact_law="saltation"),
-                    elements="adaptive", tolerance=1e-14, max_elements=cfg.order_budget,
-                    **common))
-            controls.append(time.perf_counter() - t)
-        return controls
-
     for m in cfg.mc_samples:
         if m < 8 or m & (m - 1):  # the certificate draws powers of two
             continue
@@ -309,6 +333,8 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     ds.attrs.update(
         periods=float(cfg.periods), per_period=int(cfg.per_period),
         distribution=measure.name, reference_samples=int(cfg.reference),
+        reference_method=cfg.reference_method,
+        reference_text=reference_text(cfg.reference, cfg.reference_method, cfg.order_budget),
         reference_sem=floor, reference_seconds=ref["seconds"],
         reference_rhs_evaluations=int(ref["rhs"]),
         wall_seconds=float(sum(seconds)), failures=len(failures),
@@ -317,6 +343,14 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     if write:
         write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
     return ds
+
+
+def reference_text(samples: int, method: str, budget: int) -> str:
+    """The reference in words."""
+    if method == "control":
+        return (f"the control-variate estimate from {samples} true systems on the adaptive "
+                f"ME-OPA (K = {budget}, saltation law)")
+    return f"{samples} Sobol samples"
 
 
 def _slug(text: str) -> str:
@@ -365,7 +399,8 @@ def table(ds, *, markdown=True) -> str:
 def summary_lines(ds) -> list[str]:
     out = []
     a = ds.attrs
-    out.append(f"Reference: {a['reference_samples']} Sobol samples, RMS standard error "
+    reference = a.get("reference_text", f"{a['reference_samples']} Sobol samples")
+    out.append(f"Reference: {reference}, RMS standard error "
                f"{a['reference_sem']:.1e} (errors near it are not resolved). An adaptive "
                f"run's wall time includes its split search unless one of the last 8 "
                f"searches was of the same problem with the same split budget.")

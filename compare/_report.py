@@ -1065,9 +1065,11 @@ def frontier_lines(ds) -> list[str]:
     conv = frontier_dataset(ds)
     if conv is None:
         return []
+    reference = conv.attrs.get("reference_text",
+                               f"{conv.attrs['reference_samples']} Sobol samples")
     head = (f"Cost against accuracy at {_par(ds)} = {_g(conv.attrs['value'])}, σ = "
             f"{_g(conv.attrs['sigma'])}, over {conv.attrs['periods']:g} periods (RMS error of "
-            f"E[x] against {conv.attrs['reference_samples']} Sobol samples):")
+            f"E[x] against {reference}):")
     return [head] + summary_lines(conv)
 
 

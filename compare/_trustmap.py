@@ -551,37 +551,30 @@ class _Map:
                      f"interrupted run left behind: "
                      f"{', '.join(os.path.basename(p) for p in self.parts.removed)}")
         total = len(cfg.values) * len(cfg.sigmas)
-        cdf = None if cfg.semicircle else self.measure.cdf
-        points, values, first = [], [], None
+        points, values = [], []
         start = time.perf_counter()
         with tqdm(total=total, unit="point", desc="trust map", disable=not self.progress) as bar:
             self.bar = bar
-            for value in cfg.values:
-                self.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
-                         f"{len(cfg.sigmas)} sigmas x {len(cfg.variants) * len(cfg.orders)} OPA "
-                         f"runs against Monte Carlo ...")
-                centre, scans = self.splits(value)
-                grid = {}
-                for sigma in cfg.sigmas:
-                    grid[float(sigma)] = self.evaluate(value, float(sigma))
-                    bar.update(1)
-                star, steps, probes = self.boundary(value, grid)
-                self.ensembles.clear()
-                with self.clock("assembly"):
-                    points.append([point_dataset(cfg, value, grid[float(s)], centre, scans,
-                                                 cdf) for s in cfg.sigmas])
-                    values.append(value_dataset(cfg, value, centre, scans, star, steps,
-                                                probes))
-                first = grid if first is None else first
+            if cfg.processes > 1 or cfg.scheduler is not None:
+                results = self._run_tasks(bar)
+            else:
+                results = {}
+                for i, value in enumerate(cfg.values):
+                    results[i] = self.value_work(value)
+                if cfg.frontier:
+                    self.log("cost-accuracy frontier at the largest sigma ...")
+                    with self.clock("frontier"):
+                        results["frontier"] = frontier(cfg, parts=self.parts)
+            for i in range(len(cfg.values)):
+                points.append(results[i]["points"])
+                values.append(results[i]["value"])
         self.bar = None
         with self.clock("assembly"):
             ds = combine(cfg, points, values)
-        ds = xr.merge([ds, self.details(first)], combine_attrs="drop_conflicts")
+        ds = xr.merge([ds, self.details(results[0]["phase_sigma"])],
+                      combine_attrs="drop_conflicts")
         if cfg.frontier:
-            self.log("cost-accuracy frontier at the largest sigma ...")
-            with self.clock("frontier"):
-                ds = xr.merge([ds, frontier(cfg, parts=self.parts)],
-                              combine_attrs="drop_conflicts")
+            ds = xr.merge([ds, results["frontier"]], combine_attrs="drop_conflicts")
         ds.attrs.update(_attrs(cfg))
         ds = ds.rename({"value": cfg.parameter})  # the sweep dimension (docs/datasets.md)
         # what this run did (the rest of the dataset is the same for a rerun)
@@ -592,13 +585,83 @@ class _Map:
         ds.attrs["opa_runs_computed"] = self.opa_runs
         ds.attrs["parts_computed"] = self.parts.computed
         ds.attrs["parts_set_aside"] = self.parts.set_aside
+        ds.attrs["ran_on"] = (f"Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
+                              else f"{cfg.processes} local processes" if cfg.processes > 1
+                              else "one process")
         return ds
 
-    def details(self, grid: dict[float, Point]) -> xr.Dataset:
-        """:func:`_details` at the first swept value (``grid``: its points), kept as a
-        part."""
+    def value_work(self, value: float) -> dict:
+        """Everything at one swept value: its split scan, its grid of points, the
+        bisections of its sigma*; returns its point datasets (``points``), its value
+        dataset (``value``) and the sigma of its phase portraits (``phase_sigma``)."""
         cfg = self.cfg
-        value, sigma = cfg.values[0], _phase_sigma(cfg, grid)
+        cdf = None if cfg.semicircle else self.measure.cdf
+        self.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
+                 f"{len(cfg.sigmas)} sigmas x {len(cfg.variants) * len(cfg.orders)} OPA "
+                 f"runs against Monte Carlo ...")
+        centre, scans = self.splits(value)
+        grid = {}
+        for sigma in cfg.sigmas:
+            grid[float(sigma)] = self.evaluate(value, float(sigma))
+            if self.bar is not None:
+                self.bar.update(1)
+        star, steps, probes = self.boundary(value, grid)
+        self.ensembles.clear()
+        with self.clock("assembly"):
+            points = [point_dataset(cfg, value, grid[float(s)], centre, scans, cdf)
+                      for s in cfg.sigmas]
+            value_ds = value_dataset(cfg, value, centre, scans, star, steps, probes)
+        return {"points": points, "value": value_ds, "phase_sigma": _phase_sigma(cfg, grid)}
+
+    def _run_tasks(self, bar) -> dict:
+        """The values and the frontier as tasks (:func:`compare._scaleout.run_tasks`) on
+        ``cfg.workers`` local processes or the Dask cluster ``cfg.scheduler``: what each
+        did (counts, phase seconds summed over the workers, log lines) is added here;
+        this process's wait is the phase "waiting for workers"."""
+        from compare._scaleout import run_tasks
+
+        cfg = self.cfg
+        inner = _task_config(cfg)
+        tasks = [("frontier", frontier_task, (inner,))] if cfg.frontier else []
+        tasks += [(i, value_task, (inner, value)) for i, value in enumerate(cfg.values)]
+        where = (f"the Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
+                 else f"{cfg.processes} local processes")
+        self.log(f"{len(tasks)} tasks ({len(cfg.values)} values"
+                 f"{' and the frontier' if cfg.frontier else ''}) on {where} ...")
+        results = {}
+        with self.clock("waiting for workers"):
+            for key, result in run_tasks(tasks, workers=cfg.processes,
+                                         scheduler=cfg.scheduler):
+                for line in result.pop("log"):
+                    self.log(line)
+                work = result.pop("work")
+                self.mc_runs += work["mc_runs"]
+                self.true_runs += work["true_runs"]
+                self.true_periods += work["true_periods"]
+                self.opa_runs += work["opa_runs"]
+                self.parts.computed += work["parts_computed"]
+                self.parts.set_aside += work["parts_set_aside"]
+                for name, wall, cpu, calls in work["phases"]:
+                    self.clock.wall[name] = self.clock.wall.get(name, 0.0) + wall
+                    self.clock.cpu[name] = self.clock.cpu.get(name, 0.0) + cpu
+                    self.clock.calls[name] = self.clock.calls.get(name, 0) + calls
+                if key != "frontier":
+                    bar.update(len(cfg.sigmas))
+                results[key] = result["result"]
+        return results
+
+    def work(self) -> dict:
+        """What this object computed: counts and the phase table."""
+        return {"mc_runs": self.mc_runs, "true_runs": self.true_runs,
+                "true_periods": self.true_periods, "opa_runs": self.opa_runs,
+                "parts_computed": self.parts.computed,
+                "parts_set_aside": self.parts.set_aside, "phases": self.clock.rows()}
+
+    def details(self, sigma: float) -> xr.Dataset:
+        """:func:`_details` at the first swept value and ``sigma`` (the first grid sigma
+        where mean/galerkin fails over the first horizon there), kept as a part."""
+        cfg = self.cfg
+        value = cfg.values[0]
         inputs = {"system": cfg.system_at(value, sigma=float(sigma), order=cfg.nmax),
                   "horizons": cfg.horizons, "per_period": cfg.per_period, "seed": cfg.seed,
                   "dense_per_period": DENSE_PER_PERIOD, "options": cfg.options}
@@ -607,9 +670,38 @@ class _Map:
                               ".nc")
 
 
+def _task_config(cfg: ValidateConfig) -> ValidateConfig:
+    """The configuration a task runs with: in one process, no nested pool or cluster."""
+    from dataclasses import replace
+
+    return replace(cfg, workers=1, scheduler=None)  # each task runs in one process
+
+
+def value_task(cfg: ValidateConfig, value: float) -> dict:
+    """:meth:`_Map.value_work` as a task (:mod:`compare._scaleout`): its result, what it
+    computed (``work``) and its log lines."""
+    lines: list[str] = []
+    job = _Map(cfg, progress=False, log=lines.append)
+    with job.clock("other"):
+        result = job.value_work(value)
+    return {"result": result, "work": job.work(), "log": lines}
+
+
+def frontier_task(cfg: ValidateConfig) -> dict:
+    """:func:`frontier` as a task, with its runs kept in the map's parts."""
+    lines: list[str] = ["cost-accuracy frontier at the largest sigma ..."]
+    job = _Map(cfg, progress=False, log=lines.append)
+    with job.clock("frontier"):
+        result = frontier(cfg, parts=job.parts)
+    return {"result": result, "work": job.work(), "log": lines}
+
+
 FRONTIER_BUDGETS = (8, 16, 32, 64)
 FRONTIER_SAMPLES = (256, 512, 1024, 2048, 4096, 8192)
-FRONTIER_REFERENCE = 32768
+#: true systems of the frontier's reference, a control variate on the adaptive ME-OPA of
+#: 64 elements (compare.verify): RMS standard error 1.3e-6 at omega = 3.98, sigma = 0.05,
+#: 10 periods, where 32768 plain Sobol samples gave 2.4e-5
+FRONTIER_REFERENCE = 4096
 
 
 def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
@@ -617,7 +709,8 @@ def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
     horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element
     OPA (mean and
     saltation laws, element budgets 8..64), multi-element collocation, single-element
-    collocation, MC and scrambled Sobol, against a 2^15-sample Sobol reference
+    collocation, MC, scrambled Sobol and control variates, against the control-variate
+    estimate of ``FRONTIER_REFERENCE`` true systems on the adaptive ME-OPA of 64 elements
     (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``.
     With ``parts``, every run of the study is kept there (``frontier_<run>_<key>.npz``)."""
     from compare._convergence import ConvergenceConfig, run_convergence
@@ -628,7 +721,8 @@ def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
         per_period=cfg.per_period, order=1, orders=tuple(sorted({0, 1, cfg.nmax})),
         uniform=(), budgets=FRONTIER_BUDGETS, order_budget=FRONTIER_BUDGETS[-1],
         single_nodes=(1, 2, 4, 8), mc_samples=FRONTIER_SAMPLES,
-        reference=FRONTIER_REFERENCE, seed=cfg.seed + 1, outdir=cfg.outdir,
+        reference=FRONTIER_REFERENCE, reference_method="control", seed=cfg.seed + 1,
+        outdir=cfg.outdir,
         allow_negative=True, impulse=cfg.impulse, pulse_width=cfg.pulse_width,
         impulse_at_zero=cfg.impulse_at_zero, distribution=cfg.distribution)
     memo = None
@@ -639,7 +733,7 @@ def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
     out = ds.rename({name: f"frontier_{name}" for name in ds.data_vars} | {"run": "frontier_run"})
     out.attrs = {"frontier_" + k: v for k, v in ds.attrs.items()
                  if k in ("sigma", "periods", "reference_samples", "reference_sem",
-                          "wall_seconds")}
+                          "reference_method", "reference_text", "wall_seconds")}
     out.attrs["frontier_value"] = float(cfg.values[0])
     out.attrs["frontier_omega"] = float(cfg.oscillator_at(cfg.values[0]).omega)
     return out

@@ -139,8 +139,13 @@ def register_validate(sub) -> None:
     g.add_argument("--no-frontier", action="store_true",
                    help="skip the cost-accuracy frontier (multi-element OPA, collocation, "
                         "MC and Sobol at the first value and the largest sigma)")
+    g.add_argument("--workers", type=positive_int, default=None, metavar="W",
+                   help="local processes for the swept values and the frontier, each "
+                        "with cores/W numba threads (default: one per core up to the number "
+                        "of tasks when there are at least 3, else 1)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="Dask distributed scheduler for the Monte Carlo chunks")
+                   help="Dask scheduler that runs the swept values and the frontier as "
+                        "tasks (each with its worker's --nthreads numba threads)")
     g.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
     _solver_flags(p, tolerance=1e-9, defaults=False)
     _impulse_flags(p, defaults=False)
@@ -185,7 +190,7 @@ def cmd_validate(args) -> int:
         max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
         long_splits=args.long_splits,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,
-        frontier=False if args.no_frontier else None, **impulse,
+        workers=args.workers, frontier=False if args.no_frontier else None, **impulse,
     )
     _check_outdir(cfg.outdir)
     start = process_started()  # the one clock of the run: every wall time below reads it

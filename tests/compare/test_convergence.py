@@ -76,6 +76,36 @@ def test_control_variate_rows_match_a_direct_certificate(study):
         assert ds.error.values[i] == pytest.approx(err, rel=1e-12)
 
 
+def test_a_control_variate_reference_agrees_with_plain_sobol(tmp_path):
+    """reference_method="control": the reference is compare.verify of the adaptive
+    ME-OPA control at the reference's seed; it agrees with an independent 2^14-sample
+    Sobol ensemble within 4 joint standard errors at every output, with a smaller
+    standard error from 1024 true systems."""
+    cfg = ConvergenceConfig(outdir=str(tmp_path), reference_method="control",
+                            **{**TINY, "budgets": (4,), "uniform": (1,), "orders": (1,)})
+    ds = run_convergence(cfg, log=lambda *a: None, write=False)
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    plain = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=2**14, sampler="sobol",
+                        seed=99, order=0, times=times, options=cfg.options, progress=False)
+    i = int(np.flatnonzero((ds.method.values == "ME-OPA uniform") & (ds.law.values == "mean")
+                           & (ds["size"].values == 1))[0])
+    emr = simulate_opa(cfg.oscillator, sigma=cfg.sigma, order=cfg.order, elements=1,
+                       impact_law="mean", times=times, options=cfg.options)
+    # the row's error against the reference and against the plain ensemble differ by
+    # at most the two references' difference, within their noise
+    direct = float(np.sqrt(np.mean((emr.x_mean.values - plain.x_mean.values) ** 2)))
+    assert abs(ds.error.values[i] - direct) <= 4 * float(np.sqrt(np.mean(
+        plain.x_sem.values**2))) + 4 * ds.attrs["reference_sem"]
+    assert ds.attrs["reference_sem"] < float(np.sqrt(np.mean(plain.x_sem.values**2)))
+    assert ds.attrs["reference_method"] == "control"
+    assert summary_lines(ds)[0].startswith("Reference: the control-variate estimate from "
+                                           "1024 true systems")
+    with pytest.raises(ValueError, match="power of two"):
+        ConvergenceConfig(reference_method="control", reference=3000)
+    with pytest.raises(ValueError, match="reference_method"):
+        ConvergenceConfig(reference_method="quad")
+
+
 def test_round_trip_and_report(study):
     _, ds, out = study
     with xr.open_dataset(out / "convergence.nc") as back:

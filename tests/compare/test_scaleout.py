@@ -1,0 +1,107 @@
+"""The trust map's tasks on a local process pool and on a Dask cluster (compare._scaleout):
+the map they assemble equals the one computed in one process, bit for bit."""
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from compare._config import load_config
+from compare._scaleout import auto_workers, run_tasks, threads_per_worker
+from compare._trustmap import run_validation
+from tests.compare.test_parts import RUN_ATTRS
+
+# two swept values and the frontier off: three sigmas, N = 0 and 2, two horizons
+SMALL = dict(values=(3.98, 4.09), sigmas=(0.01, 0.02, 0.03), orders=(0, 2), horizons=(4, 8),
+             samples=64, max_samples=256, per_period=4, frontier=False)
+TIMING_VARS = ("mc_seconds", "point_seconds", "frontier_seconds")
+
+
+def _draw(seed: int, n: int) -> np.ndarray:
+    return np.random.default_rng(seed).standard_normal(n)
+
+
+def assert_same_map(a: xr.Dataset, b: xr.Dataset) -> None:
+    """Every variable and attribute the same, but the wall times and what the run did."""
+    assert set(a.data_vars) == set(b.data_vars)
+    for name in a.data_vars:
+        if name in TIMING_VARS:
+            continue
+        x, y = a[name].values, b[name].values
+        if x.dtype.kind in "fc":
+            assert np.array_equal(x, y, equal_nan=True), name
+        else:
+            assert np.array_equal(x, y), name
+    keep = [k for k in a.attrs if k not in RUN_ATTRS]
+    assert keep == [k for k in b.attrs if k not in RUN_ATTRS]
+    for k in keep:
+        assert str(a.attrs[k]) == str(b.attrs[k]), k
+
+
+def test_run_tasks_gives_every_result_under_its_key():
+    tasks = [(i, _draw, (i, 5)) for i in range(4)]
+    serial = dict(run_tasks(tasks))
+    pooled = dict(run_tasks(tasks, workers=2))
+    assert sorted(pooled) == [0, 1, 2, 3]
+    for i in range(4):
+        np.testing.assert_array_equal(pooled[i], serial[i])
+
+
+def test_a_task_failure_reaches_the_caller():
+    with pytest.raises(ValueError, match="math domain"):
+        dict(run_tasks([(0, _fail, ()), (1, _draw, (1, 2))], workers=2))
+
+
+def _fail():
+    import math
+
+    return math.sqrt(-1.0)
+
+
+def test_the_default_shares_the_cores_out():
+    assert auto_workers(6, cores=2) == 2 and auto_workers(6, cores=16) == 6
+    assert auto_workers(2, cores=16) == 1 and auto_workers(6, cores=1) == 1
+    assert threads_per_worker(1) >= 1
+
+
+@pytest.fixture(scope="module")
+def one_process(tmp_path_factory):
+    cfg = load_config(None, outdir=str(tmp_path_factory.mktemp("one")), workers=1, **SMALL)
+    return run_validation(cfg, progress=False, log=lambda *a: None)
+
+
+def test_a_pool_of_processes_gives_the_same_map(one_process, tmp_path):
+    cfg = load_config(None, outdir=str(tmp_path), workers=2, **SMALL)
+    lines = []
+    pooled = run_validation(cfg, progress=False, log=lines.append)
+    assert pooled.attrs["ran_on"] == "2 local processes"
+    assert any("2 tasks (2 values) on 2 local processes" in line for line in lines)
+    assert_same_map(one_process, pooled)
+    # the work done is counted wherever it ran
+    for name in ("true_runs_computed", "mc_runs_computed", "opa_runs_computed"):
+        assert pooled.attrs[name] == one_process.attrs[name], name
+
+
+def test_a_dask_cluster_gives_the_same_map(one_process, tmp_path):
+    """The values as tasks on a LocalCluster of 2 worker processes (one thread each)."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as cluster:
+        cfg = load_config(None, outdir=str(tmp_path), scheduler=cluster.scheduler_address,
+                          **SMALL)
+        clustered = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert clustered.attrs["ran_on"].startswith("Dask cluster at tcp://")
+    assert_same_map(one_process, clustered)
+    assert clustered.attrs["true_runs_computed"] == one_process.attrs["true_runs_computed"]
+
+
+def test_a_scheduler_that_does_not_answer_is_named(tmp_path):
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    cfg = load_config(None, outdir=str(tmp_path), scheduler=f"tcp://127.0.0.1:{port}",
+                      **SMALL)
+    with pytest.raises(ValueError, match=f"scheduler 'tcp://127.0.0.1:{port}' did not "
+                                         f"answer"):
+        run_validation(cfg, progress=False, log=lambda *a: None)
