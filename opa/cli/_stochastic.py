@@ -57,6 +57,8 @@ def register_stochastic(sub) -> None:
     g.add_argument("--workers", type=positive_int, default=2, metavar="W",
                    help="local worker processes, one control value each at a time "
                         "(default 2; 1: in process)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler: the control values run there as tasks instead")
     _solver_flags(p)
     _output_flags(p, parts=True)
     p.set_defaults(func=cmd_stochastic)
@@ -88,7 +90,7 @@ def cmd_stochastic(args) -> int:
                             transient=args.transient, record=args.record,
                             extra_states=args.extra_states, coexist=coexist,
                             emr=args.emr, emr_order=args.emr_order or 4,
-                            workers=args.workers,
+                            workers=args.workers, scheduler=args.scheduler,
                             parts=f"{args.out}.parts" if args.out else None, log=log)
     elapsed = time.perf_counter() - start
     if args.out:

@@ -298,7 +298,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                        record: int = 64, xtol: float = 1e-10,
                        extra_states: int = EXTRA_STATES, coexist: int = COEXIST_SAMPLES,
                        emr: bool = False, emr_order: int = 4, workers: int = 1,
-                       parts: str | None = None, log=None):
+                       scheduler=None, parts: str | None = None, log=None):
     """Attractor types and their probabilities along ``parameter`` (module docstring).
 
     Parameters
@@ -317,6 +317,9 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
         same sigma, semicircle law only: the paper's diagrams) over the values, 500
         transient and 100 recorded periods from the paper's start, for the figure.
     workers : processes; the control values are shared out among them.
+    scheduler : a Dask scheduler address or ``distributed.Client``: the control values
+        (and the EMR sweep) run there as tasks instead, each with one numba thread; the
+        result is the same to the bit.
     parts : a folder where each finished control value is kept as it finishes, a
         :class:`opa._dataset.Store` keyed by everything the value depends on; a rerun
         with the same folder reads them back instead of computing them again (an
@@ -422,7 +425,10 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
         results[i] = piece
         _log(log, i, len(tasks), parameter, piece, reused=False)
 
-    _run_slices(tasks, todo, finish, workers)
+    if scheduler is not None and todo:
+        _run_slices_dask(tasks, todo, finish, scheduler)
+    else:
+        _run_slices(tasks, todo, finish, workers)
     slices = [results[i] for i in range(len(tasks))]
     ds = _dataset(slices, parameter, values, system, options, measure, settings, seed,
                   samples, xtol, extra_states, coexist)
@@ -434,7 +440,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                 f"values of {parameter}")
         opa = sweep("opa", parameter, values, system.replace(order=emr_order),
                     transient=EMR_TRANSIENT, record=EMR_RECORD, options=options,
-                    workers=workers, progress=False, locate=False)
+                    workers=workers, scheduler=scheduler, progress=False, locate=False)
         ds["emr_x"] = ((parameter, "emr_point"), opa.section_x.values, {
             "long_name": f"stroboscopic x_0 of the EMR (OPA N = {emr_order}) after "
             f"{EMR_TRANSIENT} periods, {EMR_RECORD} recorded", "units": "1"})
@@ -469,6 +475,35 @@ def _run_slices(tasks, todo, finish, workers) -> None:
         raise
     finally:
         executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _single_threaded_slice(task: SliceTask) -> dict:
+    """:func:`compute_slice` with one numba thread (a Dask worker runs several tasks at
+    once; the cores are shared out by its thread count)."""
+    import numba
+
+    numba.set_num_threads(1)
+    return compute_slice(task)
+
+
+def _run_slices_dask(tasks, todo, finish, scheduler) -> None:
+    """Compute the control values ``todo`` as tasks on a Dask cluster."""
+    from distributed import as_completed, Client
+
+    own = not isinstance(scheduler, Client)
+    try:
+        client = Client(scheduler, timeout=5) if own else scheduler
+    except (OSError, TimeoutError) as err:
+        raise ValueError(f"scheduler {scheduler!r} did not answer as a Dask scheduler "
+                         f"within 5 s ({type(err).__name__})") from None
+    try:
+        futures = {client.submit(_single_threaded_slice, tasks[i], pure=False): i
+                   for i in todo}
+        for future in as_completed(futures):
+            finish(futures[future], future.result())
+    finally:
+        if own:
+            client.close()
 
 
 def _log(log, i, count, parameter, piece, *, reused) -> None:
