@@ -14,6 +14,7 @@ from tests.compare.test_parts import RUN_ATTRS
 SMALL = dict(values=(3.98, 4.09), sigmas=(0.01, 0.02, 0.03), orders=(0, 2), horizons=(4, 8),
              samples=64, max_samples=256, per_period=4, frontier=False)
 TIMING_VARS = ("mc_seconds", "point_seconds", "frontier_seconds")
+TIMING_ATTRS = RUN_ATTRS + ("frontier_wall_seconds",)
 
 
 def _draw(seed: int, n: int) -> np.ndarray:
@@ -31,8 +32,8 @@ def assert_same_map(a: xr.Dataset, b: xr.Dataset) -> None:
             assert np.array_equal(x, y, equal_nan=True), name
         else:
             assert np.array_equal(x, y), name
-    keep = [k for k in a.attrs if k not in RUN_ATTRS]
-    assert keep == [k for k in b.attrs if k not in RUN_ATTRS]
+    keep = [k for k in a.attrs if k not in TIMING_ATTRS]
+    assert keep == [k for k in b.attrs if k not in TIMING_ATTRS]
     for k in keep:
         assert str(a.attrs[k]) == str(b.attrs[k]), k
 
@@ -105,3 +106,18 @@ def test_a_scheduler_that_does_not_answer_is_named(tmp_path):
     with pytest.raises(ValueError, match=f"scheduler 'tcp://127.0.0.1:{port}' did not "
                                          f"answer"):
         run_validation(cfg, progress=False, log=lambda *a: None)
+
+
+@pytest.mark.slow
+def test_the_default_map_on_a_4_process_local_cluster(tmp_path):
+    """Issue 29's target: the embedded default map on a LocalCluster of 4 worker
+    processes equals the one-process map bit for bit."""
+    distributed = pytest.importorskip("distributed")
+    one = run_validation(load_config(None, outdir=str(tmp_path / "one"), workers=1),
+                         progress=False, log=lambda *a: None)
+    with distributed.LocalCluster(n_workers=4, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as cluster:
+        cfg = load_config(None, outdir=str(tmp_path / "four"),
+                          scheduler=cluster.scheduler_address)
+        four = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert_same_map(one, four)
