@@ -40,6 +40,8 @@ from opa.engine import (
 from compare._verify import verify
 
 STUDY_LAWS = ("mean", "saltation")
+#: Sobol samples of the reference when a control-variate reference has no control
+PLAIN_REFERENCE = 32768
 
 
 @dataclass(frozen=True)
@@ -156,20 +158,31 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     def reference():
         t0 = time.perf_counter()
         if cfg.reference_method == "control":
-            control, control_seconds = control_run()
-            t0 -= control_seconds
-            cv = verify(control, samples=cfg.reference, max_samples=cfg.reference,
-                        sequential=False, seed=cfg.seed)
+            try:
+                control, control_seconds = control_run()
+                t0 -= control_seconds
+                cv = verify(control, samples=cfg.reference, max_samples=cfg.reference,
+                            sequential=False, seed=cfg.seed)
+            except (SimulationError, ValueError) as err:  # no control: plain Sobol
+                log(f"  the control run cannot serve ({err}): the reference is "
+                    f"{PLAIN_REFERENCE} Sobol samples")
+                return plain(PLAIN_REFERENCE, t0)
             return {"x_mean": cv.cv_x_mean.values, "x_var": cv.cv_x_var.values,
                     "x_sem": cv.cv_x_mean_sem.values,
                     "rhs": int(control.attrs["rhs_evaluations"])
                     + int(cv.attrs["verify_rhs_evaluations"]),
-                    "seconds": time.perf_counter() - t0}
-        ref = simulate_mc(base.replace(order=0), samples=cfg.reference, sampler="sobol",
+                    "seconds": time.perf_counter() - t0,
+                    "text": reference_text(cfg.reference, "control", cfg.order_budget)}
+        return plain(cfg.reference, t0)
+
+    def plain(samples, t0):
+        ref = simulate_mc(base.replace(order=0), samples=samples, sampler="sobol",
                           seed=cfg.seed, progress=False, **common)
         return {"x_mean": ref.x_mean.values, "x_var": ref.x_var.values,
                 "x_sem": ref.x_sem.values, "rhs": int(ref.attrs["rhs_evaluations"]),
-                "seconds": time.perf_counter() - t0}
+                "seconds": time.perf_counter() - t0,
+                "text": reference_text(samples, "sobol", cfg.order_budget),
+                "samples": int(samples)}
 
     log(f"reference: {reference_text(cfg.reference, cfg.reference_method, cfg.order_budget)}"
         f" ...")
@@ -332,9 +345,11 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     )
     ds.attrs.update(
         periods=float(cfg.periods), per_period=int(cfg.per_period),
-        distribution=measure.name, reference_samples=int(cfg.reference),
-        reference_method=cfg.reference_method,
-        reference_text=reference_text(cfg.reference, cfg.reference_method, cfg.order_budget),
+        distribution=measure.name,
+        reference_samples=int(ref.get("samples", cfg.reference)),
+        reference_method="sobol" if "samples" in ref else cfg.reference_method,
+        reference_text=str(ref.get("text", reference_text(cfg.reference, cfg.reference_method,
+                                                          cfg.order_budget))),
         reference_sem=floor, reference_seconds=ref["seconds"],
         reference_rhs_evaluations=int(ref["rhs"]),
         wall_seconds=float(sum(seconds)), failures=len(failures),

@@ -106,6 +106,35 @@ def test_a_control_variate_reference_agrees_with_plain_sobol(tmp_path):
         ConvergenceConfig(reference_method="quad")
 
 
+def test_without_a_control_the_reference_is_plain_sobol(tmp_path, monkeypatch):
+    """A control run that cannot serve (here: its certificate refused) leaves the plain
+    Sobol reference of PLAIN_REFERENCE samples, said in the log and the attributes."""
+    import compare._convergence as C
+
+    real = C.verify
+
+    def refuse_the_reference(run, *, samples, **kw):
+        if samples == 1024:
+            raise ValueError("refused for the test")
+        return real(run, samples=samples, **kw)
+
+    monkeypatch.setattr(C, "verify", refuse_the_reference)
+    monkeypatch.setattr(C, "PLAIN_REFERENCE", 2048)
+    cfg = ConvergenceConfig(outdir=str(tmp_path), reference_method="control",
+                            **{**TINY, "budgets": (4,), "uniform": (1,), "orders": (1,)})
+    lines = []
+    ds = run_convergence(cfg, log=lines.append, write=False)
+    assert any("refused for the test" in line and "2048 Sobol samples" in line
+               for line in lines)
+    assert ds.attrs["reference_method"] == "sobol" and ds.attrs["reference_samples"] == 2048
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    ref = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=2048, sampler="sobol",
+                      seed=cfg.seed, order=0, times=times, options=cfg.options,
+                      progress=False)
+    assert ds.attrs["reference_sem"] == pytest.approx(
+        float(np.sqrt(np.mean(ref.x_sem.values ** 2))))
+
+
 def test_round_trip_and_report(study):
     _, ds, out = study
     with xr.open_dataset(out / "convergence.nc") as back:
