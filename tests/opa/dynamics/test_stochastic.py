@@ -173,12 +173,7 @@ def test_a_dask_cluster_gives_the_same_diagram():
                                   dashboard_address=":0") as cluster:
         there = stochastic_diagram(SECTION_31, "c", [0.04, 0.05],
                                    scheduler=cluster.scheduler_address, **kw)
-    assert set(here.data_vars) == set(there.data_vars)
-    for name in here.data_vars:
-        if "seconds" in name:  # the CPU time each value took
-            continue
-        a, b = here[name].values, there[name].values
-        if a.dtype.kind in "fc":
-            assert np.array_equal(a, b, equal_nan=True), name
-        else:
-            assert np.array_equal(a, b), name
+    from tests.compare.test_scaleout import assert_same_variables
+
+    # but the CPU time each value took
+    assert_same_variables(here, there, skip=[n for n in here.data_vars if "seconds" in n])
