@@ -76,7 +76,8 @@ def run_tasks(tasks: list[tuple[object, Callable, tuple]], *, workers: int = 1,
     """Run ``tasks`` = [(key, fn, args), ...]; yield (key, fn(*args)) as each finishes.
 
     In this process one by one when ``workers`` is 1 and there is no ``scheduler``, in
-    the order given; else in the order they finish. A task's exception is raised here.
+    the order given; else in the order they finish, never in this process (what a task
+    counts in its own thread is its own). A task's exception is raised here.
 
     >>> list(run_tasks([("a", max, (1, 2)), ("b", min, (1, 2))]))
     [('a', 2), ('b', 1)]
@@ -84,7 +85,7 @@ def run_tasks(tasks: list[tuple[object, Callable, tuple]], *, workers: int = 1,
     if scheduler is not None:
         yield from _run_dask(tasks, scheduler)
         return
-    if workers <= 1 or len(tasks) <= 1:
+    if workers <= 1:
         for key, fn, args in tasks:
             yield key, fn(*args)
         return

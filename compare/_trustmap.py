@@ -71,7 +71,7 @@ from opa.engine import (
     true_runs,
     Measure, opa_variants, provenance_attrs, run_elements, scan_splits,
     simulate_dmr, simulate_opa, SimulationError, SolverOptions, Store, System,
-    time_grid, uniform_edges, write_netcdf,
+    time_grid, true_system_work, uniform_edges, write_netcdf,
 )
 
 #: a verdict hangs on the noise while OPA fails without the allowance for the noise but
@@ -94,6 +94,9 @@ class _Map:
         self.true_runs = 0
         self.true_periods = 0.0  # forcing periods integrated by those runs
         self.opa_runs = 0
+        # every true impact system integrated (Monte Carlo, split scans, frontier, ...) by
+        # the tasks run elsewhere; this process's own are read off the kernel's counter
+        self.system_runs, self.system_time = 0, 0.0
         self.bar = None
         self.measure = cfg.measure()  # one object: its recurrences are cached
         self.clock = PhaseClock()
@@ -538,8 +541,14 @@ class _Map:
     def run(self) -> xr.Dataset:
         """The map's dataset, with the phase table of this run (``phase_*`` attributes:
         seconds not charged to a named phase go to "other": parts read back, loops)."""
+        before = true_system_work()
         with self.clock("other"):
             ds = self._run()
+        after = true_system_work()
+        self.system_runs += after[0] - before[0]
+        self.system_time += after[1] - before[1]
+        ds.attrs["true_system_runs"] = int(self.system_runs)
+        ds.attrs["true_system_time"] = float(self.system_time)
         return ds.assign_attrs(self.clock.attrs())
 
     def _run(self) -> xr.Dataset:
@@ -639,6 +648,8 @@ class _Map:
                 self.true_runs += work["true_runs"]
                 self.true_periods += work["true_periods"]
                 self.opa_runs += work["opa_runs"]
+                self.system_runs += work["system_runs"]
+                self.system_time += work["system_time"]
                 self.parts.computed += work["parts_computed"]
                 self.parts.set_aside += work["parts_set_aside"]
                 for name, wall, cpu, calls in work["phases"]:
@@ -650,9 +661,11 @@ class _Map:
                 results[key] = result["result"]
         return results
 
-    def work(self) -> dict:
-        """What this object computed: counts and the phase table."""
+    def work(self, system: tuple[int, float] = (0, 0.0)) -> dict:
+        """What this object computed: counts and the phase table; ``system``: the true
+        impact systems it integrated (runs, time; :func:`opa.engine.true_system_work`)."""
         return {"mc_runs": self.mc_runs, "true_runs": self.true_runs,
+                "system_runs": int(system[0]), "system_time": float(system[1]),
                 "true_periods": self.true_periods, "opa_runs": self.opa_runs,
                 "parts_computed": self.parts.computed,
                 "parts_set_aside": self.parts.set_aside, "phases": self.clock.rows()}
@@ -682,18 +695,24 @@ def value_task(cfg: ValidateConfig, value: float) -> dict:
     computed (``work``) and its log lines."""
     lines: list[str] = []
     job = _Map(cfg, progress=False, log=lines.append)
+    before = true_system_work()
     with job.clock("other"):
         result = job.value_work(value)
-    return {"result": result, "work": job.work(), "log": lines}
+    after = true_system_work()
+    return {"result": result, "log": lines,
+            "work": job.work((after[0] - before[0], after[1] - before[1]))}
 
 
 def frontier_task(cfg: ValidateConfig) -> dict:
     """:func:`frontier` as a task, with its runs kept in the map's parts."""
     lines: list[str] = ["cost-accuracy frontier at the largest sigma ..."]
     job = _Map(cfg, progress=False, log=lines.append)
+    before = true_system_work()
     with job.clock("frontier"):
         result = frontier(cfg, parts=job.parts)
-    return {"result": result, "work": job.work(), "log": lines}
+    after = true_system_work()
+    return {"result": result, "log": lines,
+            "work": job.work((after[0] - before[0], after[1] - before[1]))}
 
 
 FRONTIER_BUDGETS = (8, 16, 32, 64)

@@ -522,6 +522,26 @@ STATUS_NAMES = tuple(dict(sorted({
 
 
 # ---------------------------------------------------------------------------- the runs
+_WORK = threading.local()
+
+
+def true_system_work() -> tuple[int, float]:
+    """(runs, time) of the true impact systems (state dimension 2, sigma = 0: sampled or
+    deterministic, not OPA at N = 0) that this thread has integrated so far: runs
+    started from their initial state, and the time units integrated by every run
+    (resumed ones too). A caller takes the difference of two readings; the kernel's own
+    threads are not separate callers."""
+    return getattr(_WORK, "runs", 0), getattr(_WORK, "time", 0.0)
+
+
+def _count(dim: int, p: np.ndarray, times, fresh: bool) -> None:
+    if dim != 2 or not len(times):
+        return
+    count = int(np.count_nonzero(np.atleast_2d(p)[:, K.P_SIGMA] == 0.0))
+    _WORK.runs = getattr(_WORK, "runs", 0) + (count if fresh else 0)
+    _WORK.time = getattr(_WORK, "time", 0.0) + count * float(times[-1] - times[0])
+
+
 def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "trajectory",
         tangent=None, statistics: bool = False, renormalise: bool = False,
         events: bool = True, include_start: bool = True, partial: bool = False,
@@ -542,6 +562,7 @@ def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "tr
     ``failure``."""
     y0 = np.asarray(y0, dtype=float)
     times = np.ascontiguousarray(times, dtype=float)
+    _count(y0.shape[-1], inputs.p, times, include_start)
     cfg = inputs.cfg
     limit = step_guard(times, inputs.p) if guard and cfg[K.C_MAXSTEPS] == DEFAULT_MAX_STEPS \
         else None
@@ -619,6 +640,7 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
         for b in np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS):
             guarded[b] = cfgs[b, K.C_MAXSTEPS] = step_guard(times, inputs.p[b])
     dim = y0.shape[-1]
+    _count(dim, inputs.p, times, include_start)
     out = np.empty((B, len(times), dim))
     logs = np.empty((B, capacity, 3))
     counters = np.zeros((B, 5), dtype=np.int64)

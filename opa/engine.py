@@ -43,7 +43,8 @@ from opa._model import (
     preset,
     time_grid,
 )
-from opa._run import STATUS_NAMES, SimulationError, output_times, run_batch
+from opa._run import STATUS_NAMES, SimulationError, output_times, run_batch, \
+    true_system_work
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
     CHATTER_WINDOW,
@@ -74,6 +75,7 @@ __all__ = [
     "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",
     "package_version", "parse", "phase_section", "preset", "provenance_attrs",
     "quadrature_order", "remove_store", "run_batch", "run_elements", "run_measure",
+    "true_system_work",
     "scan_splits", "simulate_dmr", "simulate_opa", "summary_lines", "surrogate",
     "surrogate_moments", "surrogate_values", "sweep", "sweep_times", "time_coord",
     "time_grid", "true_runs", "uniform_edges", "write_netcdf",

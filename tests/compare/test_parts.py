@@ -24,7 +24,7 @@ SMALL = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1), horizons=(4,), 
 RUN_ATTRS = ("history", "wall_seconds", "mc_runs_computed", "opa_runs_computed",
              "true_runs_computed", "true_periods_computed", "parts_computed",
              "parts_set_aside", "phase_names", "phase_wall_seconds", "phase_cpu_seconds",
-             "phase_calls", "ran_on")
+             "phase_calls", "ran_on", "true_system_runs", "true_system_time")
 INTEGRATORS = {
     trustmap: ("opa_variants", "simulate_mc", "simulate_opa", "simulate_dmr", "scan_splits",
                "_sequence", "element_variants", "adaptive_edges", "true_runs"),

@@ -124,3 +124,18 @@ def test_the_default_map_on_a_4_process_local_cluster(tmp_path):
                           scheduler=cluster.scheduler_address)
         four = run_validation(cfg, progress=False, log=lambda *a: None)
     assert_same_map(one, four)
+
+
+def test_every_true_system_run_is_counted_wherever_it_ran(one_process, tmp_path):
+    """true_system_runs / true_system_time: the Monte Carlo samples, split scans and
+    phase portraits of the map, the same whether the values ran here or in workers; at
+    least the Monte Carlo runs the map counts itself, and the time at least theirs."""
+    cfg = load_config(None, outdir=str(tmp_path), workers=2, **SMALL)
+    pooled = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert pooled.attrs["true_system_runs"] == one_process.attrs["true_system_runs"]
+    assert pooled.attrs["true_system_time"] == pytest.approx(
+        one_process.attrs["true_system_time"], rel=1e-12)
+    assert one_process.attrs["true_system_runs"] > one_process.attrs["true_runs_computed"]
+    T = 2 * np.pi / np.array(SMALL["values"])
+    assert one_process.attrs["true_system_time"] >= \
+        one_process.attrs["true_periods_computed"] * T.min()
