@@ -82,6 +82,8 @@ def run_tasks(tasks: list[tuple[object, Callable, tuple]], *, workers: int = 1,
     >>> list(run_tasks([("a", max, (1, 2)), ("b", min, (1, 2))]))
     [('a', 2), ('b', 1)]
     """
+    if not tasks:
+        return
     if scheduler is not None:
         yield from _run_dask(tasks, scheduler)
         return
