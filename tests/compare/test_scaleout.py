@@ -139,3 +139,45 @@ def test_every_true_system_run_is_counted_wherever_it_ran(one_process, tmp_path)
     T = 2 * np.pi / np.array(SMALL["values"])
     assert one_process.attrs["true_system_time"] >= \
         one_process.attrs["true_periods_computed"] * T.min()
+
+
+def test_a_map_killed_on_its_pool_leaves_nothing_and_resumes(one_process, tmp_path):
+    """SIGKILL of ``opa-mc validate --workers 2`` once some parts are written: no worker
+    or fork server is left, and the rerun computes only what is missing and gives the
+    one-process map."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from tests.opa.dynamics.test_pool import _alive_in_session
+
+    flags = ["--values", "3.98,4.09", "--sigmas", "0.01,0.02,0.03", "--orders", "0,2",
+             "--horizons", "4,8", "--samples", "64", "--max-samples", "256",
+             "--per-period", "4", "--no-frontier", "--no-plots", "--quiet",
+             "--outdir", str(tmp_path)]
+    env = dict(os.environ, MPLBACKEND="Agg")
+    proc = subprocess.Popen([sys.executable, "-m", "opa.cli", "validate", "--workers", "2",
+                             *flags], start_new_session=True, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    parts = tmp_path / "parts"
+    try:
+        deadline = time.monotonic() + 120
+        while not (parts.exists() and len(list(parts.glob("mc_*.npz"))) >= 2):
+            assert proc.poll() is None, "the map finished before it could be killed"
+            assert time.monotonic() < deadline, "no parts written"
+            time.sleep(0.1)
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 5
+        while _alive_in_session(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert _alive_in_session(proc.pid) == []
+    finally:
+        for pid in _alive_in_session(proc.pid):
+            os.kill(pid, signal.SIGKILL)
+    cfg = load_config(None, outdir=str(tmp_path), workers=2, **SMALL)
+    resumed = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert 0 < resumed.attrs["parts_computed"] < one_process.attrs["parts_computed"]
+    assert_same_map(one_process, resumed)
