@@ -22,6 +22,7 @@ down to the reference's own standard error, which is stored beside them.
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import time
@@ -107,8 +108,13 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(np.square(a))))
 
 
+#: what a row that is not computed yet reads as while the study finds its runs
+_PENDING = {"error": math.nan, "sd_error": math.nan, "rhs": 0, "elements": 0,
+            "seconds": 0.0}
+
+
 def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
-                    memo=None) -> xr.Dataset:
+                    memo=None, workers: int = 1, scheduler=None) -> xr.Dataset:
     """Run the study; returns its dataset (also written to OUTDIR/convergence.nc unless
     ``write`` is false).
 
@@ -119,7 +125,56 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     (the trust map keeps them in its parts, :class:`opa._dataset.Store`). Without
     ``memo`` every run is done. The dataset's ``wall_seconds`` is the sum of the runs' wall
     times (for reused runs, the time they took when they were done).
+
+    With ``workers`` > 1 or a Dask ``scheduler`` (and no ``memo``), the runs are tasks
+    (:func:`compare._scaleout.run_tasks`): after the reference, the study is walked
+    without computing to find the runs it needs, those run side by side, and so on until
+    every run is known (the adaptive collocation rows need the adaptive runs' edges);
+    then the study is assembled from them. The rows are the same as in one process.
     """
+    if (workers > 1 or scheduler is not None) and memo is None:
+        return _run_parallel(cfg, log=log, write=write, workers=workers,
+                             scheduler=scheduler)
+    return _study(cfg, log=log, write=write, memo=memo)
+
+
+def _run_parallel(cfg, *, log, write, workers, scheduler) -> xr.Dataset:
+    import cloudpickle
+
+    from compare._scaleout import run_tasks
+
+    known: dict = {}
+
+    def dry(name, spec, compute):
+        if name in known:
+            return known[name]
+        if name == "reference":  # every row's error depends on it: computed here, first
+            known[name] = compute()
+            return known[name]
+        pending.append((name, compute))
+        return _PENDING
+
+    while True:
+        pending: list = []
+        _study(cfg, log=lambda *a: None, write=False, memo=dry)
+        if not pending:
+            break
+        log(f"{len(pending)} runs of the study as tasks ...")
+        tasks = [(name, _call, (cloudpickle.dumps(compute),)) for name, compute in pending]
+        for name, result in run_tasks(tasks, workers=workers, scheduler=scheduler):
+            known[name] = result
+    return _study(cfg, log=log, write=write, memo=lambda name, spec, compute: known[name])
+
+
+def _call(blob: bytes):
+    """A run of the study sent to a worker (cloudpickle carries its closure)."""
+    import cloudpickle
+
+    return cloudpickle.loads(blob)()
+
+
+def _study(cfg: ConvergenceConfig, *, log, write: bool, memo) -> xr.Dataset:
+    """The study itself (:func:`run_convergence`)."""
     osc, opts = cfg.oscillator, cfg.options
     measure = parse(cfg.distribution)
     base = cfg.system.replace(distribution=measure)
@@ -240,7 +295,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
         for b in cfg.budgets:
             result = opa_row("ME-OPA adaptive", law, None, cfg.order, elements="adaptive",
                              tolerance=1e-14, max_elements=int(b))
-            if law == "saltation" and result is not None:
+            if law == "saltation" and result is not None and "edges" in result:
                 adaptive[int(b)] = result["edges"]
         for n in cfg.orders:
             opa_row("ME-OPA adaptive, N", law, None, n, elements="adaptive", tolerance=1e-14,

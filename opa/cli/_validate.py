@@ -258,6 +258,11 @@ def register_converge(sub) -> None:
                    help="Sobol samples of the reference (default 65536)")
     g.add_argument("--outdir", default="results-elements", metavar="DIR",
                    help="output folder (default results-elements)")
+    g.add_argument("--workers", type=positive_int, default=1, metavar="W",
+                   help="local processes for the study's runs, each with cores/W numba "
+                        "threads (default 1: one process)")
+    g.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler: the study's runs as tasks there")
     g.add_argument("--quiet", action="store_true", help="no log lines")
     _solver_flags(p, tolerance=1e-9)
     _impulse_flags(p)
@@ -280,7 +285,7 @@ def cmd_converge(args) -> int:
                             pulse_width=args.pulse_width, impulse_at_zero=args.impulse_at_zero,
                             **kw)
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
-    ds = run_convergence(cfg, log=log)
+    ds = run_convergence(cfg, log=log, workers=args.workers, scheduler=args.scheduler)
     from compare._report import plot_frontier
 
     command = "opa-mc " + shlex.join(getattr(args, "argv", ["converge"]))

@@ -198,3 +198,30 @@ def test_uncertain_c_rows_match_direct_runs(tmp_path):
                            elements=2, impact_law=law, times=times, options=cfg.options)
         err = float(np.sqrt(np.mean((emr.x_mean.values - ref.x_mean.values) ** 2)))
         assert ds.error.values[i] == pytest.approx(err, rel=1e-12)
+
+
+def test_the_study_on_worker_processes_has_the_same_rows(study):
+    """workers=2: the study's runs as tasks (compare._scaleout), the adaptive collocation
+    rows after the adaptive runs whose edges they take; every row as in one process."""
+    cfg, ds, _ = study
+    lines = []
+    pooled = run_convergence(cfg, log=lines.append, write=False, workers=2)
+    assert any("runs of the study as tasks" in line for line in lines)
+    assert list(pooled.method.values) == list(ds.method.values)
+    assert list(pooled.law.values) == list(ds.law.values)
+    for name in ("size", "order", "error", "sd_error", "rhs_evaluations",
+                 "node_rhs_evaluations"):
+        np.testing.assert_array_equal(pooled[name].values, ds[name].values, err_msg=name)
+    assert pooled.attrs["reference_sem"] == ds.attrs["reference_sem"]
+
+
+def test_the_study_on_a_dask_cluster_has_the_same_rows(study):
+    distributed = pytest.importorskip("distributed")
+    cfg, ds, _ = study
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as cluster:
+        there = run_convergence(cfg, log=lambda *a: None, write=False,
+                                scheduler=cluster.scheduler_address)
+    assert list(there.method.values) == list(ds.method.values)
+    for name in ("size", "error", "sd_error", "rhs_evaluations"):
+        np.testing.assert_array_equal(there[name].values, ds[name].values, err_msg=name)
