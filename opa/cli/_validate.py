@@ -274,6 +274,11 @@ def cmd_converge(args) -> int:
         write_report
     from opa.cli._flags import oscillator_from, options_from
 
+    from opa.cli._flags import MAX_WORKERS
+
+    if args.workers > MAX_WORKERS:
+        raise ValueError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got "
+                         f"{args.workers}")
     _check_outdir(args.outdir)
     kw = {k: v for k, v in (("budgets", args.budgets), ("uniform", args.uniform))
           if v is not None}

@@ -182,6 +182,9 @@ BAD_CLI = [
     (["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--workers", "1000000000"], "--workers"),
     (["reproduce", "fig3", "--workers", "1e9"], "--workers"),
     (["converge", "--reference", "1e308"], "--reference"),
+    (["converge", "--workers", "1000"], "--workers"),
+    (["validate", "--workers", "1000"], "workers"),
+    (["converge", "--workers", "0"], "--workers"),
     # flags
     (["simulate", "dmr", "--no-such-flag"], "--no-such-flag"),
     (["simulate", "fem"], "fem"),
