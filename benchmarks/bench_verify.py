@@ -69,6 +69,33 @@ def test_the_reference_agrees_with_plain_sobol(case):
     assert np.all(gap <= 4 * np.hypot(plain.x_sem.values, ref.cv_x_mean_sem.values) + 1e-12)
 
 
+def test_the_edge_misfit_follows_the_spread_inside(case):
+    """The allocation's premise: each element's misfit at its ends (edge_indicator) against
+    the spread of x - x_hat over the element at 2^15 points of equal probability (2^12
+    in smoke mode); the correlation of the logarithms is printed."""
+    from compare._verify import edge_indicator, system_of
+    from opa.engine import run_measure, surrogate, true_runs
+
+    run = case["control"]
+    system, options = system_of(run)
+    measure = run_measure(run)
+    edges = run.element_edges.values
+    n = 4096 if len(case["counts"]) == 1 else 32768
+    xi = measure.ppf((np.arange(n) + 0.5) / n)
+    paths, _ = true_runs(system, options, xi, case["times"], what="grid point")
+    d = paths[:, :, 0] - surrogate(run, xi, measure=measure)[0]
+    which = np.clip(np.searchsorted(edges, xi, side="right") - 1, 0, len(edges) - 2)
+    spread = np.array([np.sqrt(np.mean(np.var(d[which == k], axis=0)))
+                       if np.sum(which == k) > 1 else np.nan for k in range(len(edges) - 1)])
+    ends, _ = true_runs(system, options, edges, case["times"], what="element edge")
+    misfit = edge_indicator(run.element_x_coef.values, edges, measure, ends[:, :, 0])
+    ok = np.isfinite(spread) & (spread > 0) & (misfit > 0)
+    r = float(np.corrcoef(np.log(spread[ok]), np.log(misfit[ok]))[0, 1])
+    print(f"\nlog misfit at the ends against log spread inside, {ok.sum()} elements with "
+          f"points: correlation {r:.3f}")
+    assert r > 0.5
+
+
 def test_error_against_true_runs(case):
     """The table: RMS error of E[x] against the reference, control variate and plain
     Sobol at the same number of true runs (one seed)."""

@@ -119,6 +119,9 @@ class ValidateConfig:
         if not 0 <= self.workers <= 4 * (os.cpu_count() or 1):
             raise ValueError(f"workers must be between 0 (auto) and "
                              f"{4 * (os.cpu_count() or 1)} (4 per CPU), got {self.workers}")
+        if self.scheduler is not None and self.workers > 1:
+            raise ValueError("workers has no effect with a scheduler (the Dask cluster's "
+                             "workers run the tasks): give one or the other")
         if self.scheduler is not None and (not isinstance(self.scheduler, str)
                                            or not self.scheduler.strip()):
             raise ValueError(f"scheduler must be an address such as tcp://host:8786, got "

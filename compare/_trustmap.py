@@ -691,25 +691,24 @@ def _task_config(cfg: ValidateConfig) -> ValidateConfig:
 
 
 def value_task(cfg: ValidateConfig, value: float) -> dict:
-    """:meth:`_Map.value_work` as a task (:mod:`compare._scaleout`): its result, what it
-    computed (``work``) and its log lines."""
-    lines: list[str] = []
-    job = _Map(cfg, progress=False, log=lines.append)
-    before = true_system_work()
-    with job.clock("other"):
-        result = job.value_work(value)
-    after = true_system_work()
-    return {"result": result, "log": lines,
-            "work": job.work((after[0] - before[0], after[1] - before[1]))}
+    """:meth:`_Map.value_work` as a task (:mod:`compare._scaleout`)."""
+    return _task(cfg, "other", [], lambda job: job.value_work(value))
 
 
 def frontier_task(cfg: ValidateConfig) -> dict:
     """:func:`frontier` as a task, with its runs kept in the map's parts."""
-    lines: list[str] = ["cost-accuracy frontier at the largest sigma ..."]
+    return _task(cfg, "frontier", ["cost-accuracy frontier at the largest sigma ..."],
+                 lambda job: frontier(cfg, parts=job.parts))
+
+
+def _task(cfg: ValidateConfig, phase: str, lines: list[str], work) -> dict:
+    """``work(job)`` on a fresh :class:`_Map` with its time charged to ``phase``: its
+    result, what it computed (``work``: counts, phases, the true systems integrated in
+    this thread) and its log lines."""
     job = _Map(cfg, progress=False, log=lines.append)
     before = true_system_work()
-    with job.clock("frontier"):
-        result = frontier(cfg, parts=job.parts)
+    with job.clock(phase):
+        result = work(job)
     after = true_system_work()
     return {"result": result, "log": lines,
             "work": job.work((after[0] - before[0], after[1] - before[1]))}

@@ -26,7 +26,7 @@ sqrt(R), the honest error of randomised QMC. For a multi-element run of K elemen
 M >= 5K + 1: stratified by element (the elements are the strata, of known probability).
 First the true systems at the K + 1 edges: element k's indicator is the misfit of its own
 polynomial at its two ends (:func:`edge_indicator`), which follows the spread of d inside
-the element (correlation 0.99 of the logarithms in the case below), so no random pilot
+the element (correlation 0.978 of the logarithms in the case below), so no random pilot
 is spent or discarded. The other M - K - 1 points come in jittered groups of
 ``GROUP`` = 4: element k gets n_k groups (one each, then half the rest in proportion to
 P_k times its indicator, half to P_k), cuts its law into n_k slices of equal probability
@@ -212,8 +212,9 @@ def edge_indicator(x_coef: np.ndarray, edges, measure, x_edges: np.ndarray) -> n
     its two ends of the RMS over time of ``x(t, e) - x_hat_k(t, e)``, with x_hat_k the
     element's own polynomial (at an inner edge the two neighbours' polynomials differ).
     It follows the spread of x - x_hat inside the element closely (section 3.2,
-    omega = 3.98, sigma = 0.05, 10 periods, 64 adaptive elements: correlation 0.99 of the
-    logarithms against 2^15 points), so it sets the allocation without a pilot.
+    omega = 3.98, sigma = 0.05, 10 periods, 64 adaptive elements: correlation 0.978 of
+    the logarithms against 2^15 points; benchmarks/bench_verify.py), so it sets the
+    allocation without a pilot.
 
     >>> coef = np.array([[[0.0], [1.0]], [[0.0], [0.0]]])  # x_hat = phi_1 on [-1, 0], 0 on [0, 1]
     >>> from opa._measure import uniform

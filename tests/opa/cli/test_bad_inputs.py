@@ -184,6 +184,7 @@ BAD_CLI = [
     (["converge", "--reference", "1e308"], "--reference"),
     (["converge", "--workers", "1000"], "--workers"),
     (["validate", "--workers", "1000"], "workers"),
+    (["validate", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "workers"),
     (["converge", "--workers", "0"], "--workers"),
     # flags
     (["simulate", "dmr", "--no-such-flag"], "--no-such-flag"),
