@@ -654,7 +654,8 @@ def build_diffrax(solver_name: str, rtol: float, atol: float, capacity: dict):
         return tuple(np.concatenate([np.asarray(r[1][j]) for r in parts])
                      for j in range(len(parts[0][1])))
 
-    _DIFFRAX[key] = dict(single=single, ensemble=ensemble, devices=len(devices), jax=jax)
+    _DIFFRAX[key] = dict(single=single, ensemble=ensemble, devices=len(devices), jax=jax,
+                         batched=batched)
     return _DIFFRAX[key]
 
 
@@ -724,6 +725,45 @@ def diffrax_ensemble(osc, mus, periods: int, rtol: float, atol: float,
     nfev = (np.asarray(steps).reshape(-1)[:M].sum() * stages(solver)
             + 2 * np.asarray(solves).reshape(-1)[:M].sum())
     return xo, vo, n_imp, int(nfev)
+
+
+def diffrax_gpu_ensemble(osc, mus, periods: int, rtol: float, atol: float, lanes: int,
+                         solver: str = "Dopri5"):
+    """The same loop's ``vmap`` on the first GPU, ``lanes`` samples a launch, each chunk
+    reduced there: only the moments cross back, as ours (``opa._run.gpu_moments``).
+    Returns (mean x, var x (ddof 1), mean v, var v at the outputs, impacts in all, rhs
+    evaluations)."""
+    d = build_diffrax(solver, rtol, atol, MC_CAPACITY)
+    jax = d["jax"]
+    gpu = jax.devices("gpu")[0]
+    t_out, sched = _padded_schedule(osc, periods, MC_CAPACITY)
+    n = len(t_out)
+    key = ("gpu", solver, rtol, atol, n)
+    if key not in _DIFFRAX:
+        def reduced(P, *rest):
+            xo, vo, _, n_imp, steps, solves, fail, _ = d["batched"](P, *rest)
+            xo, vo = xo[:, :n], vo[:, :n]
+            return (xo.sum(0), (xo * xo).sum(0), vo.sum(0), (vo * vo).sum(0), n_imp.sum(),
+                    steps.sum(), solves.sum(), (fail > 0).sum())
+        _DIFFRAX[key] = jax.jit(reduced)
+    reduced = _DIFFRAX[key]
+    mus = np.asarray(mus, dtype=float)
+    M = len(mus)
+    if M % lanes:
+        raise ValueError(f"{M} samples are not whole chunks of {lanes} lanes")
+    P = np.tile(parameters(osc), (M, 1))
+    P[:, MU] = mus
+    y0 = np.array([osc.x0, osc.v0])
+    rest = jax.device_put((y0, *sched), gpu)
+    parts = [reduced(jax.device_put(P[c:c + lanes], gpu), *rest) for c in range(0, M, lanes)]
+    sx, sxx, sv, svv, imp, steps, solves, failed = (
+        sum(np.asarray(jax.device_get(p[j])) for p in parts) for j in range(8))
+    if int(failed):
+        raise RuntimeError(f"diffrax {solver} GPU ensemble: {int(failed)} samples failed")
+    mx, mv = sx / M, sv / M
+    vx, vv = (sxx - M * mx * mx) / (M - 1), (svv - M * mv * mv) / (M - 1)
+    nfev = int(steps) * stages(solver) + 2 * int(solves)
+    return mx, vx, mv, vv, int(imp), nfev
 
 
 # ============================================================================ scipy OPA

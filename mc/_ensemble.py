@@ -38,7 +38,8 @@ from mc._checkpoint import Checkpoint, stats_arrays
 from mc._control import check_control, controlled
 from mc._sampling import check_sampler, sample_xi
 from opa.engine import (
-    IMPULSE_FIELDS, as_system, chebyshev_u, check_instance, check_memory, digest, orthonormal,
+    IMPULSE_FIELDS, as_system, chebyshev_u, check_device, check_instance, check_memory, digest,
+    orthonormal, require_gpu,
     Oscillator, output_times, package_version, provenance_attrs, run_batch, SimulationError,
     SolverOptions, System, time_coord,
 )
@@ -52,6 +53,7 @@ if TYPE_CHECKING:
     from distributed import Client
 
 CHUNK_BYTES = 32 * 2**20
+GPU_CHUNK, GPU_CHUNK_BYTES = 2**18, 2**30  # device="cuda": samples a launch, paths' bytes
 MAX_TIMEOUT = 86400.0  # a day: longer Dask timeouts are mistakes, not waits
 # Memory a sample takes outside the paths: xi, its weight, replicate index and impact
 # count and the sample coordinate (8 bytes each), the sampler's uniforms (up to 16 for a
@@ -172,16 +174,26 @@ class ChunkStats:
 
 
 def run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_paths,
-              recurrence=None, single_thread=False):
-    """Integrate one chunk of samples of ``system``'s law and reduce it: (ChunkStats,
-    n_impacts, finished (a mask), paths), or (None, n_impacts, finished, (m, xi_m,
-    why)) for the first sample m that failed."""
+              recurrence=None, single_thread=False, device="cpu"):
+    """Integrate one chunk of samples of ``system``'s law (on ``device``) and reduce it:
+    (ChunkStats, n_impacts, finished (a mask), paths), or (None, n_impacts, finished, (m,
+    xi_m, why)) for the first sample m that failed."""
     if single_thread:
         import numba
 
         numba.set_num_threads(1)
-    batch = run_batch(system.sampled_inputs(options, xi=xi), y0, times, rtol=options.rtol,
-                      atol=options.atol, stop_on_failure=True)
+    batch = integrate_chunk(y0, xi, times, system, options, device)
+    return reduce_chunk(batch, xi, w, rep, replicates, order, keep_paths, recurrence)
+
+
+def integrate_chunk(y0, xi, times, system, options, device="cpu"):
+    """The runs of one chunk's samples (a ``Batch``), the first half of :func:`run_chunk`."""
+    return run_batch(system.sampled_inputs(options, xi=xi), y0, times, rtol=options.rtol,
+                     atol=options.atol, stop_on_failure=device == "cpu", device=device)
+
+
+def reduce_chunk(batch, xi, w, rep, replicates, order, keep_paths, recurrence=None):
+    """The chunk's statistics from its runs, the second half of :func:`run_chunk`."""
     # the first sample that failed (the others may have been skipped after it)
     bad = np.flatnonzero(batch.failed)
     if len(bad):
@@ -195,7 +207,7 @@ def run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_pa
     return stats, batch.impacts, batch.ok, (batch.states if keep_paths else None)
 
 
-def _chunk_size(n_times: int, requested: int | None) -> int:
+def _chunk_size(n_times: int, requested: int | None, device: str = "cpu") -> int:
     if requested is not None:
         from opa.engine import check_count
 
@@ -204,6 +216,8 @@ def _chunk_size(n_times: int, requested: int | None) -> int:
         except ValueError as err:
             raise ValueError(str(err) if "at most" in str(err) else
                              f"chunk_size must be a positive integer, got {requested}") from None
+    if device == "cuda":  # a GPU wants many threads: up to GPU_CHUNK samples a launch
+        return int(min(GPU_CHUNK, max(1024, GPU_CHUNK_BYTES // (16 * n_times))))
     return int(min(4096, max(64, CHUNK_BYTES // (16 * n_times))))
 
 
@@ -227,6 +241,7 @@ def simulate_mc(
     worker_timeout: float | None = 60.0,
     log: Callable[[str], object] | None = None,
     control: xr.Dataset | None = None,
+    device: str = "cpu",
     **fields,
 ) -> xr.Dataset:
     """Monte Carlo ensemble of the sampled impact system, eq. (1), p = p_bar + sigma xi.
@@ -270,6 +285,13 @@ def simulate_mc(
         a control variate (:mod:`mc._control`): adds ``cv_x_mean``, ``cv_x_var`` with
         their standard errors and the attribute ``variance_reduction``. Needs ``sobol``
         with R >= 2 replicates; the output times default to the run's.
+    device : "cpu" (default) or "cuda": the samples' trajectories on a CUDA GPU, one
+        thread per sample, each running the CPU kernel's own driver compiled for the GPU
+        (:mod:`opa._gpu`, the ``gpu`` extra numba-cuda); each chunk's paths are copied
+        back and reduced here as on the CPU. Chunks default to up to 2^18 samples (about
+        1 GiB of paths). The GPU's rounding differs from the CPU's in the last digits
+        (fused multiply-adds), so its results agree to the solver's accuracy, not to the
+        bit; not with ``scheduler``.
 
     Returns
     -------
@@ -317,6 +339,10 @@ def simulate_mc(
     check_memory("sampling", samples * SAMPLE_BYTES,
                  f"samples {samples} x {SAMPLE_BYTES} bytes")
     _check_dask_timeouts(connect_timeout, worker_timeout)
+    if check_device(device) == "cuda":
+        if scheduler is not None:
+            raise ValueError('device="cuda" runs in this process: not with scheduler')
+        require_gpu()
     if checkpoint is not None and not isinstance(checkpoint, (str, os.PathLike)):
         raise ValueError(f"checkpoint must be a directory path, got {checkpoint!r:.60}")
     if scheduler is not None and not isinstance(scheduler, str):
@@ -334,13 +360,13 @@ def simulate_mc(
         raise ValueError(f"control needs sampler='sobol' with replicates >= 2 (its "
                          f"standard errors are the replicates' spread), got sampler="
                          f"{sampler!r}, replicates={replicates}")
-    size = min(_chunk_size(T, chunk_size), samples)
+    size = min(_chunk_size(T, chunk_size, device), samples)
     if keep_paths:
         check_memory("keep_paths", samples * T * 2 * 8,
                      f"samples {samples} x {T} outputs x 2 states")
-    check_memory("a chunk of paths", size * T * 2 * 8 * 2,
+    check_memory("a chunk of paths", size * T * 2 * 8 * 3,
                  f"chunk_size {size} x {T} outputs x 2 states, with the statistics' "
-                 f"temporaries")
+                 f"temporaries and the next chunk's paths")
     check_memory("x_coef", (order + 1) * T * 8 * 2,
                  f"order + 1 = {order + 1} coefficients x {T} outputs, running sum and "
                  f"a chunk's")
@@ -365,12 +391,13 @@ def simulate_mc(
         if checkpoint is not None:
             store = Checkpoint(checkpoint, _manifest(
                 system, options, sampler, samples, seed, replicates, times, measure,
-                recurrence, xi, w, bounds, keep_paths), log)
+                recurrence, xi, w, bounds, keep_paths, device), log)
             finished = store.finished(bounds, check)
             if finished and log is not None:
                 log(f"resuming from checkpoint {store.directory}: {len(finished)} of "
                     f"{len(bounds)} chunks already finished")
-        runner = _Chunks(y0, xi, w, rep, replicates, bounds, args, store, finished, check)
+        runner = _Chunks(y0, xi, w, rep, replicates, bounds, args, store, finished, check,
+                         device)
         if progress is None:
             progress = sys.stderr.isatty()
         if client is None:
@@ -424,8 +451,9 @@ def _check_dask_timeouts(connect_timeout, worker_timeout) -> None:
 
 
 def _manifest(system, options, sampler, samples, seed, replicates, times, measure,
-              recurrence, xi, w, bounds, keep_paths) -> dict:
-    """Everything that determines the result of a run, for its checkpoint."""
+              recurrence, xi, w, bounds, keep_paths, device="cpu") -> dict:
+    """Everything that determines the result of a run, for its checkpoint (the device
+    only when it is a GPU, so that CPU checkpoints of earlier versions still resume)."""
     if measure is None:
         law = "semicircle"
     else:
@@ -451,6 +479,7 @@ def _manifest(system, options, sampler, samples, seed, replicates, times, measur
         "weight": digest(w),
         "chunks": [list(b) for b in bounds],
         "keep_paths": bool(keep_paths),
+        **({"device": device} if device != "cpu" else {}),
     }
 
 
@@ -510,6 +539,7 @@ class _Chunks:
     store: Checkpoint | None
     finished: set
     check: Callable
+    device: str = "cpu"
 
     @property
     def keep_paths(self) -> bool:
@@ -521,15 +551,29 @@ class _Chunks:
                 *self.args)
 
     def compute(self, i: int):
-        return run_chunk(*self.task(i))
+        return self.reduce(i, self.integrate(i))
 
-    def loaded(self, i: int):
+    def integrate(self, i: int):
+        lo, hi = self.bounds[i]
+        times, system, options = self.args[:3]
+        return integrate_chunk(self.y0, self.xi[lo:hi], times, system, options, self.device)
+
+    def reduce(self, i: int, batch):
+        lo, hi = self.bounds[i]
+        times, system, options, order, keep_paths, recurrence = self.args
+        return reduce_chunk(batch, self.xi[lo:hi], self.w[lo:hi], self.rep[lo:hi],
+                            self.replicates, order, keep_paths, recurrence)
+
+    def loaded(self, i: int, ahead=None):
         """Chunk i from the checkpoint; computed (and saved) again if its file went bad
-        since it was first read."""
+        since it was first read (its runs on ``ahead``, the one thread that integrates,
+        when there is one)."""
         lo, hi = self.bounds[i]
         arrays = self.store.load(i, lo, hi, self.check)
         if arrays is None:
-            result = self.compute(i)
+            batch = self.integrate(i) if ahead is None else \
+                ahead.submit(self.integrate, i).result()
+            result = self.reduce(i, batch)
             self.save(i, result)
             return result
         return _from_arrays(arrays, self.keep_paths)
@@ -547,18 +591,36 @@ class _Chunks:
         return sum(hi - lo for i, (lo, hi) in enumerate(self.bounds) if i in self.finished)
 
     def local(self, progress: bool):
+        """The chunks in order, pipelined: one thread integrates the next chunk (the
+        kernel's parallel batch, or the GPU's launch) while this one reduces the last, so
+        the serial reduction no longer idles the kernel's threads. Every integration runs
+        on that one thread (never two parallel batches at once); chunks are reduced and
+        merged in order, so the result is the sequential one to the bit."""
+        from concurrent.futures import ThreadPoolExecutor
+
         from tqdm.auto import tqdm
 
+        todo = [i for i in range(len(self.bounds)) if i not in self.finished]
         with tqdm(total=len(self.xi), initial=self.done_samples(), unit="sample",
-                  disable=not progress, desc="Monte Carlo") as bar:
-            for i, (lo, hi) in enumerate(self.bounds):
-                if i in self.finished:
-                    yield (lo, hi), self.loaded(i)
-                    continue
-                result = self.compute(i)
-                self.save(i, result)
-                bar.update(hi - lo)
-                yield (lo, hi), result
+                  disable=not progress, desc="Monte Carlo") as bar, \
+                ThreadPoolExecutor(1, thread_name_prefix="opa-mc-chunks") as ahead:
+            pending = {}
+            try:
+                for i, (lo, hi) in enumerate(self.bounds):
+                    if i in self.finished:
+                        yield (lo, hi), self.loaded(i, ahead)
+                        continue
+                    for j in todo[:2]:  # this chunk and the next
+                        if j not in pending:
+                            pending[j] = ahead.submit(self.integrate, j)
+                    todo.remove(i)
+                    result = self.reduce(i, pending.pop(i).result())
+                    self.save(i, result)
+                    bar.update(hi - lo)
+                    yield (lo, hi), result
+            finally:
+                for future in pending.values():
+                    future.cancel()
 
     def dask(self, client, progress: bool, worker_timeout: float | None):
         """Chunks as Dask tasks on ``client``. Results are merged (and released) in

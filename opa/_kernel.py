@@ -58,6 +58,8 @@ turns codes into messages.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, prange
 
@@ -293,7 +295,7 @@ def last_stage(method):
 @njit(cache=True)
 def impulse_strength(t, p):
     """Impulse magnitude F0 (1 + a1 sin(omega1 t / n)) at an impulse time t (eq. (1))."""
-    return p[P_F0] * (1.0 + p[P_A1] * np.sin(p[P_OMEGA1] * t / p[P_N]))
+    return p[P_F0] * (1.0 + p[P_A1] * math.sin(p[P_OMEGA1] * t / p[P_N]))
 
 
 @njit(cache=True, inline="always")
@@ -301,7 +303,7 @@ def forcing(t, p, force):
     """The external force at t: f cos(omega t) plus the pulse force ``force`` (0 for
     Dirac impulses or between pulses). The steppers evaluate it at their stages with
     ``stage_forcing``."""
-    return p[P_F] * np.cos(p[P_OMEGA] * t) + force
+    return p[P_F] * math.cos(p[P_OMEGA] * t) + force
 
 
 @njit(cache=True, inline="always")
@@ -349,7 +351,7 @@ def _stage_forcing_long(t, theta, h, f, w, cw, sw, force):
         cd, sd = cd * cd - sd * sd, 2.0 * sd * cd
         cd, sd = cd * cd - sd * sd, 2.0 * sd * cd
     else:
-        return f * np.cos(w * (t + theta * h)) + force
+        return f * math.cos(w * (t + theta * h)) + force
     return f * (cw * cd - sw * sd) + force
 
 
@@ -642,8 +644,8 @@ def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
     (DP5, the slower choice, keeps the general loop: one unrolled step compiles in about
     2 s)."""
     w = p[P_OMEGA]
-    cw = np.cos(w * t)
-    sw = np.sin(w * t)
+    cw = math.cos(w * t)
+    sw = math.sin(w * t)
     x = z[0]
     v = z[1]
     k0x = K[0, 0]
@@ -675,8 +677,8 @@ def _stage_rows(t, z, h, K, ztmp, A, C, first, stop, m, p, cfg, nodes, weights, 
     """Rows first..stop-1 of K: the stages z + h sum_r A[s, r] K[r] at t + C[s] h.
     Returns (cos(omega t), sin(omega t)) for ``stage_forcing`` at the step's end."""
     size = z.shape[0]
-    cw = np.cos(p[P_OMEGA] * t)
-    sw = np.sin(p[P_OMEGA] * t)
+    cw = math.cos(p[P_OMEGA] * t)
+    sw = math.sin(p[P_OMEGA] * t)
     for s in range(first, stop):
         for j in range(size):
             acc = 0.0
@@ -740,14 +742,14 @@ def step_factor(method, err):
     roots: a libm pow took 3% of a DMR run)."""
     if method == METHOD_DP5:
         return err ** (-1.0 / 5.0)
-    return 1.0 / np.sqrt(np.sqrt(np.sqrt(err)))
+    return 1.0 / math.sqrt(math.sqrt(math.sqrt(err)))
 
 
 @njit(cache=True, inline="always")
 def _combine_errors(method, h, worst, worst3):
     if method == METHOD_DP5 or worst == 0.0:
         return worst
-    return abs(h) * worst * worst / np.sqrt(worst * worst + 0.01 * worst3 * worst3)
+    return abs(h) * worst * worst / math.sqrt(worst * worst + 0.01 * worst3 * worst3)
 
 
 @njit(cache=True)
@@ -809,7 +811,7 @@ def dense_prepare2(t, z, z_new, h, K, F, p, force, sticking):
     stages in scalars (``_dense_stages2_dop853``), the same bits as the general loop."""
     w = p[P_OMEGA]
     _dense_stages2_dop853(t, h, K, z[0], z[1], p[P_MU], p[P_A], p[P_C], p[P_F], w,
-                          np.cos(w * t), np.sin(w * t), force, sticking)
+                          math.cos(w * t), math.sin(w * t), force, sticking)
     _dop853_coefficients(z, z_new, h, K, F)
     return 3
 
@@ -1200,10 +1202,10 @@ def first_impulse(t0, include_start, T1, at_zero):
     ``include_start``), or -1 when t0 / T1 is beyond exact integers (impulse times not
     resolvable). Impulses within SNAP of t0 count as at t0."""
     snap = SNAP * max(1.0, abs(t0))
-    jf = np.floor(t0 / T1) - 1.0
-    if not (abs(jf) < 2.0**53):
+    r = t0 / T1
+    if not (abs(r) < 2.0**53):
         return -1
-    j = int(jf)
+    j = int(r) - (2 if r < 0.0 else 1)  # floor(r) - 1 or below (no floor on the GPU)
     for _ in range(8):
         if j * T1 >= t0 - snap:
             break
@@ -1364,15 +1366,15 @@ def renormalise_tangent(z, dim, k_first, k_stop, log_growth):
         norm = 0.0
         for j in range(dim, size):
             norm += z[j] * z[j]
-        norm = np.sqrt(norm)
+        norm = math.sqrt(norm)
         if norm > 0.0 and norm < np.inf:
-            log_growth[k - 1] = np.log(norm)
+            log_growth[k - 1] = math.log(norm)
             for j in range(dim, size):
                 z[j] /= norm
         else:
             log_growth[k - 1] = -np.inf
             for j in range(dim, size):
-                z[j] = 1.0 / np.sqrt(size - dim)
+                z[j] = 1.0 / math.sqrt(size - dim)
 
 
 @njit(cache=True, inline="always")
@@ -1442,8 +1444,8 @@ def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, a
 
     Returns (err, margin, x_new, v_new, kx, kv), kx and kv the stages 1-12 (the last
     f(t + h, x_new, v_new)), stored in K only when the dense output needs them."""
-    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, np.cos(w * t),
-                                     np.sin(w * t), force, sticking)
+    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, math.cos(w * t),
+                                     math.sin(w * t), force, sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
     return err, margin, xn, vn, kx, kv
 
@@ -1596,7 +1598,23 @@ def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, node
 @njit(cache=True)
 def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U, rtol, atol,
               out, stats, log_growth, log):
-    """Integrate the augmented state ``z`` in place through the output times ``t_out``.
+    """Integrate the augmented state ``z`` in place through the output times ``t_out``:
+    ``integrate_with`` on freshly allocated work arrays (``allocate_scratch``)."""
+    K, K2, F, z_new, ztmp, z_top, f_minus, f_plus, work = allocate_scratch(
+        z.shape[0], 2 * cfg[C_NCOEF], nodes.shape[0])
+    return integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U,
+                          rtol, atol, out, stats, log_growth, log, K, K2, F, z_new, ztmp, z_top,
+                          f_minus, f_plus, work)
+
+
+@njit(cache=True, inline="always")
+def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U, rtol,
+                   atol, out, stats, log_growth, log, K, K2, F, z_new, ztmp, z_top, f_minus,
+                   f_plus, work):
+    """Integrate the augmented state ``z`` in place through the output times ``t_out``,
+    with the work arrays of ``allocate_scratch`` passed in: it allocates nothing, so the
+    same driver compiles for a GPU thread (``opa._gpu``), whose work arrays are its own
+    local memory.
 
     Parameters
     ----------
@@ -1650,8 +1668,6 @@ def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U
     mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
     kx = kv = _NO_STAGES
     off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
-    K, K2, F, z_new, ztmp, z_top, f_minus, f_plus, work = allocate_scratch(size, dim,
-                                                                          nodes.shape[0])
     t = t_out[0]
     t_end = t_out[n_out - 1]
     escape = escape_bound(z[:dim], p)

@@ -240,6 +240,15 @@ def step_guard(times, p) -> int:
                                           GUARD_PER_TIME * span)))
 
 
+def step_guards(times, P) -> np.ndarray:
+    """:func:`step_guard` of each row of ``P`` (B, N_PARAMS) at once."""
+    span = float(times[-1] - times[0]) if len(times) else 0.0
+    periods = span * np.asarray(P)[:, K.P_OMEGA] / (2.0 * np.pi)
+    steps = np.maximum(np.maximum(GUARD_FLOOR, GUARD_PER_PERIOD * periods),
+                       GUARD_PER_TIME * span)
+    return np.minimum(DEFAULT_MAX_STEPS, steps).astype(np.int64)
+
+
 def advice(status: int) -> str:
     """What to try after a kernel status: tolerances help a collapsed step, not an escape."""
     if status in (K.ESCAPED, K.DIVERGED):
@@ -619,7 +628,7 @@ def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
 
 def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: int = 0,
               stop_on_failure: bool = False, guard: bool = True,
-              include_start: bool = True) -> Batch:
+              include_start: bool = True, device: str = "cpu") -> Batch:
     """B independent plain runs in parallel: run b starts from ``y0`` (or ``y0[b]`` when
     it has shape (B, dim)) with the b-th system of ``inputs`` (:func:`stack`,
     :func:`sampled`). Each log keeps ``capacity`` events. With ``stop_on_failure`` the
@@ -627,7 +636,8 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
     their own). ``guard``: the runaway guard (:func:`step_guard`) for each run whose step
     limit is the default one. ``include_start``: as for :func:`run` (False: runs resumed
     mid-way; not with ``stop_on_failure``). Each run depends on nothing but its own
-    inputs, so the results do not depend on the threads."""
+    inputs, so the results do not depend on the threads. ``device="cuda"``: the runs on a
+    GPU, one thread each (:mod:`opa._gpu`; the true 2-D systems only, every run made)."""
     y0 = np.ascontiguousarray(y0, dtype=float)
     times = np.ascontiguousarray(times, dtype=float)
     B = len(inputs.p)
@@ -637,13 +647,20 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
     cfgs = np.array(inputs.cfg, dtype=np.int64)
     guarded = np.zeros(B, np.int64)
     if guard:
-        for b in np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS):
-            guarded[b] = cfgs[b, K.C_MAXSTEPS] = step_guard(times, inputs.p[b])
+        rows = np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS)
+        guarded[rows] = cfgs[rows, K.C_MAXSTEPS] = step_guards(times, inputs.p[rows])
     dim = y0.shape[-1]
     _count(dim, inputs.p, times, include_start)
     out = np.empty((B, len(times), dim))
     logs = np.empty((B, capacity, 3))
     counters = np.zeros((B, 5), dtype=np.int64)
+    if device == "cuda":
+        from . import _gpu
+
+        out, logs, counters = _gpu.run_batch(
+            np.broadcast_to(y0, (B, dim)), include_start, times, inputs.p, cfgs,
+            inputs.nodes, inputs.weights, inputs.basis, rtol, atol, capacity)
+        return Batch(out, logs, counters, guarded)
     if own_states:
         prepare_kernels(K.run_batch_from)
         K.run_batch_from(np.ascontiguousarray(np.broadcast_to(y0, (B, dim))),
@@ -659,3 +676,23 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
                   for a in (inputs.nodes, inputs.weights, inputs.basis)),
                 rtol, atol, out, logs, counters, abort)
     return Batch(out, logs, counters, guarded)
+
+
+def gpu_moments(inputs: Inputs, y0, times, *, rtol: float, atol: float,
+                guard: bool = True):
+    """The B runs of ``inputs`` (the true 2-D systems, :func:`sampled`) from ``y0`` on a
+    CUDA GPU, reduced there (:func:`opa._gpu.moments`): only the moments and the counters
+    cross back. Returns (mean (n_out, 2), var (n_out, 2), finite counts, counters (B, 5)).
+    ``guard``: as for :func:`run_batch`."""
+    from . import _gpu
+
+    times = np.ascontiguousarray(times, dtype=float)
+    cfgs = np.array(inputs.cfg, dtype=np.int64)
+    if guard:
+        rows = np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS)
+        cfgs[rows, K.C_MAXSTEPS] = step_guards(times, inputs.p[rows])
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    B = len(inputs.p)
+    _count(y0.shape[-1], inputs.p, times, True)
+    return _gpu.moments(np.broadcast_to(y0, (B, y0.shape[-1])), True, times, inputs.p, cfgs,
+                        inputs.nodes, inputs.weights, inputs.basis, rtol, atol)

@@ -29,6 +29,8 @@ from opa._elements import (
     true_runs,
     uniform_edges,
 )
+from opa._gpu import check_device
+from opa._gpu import require as require_gpu
 from opa._measure import Measure, parse
 from opa._memory import check_memory
 from opa._model import (
@@ -64,17 +66,18 @@ from opa.dynamics._sections import identify_motion, mean_state, phase_section
 from opa.dynamics._sweep import local_executor, locate_setup, summary_lines, sweep, sweep_times
 
 __all__ = [
-    "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
+    "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS",
+    "MAX_CYCLE",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
     "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
-    "as_system", "atomic_write", "chebyshev_u", "check_count", "check_instance",
+    "as_system", "atomic_write", "chebyshev_u", "check_count", "check_device", "check_instance",
     "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",
     "collocation", "count_probabilities", "digest", "event_sequence", "gauss_nodes",
     "global_coefficients", "identify_motion", "impulse_cycle", "local_executor",
     "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",
     "package_version", "parse", "phase_section", "preset", "provenance_attrs",
-    "quadrature_order", "remove_store", "run_batch", "run_elements", "run_measure",
+    "quadrature_order", "remove_store", "require_gpu", "run_batch", "run_elements", "run_measure",
     "true_system_work",
     "scan_splits", "simulate_dmr", "simulate_opa", "summary_lines", "surrogate",
     "surrogate_moments", "surrogate_values", "sweep", "sweep_times", "time_coord",

@@ -161,10 +161,18 @@ def strongly_connected(graph: dict[str, list[str]]) -> list[list[str]]:
 
 
 def test_the_kernel_has_one_caller():
-    """``opa._run`` is the only module of the packages that imports the compiled kernel;
-    everything else goes through its interface (``run``, ``run_batch``, ``Record``)."""
+    """``opa._run`` is the only module of the packages that imports the compiled kernel,
+    beside ``opa._gpu``, which compiles the kernel's driver for a GPU and whose launches
+    only ``opa._run`` makes (``opa.engine`` takes its device checks from it);
+    everything else goes through ``_run``'s interface (``run``, ``run_batch``, ``Record``)."""
     importers = sorted(m for m in MODULES if any(t == "opa._kernel" for t, _ in imports(m)))
-    assert importers == ["opa._run"]
+    assert importers == ["opa._gpu", "opa._run"]
+    gpu_importers = sorted(m for m in MODULES if any(t == "opa._gpu" for t, _ in imports(m)))
+    assert gpu_importers == ["opa._run", "opa.engine"]
+    taken = {a.name for node in ast.walk(TREES["opa.engine"])
+             if isinstance(node, ast.ImportFrom) and node.module == "opa._gpu"
+             for a in node.names}
+    assert taken == {"check_device", "require"}
 
 
 def _private_imports(module: str) -> list[str]:

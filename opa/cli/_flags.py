@@ -105,7 +105,8 @@ def _run_flags(parser: argparse.ArgumentParser) -> None:
                         "K = 1 gives the stroboscopic samples (default 1)")
 
 
-def _mc_flags(parser: argparse.ArgumentParser, *, connect_timeout: bool = False) -> None:
+def _mc_flags(parser: argparse.ArgumentParser, *, connect_timeout: bool = False,
+              device: bool = False) -> None:
     g = parser.add_argument_group("Monte Carlo")
     g.add_argument("--samples", type=positive_int, default=1024, metavar="M",
                    help="Monte Carlo samples (default 1024)")
@@ -115,6 +116,11 @@ def _mc_flags(parser: argparse.ArgumentParser, *, connect_timeout: bool = False)
                    help="random seed (default 0)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="Dask distributed scheduler address (default: local threads)")
+    if device:
+        g.add_argument("--device", choices=("cpu", "cuda"), default="cpu",
+                       help="where the samples' trajectories run: cpu (default, numba "
+                            "threads) or cuda (one GPU thread per sample; needs an NVIDIA "
+                            "GPU and the 'gpu' extra, numba-cuda)")
     if connect_timeout:
         g.add_argument("--connect-timeout", type=float, default=5.0, metavar="S",
                        help="with --scheduler: seconds to wait for the Dask scheduler to "

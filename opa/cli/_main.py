@@ -106,7 +106,7 @@ def cmd_simulate(args) -> int:
                              samples=args.samples, sampler=args.sampler, seed=args.seed,
                              periods=args.periods, per_period=args.per_period, options=opts,
                              scheduler=args.scheduler, progress=not args.quiet,
-                             checkpoint=parts,
+                             checkpoint=parts, device=args.device,
                              connect_timeout=args.connect_timeout,
                              log=None if args.quiet else
                              (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
@@ -274,7 +274,8 @@ _ONLY = {
     "--element-tolerance": ("opa",), "--max-elements": ("opa",), "--verify": ("opa",),
     "--verify-max": ("opa",), "--strict": ("opa",),
     "--samples": ("mc",), "--sampler": ("mc",), "--scheduler": ("mc",),
-    "--connect-timeout": ("mc",), "--keep-parts": ("mc",), "--seed": ("opa", "mc"),
+    "--connect-timeout": ("mc",), "--keep-parts": ("mc",), "--device": ("mc",),
+    "--seed": ("opa", "mc"),
 }
 _WHY = {
     "--truncation": "closures of the OPA system: simulate mc integrates the true sampled "
@@ -330,7 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
         else:
             _system_flags(p, closures=name == "opa")
             if name == "mc":
-                _mc_flags(p, connect_timeout=True)
+                _mc_flags(p, connect_timeout=True, device=True)
         _solver_flags(p)
         if name != "dmr":
             _law_flag(p, elements=name == "opa")

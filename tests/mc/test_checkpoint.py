@@ -49,13 +49,13 @@ def chunk_files(directory) -> list[str]:
 def counted(monkeypatch):
     """The chunks computed (not loaded), by their first sample."""
     computed = []
-    original = _ensemble.run_chunk
+    original = _ensemble.integrate_chunk
 
-    def run_chunk(y0, xi, *args, **kwargs):
+    def integrate_chunk(y0, xi, *args, **kwargs):
         computed.append(len(xi))
         return original(y0, xi, *args, **kwargs)
 
-    monkeypatch.setattr(_ensemble, "run_chunk", run_chunk)
+    monkeypatch.setattr(_ensemble, "integrate_chunk", integrate_chunk)
     return computed
 
 

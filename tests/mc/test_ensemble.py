@@ -534,7 +534,7 @@ def test_bad_input_names_the_parameter_and_the_value(kwargs, message):
          r"^x_coef needs 790.6 KiB \(order \+ 1 = 501 coefficients x 101 outputs, running "
          r"sum and a chunk's\), more than the memory budget of 512 KiB"),
         (dict(samples=4096, chunk_size=4096),
-         r"^a chunk of paths needs 12.6 MiB \(chunk_size 4096 x 101 outputs"),
+         r"^a chunk of paths needs 18.9 MiB \(chunk_size 4096 x 101 outputs"),
         (dict(samples=256, sampler="sobol", order=40, chunk_size=64),
          r"^x_coef_sem needs 1.1 MiB \(\(replicates 16 \+ 1\) x order \+ 1 = 41 "
          r"coefficients x 101 outputs, running sums and a chunk's\), more than the memory "

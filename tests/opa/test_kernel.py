@@ -67,7 +67,21 @@ def test_the_kernel_imports_nothing_from_the_package():
         elif isinstance(node, ast.ImportFrom):
             assert node.level == 0, "relative import in the kernel"
             imported.add(node.module.split(".")[0])
-    assert imported <= {"__future__", "numpy", "numba"}, imported
+    assert imported <= {"__future__", "math", "numpy", "numba"}, imported
+
+
+def test_cuda_kernels_live_only_in_the_gpu_module():
+    """``opa/_gpu.py`` holds the only CUDA kernels; every function they run on a GPU thread
+    is the kernel module's own (``integrate_with``), compiled again for the device."""
+    users = []
+    for path in package_modules():
+        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+            if isinstance(node, ast.Attribute) and node.attr == "jit" and \
+                    isinstance(node.value, ast.Name) and node.value.id == "cuda":
+                users.append(str(path.relative_to(ROOT)))
+    assert sorted(set(users)) == ["opa/_gpu.py"]
+    source = (ROOT / "opa" / "_gpu.py").read_text()
+    assert "K.integrate_with" in source and "def integrate_with" not in source
 
 
 def test_the_layout_indices_are_a_permutation():

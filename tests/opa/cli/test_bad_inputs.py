@@ -704,7 +704,7 @@ def test_adaptive_element_flags_act_under_their_new_name(capsys, tmp_path, monke
 
 _VALUES = ["0", "1", "2", "2.5", "-1", "1e-300", "1e300", "nan", "inf", "-inf", "x", "",
            "9007199254740993", "0.5", "8", "3.98", "adaptive", "beta:2,3", "gauss",
-           "tcp://127.0.0.1:1"]
+           "tcp://127.0.0.1:1", "cuda"]
 _FLAGS = {
     "simulate dmr": ["--periods", "--per-period", "--omega", "--c", "--eta", "--x0", "--F0",
                      "--impulse", "--pulse-width", "--rtol", "--max-step", "--sigma",
@@ -715,7 +715,7 @@ _FLAGS = {
                      "--quiet"],
     "simulate mc": ["--periods", "--samples", "--sampler", "--seed", "--sigma", "--order",
                     "--distribution", "--scheduler", "--connect-timeout", "--keep-parts",
-                    "--elements", "--quiet"],
+                    "--elements", "--device", "--quiet"],
     "stability dmr": ["--benettin", "--lyapunov", "--depth", "--sigma", "--t0", "--transient",
                       "--orbit-periods", "--quiet"],
     "bifurcation dmr": ["--sweep", "--samples", "--record", "--transient", "--workers",

@@ -1,0 +1,32 @@
+#!/usr/bin/env bash
+# The checks that need the lent GPU machine (16 cores, one H100/H200), one part per call:
+#   bash benchmarks/device.sh gpu   # bench_gpu.py: agreement, ours vs diffrax vs 16 cores
+#   bash benchmarks/device.sh threads  # bench_threads.py: the MC kernel at 1..16 cores
+#   bash benchmarks/device.sh phases   # bench_phases.py: the default map at 1 and 16
+# (an optional second argument is the part's time limit in seconds)
+# The machine has no registry: the wheels that its image lacks (chaospy, numpoly,
+# netCDF4, cftime, dask, distributed and theirs) travel in .whl/ (Python 3.12 builds).
+set -u
+export NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS=0
+python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+    --target /tmp/site .whl/*.whl || exit 1
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1 MPLBACKEND=Agg XLA_PYTHON_CLIENT_PREALLOCATE=false
+OUT=${OUT:-/tmp/out}
+mkdir -p "$OUT"
+nvidia-smi --query-gpu=name,memory.total,driver_version,clocks.sm --format=csv,noheader
+nproc; uptime
+python3 -c "import numba, numpy, jax, diffrax; print('numba', numba.__version__, 'numpy', \
+numpy.__version__, 'jax', jax.__version__, 'diffrax', diffrax.__version__)"
+case "${1:-gpu}" in
+gpu)
+    timeout "${2:-420}" python3 -m pytest -q -s -p no:cacheprovider benchmarks/bench_gpu.py \
+        2>&1 | tee "$OUT/gpu.log" ;;
+threads)
+    timeout "${2:-150}" python3 -m pytest -q -s -p no:cacheprovider benchmarks/bench_threads.py \
+        -m slow 2>&1 | tee "$OUT/threads.log" ;;
+phases)
+    PHASE_COUNTS=${PHASE_COUNTS:-1,16} timeout "${2:-330}" python3 -m pytest -q -s \
+        -p no:cacheprovider benchmarks/bench_phases.py -m slow 2>&1 | tee "$OUT/phases.log" ;;
+esac
+cp benchmarks/results/gpu.json "$OUT/" 2>/dev/null
+uptime
