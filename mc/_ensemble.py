@@ -26,6 +26,7 @@ import dataclasses
 import math
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -39,7 +40,7 @@ from mc._control import check_control, controlled
 from mc._sampling import check_sampler, sample_xi
 from opa.engine import (
     IMPULSE_FIELDS, as_system, chebyshev_u, check_device, check_instance, check_memory, digest,
-    orthonormal, require_gpu,
+    orthonormal, require_gpu, add_true_system_work, true_system_work,
     Oscillator, output_times, package_version, provenance_attrs, run_batch, SimulationError,
     SolverOptions, System, time_coord,
 )
@@ -554,11 +555,19 @@ class _Chunks:
         return self.reduce(i, self.integrate(i))
 
     def integrate(self, i: int):
+        """Chunk i's runs, and the true-system work they were (counted in the thread
+        that ran them: ``reduce`` adds it to the thread that asked)."""
         lo, hi = self.bounds[i]
         times, system, options = self.args[:3]
-        return integrate_chunk(self.y0, self.xi[lo:hi], times, system, options, self.device)
+        runs, time_units = true_system_work()
+        batch = integrate_chunk(self.y0, self.xi[lo:hi], times, system, options, self.device)
+        after = true_system_work()
+        return batch, (after[0] - runs, after[1] - time_units), threading.get_ident()
 
-    def reduce(self, i: int, batch):
+    def reduce(self, i: int, integrated):
+        batch, work, thread = integrated
+        if thread != threading.get_ident():
+            add_true_system_work(*work)
         lo, hi = self.bounds[i]
         times, system, options, order, keep_paths, recurrence = self.args
         return reduce_chunk(batch, self.xi[lo:hi], self.w[lo:hi], self.rep[lo:hi],

@@ -543,6 +543,13 @@ def true_system_work() -> tuple[int, float]:
     return getattr(_WORK, "runs", 0), getattr(_WORK, "time", 0.0)
 
 
+def add_true_system_work(runs: int, time: float) -> None:
+    """Count in this thread true-system work done for it in another (a helper thread that
+    integrates ahead: ``mc``'s chunk pipeline)."""
+    _WORK.runs = getattr(_WORK, "runs", 0) + int(runs)
+    _WORK.time = getattr(_WORK, "time", 0.0) + float(time)
+
+
 def _count(dim: int, p: np.ndarray, times, fresh: bool) -> None:
     if dim != 2 or not len(times):
         return

@@ -45,8 +45,8 @@ from opa._model import (
     preset,
     time_grid,
 )
-from opa._run import STATUS_NAMES, SimulationError, output_times, run_batch, \
-    true_system_work
+from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, output_times, \
+    run_batch, true_system_work
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
     CHATTER_WINDOW,
@@ -66,8 +66,8 @@ from opa.dynamics._sections import identify_motion, mean_state, phase_section
 from opa.dynamics._sweep import local_executor, locate_setup, summary_lines, sweep, sweep_times
 
 __all__ = [
-    "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS",
-    "MAX_CYCLE",
+    "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
+    "add_true_system_work",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
     "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",

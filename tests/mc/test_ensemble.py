@@ -548,3 +548,30 @@ def test_sizes_beyond_the_memory_budget_are_refused_up_front(monkeypatch, kwargs
     arguments = dict(sigma=SIGMA, sampler="random", seed=0, periods=1, per_period=100)
     with pytest.raises(ValueError, match=message):
         mc.simulate_mc(SECTION_32, **{**arguments, **kwargs})
+
+
+def test_pipelined_chunks_count_their_runs_in_the_calling_thread():
+    """The chunks are integrated on a helper thread while the last is reduced; every
+    sample's run is still counted in the thread that asked (``true_system_work``), and
+    the result equals the same chunks run one after the other in this thread."""
+    from opa.engine import true_system_work
+
+    osc = opa.Oscillator(omega=3.98)
+    kw = dict(sigma=0.02, samples=64, sampler="random", seed=5, periods=3, per_period=2,
+              chunk_size=16, progress=False)
+    runs, time_units = true_system_work()
+    ds = mc.simulate_mc(osc, **kw)
+    after = true_system_work()
+    assert after[0] - runs == 64
+    assert after[1] - time_units == pytest.approx(64 * 3 * 2 * np.pi / 3.98, rel=1e-12)
+    from mc import _ensemble
+
+    chunks = [_ensemble.run_chunk(np.array([osc.x0, osc.v0]), ds.xi.values[lo:lo + 16],
+                                  ds.weight.values[lo:lo + 16], np.zeros(16, int), 1,
+                                  ds.time.values, opa.System(osc, sigma=0.02),
+                                  opa.SolverOptions(), ds.attrs.get("order", 4), False)[0]
+              for lo in range(0, 64, 16)]
+    total = chunks[0]
+    for c in chunks[1:]:
+        total = total.merge(c)
+    np.testing.assert_array_equal(total.x_mean, ds.x_mean.values)
