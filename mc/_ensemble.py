@@ -604,15 +604,20 @@ class _Chunks:
         kernel's parallel batch, or the GPU's launch) while this one reduces the last, so
         the serial reduction no longer idles the kernel's threads. Every integration runs
         on that one thread (never two parallel batches at once); chunks are reduced and
-        merged in order, so the result is the sequential one to the bit."""
+        merged in order, so the result is the sequential one to the bit. numba's thread
+        count is per thread: the helper takes this thread's (a map's worker process sets
+        its share of the cores)."""
         from concurrent.futures import ThreadPoolExecutor
 
+        import numba
         from tqdm.auto import tqdm
 
         todo = [i for i in range(len(self.bounds)) if i not in self.finished]
         with tqdm(total=len(self.xi), initial=self.done_samples(), unit="sample",
                   disable=not progress, desc="Monte Carlo") as bar, \
-                ThreadPoolExecutor(1, thread_name_prefix="opa-mc-chunks") as ahead:
+                ThreadPoolExecutor(1, thread_name_prefix="opa-mc-chunks",
+                                   initializer=numba.set_num_threads,
+                                   initargs=(numba.get_num_threads(),)) as ahead:
             pending = {}
             try:
                 for i, (lo, hi) in enumerate(self.bounds):

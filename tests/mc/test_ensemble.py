@@ -575,3 +575,28 @@ def test_pipelined_chunks_count_their_runs_in_the_calling_thread():
     for c in chunks[1:]:
         total = total.merge(c)
     np.testing.assert_array_equal(total.x_mean, ds.x_mean.values)
+
+
+def test_the_pipeline_integrates_with_the_callers_numba_thread_count(monkeypatch):
+    """numba's thread count is per thread: the helper that integrates the chunks takes the
+    caller's (a map's worker process runs on its share of the cores)."""
+    import numba
+
+    from mc import _ensemble
+
+    seen = []
+    original = _ensemble.integrate_chunk
+
+    def integrate_chunk(*args, **kwargs):
+        seen.append(numba.get_num_threads())
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(_ensemble, "integrate_chunk", integrate_chunk)
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        mc.simulate_mc(opa.Oscillator(), sigma=0.01, samples=32, periods=1, chunk_size=8,
+                       progress=False)
+    finally:
+        numba.set_num_threads(before)
+    assert seen == [1, 1, 1, 1]
