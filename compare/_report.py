@@ -1080,10 +1080,40 @@ def wall_text(seconds: dict) -> str:
     return f"{seconds['total']:.1f} s" + (f" ({parts})" if parts else "")
 
 
+FIGURES = (("trust_map.png", plot_map), ("error_vs_N.png", plot_error_vs_order),
+           ("mean_vs_mc.png", plot_mean), ("variance.png", plot_variance),
+           ("phase.png", plot_phase))
+
+
+def draw_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1) -> list[str]:
+    """The report's figures (:data:`FIGURES`, then the frontier's when the map has one),
+    drawn in this process or, with ``workers`` > 1, side by side on that many processes
+    of :func:`opa.engine.local_executor` (each figure depends on ``ds`` alone; the files
+    are the same either way). Returns the written paths in the order of the figures."""
+    jobs = [(fn, ds, os.path.join(outdir, name)) for name, fn in FIGURES]
+    conv = frontier_dataset(ds)
+    if conv is not None:
+        jobs.append((plot_frontier, conv, os.path.join(outdir, "frontier.png")))
+    if workers <= 1:
+        done = [fn(data, path) for fn, data, path in jobs]
+    else:
+        from opa.engine import local_executor
+
+        with local_executor(min(int(workers), len(jobs))) as pool:
+            futures = [pool.submit(fn, data, path) for fn, data, path in jobs]
+            done = [f.result() for f in futures]
+    paths = []
+    for written in done:
+        paths += [written] if isinstance(written, str) else list(written)
+    return paths
+
+
 def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
                  command: str = "opa-mc validate", started: float | None = None,
-                 timing: dict | None = None) -> list[str]:
+                 timing: dict | None = None, workers: int = 1) -> list[str]:
     """Write summary.md and the figures; returns the written paths.
+
+    ``workers``: processes that draw the figures side by side (:func:`draw_figures`).
 
     ``started``: the ``time.perf_counter()`` reading at which the command started, the
     same clock as ``run_validation(started=...)``: summary.md then gives the time from it
@@ -1095,14 +1125,7 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     os.makedirs(outdir, exist_ok=True)
     paths = []
     if plots:
-        paths += plot_map(ds, os.path.join(outdir, "trust_map.png"))
-        paths += plot_error_vs_order(ds, os.path.join(outdir, "error_vs_N.png"))
-        paths += plot_mean(ds, os.path.join(outdir, "mean_vs_mc.png"))
-        paths += plot_variance(ds, os.path.join(outdir, "variance.png"))
-        paths += plot_phase(ds, os.path.join(outdir, "phase.png"))
-        conv = frontier_dataset(ds)
-        if conv is not None:
-            paths.append(plot_frontier(conv, os.path.join(outdir, "frontier.png")))
+        paths += draw_figures(ds, outdir, workers=workers)
     a = ds.attrs
     seconds = {"total": float(a["wall_seconds"])}
     if started is not None:
@@ -1176,7 +1199,8 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     return [md] + paths
 
 
-__all__ = ["best_variant", "boundary_table", "cause", "first_screen", "run_failures",
+__all__ = ["best_variant", "boundary_table", "cause", "draw_figures", "first_screen",
+           "run_failures",
            "short_cause", "wall_text", "bullet", "process_started", "complete_within",
            "count_table", "findings",
            "frontier_dataset", "frontier_lines", "nearest_crossing", "nearest_split",

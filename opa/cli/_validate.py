@@ -198,8 +198,10 @@ def cmd_validate(args) -> int:
     ds = run_validation(cfg, progress=not args.quiet, log=log, started=start)
     command = "opa-mc " + shlex.join(getattr(args, "argv", ["validate"]))
     timing: dict = {}
+    # the figures side by side on the map's processes (its fork server is started then)
+    figures = cfg.processes if cfg.scheduler is None and cfg.processes > 1 else 1
     written = write_report(ds, cfg.outdir, plots=cfg.plots, command=command, started=start,
-                           timing=timing)
+                           timing=timing, workers=figures)
     print("\n".join(first_screen(ds)))
     print()
     for h in range(ds.sizes["horizon"]):

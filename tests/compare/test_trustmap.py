@@ -3,6 +3,7 @@ netCDF round trip, resume from parts/, the report, the configuration and the CLI
 
 import math
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -314,6 +315,25 @@ def test_report_files_and_tables(tiny):
     assert (f"computed: {a['mc_runs_computed']} Monte Carlo runs, {a['opa_runs_computed']} "
             f"OPA runs, {a['parts_computed']} parts in all") in text
     assert a["parts_computed"] > a["mc_runs_computed"] > 0 and a["opa_runs_computed"] > 0
+
+
+def test_figures_drawn_on_two_processes_are_the_same_files(tiny, tmp_path):
+    """``write_report(workers=2)`` draws the figures side by side on worker processes:
+    the same PNG bytes as drawn in this process, in the same order."""
+    import hashlib
+
+    from compare._report import draw_figures
+
+    _, ds, _ = tiny
+    (tmp_path / "one").mkdir()
+    (tmp_path / "two").mkdir()
+    one = draw_figures(ds, str(tmp_path / "one"))
+    two = draw_figures(ds, str(tmp_path / "two"), workers=2)
+    assert [os.path.basename(p) for p in one] == [os.path.basename(p) for p in two]
+    assert len(one) >= 5
+    for a, b in zip(one, two):
+        assert hashlib.sha256(Path(a).read_bytes()).digest() == \
+            hashlib.sha256(Path(b).read_bytes()).digest(), a
 
 
 def test_config_errors_name_the_key(tmp_path):
