@@ -1080,17 +1080,17 @@ def wall_text(seconds: dict) -> str:
     return f"{seconds['total']:.1f} s" + (f" ({parts})" if parts else "")
 
 
-FIGURES = (("trust_map.png", plot_map), ("error_vs_N.png", plot_error_vs_order),
+REPORT_FIGURES = (("trust_map.png", plot_map), ("error_vs_N.png", plot_error_vs_order),
            ("mean_vs_mc.png", plot_mean), ("variance.png", plot_variance),
            ("phase.png", plot_phase))
 
 
 def draw_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1) -> list[str]:
-    """The report's figures (:data:`FIGURES`, then the frontier's when the map has one),
+    """The report's figures (:data:`REPORT_FIGURES`, then the frontier's when the map has one),
     drawn in this process or, with ``workers`` > 1, side by side on that many processes
     of :func:`opa.engine.local_executor` (each figure depends on ``ds`` alone; the files
     are the same either way). Returns the written paths in the order of the figures."""
-    jobs = [(fn, ds, os.path.join(outdir, name)) for name, fn in FIGURES]
+    jobs = [(fn, ds, os.path.join(outdir, name)) for name, fn in REPORT_FIGURES]
     conv = frontier_dataset(ds)
     if conv is not None:
         jobs.append((plot_frontier, conv, os.path.join(outdir, "frontier.png")))

@@ -94,7 +94,8 @@ cuda = None  # numba.cuda, imported by the first _kernels() (a module global, so
 
 @functools.cache
 def _kernels():
-    """The CUDA kernels, compiled at their first launch (about 25 s on a cold start)."""
+    """The CUDA kernels, compiled at their first launch (the first launch took 46 s on the
+    H100 machine, compilation included; ``benchmarks/bench_gpu.py``)."""
     global cuda, _integrate
     if not hasattr(np, "row_stack"):
         # numba-cuda (0.30 and before) registers an overload of np.row_stack at its first
@@ -127,9 +128,9 @@ def _kernels():
         none2 = cuda.local.array((1, _STATS), float64)
         none1 = cuda.local.array(1, float64)
         res = _integrate(z, np.int64(0), t_out, include_start, np.bool_(False), P[b],
-                               cfgs[b], nodes[b], weights[b], U[b], rtol, atol, out[b],
-                               none2[:0], none1[:0], logs[b], k1, k2, f, z_new, ztmp, z_top,
-                               f_minus, f_plus, work)
+                         cfgs[b], nodes[b], weights[b], U[b], rtol, atol, out[b], none2[:0],
+                         none1[:0], logs[b], k1, k2, f, z_new, ztmp, z_top, f_minus, f_plus,
+                         work)
         for j in range(5):
             counters[b, j] = res[j]
 
