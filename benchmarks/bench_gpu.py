@@ -24,6 +24,8 @@ trajectory-periods per second:
 
 - ``ours_moments``: ``opa._run.gpu_moments``: the kernel, the reduction on the device, the
   moments copied back;
+- ``ours_moments_blockN``: the same at 65,536 samples with N threads per block (32, 64,
+  256; the default is 128);
 - ``ours_simulate_mc``: ``mc.simulate_mc(device="cuda")``: chunks of 2^18 paths copied back
   and reduced on the CPU as every ensemble is (the statistics of ``simulate mc``);
 - ``diffrax``: ``peers.diffrax_gpu_ensemble``, ``vmap`` over all the samples of a size (one
@@ -213,6 +215,22 @@ def test_gpu_ours(setup):
         assert np.isfinite(mean).all() and np.isfinite(var).all()
         _record("ours_moments", M, setup["periods"], seconds,
                 rhs_evaluations=int(counters[:, 4].sum()))
+
+
+@needs_gpu
+def test_gpu_block_sizes(setup):
+    """Our kernel at 65,536 samples with other block sizes (``opa._gpu.THREADS``, 128 by
+    default), for the next tuning step; the default's row is ``ours_moments``."""
+    M = setup["sizes"][0]
+    default = _gpu.THREADS
+    try:
+        for threads in (32, 64, 256):
+            _gpu.THREADS = threads
+            ours_moments(1024, 2)
+            seconds, _ = _best(lambda: ours_moments(M, setup["periods"]), setup["rounds"])
+            _record(f"ours_moments_block{threads}", M, setup["periods"], seconds)
+    finally:
+        _gpu.THREADS = default
 
 
 @needs_gpu

@@ -3,6 +3,7 @@
 #   bash benchmarks/device.sh gpu   # bench_gpu.py: agreement, ours vs diffrax vs 16 cores
 #   bash benchmarks/device.sh threads  # bench_threads.py: the MC kernel at 1..16 cores
 #   bash benchmarks/device.sh phases   # bench_phases.py: the default map at 1 and 16
+#   bash benchmarks/device.sh profile  # Nsight Compute on one launch of the GPU kernel
 # (an optional second argument is the part's time limit in seconds)
 # The machine has no registry: the wheels that its image lacks (chaospy, numpoly,
 # netCDF4, cftime, dask, distributed and theirs) travel in .whl/ (Python 3.12 builds).
@@ -24,6 +25,13 @@ gpu)
 threads)
     timeout "${2:-150}" python3 -m pytest -q -s -p no:cacheprovider benchmarks/bench_threads.py \
         -m slow 2>&1 | tee "$OUT/threads.log" ;;
+profile)
+    # Nsight Compute on one launch (it reads counters on Firecracker machines; clocks left
+    # as they are); -c 2: the warm-up launch and the measured one, both reported
+    timeout "${2:-240}" ncu --clock-control none -k regex:ensemble -c 2 \
+        --section SpeedOfLight --section Occupancy --section LaunchStats \
+        --section MemoryWorkloadAnalysis python3 benchmarks/gpu_profile.py \
+        2>&1 | tee "$OUT/profile.log" ;;
 phases)
     PHASE_COUNTS=${PHASE_COUNTS:-1,16} timeout "${2:-330}" python3 -m pytest -q -s \
         -p no:cacheprovider benchmarks/bench_phases.py -m slow 2>&1 | tee "$OUT/phases.log" ;;
