@@ -6,7 +6,11 @@
 #   bash benchmarks/device.sh profile  # Nsight Compute on one launch of the GPU kernel
 # (an optional second argument is the part's time limit in seconds)
 # The machine has no registry: the wheels that its image lacks (chaospy, numpoly,
-# netCDF4, cftime, dask, distributed and theirs) travel in .whl/ (Python 3.12 builds).
+# netCDF4, cftime, dask, distributed and theirs) travel in .whl/ (Python 3.12 builds;
+# name .whl in the call's carry). Made here, with /.whl/ in .git/info/exclude:
+#   pip download --no-deps --only-binary=:all: --python-version 3.12 --implementation cp #     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 #     --platform manylinux2014_x86_64 --platform manylinux1_x86_64 -d .whl #     chaospy==4.3.21 netCDF4==1.7.5.1.post1 cftime==1.6.6.1 dask==2026.8.0 #     distributed==2026.8.0 locket==1.0.0 tblib==3.2.2 tornado==6.6.1 zict==3.0.0 #     partd==1.4.2
+#   PYENV_VERSION=3.12.1 python3.12 -m pip wheel --no-deps -w .whl numpoly==1.3.9
+# (numpoly 1.3.9 has no Python 3.12 wheel on the index: it is built here.)
 set -u
 export NUMBA_CUDA_LOW_OCCUPANCY_WARNINGS=0
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
