@@ -54,6 +54,7 @@ import pytest
 import mc
 import opa
 from benchmarks import peers
+from benchmarks.bench_peers import AGREE
 from benchmarks.conftest import smoke_mode
 from opa import _gpu, _run
 from opa._kernel import EV_STICK
@@ -188,13 +189,7 @@ def test_diffrax_gpu_agrees():
     print(f"\ndiffrax GPU vs ours, 20 periods, {AGREE_LANES} samples: means within "
           f"{diff:.3g}; "
           f"impacts {imp} vs {int(ours.impacts.sum())}")
-    assert diff <= peers_tolerance() and imp == int(ours.impacts.sum())
-
-
-def peers_tolerance() -> float:
-    from benchmarks.bench_peers import AGREE
-
-    return AGREE["mc"]
+    assert diff <= AGREE["mc"] and imp == int(ours.impacts.sum())
 
 
 def _record(name, samples, periods, seconds, **extra):

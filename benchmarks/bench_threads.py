@@ -88,16 +88,21 @@ def _processes(n: int, per: int, periods: int) -> float:
     return max(times)
 
 
-def _table(counts, per, periods) -> str:
+def _rates(counts, per, periods) -> dict:
+    """{(mode, n): trajectory-periods per second} for both ways of using n cores."""
+    return {(mode, n): n * per * periods / fn(n, per, periods)
+            for n in counts for mode, fn in (("threads", _threads), ("processes", _processes))}
+
+
+def _table(rates: dict) -> str:
     lines = ["| cores | threads: traj-periods/s | per core | efficiency | processes: "
              "traj-periods/s | per core | efficiency |", "|---|---|---|---|---|---|---|"]
-    base = {}
+    counts = sorted({n for _, n in rates})
     for n in counts:
         cells = []
-        for mode, fn in (("threads", _threads), ("processes", _processes)):
-            rate = n * per * periods / fn(n, per, periods)
-            base.setdefault(mode, rate / n)
-            cells.append(f"{rate:.3g} | {rate / n:.3g} | {rate / n / base[mode]:.2f}")
+        for mode in ("threads", "processes"):
+            rate, base = rates[(mode, n)], rates[(mode, counts[0])] / counts[0]
+            cells.append(f"{rate:.3g} | {rate / n:.3g} | {rate / n / base:.2f}")
         lines.append(f"| {n} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -118,13 +123,14 @@ def _counts(cores: int) -> list[int]:
 
 def test_threads_smoke():
     per, periods = SMOKE
-    text = _table([1, 2], per, periods)
-    print("\n" + text)
-    assert text.count("\n") == 3
+    rates = _rates([1, 2], per, periods)
+    print("\n" + _table(rates))
+    assert set(rates) == {(m, n) for m in ("threads", "processes") for n in (1, 2)}
+    assert all(0.0 < r < float("inf") for r in rates.values())
 
 
 @pytest.mark.slow
 def test_threads_scaling():
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    text = _table(_counts(cores), PER_THREAD, PERIODS)
+    text = _table(_rates(_counts(cores), PER_THREAD, PERIODS))
     print(f"\n{_lscpu()}\nload average {os.getloadavg()[0]:.2f} after the runs\n{text}")

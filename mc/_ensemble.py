@@ -290,9 +290,9 @@ def simulate_mc(
         thread per sample, each running the CPU kernel's own driver compiled for the GPU
         (:mod:`opa._gpu`, the ``gpu`` extra numba-cuda); each chunk's paths are copied
         back and reduced here as on the CPU. Chunks default to up to 2^18 samples (about
-        1 GiB of paths). The GPU's rounding differs from the CPU's in the last digits
-        (fused multiply-adds), so its results agree to the solver's accuracy, not to the
-        bit; not with ``scheduler``.
+        1 GiB of paths). Its results are not the CPU's to the bit (states within 9.3e-9
+        of them at rtol 1e-10 over 20 periods in ``benchmarks/bench_gpu.py``'s run on an
+        H100, with the same impact counts); not with ``scheduler``.
 
     Returns
     -------

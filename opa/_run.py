@@ -249,6 +249,18 @@ def step_guards(times, P) -> np.ndarray:
     return np.minimum(DEFAULT_MAX_STEPS, steps).astype(np.int64)
 
 
+def _guarded_cfgs(inputs: Inputs, times, guard: bool):
+    """(cfgs, guarded): a copy of the batch's configurations with the runaway guard as the
+    step limit of every run that keeps the default one (with ``guard``), and those limits
+    (0 for the runs not guarded)."""
+    cfgs = np.array(inputs.cfg, dtype=np.int64)
+    guarded = np.zeros(len(cfgs), np.int64)
+    if guard:
+        rows = np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS)
+        guarded[rows] = cfgs[rows, K.C_MAXSTEPS] = step_guards(times, inputs.p[rows])
+    return cfgs, guarded
+
+
 def advice(status: int) -> str:
     """What to try after a kernel status: tolerances help a collapsed step, not an escape."""
     if status in (K.ESCAPED, K.DIVERGED):
@@ -651,11 +663,7 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
     own_states = y0.ndim == 2 or not include_start
     if own_states and stop_on_failure:
         raise ValueError("stop_on_failure needs one start state and include_start")
-    cfgs = np.array(inputs.cfg, dtype=np.int64)
-    guarded = np.zeros(B, np.int64)
-    if guard:
-        rows = np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS)
-        guarded[rows] = cfgs[rows, K.C_MAXSTEPS] = step_guards(times, inputs.p[rows])
+    cfgs, guarded = _guarded_cfgs(inputs, times, guard)
     dim = y0.shape[-1]
     _count(dim, inputs.p, times, include_start)
     out = np.empty((B, len(times), dim))
@@ -694,10 +702,7 @@ def gpu_moments(inputs: Inputs, y0, times, *, rtol: float, atol: float,
     from . import _gpu
 
     times = np.ascontiguousarray(times, dtype=float)
-    cfgs = np.array(inputs.cfg, dtype=np.int64)
-    if guard:
-        rows = np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS)
-        cfgs[rows, K.C_MAXSTEPS] = step_guards(times, inputs.p[rows])
+    cfgs, _ = _guarded_cfgs(inputs, times, guard)
     y0 = np.ascontiguousarray(y0, dtype=float)
     B = len(inputs.p)
     _count(y0.shape[-1], inputs.p, times, True)
