@@ -85,9 +85,9 @@ class ValidateConfig:
     outdir: str = "results"
     plots: bool = True
     scheduler: str | None = None
-    # local processes for the swept values and the frontier (compare._scaleout): 1 runs
-    # them one after the other in this process, numba's threads sharing the cores; 0:
-    # one per core up to the number of tasks where there are at least 3 (auto_workers)
+    # local processes for the map's tasks (compare._mapflow): 1 runs the values one after
+    # the other in this process, numba's threads sharing the cores; 0: one per core up to
+    # the number of tasks, where the values and the frontier are at least 3 (auto_workers)
     workers: int = 0
     frontier: bool = True
     # the law of xi (a name of opa._measure.DISTRIBUTIONS) and the multi-element variants:
@@ -100,12 +100,17 @@ class ValidateConfig:
     @property
     def processes(self) -> int:
         """The local processes the map runs on (``workers``, 0 resolved by
-        :func:`compare._scaleout.auto_workers`)."""
+        :func:`compare._scaleout.auto_workers`: a pool where the values and the frontier
+        are at least 3, of one process per core up to the map's first tasks,
+        :func:`compare._mapflow.planned_tasks`)."""
+        from compare._mapflow import planned_tasks
         from compare._scaleout import auto_workers
 
         if self.workers:
             return int(self.workers)
-        return auto_workers(len(self.values) + bool(self.frontier))
+        if auto_workers(len(self.values) + bool(self.frontier)) == 1:
+            return 1
+        return auto_workers(planned_tasks(self))
 
     def __post_init__(self):
         self._check_law()

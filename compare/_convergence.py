@@ -109,7 +109,7 @@ def _rms(a) -> float:
 
 
 #: what a row that is not computed yet reads as while the study finds its runs
-_PENDING = {"error": math.nan, "sd_error": math.nan, "rhs": 0, "elements": 0,
+PENDING = {"error": math.nan, "sd_error": math.nan, "rhs": 0, "elements": 0,
             "seconds": 0.0}
 
 
@@ -152,7 +152,7 @@ def _run_parallel(cfg, *, log, write, workers, scheduler) -> xr.Dataset:
             known[name] = compute()
             return known[name]
         pending.append((name, compute))
-        return _PENDING
+        return PENDING
 
     while True:
         pending: list = []
@@ -524,5 +524,5 @@ def write_report(ds, outdir, *, draw, command="opa-mc converge") -> list[str]:
     return [md, png]
 
 
-__all__ = ["ConvergenceConfig", "cheapest_reaching", "run_convergence", "slope",
+__all__ = ["PENDING", "ConvergenceConfig", "cheapest_reaching", "run_convergence", "slope",
            "summary_lines", "table", "write_report"]

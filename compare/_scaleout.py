@@ -20,6 +20,7 @@ the bit wherever it runs, and the map assembled from them is the same.
 from __future__ import annotations
 
 import os
+from collections import deque
 from collections.abc import Callable, Iterator
 
 
@@ -73,40 +74,77 @@ def auto_workers(tasks: int, cores: int | None = None) -> int:
 
 def run_tasks(tasks: list[tuple[object, Callable, tuple]], *, workers: int = 1,
               scheduler=None) -> Iterator[tuple[object, object]]:
-    """Run ``tasks`` = [(key, fn, args), ...]; yield (key, fn(*args)) as each finishes.
-
-    In this process one by one when ``workers`` is 1 and there is no ``scheduler``, in
-    the order given; else in the order they finish, never in this process (what a task
-    counts in its own thread is its own). A task's exception is raised here.
+    """Run ``tasks`` = [(key, fn, args), ...]; yield (key, fn(*args)) as each finishes
+    (:func:`run_flow` with no followers).
 
     >>> list(run_tasks([("a", max, (1, 2)), ("b", min, (1, 2))]))
     [('a', 2), ('b', 1)]
     """
-    if not tasks:
-        return
+    yield from run_flow(tasks, workers=min(int(workers), max(1, len(tasks))),
+                        scheduler=scheduler)
+
+
+def run_flow(tasks: list[tuple[object, Callable, tuple]],
+             follow: Callable[[object, object], list] | None = None, *, workers: int = 1,
+             scheduler=None) -> Iterator[tuple[object, object]]:
+    """Run ``tasks`` = [(key, fn, args), ...] and the tasks that become ready as they
+    finish: ``follow(key, result)``, called (here) as each finishes, returns the tasks it
+    made ready (those that needed it). Yields (key, fn(*args)) as each finishes.
+
+    Tasks start in the order given, the ones ``follow`` returned ahead of those not yet
+    started (the work the rest waits on); at most ``workers`` run at once on a local
+    pool, each process with ``cores // workers`` numba threads. With ``workers`` 1 and no
+    ``scheduler`` they run in this process, one after the other; else never in this
+    process (what a task counts in its own thread is its own). On a Dask cluster every
+    ready task is submitted at once, the followers with a higher priority. A task's
+    exception is raised here, and the tasks not yet finished are cancelled.
+
+    >>> follow = lambda key, result: [("b", abs, (-result,))] if key == "a" else []
+    >>> list(run_flow([("a", max, (1, 2))], follow))
+    [('a', 2), ('b', 2)]
+    """
+    follow = follow or (lambda key, result: [])
     if scheduler is not None:
-        yield from _run_dask(tasks, scheduler)
+        yield from _flow_dask(tasks, follow, scheduler)
         return
+    ready = deque(tasks)
     if workers <= 1:
-        for key, fn, args in tasks:
-            yield key, fn(*args)
+        while ready:
+            key, fn, args = ready.popleft()
+            result = fn(*args)
+            ready.extendleft(reversed(list(follow(key, result))))
+            yield key, result
         return
-    from concurrent.futures import as_completed
+    from concurrent.futures import FIRST_COMPLETED, wait
 
     from opa.engine import local_executor
 
-    threads = threads_per_worker(min(workers, len(tasks)))
-    with local_executor(min(workers, len(tasks))) as pool:
-        futures = {pool.submit(_threaded, threads, fn, args): key for key, fn, args in tasks}
+    workers = int(workers)
+    threads = threads_per_worker(workers)
+    running: dict = {}
+    with local_executor(workers) as pool:
         try:
-            for future in as_completed(futures):
-                yield futures[future], future.result()
+            while ready or running:
+                while ready and len(running) < workers:
+                    key, fn, args = ready.popleft()
+                    running[pool.submit(_threaded, threads, fn, args)] = key
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in sorted(done, key=lambda f: _order(running[f])):
+                    key = running.pop(future)
+                    result = future.result()
+                    ready.extendleft(reversed(list(follow(key, result))))
+                    yield key, result
         finally:
-            for future in futures:
+            for future in running:
                 future.cancel()
 
 
-def _run_dask(tasks, scheduler) -> Iterator[tuple[object, object]]:
+def _order(key) -> str:
+    """A fixed order among tasks that finish together (their keys as text)."""
+    return repr(key)
+
+
+def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
     from distributed import as_completed, Client
 
     own = not isinstance(scheduler, Client)
@@ -116,14 +154,33 @@ def _run_dask(tasks, scheduler) -> Iterator[tuple[object, object]]:
         raise ValueError(f"scheduler {scheduler!r} did not answer as a Dask scheduler "
                          f"within {CONNECT_TIMEOUT:g} s ({type(err).__name__}); check the "
                          f"address and that the scheduler runs") from None
+    keys: dict = {}
+
+    def submit(batch, priority):
+        for i, (key, fn, args) in enumerate(batch):
+            future = client.submit(_threaded, None, fn, args, pure=False,
+                                   priority=priority - i)
+            keys[future] = key
+            yield future
+
     try:
-        futures = {client.submit(_threaded, None, fn, args, pure=False): key
-                   for key, fn, args in tasks}
-        for future in as_completed(futures):
-            yield futures[future], future.result()
+        pending = as_completed(list(submit(tasks, 0)))
+        followers = 0
+        for future in pending:
+            key = keys.pop(future)
+            result = future.result()
+            more = list(follow(key, result))
+            if more:
+                followers += 1
+                for fut in submit(more, 1_000_000 * followers):
+                    pending.add(fut)
+            yield key, result
     finally:
+        for future in keys:
+            future.cancel()
         if own:
             client.close()
 
 
-__all__ = ["CONNECT_TIMEOUT", "auto_workers", "dask_threads", "run_tasks", "threads_per_worker"]
+__all__ = ["CONNECT_TIMEOUT", "auto_workers", "dask_threads", "run_flow", "run_tasks",
+           "threads_per_worker"]

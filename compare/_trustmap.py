@@ -102,6 +102,9 @@ class _Map:
         self.clock = PhaseClock()
         # (value, sigma, outputs) -> the last ensemble run there (this value only)
         self.ensembles: dict = {}
+        # what a point says of its runs (a point computed ahead of its value's task says
+        # nothing: the value's task reads it back and says it, as in one process)
+        self.point_log = log
 
     def _timed(self, phase: str, compute):
         """``compute`` with its time charged to ``phase`` (:class:`compare._phases.PhaseClock`)."""
@@ -341,7 +344,7 @@ class _Map:
                             self.measure.restrict(a, b).probability()
                             for a, b in zip(cuts[:-1], cuts[1:])])
                 if failure:
-                    self.log(f"{self._name(value, sigma)}, N = {order}: multi-element "
+                    self.point_log(f"{self._name(value, sigma)}, N = {order}: multi-element "
                              f"variant not run ({failure})")
         opa_inputs = [self._opa_inputs(value, sigma, order, times) for order in orders]
         if cfg.element_laws and cfg.nmax in orders:
@@ -623,24 +626,27 @@ class _Map:
         return {"points": points, "value": value_ds, "phase_sigma": _phase_sigma(cfg, grid)}
 
     def _run_tasks(self, bar) -> dict:
-        """The values and the frontier as tasks (:func:`compare._scaleout.run_tasks`) on
-        ``cfg.workers`` local processes or the Dask cluster ``cfg.scheduler``: what each
-        did (counts, phase seconds summed over the workers, log lines) is added here;
-        this process's wait is the phase "waiting for workers"."""
-        from compare._scaleout import run_tasks
+        """The map as a flow of small tasks (:class:`compare._mapflow.MapFlow`, run by
+        :func:`compare._scaleout.run_flow`) on ``cfg.workers`` local processes or the
+        Dask cluster ``cfg.scheduler``: what each did (counts, phase seconds summed over
+        the workers, log lines) is added here; this process's wait is the phase "waiting
+        for workers"."""
+        from compare._mapflow import MapFlow
+        from compare._scaleout import run_flow
 
         cfg = self.cfg
-        inner = _task_config(cfg)
-        tasks = [("frontier", frontier_task, (inner,))] if cfg.frontier else []
-        tasks += [(i, value_task, (inner, value)) for i, value in enumerate(cfg.values)]
+        flow = MapFlow(cfg, self.parts)
+        first = flow.first()
         where = (f"the Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
                  else f"{cfg.processes} local processes")
-        self.log(f"{len(tasks)} tasks ({len(cfg.values)} values"
-                 f"{' and the frontier' if cfg.frontier else ''}) on {where} ...")
+        self.log(f"{len(first)} tasks ({len(cfg.values)} split scans, "
+                 f"{len(cfg.values) * len(cfg.sigmas)} grid points"
+                 f"{', the frontier' if cfg.frontier else ''}), then each value's "
+                 f"bisections, on {where} ...")
         results = {}
         with self.clock("waiting for workers"):
-            for key, result in run_tasks(tasks, workers=cfg.processes,
-                                         scheduler=cfg.scheduler):
+            for key, result in run_flow(first, flow.follow, workers=cfg.processes,
+                                        scheduler=cfg.scheduler):
                 for line in result.pop("log"):
                     self.log(line)
                 work = result.pop("work")
@@ -656,9 +662,15 @@ class _Map:
                     self.clock.wall[name] = self.clock.wall.get(name, 0.0) + wall
                     self.clock.cpu[name] = self.clock.cpu.get(name, 0.0) + cpu
                     self.clock.calls[name] = self.clock.calls.get(name, 0) + calls
-                if key != "frontier":
-                    bar.update(len(cfg.sigmas))
-                results[key] = result["result"]
+                if key[0] == "point":
+                    bar.update(1)
+                elif key[0] == "value":
+                    results[key[1]] = result["result"]
+        if flow.frontier is not None:
+            if not flow.frontier.complete:
+                raise RuntimeError("the frontier's runs did not all finish")
+            with self.clock("frontier"):
+                results["frontier"] = flow.frontier.dataset()
         return results
 
     def work(self, system: tuple[int, float] = (0, 0.0)) -> dict:
@@ -683,37 +695,6 @@ class _Map:
                               ".nc")
 
 
-def _task_config(cfg: ValidateConfig) -> ValidateConfig:
-    """The configuration a task runs with: in one process, no nested pool or cluster."""
-    from dataclasses import replace
-
-    return replace(cfg, workers=1, scheduler=None)  # each task runs in one process
-
-
-def value_task(cfg: ValidateConfig, value: float) -> dict:
-    """:meth:`_Map.value_work` as a task (:mod:`compare._scaleout`)."""
-    return _task(cfg, "other", [], lambda job: job.value_work(value))
-
-
-def frontier_task(cfg: ValidateConfig) -> dict:
-    """:func:`frontier` as a task, with its runs kept in the map's parts."""
-    return _task(cfg, "frontier", ["cost-accuracy frontier at the largest sigma ..."],
-                 lambda job: frontier(cfg, parts=job.parts))
-
-
-def _task(cfg: ValidateConfig, phase: str, lines: list[str], work) -> dict:
-    """``work(job)`` on a fresh :class:`_Map` with its time charged to ``phase``: its
-    result, what it computed (``work``: counts, phases, the true systems integrated in
-    this thread) and its log lines."""
-    job = _Map(cfg, progress=False, log=lines.append)
-    before = true_system_work()
-    with job.clock(phase):
-        result = work(job)
-    after = true_system_work()
-    return {"result": result, "log": lines,
-            "work": job.work((after[0] - before[0], after[1] - before[1]))}
-
-
 FRONTIER_BUDGETS = (8, 16, 32, 64)
 FRONTIER_SAMPLES = (256, 512, 1024, 2048, 4096, 8192)
 #: true systems of the frontier's reference, a control variate on the adaptive ME-OPA of
@@ -722,18 +703,12 @@ FRONTIER_SAMPLES = (256, 512, 1024, 2048, 4096, 8192)
 FRONTIER_REFERENCE = 4096
 
 
-def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
-    """Cost against accuracy at the first swept value, the largest sigma and the first
-    horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element
-    OPA (mean and
-    saltation laws, element budgets 8..64), multi-element collocation, single-element
-    collocation, MC, scrambled Sobol and control variates, against the control-variate
-    estimate of ``FRONTIER_REFERENCE`` true systems on the adaptive ME-OPA of 64 elements
-    (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``.
-    With ``parts``, every run of the study is kept there (``frontier_<run>_<key>.npz``)."""
-    from compare._convergence import ConvergenceConfig, run_convergence
+def frontier_study(cfg: ValidateConfig):
+    """The :class:`compare._convergence.ConvergenceConfig` of the map's frontier
+    (:func:`frontier`)."""
+    from compare._convergence import ConvergenceConfig
 
-    conv = ConvergenceConfig(
+    return ConvergenceConfig(
         oscillator=cfg.oscillator_at(cfg.values[0]), options=cfg.options,
         sigma=float(max(cfg.sigmas)), uncertain=cfg.uncertain, periods=cfg.horizons[0],
         per_period=cfg.per_period, order=1, orders=tuple(sorted({0, 1, cfg.nmax})),
@@ -743,11 +718,29 @@ def frontier(cfg: ValidateConfig, parts: Store | None = None) -> xr.Dataset:
         outdir=cfg.outdir,
         allow_negative=True, impulse=cfg.impulse, pulse_width=cfg.pulse_width,
         impulse_at_zero=cfg.impulse_at_zero, distribution=cfg.distribution)
-    memo = None
+
+
+def frontier_part(run: str) -> str:
+    """The name of the part that keeps the frontier's run ``run``."""
+    return f"frontier_{run}"
+
+
+def frontier(cfg: ValidateConfig, parts: Store | None = None, memo=None) -> xr.Dataset:
+    """Cost against accuracy at the first swept value, the largest sigma and the first
+    horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element
+    OPA (mean and
+    saltation laws, element budgets 8..64), multi-element collocation, single-element
+    collocation, MC, scrambled Sobol and control variates, against the control-variate
+    estimate of ``FRONTIER_REFERENCE`` true systems on the adaptive ME-OPA of 64 elements
+    (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``.
+    With ``parts``, every run of the study is kept there (``frontier_<run>_<key>.npz``);
+    ``memo`` (:func:`compare._convergence.run_convergence`'s) instead gives the runs."""
+    from compare._convergence import run_convergence
+
     if parts is not None:
         def memo(run, spec, compute):
-            return parts.get(f"frontier_{run}", spec, compute)
-    ds = run_convergence(conv, log=lambda *a: None, write=False, memo=memo)
+            return parts.get(frontier_part(run), spec, compute)
+    ds = run_convergence(frontier_study(cfg), log=lambda *a: None, write=False, memo=memo)
     out = ds.rename({name: f"frontier_{name}" for name in ds.data_vars} | {"run": "frontier_run"})
     out.attrs = {"frontier_" + k: v for k, v in ds.attrs.items()
                  if k in ("sigma", "periods", "reference_samples", "reference_sem",

@@ -6,7 +6,7 @@ import pytest
 import xarray as xr
 
 from compare._config import load_config
-from compare._scaleout import auto_workers, run_tasks, threads_per_worker
+from compare._scaleout import auto_workers, run_flow, run_tasks, threads_per_worker
 from compare._trustmap import run_validation
 from tests.compare.test_parts import RUN_ATTRS
 
@@ -78,7 +78,8 @@ def test_a_pool_of_processes_gives_the_same_map(one_process, tmp_path):
     lines = []
     pooled = run_validation(cfg, progress=False, log=lines.append)
     assert pooled.attrs["ran_on"] == "2 local processes"
-    assert any("2 tasks (2 values) on 2 local processes" in line for line in lines)
+    assert any("8 tasks (2 split scans, 6 grid points), then each value's bisections, "
+               "on 2 local processes" in line for line in lines)
     assert_same_map(one_process, pooled)
     # the work done is counted wherever it ran
     for name in ("true_runs_computed", "mc_runs_computed", "opa_runs_computed"):
@@ -181,3 +182,43 @@ def test_a_map_killed_on_its_pool_leaves_nothing_and_resumes(one_process, tmp_pa
     resumed = run_validation(cfg, progress=False, log=lambda *a: None)
     assert 0 < resumed.attrs["parts_computed"] < one_process.attrs["parts_computed"]
     assert_same_map(one_process, resumed)
+
+
+def _negate(x):
+    return -x
+
+
+def _follow_chain(key, result):
+    """a -> b: each finished "a" task makes a "b" task ready."""
+    return [(("b", key[1]), _negate, (result,))] if key[0] == "a" else []
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_run_flow_runs_what_each_task_makes_ready(workers):
+    tasks = [(("a", i), abs, (-i,)) for i in range(4)]
+    got = dict(run_flow(tasks, _follow_chain, workers=workers))
+    assert got == {**{("a", i): i for i in range(4)}, **{("b", i): -i for i in range(4)}}
+
+
+def test_run_flow_starts_what_a_task_made_ready_ahead_of_the_rest():
+    """In one process the order is fixed: b 0 runs right after a 0, before a 1."""
+    tasks = [(("a", i), abs, (-i,)) for i in range(3)]
+    order = [key for key, _ in run_flow(tasks, _follow_chain)]
+    assert order == [("a", 0), ("b", 0), ("a", 1), ("b", 1), ("a", 2), ("b", 2)]
+
+
+def test_run_flow_on_a_dask_cluster_runs_the_followers():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                  dashboard_address=":0") as cluster:
+        tasks = [(("a", i), abs, (-i,)) for i in range(3)]
+        got = dict(run_flow(tasks, _follow_chain, scheduler=cluster.scheduler_address))
+    assert got == {**{("a", i): i for i in range(3)}, **{("b", i): -i for i in range(3)}}
+
+
+def test_a_failed_follower_reaches_the_caller():
+    def follow(key, result):
+        return [("bad", _fail, ())] if key == "a" else []
+
+    with pytest.raises(ValueError, match="math domain"):
+        dict(run_flow([("a", abs, (1,)), ("c", abs, (2,))], follow, workers=2))

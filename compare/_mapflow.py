@@ -1,0 +1,227 @@
+"""The trust map as a flow of small tasks, for a local process pool or a Dask cluster.
+
+One task per swept value leaves most workers idle past a handful of cores: the default
+map has 5 values and the frontier. :class:`MapFlow` cuts the same work finer, into tasks
+that share nothing but the parts folder (:class:`opa._dataset.Store`):
+
+* first, all independent of each other: the split scan of every value
+  (:func:`splits_task`), every grid point (value, sigma) with its OPA runs and its Monte
+  Carlo rounds (:func:`point_task`), and the frontier's reference;
+* as they finish, the tasks they make ready (:func:`compare._scaleout.run_flow` starts
+  these ahead of the rest): a value whose split scan and grid points are all done gets
+  its value task (:func:`value_task`), which reads them back from the parts, bisects its
+  sigma* and assembles its datasets (:meth:`compare._trustmap._Map.value_work`); the
+  frontier's runs once its reference is known (:class:`FrontierRuns`), and those that
+  need the edges of earlier runs once these are known.
+
+Each task writes what it computes as parts and returns it read back from its file, and
+the value tasks and the frontier read those parts, so the map assembled here is the
+one-process map to the bit, wherever the tasks ran.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import xarray as xr
+
+from compare._config import ValidateConfig
+from compare._convergence import PENDING, run_convergence
+from compare._trustmap import _Map, frontier, frontier_part, frontier_study
+from opa.engine import Store, true_system_work
+
+#: frontier runs that share one computation run as one task: the control-variate rows
+#: each use the same adaptive ME-OPA control run, done once per task
+SHARED_RUNS = ("CV-",)
+
+
+class _Found(Exception):
+    """Every run a frontier task was given is done: the rest of the study's walk is not
+    needed."""
+
+
+class _NoReference(Exception):
+    """The study's walk needs the reference before it can name any other run."""
+
+
+def task_config(cfg: ValidateConfig) -> ValidateConfig:
+    """The configuration a task runs with: in one process, no nested pool or cluster."""
+    return replace(cfg, workers=1, scheduler=None)
+
+
+def _task(cfg: ValidateConfig, phase: str, work, *, quiet_points: bool = False) -> dict:
+    """``work(job)`` on a fresh :class:`compare._trustmap._Map` with its time charged to
+    ``phase``: its result, what it computed (``work``: counts, phases, the true systems
+    integrated in this thread) and its log lines. ``quiet_points``: the points' own
+    lines are left to the value task that reads them back."""
+    lines: list[str] = []
+    job = _Map(cfg, progress=False, log=lines.append)
+    if quiet_points:
+        job.point_log = lambda line: None
+    before = true_system_work()
+    with job.clock(phase):
+        result = work(job)
+    after = true_system_work()
+    return {"result": result, "log": lines,
+            "work": job.work((after[0] - before[0], after[1] - before[1]))}
+
+
+def splits_task(cfg: ValidateConfig, value: float) -> dict:
+    """The split scan at one swept value, kept as a part (:meth:`_Map.splits`)."""
+    def work(job):
+        job.splits(value)
+
+    return _task(cfg, "other", work)
+
+
+def point_task(cfg: ValidateConfig, value: float, sigma: float) -> dict:
+    """One grid point's OPA runs and Monte Carlo rounds, kept as parts
+    (:meth:`_Map.evaluate`)."""
+    def work(job):
+        job.evaluate(value, sigma)
+
+    return _task(cfg, "other", work, quiet_points=True)
+
+
+def value_task(cfg: ValidateConfig, value: float) -> dict:
+    """:meth:`_Map.value_work` as a task: after :func:`splits_task` and the
+    :func:`point_task` of its grid, it reads those back and bisects."""
+    return _task(cfg, "other", lambda job: job.value_work(value))
+
+
+def frontier_runs_task(cfg: ValidateConfig, runs: tuple[str, ...], known: dict) -> dict:
+    """The frontier's ``runs``, each kept as a part, given the runs ``known`` before
+    them (the reference, and the edges the adaptive collocation rows take): the study
+    is walked up to the last of them (:func:`compare._convergence.run_convergence` with
+    a ``memo``) and only those are computed."""
+    def work(job):
+        out = {}
+
+        def memo(run, spec, compute):
+            if run not in runs:
+                return known.get(run, PENDING)
+            out[run] = job.parts.get(frontier_part(run), spec, compute)
+            if len(out) == len(runs):
+                raise _Found
+            return out[run]
+
+        try:
+            run_convergence(frontier_study(cfg), log=lambda *a: None, write=False, memo=memo)
+        except _Found:
+            return out
+        raise RuntimeError(f"the frontier's study did not reach the runs "
+                           f"{sorted(set(runs) - set(out))}")
+
+    return _task(cfg, "frontier", work)
+
+
+class FrontierRuns:
+    """The frontier's runs as tasks: which are known (read back from the parts, or
+    returned by a task), which are running, and the study assembled once all are known.
+
+    The study is walked here without computing (a ``memo`` that returns what is known
+    and :data:`compare._convergence.PENDING` for the rest) to find the runs it needs:
+    first the reference alone (every row's error depends on it), then every run it makes
+    ready, then those that need their edges."""
+
+    def __init__(self, cfg: ValidateConfig, parts: Store):
+        self.cfg = cfg
+        self.parts = parts
+        self.known: dict = {}
+        self.tried: set[str] = set()  # looked for in the parts
+        self.running: set[str] = set()
+
+    def _needed(self) -> list[str]:
+        needed = []
+
+        def memo(run, spec, compute):
+            if run in self.known:
+                return self.known[run]
+            if run not in self.tried:  # a part an earlier run left
+                self.tried.add(run)
+                found = self.parts.load(frontier_part(run), spec)
+                if found is not None:
+                    self.known[run] = found
+                    return found
+            needed.append(run)
+            if run == "reference":
+                raise _NoReference
+            return PENDING
+
+        try:
+            run_convergence(frontier_study(self.cfg), log=lambda *a: None, write=False,
+                            memo=memo)
+        except _NoReference:
+            pass
+        return needed
+
+    def ready(self) -> list[tuple]:
+        """The tasks of the runs needed and not yet running."""
+        fresh = [run for run in self._needed() if run not in self.running]
+        shared = [run for run in fresh if run.startswith(SHARED_RUNS)]
+        groups = [(run,) for run in fresh if run not in shared]
+        if shared:
+            groups.append(tuple(shared))
+        known = dict(self.known)
+        tasks = []
+        for runs in groups:
+            self.running.update(runs)
+            tasks.append((("frontier", runs[0]), frontier_runs_task,
+                          (task_config(self.cfg), runs, known)))
+        return tasks
+
+    def done(self, runs: dict) -> list[tuple]:
+        """A task's runs are known; the tasks that made ready."""
+        self.known.update(runs)
+        self.running.difference_update(runs)
+        return self.ready()
+
+    @property
+    def complete(self) -> bool:
+        return not self.running and not self._needed()
+
+    def dataset(self) -> xr.Dataset:
+        """The frontier assembled from the known runs (:func:`compare._trustmap.frontier`)."""
+        return frontier(self.cfg, memo=lambda run, spec, compute: self.known[run])
+
+
+class MapFlow:
+    """The map's tasks (:func:`compare._scaleout.run_flow`): :meth:`first` are the
+    independent ones, :meth:`follow` gives those each finished task makes ready."""
+
+    def __init__(self, cfg: ValidateConfig, parts: Store):
+        self.cfg = cfg
+        self.inner = task_config(cfg)
+        # per value: its split scan and grid points not yet done
+        self.waiting = {i: 1 + len(cfg.sigmas) for i in range(len(cfg.values))}
+        self.frontier = FrontierRuns(cfg, parts) if cfg.frontier else None
+
+    def first(self) -> list[tuple]:
+        cfg, inner = self.cfg, self.inner
+        tasks = self.frontier.ready() if self.frontier is not None else []
+        tasks += [(("splits", i), splits_task, (inner, value))
+                  for i, value in enumerate(cfg.values)]
+        tasks += [(("point", i, j), point_task, (inner, value, float(sigma)))
+                  for i, value in enumerate(cfg.values) for j, sigma in enumerate(cfg.sigmas)]
+        return tasks
+
+    def follow(self, key, result: dict) -> list[tuple]:
+        kind = key[0]
+        if kind == "frontier":
+            return self.frontier.done(result["result"])
+        if kind in ("splits", "point"):
+            i = key[1]
+            self.waiting[i] -= 1
+            if not self.waiting[i]:
+                return [(("value", i), value_task, (self.inner, self.cfg.values[i]))]
+        return []
+
+
+def planned_tasks(cfg: ValidateConfig) -> int:
+    """The tasks a map starts with (:meth:`MapFlow.first`, the frontier's reference
+    counted as one): what :func:`compare._scaleout.auto_workers` shares the cores among."""
+    return len(cfg.values) * (1 + len(cfg.sigmas)) + bool(cfg.frontier)
+
+
+__all__ = ["FrontierRuns", "MapFlow", "SHARED_RUNS", "frontier_runs_task", "planned_tasks",
+           "point_task", "splits_task", "task_config", "value_task"]

@@ -1,0 +1,86 @@
+"""The trust map as a flow of small tasks (compare._mapflow): which tasks come first,
+which each one makes ready, and that the map they give is the one-process map."""
+
+import pytest
+
+from compare._config import load_config
+from compare._mapflow import SHARED_RUNS, FrontierRuns, MapFlow, planned_tasks
+from compare._trustmap import run_validation
+from opa.engine import Store
+from tests.compare.test_scaleout import assert_same_map
+
+# one swept value, two sigmas, the frontier on, short horizons
+WITH_FRONTIER = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 2), horizons=(2, 4),
+                     samples=64, max_samples=128, per_period=4, frontier=True)
+
+
+def _store(tmp_path) -> Store:
+    return Store(str(tmp_path / "parts"), "trust map")
+
+
+def test_the_first_tasks_are_independent_and_each_value_waits_for_its_grid(tmp_path):
+    cfg = load_config(None, outdir=str(tmp_path), values=(3.98, 4.09), sigmas=(0.01, 0.02),
+                      frontier=False)
+    flow = MapFlow(cfg, _store(tmp_path))
+    first = flow.first()
+    assert [key for key, _, _ in first] == [
+        ("splits", 0), ("splits", 1), ("point", 0, 0), ("point", 0, 1), ("point", 1, 0),
+        ("point", 1, 1)]
+    assert len(first) == planned_tasks(cfg)
+    # value 1 is ready once its split scan and both its points are done, not before
+    assert flow.follow(("point", 1, 0), {}) == []
+    assert flow.follow(("splits", 1), {}) == []
+    assert flow.follow(("point", 0, 0), {}) == []
+    (key, _, args), = flow.follow(("point", 1, 1), {})
+    assert key == ("value", 1) and args[1] == 4.09
+    assert args[0].workers == 1 and args[0].scheduler is None  # no pool inside a task
+
+
+def test_the_frontier_asks_for_its_reference_alone_first(tmp_path):
+    cfg = load_config(None, outdir=str(tmp_path), **WITH_FRONTIER)
+    runs = FrontierRuns(cfg, _store(tmp_path))
+    (key, _, args), = runs.ready()
+    assert key == ("frontier", "reference") and args[1] == ("reference",)
+    assert runs.ready() == []  # running: not asked for twice
+    assert not runs.complete
+
+
+def test_the_frontier_rows_come_once_the_reference_is_known(tmp_path):
+    """After the reference, every row that needs no other run is ready at once; the
+    control-variate rows share one task (their control run)."""
+    cfg = load_config(None, outdir=str(tmp_path), **WITH_FRONTIER)
+    runs = FrontierRuns(cfg, _store(tmp_path))
+    runs.ready()
+    tasks = runs.done({"reference": {"x_mean": 0.0, "x_var": 1.0, "x_sem": 0.0,
+                                     "seconds": 0.0, "rhs": 0}})
+    groups = [args[1] for _, _, args in tasks]
+    shared = [g for g in groups if g[0].startswith(SHARED_RUNS)]
+    assert len(shared) == 1 and len(shared[0]) > 1
+    assert all(len(g) == 1 for g in groups if g not in shared)
+    names = [name for g in groups for name in g]
+    assert len(names) == len(set(names)) and "reference" not in names
+    assert any(name.startswith("ME-OPA-adaptive") for name in names)
+    # the collocation rows on the adaptive runs' edges wait for those runs
+    assert not any(name.startswith("ME-collocation-adaptive") for name in names)
+
+
+@pytest.fixture(scope="module")
+def one_process_with_frontier(tmp_path_factory):
+    cfg = load_config(None, outdir=str(tmp_path_factory.mktemp("one")), workers=1,
+                      **WITH_FRONTIER)
+    return run_validation(cfg, progress=False, log=lambda *a: None)
+
+
+def test_the_frontier_as_tasks_gives_the_one_process_map(one_process_with_frontier,
+                                                          tmp_path):
+    cfg = load_config(None, outdir=str(tmp_path), workers=2, **WITH_FRONTIER)
+    pooled = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert pooled.attrs["ran_on"] == "2 local processes"
+    assert "frontier_error" in pooled
+    assert_same_map(one_process_with_frontier, pooled)
+    for name in ("true_runs_computed", "mc_runs_computed", "opa_runs_computed"):
+        assert pooled.attrs[name] == one_process_with_frontier.attrs[name], name
+    # a rerun finds every task's parts, the frontier's runs among them
+    again = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert again.attrs["parts_computed"] == 0
+    assert_same_map(one_process_with_frontier, again)
