@@ -28,6 +28,14 @@ from collections.abc import Callable, Iterator
 CONNECT_TIMEOUT = 5.0
 
 
+def usable_cores() -> int:
+    """The cores this process may run on: its CPU affinity (``taskset``, a container's
+    cpuset) where the system tells it, else every core of the machine."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
+
+
 def _threaded(threads: int | None, fn: Callable, args: tuple):
     """``fn(*args)`` with ``threads`` numba threads for the calling thread (None: on a
     Dask worker, :func:`dask_threads`)."""
@@ -52,12 +60,12 @@ def dask_threads() -> int:
                     if address.rsplit(":", 1)[0] == host) or worker.state.nthreads
     except (ImportError, ValueError, AttributeError, KeyError, OSError):
         return 1
-    return max(1, (os.cpu_count() or 1) // max(1, slots))
+    return max(1, usable_cores() // max(1, slots))
 
 
 def threads_per_worker(workers: int) -> int:
     """numba threads of each of ``workers`` local processes: the cores shared out."""
-    return max(1, (os.cpu_count() or 1) // max(1, int(workers)))
+    return max(1, usable_cores() // max(1, int(workers)))
 
 
 def auto_workers(tasks: int, cores: int | None = None) -> int:
@@ -68,7 +76,7 @@ def auto_workers(tasks: int, cores: int | None = None) -> int:
     >>> auto_workers(6, cores=2), auto_workers(6, cores=16), auto_workers(2, cores=16)
     (2, 6, 1)
     """
-    cores = (os.cpu_count() or 1) if cores is None else cores
+    cores = usable_cores() if cores is None else cores
     return min(cores, tasks) if tasks >= 3 and cores >= 2 else 1
 
 
@@ -183,4 +191,4 @@ def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
 
 
 __all__ = ["CONNECT_TIMEOUT", "auto_workers", "dask_threads", "run_flow", "run_tasks",
-           "threads_per_worker"]
+           "threads_per_worker", "usable_cores"]
