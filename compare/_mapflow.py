@@ -8,11 +8,13 @@ that share nothing but the parts folder (:class:`opa._dataset.Store`):
   (:func:`splits_task`), every grid point (value, sigma) with its OPA runs and its Monte
   Carlo rounds (:func:`point_task`), and the frontier's reference;
 * as they finish, the tasks they make ready (:func:`compare._scaleout.run_flow` starts
-  these ahead of the rest): a value whose split scan and grid points are all done gets
-  its value task (:func:`value_task`), which reads them back from the parts, bisects its
-  sigma* and assembles its datasets (:meth:`compare._trustmap._Map.value_work`); the
-  frontier's runs once its reference is known (:class:`FrontierRuns`), and those that
-  need the edges of earlier runs once these are known.
+  these ahead of the rest): a value whose grid points are all done gets the bisections
+  of its sigma*, one task per horizon (:func:`bisect_task`: the horizons' bisections
+  are independent); once these and its split scan are done, its value task
+  (:func:`value_task`) reads them back and assembles its datasets
+  (:meth:`compare._trustmap._Map.value_work`); the frontier's runs once its reference
+  is known (:class:`FrontierRuns`), and those that need the edges of earlier runs once
+  these are known.
 
 Each task writes what it computes as parts and returns it read back from its file, and
 the value tasks and the frontier read those parts, so the map assembled here is the
@@ -83,10 +85,24 @@ def point_task(cfg: ValidateConfig, value: float, sigma: float) -> dict:
     return _task(cfg, "other", work, quiet_points=True)
 
 
-def value_task(cfg: ValidateConfig, value: float) -> dict:
-    """:meth:`_Map.value_work` as a task: after :func:`splits_task` and the
-    :func:`point_task` of its grid, it reads those back and bisects."""
-    return _task(cfg, "other", lambda job: job.value_work(value))
+def bisect_task(cfg: ValidateConfig, value: float, h: int) -> dict:
+    """The bisections of horizon ``h`` at one value (:meth:`_Map.boundary_at`), after
+    the :func:`point_task` of its grid, which it reads back."""
+    def work(job):
+        job.point_log = lambda line: None  # the value task says what the grid's say
+        grid = job.grid(value)
+        job.point_log = job.log
+        return job.boundary_at(value, grid, h)
+
+    return _task(cfg, "other", work)
+
+
+def value_task(cfg: ValidateConfig, value: float, found: list) -> dict:
+    """:meth:`_Map.value_work` as a task, after :func:`splits_task`, the
+    :func:`point_task` of its grid and the :func:`bisect_task` of every horizon
+    (``found``, in horizon order): it reads those back and assembles the value's
+    datasets."""
+    return _task(cfg, "other", lambda job: job.value_work(value, found))
 
 
 def frontier_runs_task(cfg: ValidateConfig, runs: tuple[str, ...], known: dict) -> dict:
@@ -192,8 +208,11 @@ class MapFlow:
     def __init__(self, cfg: ValidateConfig, parts: Store):
         self.cfg = cfg
         self.inner = task_config(cfg)
-        # per value: its split scan and grid points not yet done
-        self.waiting = {i: 1 + len(cfg.sigmas) for i in range(len(cfg.values))}
+        values = range(len(cfg.values))
+        # per value: its grid points not yet done, its split scan done, its bisections
+        self.points = {i: len(cfg.sigmas) for i in values}
+        self.split = {i: False for i in values}
+        self.found: dict[int, dict[int, tuple]] = {i: {} for i in values}
         self.frontier = FrontierRuns(cfg, parts) if cfg.frontier else None
 
     def first(self) -> list[tuple]:
@@ -206,14 +225,26 @@ class MapFlow:
         return tasks
 
     def follow(self, key, result: dict) -> list[tuple]:
-        kind = key[0]
+        """A value's bisections, the longest horizon first, once its grid points are
+        done; its value task once these and its split scan are."""
+        kind, cfg = key[0], self.cfg
         if kind == "frontier":
             return self.frontier.done(result["result"])
-        if kind in ("splits", "point"):
-            i = key[1]
-            self.waiting[i] -= 1
-            if not self.waiting[i]:
-                return [(("value", i), value_task, (self.inner, self.cfg.values[i]))]
+        i = key[1]
+        if kind == "point":
+            self.points[i] -= 1
+            if not self.points[i]:
+                order = sorted(range(len(cfg.horizons)), key=lambda h: -cfg.horizons[h])
+                return [(("bisect", i, h), bisect_task, (self.inner, cfg.values[i], h))
+                        for h in order]
+        elif kind == "bisect":
+            self.found[i][key[2]] = result["result"]
+        elif kind == "splits":
+            self.split[i] = True
+        if kind in ("bisect", "splits") and self.split[i] \
+                and len(self.found[i]) == len(cfg.horizons):
+            found = [self.found[i][h] for h in range(len(cfg.horizons))]
+            return [(("value", i), value_task, (self.inner, cfg.values[i], found))]
         return []
 
 
@@ -223,5 +254,5 @@ def planned_tasks(cfg: ValidateConfig) -> int:
     return len(cfg.values) * (1 + len(cfg.sigmas)) + bool(cfg.frontier)
 
 
-__all__ = ["FrontierRuns", "MapFlow", "SHARED_RUNS", "frontier_runs_task", "planned_tasks",
-           "point_task", "splits_task", "task_config", "value_task"]
+__all__ = ["FrontierRuns", "MapFlow", "SHARED_RUNS", "bisect_task", "frontier_runs_task",
+           "planned_tasks", "point_task", "splits_task", "task_config", "value_task"]

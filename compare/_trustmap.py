@@ -486,13 +486,16 @@ class _Map:
                                 self._timed("split scans", compute))
         return centre, splits_from_arrays(stored)
 
-    def boundary(self, value, grid: dict[float, Point]):
+    def boundary(self, value, grid: dict[float, Point], found=None):
         """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection.
 
         A bisection of horizon h's sigma* starts from the grid's verdicts and probes with
         runs up to h only (``evaluate(..., horizon=h)``); the probes of one horizon serve
-        all its bisections. Returns the brackets, the steps, and every sigma evaluated
-        with its verdicts (variant, horizon, criterion) at N = Nmax (-1: not formed)."""
+        all its bisections, and the horizons are independent of each other
+        (:meth:`boundary_at`; ``found``: their results, computed elsewhere, in
+        ``cfg.horizons`` order). Returns the brackets, the steps, and every sigma
+        evaluated with its verdicts (variant, horizon, criterion) at N = Nmax (-1: not
+        formed)."""
         cfg = self.cfg
         k = -1  # N = Nmax; the probes run that order only
         V, H, C = len(cfg.variants), len(cfg.horizons), 2
@@ -500,41 +503,55 @@ class _Map:
         steps = np.zeros((V, H, C), dtype=np.int64)
         verdicts = {s: point.agrees[:, k].astype(np.int8) for s, point in grid.items()}
         for h in range(H):
-            probes: dict[float, Point] = dict(grid)
-            for v in range(V):
-                for c in range(C):
-                    def agrees(s, v=v, h=h, c=c):
-                        s = float(np.round(s, 12))
-                        known = probes.get(s)
-                        # a probe another bisection made may hang on the noise for this
-                        # verdict: its rounds go on (the ones done are read back)
-                        if known is None or (known.hangs[v, -1, h, c]
-                                             and known.samples * 2 <= cfg.max_samples):
-                            probes[s] = self.evaluate(value, s, orders=(cfg.nmax,),
-                                                      focus=(v, h, c), horizon=h)
-                            self._tick()
-                        return bool(probes[s].agrees[v, k, h, c])
-
-                    known = sorted(probes)
-                    for s in known:  # the probes of other bisections, decided for this one
-                        if s not in grid:
-                            agrees(s)
-                    failing = [s for s in known if not probes[s].agrees[v, k, h, c]]
-                    if not failing:
-                        star[v, h, c] = (known[-1], np.nan)  # agrees at every sigma tried
-                        continue
-                    hi = failing[0]
-                    lo = max([s for s in known if s < hi], default=0.0)
-                    with self.clock("bisection"):
-                        lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
-                    # the probes are stored under sigma rounded to 12 digits
-                    star[v, h, c] = (np.round(lo, 12), np.round(hi, 12))
-                    steps[v, h, c] = n
-            for s, point in probes.items():
-                if s not in grid:
-                    row = verdicts.setdefault(s, np.full((V, H, C), -1, np.int8))
-                    row[:, h] = point.agrees[:, k, h]
+            star[:, h], steps[:, h], rows = (self.boundary_at(value, grid, h)
+                                             if found is None else found[h])
+            for s, row_h in rows.items():
+                row = verdicts.setdefault(s, np.full((V, H, C), -1, np.int8))
+                row[:, h] = row_h
         return star, steps, verdicts
+
+    def boundary_at(self, value, grid: dict[float, Point], h: int):
+        """The bisections of horizon ``h`` (an index into ``cfg.horizons``) at one value
+        (:meth:`boundary`): the brackets (variant, criterion, 2), the steps (variant,
+        criterion), and the verdicts (variant, criterion) at N = Nmax of every sigma
+        probed that is not on the grid."""
+        cfg = self.cfg
+        k = -1
+        V, C = len(cfg.variants), 2
+        star = np.full((V, C, 2), np.nan)
+        steps = np.zeros((V, C), dtype=np.int64)
+        probes: dict[float, Point] = dict(grid)
+        for v in range(V):
+            for c in range(C):
+                def agrees(s, v=v, c=c):
+                    s = float(np.round(s, 12))
+                    known = probes.get(s)
+                    # a probe another bisection made may hang on the noise for this
+                    # verdict: its rounds go on (the ones done are read back)
+                    if known is None or (known.hangs[v, -1, h, c]
+                                         and known.samples * 2 <= cfg.max_samples):
+                        probes[s] = self.evaluate(value, s, orders=(cfg.nmax,),
+                                                  focus=(v, h, c), horizon=h)
+                        self._tick()
+                    return bool(probes[s].agrees[v, k, h, c])
+
+                known = sorted(probes)
+                for s in known:  # the probes of other bisections, decided for this one
+                    if s not in grid:
+                        agrees(s)
+                failing = [s for s in known if not probes[s].agrees[v, k, h, c]]
+                if not failing:
+                    star[v, c] = (known[-1], np.nan)  # agrees at every sigma tried
+                    continue
+                hi = failing[0]
+                lo = max([s for s in known if s < hi], default=0.0)
+                with self.clock("bisection"):
+                    lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
+                # the probes are stored under sigma rounded to 12 digits
+                star[v, c] = (np.round(lo, 12), np.round(hi, 12))
+                steps[v, c] = n
+        rows = {s: point.agrees[:, k, h] for s, point in probes.items() if s not in grid}
+        return star, steps, rows
 
     def _tick(self):
         if self.bar is not None:
@@ -602,28 +619,34 @@ class _Map:
                               else "one process")
         return ds
 
-    def value_work(self, value: float) -> dict:
+    def value_work(self, value: float, found=None) -> dict:
         """Everything at one swept value: its split scan, its grid of points, the
-        bisections of its sigma*; returns its point datasets (``points``), its value
-        dataset (``value``) and the sigma of its phase portraits (``phase_sigma``)."""
+        bisections of its sigma* (``found``: those of every horizon, computed elsewhere,
+        :meth:`boundary`); returns its point datasets (``points``), its value dataset
+        (``value``) and the sigma of its phase portraits (``phase_sigma``)."""
         cfg = self.cfg
         cdf = None if cfg.semicircle else self.measure.cdf
         self.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
                  f"{len(cfg.sigmas)} sigmas x {len(cfg.variants) * len(cfg.orders)} OPA "
                  f"runs against Monte Carlo ...")
         centre, scans = self.splits(value)
-        grid = {}
-        for sigma in cfg.sigmas:
-            grid[float(sigma)] = self.evaluate(value, float(sigma))
-            if self.bar is not None:
-                self.bar.update(1)
-        star, steps, probes = self.boundary(value, grid)
+        grid = self.grid(value)
+        star, steps, probes = self.boundary(value, grid, found)
         self.ensembles.clear()
         with self.clock("assembly"):
             points = [point_dataset(cfg, value, grid[float(s)], centre, scans, cdf)
                       for s in cfg.sigmas]
             value_ds = value_dataset(cfg, value, centre, scans, star, steps, probes)
         return {"points": points, "value": value_ds, "phase_sigma": _phase_sigma(cfg, grid)}
+
+    def grid(self, value: float) -> dict[float, Point]:
+        """The grid's points at one value (:meth:`evaluate` at every sigma)."""
+        grid = {}
+        for sigma in self.cfg.sigmas:
+            grid[float(sigma)] = self.evaluate(value, float(sigma))
+            if self.bar is not None:
+                self.bar.update(1)
+        return grid
 
     def _run_tasks(self, bar) -> dict:
         """The map as a flow of small tasks (:class:`compare._mapflow.MapFlow`, run by

@@ -27,13 +27,20 @@ def test_the_first_tasks_are_independent_and_each_value_waits_for_its_grid(tmp_p
         ("splits", 0), ("splits", 1), ("point", 0, 0), ("point", 0, 1), ("point", 1, 0),
         ("point", 1, 1)]
     assert len(first) == planned_tasks(cfg)
-    # value 1 is ready once its split scan and both its points are done, not before
+    # value 1's bisections are ready once both its points are done, the longest
+    # horizon first; its value task once they and its split scan are
     assert flow.follow(("point", 1, 0), {}) == []
-    assert flow.follow(("splits", 1), {}) == []
     assert flow.follow(("point", 0, 0), {}) == []
-    (key, _, args), = flow.follow(("point", 1, 1), {})
-    assert key == ("value", 1) and args[1] == 4.09
+    bisect = flow.follow(("point", 1, 1), {})
+    assert [key for key, _, _ in bisect] == [("bisect", 1, 1), ("bisect", 1, 0)]
+    assert cfg.horizons[1] > cfg.horizons[0]
+    _, _, args = bisect[0]
+    assert args[1:] == (4.09, 1)
     assert args[0].workers == 1 and args[0].scheduler is None  # no pool inside a task
+    assert flow.follow(("bisect", 1, 1), {"result": "long"}) == []
+    assert flow.follow(("bisect", 1, 0), {"result": "short"}) == []
+    (key, _, args), = flow.follow(("splits", 1), {})
+    assert key == ("value", 1) and args[1:] == (4.09, ["short", "long"])
 
 
 def test_the_frontier_asks_for_its_reference_alone_first(tmp_path):
