@@ -118,6 +118,9 @@ def _lscpu() -> str:
 
 
 def _counts(cores: int) -> list[int]:
+    """1, 2, 4, ... up to the cores, or the counts in $THREAD_COUNTS (e.g. "1,16")."""
+    if os.environ.get("THREAD_COUNTS"):
+        return sorted({int(n) for n in os.environ["THREAD_COUNTS"].split(",")})
     return sorted({n for n in (1, 2, 4, 8, 16, 32, 64) if n <= cores} | {cores})
 
 

@@ -94,7 +94,7 @@ def run_tasks(tasks: list[tuple[object, Callable, tuple]], *, workers: int = 1,
 
 def run_flow(tasks: list[tuple[object, Callable, tuple]],
              follow: Callable[[object, object], list] | None = None, *, workers: int = 1,
-             scheduler=None) -> Iterator[tuple[object, object]]:
+             scheduler=None, preload: tuple[str, ...] = ()) -> Iterator[tuple[object, object]]:
     """Run ``tasks`` = [(key, fn, args), ...] and the tasks that become ready as they
     finish: ``follow(key, result)``, called (here) as each finishes, returns the tasks it
     made ready (those that needed it). Yields (key, fn(*args)) as each finishes.
@@ -105,7 +105,8 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
     ``scheduler`` they run in this process, one after the other; else never in this
     process (what a task counts in its own thread is its own). On a Dask cluster every
     ready task is submitted at once, the followers with a higher priority. A task's
-    exception is raised here, and the tasks not yet finished are cancelled.
+    exception is raised here, and the tasks not yet finished are cancelled. ``preload``:
+    modules the local pool's processes get imported (:func:`opa.engine.local_executor`).
 
     >>> follow = lambda key, result: [("b", abs, (-result,))] if key == "a" else []
     >>> list(run_flow([("a", max, (1, 2))], follow))
@@ -130,7 +131,7 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
     workers = int(workers)
     threads = threads_per_worker(workers)
     running: dict = {}
-    with local_executor(workers) as pool:
+    with local_executor(workers, preload) as pool:
         try:
             while ready or running:
                 while ready and len(running) < workers:

@@ -74,6 +74,11 @@ from opa.engine import (
     time_grid, true_system_work, uniform_edges, write_netcdf,
 )
 
+#: what the map's worker processes import once, in the fork server they come from: its
+#: tasks, and the report's figures, drawn on processes of the same server
+#: (:func:`compare._report.draw_figures`)
+MAP_PRELOAD = ("compare._mapflow", "compare._report")
+
 #: a verdict hangs on the noise while OPA fails without the allowance for the noise but
 #: agrees with z + NOISE_BAND standard errors allowed (compare._trust.marginal): a
 #: disagreement more than NOISE_BAND SE past the verdict's own allowance is decided
@@ -669,7 +674,7 @@ class _Map:
         results = {}
         with self.clock("waiting for workers"):
             for key, result in run_flow(first, flow.follow, workers=cfg.processes,
-                                        scheduler=cfg.scheduler):
+                                        scheduler=cfg.scheduler, preload=MAP_PRELOAD):
                 for line in result.pop("log"):
                     self.log(line)
                 work = result.pop("work")

@@ -635,8 +635,12 @@ def _run_parallel(tasks, finish, scheduler, executor, workers) -> None:
             executor.shutdown(wait=True, cancel_futures=True)
 
 
-def local_executor(workers: int = DEFAULT_WORKERS):
+def local_executor(workers: int = DEFAULT_WORKERS, preload: tuple[str, ...] = ()):
     """A process pool for sweeps: ``workers`` processes with one numba thread each.
+
+    ``preload``: more modules for the fork server to import before it forks the first
+    worker, so that no worker imports them again (this process's first pool starts the
+    server; the ones after it share that server and its modules).
 
     Processes come from a fork server (not a plain fork, which is unsafe once numba's
     thread pool has started in this process). Reuse it across sweeps with
@@ -648,7 +652,8 @@ def local_executor(workers: int = DEFAULT_WORKERS):
     from concurrent.futures import ProcessPoolExecutor
 
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["opa.dynamics._sweep", "opa.dynamics._warm_worker"])
+    ctx.set_forkserver_preload(["opa.dynamics._sweep", "opa.dynamics._warm_worker",
+                                *preload])
     # the workers must not outlive this process, even when it is killed (SIGKILL leaves
     # no chance to shut the pool down): see _init_worker and opa.dynamics._warm_worker
     return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx,
