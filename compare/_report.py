@@ -1085,22 +1085,26 @@ REPORT_FIGURES = (("trust_map.png", plot_map), ("error_vs_N.png", plot_error_vs_
            ("phase.png", plot_phase))
 
 
-def draw_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1) -> list[str]:
+def draw_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1,
+                 source: str | None = None) -> list[str]:
     """The report's figures (:data:`REPORT_FIGURES`, then the frontier's when the map has one),
     drawn in this process or, with ``workers`` > 1, side by side on that many processes
     of :func:`opa.engine.local_executor` (each figure depends on ``ds`` alone; the files
-    are the same either way). Returns the written paths in the order of the figures."""
-    jobs = [(fn, ds, os.path.join(outdir, name)) for name, fn in REPORT_FIGURES]
-    conv = frontier_dataset(ds)
-    if conv is not None:
-        jobs.append((plot_frontier, conv, os.path.join(outdir, "frontier.png")))
+    are the same either way). ``source``: a netCDF file that holds ``ds`` (the map's
+    validate.nc), which the processes open instead of each receiving a copy of ``ds``.
+    Returns the written paths in the order of the figures."""
+    jobs = [(fn, name) for name, fn in REPORT_FIGURES]
+    if frontier_dataset(ds) is not None:
+        jobs.append((_plot_frontier_of, "frontier.png"))
     if workers <= 1:
-        done = [fn(data, path) for fn, data, path in jobs]
+        done = [fn(ds, os.path.join(outdir, name)) for fn, name in jobs]
     else:
         from opa.engine import local_executor
 
+        data = ds if source is None else source
         with local_executor(min(int(workers), len(jobs))) as pool:
-            futures = [pool.submit(fn, data, path) for fn, data, path in jobs]
+            futures = [pool.submit(_draw, fn, data, os.path.join(outdir, name))
+                       for fn, name in jobs]
             done = [f.result() for f in futures]
     paths = []
     for written in done:
@@ -1108,12 +1112,27 @@ def draw_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1) -> list[str]:
     return paths
 
 
+def _plot_frontier_of(ds: xr.Dataset, path: str):
+    """The frontier's figure of a map (:func:`frontier_dataset`)."""
+    return plot_frontier(frontier_dataset(ds), path)
+
+
+def _draw(fn, data, path: str):
+    """``fn(ds, path)`` on a worker: ``data`` is the map, or a netCDF file that holds it."""
+    if isinstance(data, str):
+        with xr.open_dataset(data) as ds:
+            return fn(ds, path)
+    return fn(data, path)
+
+
 def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
                  command: str = "opa-mc validate", started: float | None = None,
-                 timing: dict | None = None, workers: int = 1) -> list[str]:
+                 timing: dict | None = None, workers: int = 1,
+                 source: str | None = None) -> list[str]:
     """Write summary.md and the figures; returns the written paths.
 
-    ``workers``: processes that draw the figures side by side (:func:`draw_figures`).
+    ``workers``: processes that draw the figures side by side, ``source``: the netCDF
+    file of ``ds`` they read it from (:func:`draw_figures`).
 
     ``started``: the ``time.perf_counter()`` reading at which the command started, the
     same clock as ``run_validation(started=...)``: summary.md then gives the time from it
@@ -1125,7 +1144,7 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     os.makedirs(outdir, exist_ok=True)
     paths = []
     if plots:
-        paths += draw_figures(ds, outdir, workers=workers)
+        paths += draw_figures(ds, outdir, workers=workers, source=source)
     a = ds.attrs
     seconds = {"total": float(a["wall_seconds"])}
     if started is not None:

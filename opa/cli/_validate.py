@@ -201,7 +201,8 @@ def cmd_validate(args) -> int:
     # the figures side by side on the map's processes (its fork server is started then)
     figures = cfg.processes if cfg.scheduler is None and cfg.processes > 1 else 1
     written = write_report(ds, cfg.outdir, plots=cfg.plots, command=command, started=start,
-                           timing=timing, workers=figures)
+                           timing=timing, workers=figures,
+                           source=os.path.join(cfg.outdir, "validate.nc"))
     print("\n".join(first_screen(ds)))
     print()
     for h in range(ds.sizes["horizon"]):

@@ -319,21 +319,26 @@ def test_report_files_and_tables(tiny):
 
 def test_figures_drawn_on_two_processes_are_the_same_files(tiny, tmp_path):
     """``write_report(workers=2)`` draws the figures side by side on worker processes:
-    the same PNG bytes as drawn in this process, in the same order."""
+    the same PNG bytes as drawn in this process, in the same order, whether the workers
+    receive the map or read it from its validate.nc (``source``)."""
     import hashlib
 
     from compare._report import draw_figures
 
-    _, ds, _ = tiny
-    (tmp_path / "one").mkdir()
-    (tmp_path / "two").mkdir()
+    _, ds, out = tiny
+    for name in ("one", "two", "file"):
+        (tmp_path / name).mkdir()
     one = draw_figures(ds, str(tmp_path / "one"))
     two = draw_figures(ds, str(tmp_path / "two"), workers=2)
-    assert [os.path.basename(p) for p in one] == [os.path.basename(p) for p in two]
+    read = draw_figures(ds, str(tmp_path / "file"), workers=2,
+                        source=str(out / "validate.nc"))
+    assert [os.path.basename(p) for p in one] == [os.path.basename(p) for p in two] \
+        == [os.path.basename(p) for p in read]
     assert len(one) >= 5
-    for a, b in zip(one, two):
-        assert hashlib.sha256(Path(a).read_bytes()).digest() == \
-            hashlib.sha256(Path(b).read_bytes()).digest(), a
+    for a, b, c in zip(one, two, read):
+        digest = hashlib.sha256(Path(a).read_bytes()).digest()
+        assert digest == hashlib.sha256(Path(b).read_bytes()).digest(), a
+        assert digest == hashlib.sha256(Path(c).read_bytes()).digest(), c
 
 
 def test_config_errors_name_the_key(tmp_path):
