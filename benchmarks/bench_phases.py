@@ -149,3 +149,20 @@ def test_phases_default(tmp_path):
     cores = os.cpu_count() or 1
     _phases(tmp_path, [], _counts(), pools=_counts("PHASE_POOLS", [cores] if cores > 1
                                                    else []))
+
+
+def test_timeline_tiny(tmp_path):
+    """The smoke run of ``benchmarks/map_timeline.py``: every task of a tiny map's flow
+    finishes once, each value's assembly after its bisections and its grid."""
+    from benchmarks.map_timeline import timeline
+    from compare._config import load_config
+
+    cfg = load_config(None, outdir=str(tmp_path), values=(3.98,), sigmas=(0.01, 0.03),
+                      orders=(0, 2), horizons=(2, 4), samples=64, max_samples=128,
+                      frontier=False)
+    rows = timeline(cfg, 2)
+    keys = [key for key, _, _ in rows]
+    assert sorted(keys) == sorted([("splits", 0), ("point", 0, 0), ("point", 0, 1),
+                                   ("bisect", 0, 0), ("bisect", 0, 1), ("value", 0)])
+    assert keys[-1] == ("value", 0)
+    assert all(cpu > 0 for _, _, cpu in rows)

@@ -4,7 +4,7 @@ from compare._config import ValidateConfig, load_config
 from compare._metrics import compare_runs, error_metrics
 from compare._report import boundary_table, findings, verdict_grid, write_report
 from compare._mapdata import count_distribution
-from compare._trustmap import run_validation
+from compare._mapflow import run_validation
 from compare._verify import verify
 
 

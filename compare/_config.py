@@ -102,15 +102,21 @@ class ValidateConfig:
         """The local processes the map runs on (``workers``, 0 resolved by
         :func:`compare._scaleout.auto_workers`: a pool where the values and the frontier
         are at least 3, of one process per core up to the map's first tasks,
-        :func:`compare._mapflow.planned_tasks`)."""
-        from compare._mapflow import planned_tasks
+        :attr:`first_tasks`)."""
         from compare._scaleout import auto_workers
 
         if self.workers:
             return int(self.workers)
         if auto_workers(len(self.values) + bool(self.frontier)) == 1:
             return 1
-        return auto_workers(planned_tasks(self))
+        return auto_workers(self.first_tasks)
+
+    @property
+    def first_tasks(self) -> int:
+        """The tasks the map starts with on a pool or a cluster
+        (:meth:`compare._mapflow.MapFlow.first`: every value's split scan and grid points,
+        and the frontier's reference): what the cores are shared among."""
+        return len(self.values) * (1 + len(self.sigmas)) + bool(self.frontier)
 
     def __post_init__(self):
         self._check_law()

@@ -1,4 +1,5 @@
-"""The trust map as a flow of small tasks, for a local process pool or a Dask cluster.
+"""The trust map's run (:func:`run_validation`): in one process, or as a flow of small
+tasks on a local process pool or a Dask cluster.
 
 One task per swept value leaves most workers idle past a handful of cores: the default
 map has 5 values and the frontier. :class:`MapFlow` cuts the same work finer, into tasks
@@ -23,14 +24,17 @@ one-process map to the bit, wherever the tasks ran.
 
 from __future__ import annotations
 
+import os
+import time
 from dataclasses import replace
 
+import numpy as np
 import xarray as xr
 
 from compare._config import ValidateConfig
 from compare._convergence import PENDING, run_convergence
 from compare._trustmap import _Map, frontier, frontier_part, frontier_study
-from opa.engine import Store, true_system_work
+from opa.engine import Store, true_system_work, write_netcdf
 
 #: frontier runs that share one computation run as one task: the control-variate rows
 #: each use the same adaptive ME-OPA control run, done once per task
@@ -248,11 +252,83 @@ class MapFlow:
         return []
 
 
-def planned_tasks(cfg: ValidateConfig) -> int:
-    """The tasks a map starts with (:meth:`MapFlow.first`, the frontier's reference
-    counted as one): what :func:`compare._scaleout.auto_workers` shares the cores among."""
-    return len(cfg.values) * (1 + len(cfg.sigmas)) + bool(cfg.frontier)
+def run_map_tasks(job: _Map, bar) -> dict:
+    """The map of ``job`` (a :class:`compare._trustmap._Map`) as a flow of small tasks
+    (:class:`MapFlow`, run by :func:`compare._scaleout.run_flow`) on ``cfg.workers``
+    local processes or the Dask cluster ``cfg.scheduler``: what each did (counts, phase
+    seconds summed over the workers, log lines) is added to ``job``; this process's wait
+    is the phase "waiting for workers". Returns the values' results and the frontier."""
+    from compare._scaleout import MAP_PRELOAD, run_flow
+
+    cfg = job.cfg
+    flow = MapFlow(cfg, job.parts)
+    first = flow.first()
+    where = (f"the Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
+             else f"{cfg.processes} local processes")
+    job.log(f"{len(first)} tasks ({len(cfg.values)} split scans, "
+             f"{len(cfg.values) * len(cfg.sigmas)} grid points"
+             f"{', the frontier' if cfg.frontier else ''}), then each value's "
+             f"bisections, on {where} ...")
+    results = {}
+    with job.clock("waiting for workers"):
+        for key, result in run_flow(first, flow.follow, workers=cfg.processes,
+                                    scheduler=cfg.scheduler, preload=MAP_PRELOAD):
+            for line in result.pop("log"):
+                job.log(line)
+            work = result.pop("work")
+            job.mc_runs += work["mc_runs"]
+            job.true_runs += work["true_runs"]
+            job.true_periods += work["true_periods"]
+            job.opa_runs += work["opa_runs"]
+            job.system_runs += work["system_runs"]
+            job.system_time += work["system_time"]
+            job.parts.computed += work["parts_computed"]
+            job.parts.set_aside += work["parts_set_aside"]
+            for name, wall, cpu, calls in work["phases"]:
+                job.clock.wall[name] = job.clock.wall.get(name, 0.0) + wall
+                job.clock.cpu[name] = job.clock.cpu.get(name, 0.0) + cpu
+                job.clock.calls[name] = job.clock.calls.get(name, 0) + calls
+            if key[0] == "point":
+                bar.update(1)
+            elif key[0] == "value":
+                results[key[1]] = result["result"]
+    if flow.frontier is not None:
+        if not flow.frontier.complete:
+            raise RuntimeError("the frontier's runs did not all finish")
+        with job.clock("frontier"):
+            results["frontier"] = flow.frontier.dataset()
+    return results
+
+
+
+def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
+                   started: float | None = None) -> xr.Dataset:
+    """Run the trust map and return its dataset (also written to OUTDIR/validate.nc):
+    in this process, or as a flow of tasks on ``cfg.workers`` local processes or the
+    Dask cluster ``cfg.scheduler`` (:func:`run_map_tasks`), to the same bits.
+
+    ``started``: the ``time.perf_counter()`` reading at which the command started (the
+    one clock of a run); the attribute ``wall_seconds`` is the time from it to the
+    finished dataset (default: from the call)."""
+    started = time.perf_counter() if started is None else started
+    pooled = cfg.processes > 1 or cfg.scheduler is not None
+    ds = _Map(cfg, progress=progress, log=log).run(run_map_tasks if pooled else None)
+    for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
+        if dim not in ds.coords:
+            ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
+                                         {"long_name": f"index along {dim}", "units": "1"})})
+    if "frontier_run" in ds.dims:
+        ds["frontier_run"].attrs.update(long_name="index of a run of the cost-accuracy study",
+                                        units="1")
+        for name, text in (("frontier_method", "method of the run"),
+                           ("frontier_law", "impact law of the run (true system: none)")):
+            if name in ds and "long_name" not in ds[name].attrs:
+                ds[name].attrs["long_name"] = text
+    ds.attrs["wall_seconds"] = time.perf_counter() - started
+    write_netcdf(ds, os.path.join(cfg.outdir, "validate.nc"))
+    return ds
 
 
 __all__ = ["FrontierRuns", "MapFlow", "SHARED_RUNS", "bisect_task", "frontier_runs_task",
-           "planned_tasks", "point_task", "splits_task", "task_config", "value_task"]
+           "point_task", "run_map_tasks", "run_validation", "splits_task", "task_config",
+           "value_task"]

@@ -1,14 +1,16 @@
-"""The trust map's independent tasks on a local process pool or a Dask cluster.
+"""The trust map's tasks on a local process pool or a Dask cluster.
 
-The map splits into tasks that share nothing but the parts folder: one per swept value
-(its split scan, its grid of points, the bisections of its sigma*, its datasets) and the
-cost-accuracy frontier. :func:`run_tasks` runs them
+The map's tasks share nothing but the parts folder: split scans, grid points,
+bisections, value assemblies and the frontier's runs (:mod:`compare._mapflow`), some
+ready only once others have finished. :func:`run_flow` runs them
 
 * in this process, one after the other (``workers=1``, no scheduler): numba's threads
   share the cores inside each task;
 * on ``workers`` local processes (:func:`opa.engine.local_executor`, started by a fork
-  server), each with ``cores // workers`` numba threads, so the cores are not
-  oversubscribed;
+  server), each task with the numba threads of its share of the cores that no running
+  task holds (:func:`share_cores`; the cores of this process's CPU affinity,
+  :func:`usable_cores`): one each while there are more tasks than processes, more for
+  the last ones, so the cores are neither idle at the end nor oversubscribed;
 * on a Dask cluster (``scheduler``: an address or a ``distributed.Client``), each task
   with its machine's cores shared out among the tasks that can run there at once (the
   Dask threads of every worker on that host, :func:`dask_threads`).
@@ -26,6 +28,11 @@ from collections.abc import Callable, Iterator
 
 #: seconds to wait for a Dask scheduler to answer
 CONNECT_TIMEOUT = 5.0
+
+#: what the map's worker processes import once, in the fork server they come from: its
+#: tasks, and the report's figures, drawn on processes of the same server
+#: (:func:`compare._report.draw_figures`)
+MAP_PRELOAD = ("compare._mapflow", "compare._report")
 
 
 def usable_cores() -> int:
@@ -63,9 +70,18 @@ def dask_threads() -> int:
     return max(1, usable_cores() // max(1, slots))
 
 
-def threads_per_worker(workers: int) -> int:
-    """numba threads of each of ``workers`` local processes: the cores shared out."""
-    return max(1, usable_cores() // max(1, int(workers)))
+def share_cores(cores: int, busy: int, starting: int) -> int:
+    """The numba threads of a task started now on a local pool: the cores that no
+    running task holds (``busy``: their threads) shared among the ``starting`` tasks, at
+    least one. While the pool has more tasks than processes every task gets one share of
+    the cores; the last tasks of a flow get the cores the finished ones left.
+
+    >>> share_cores(16, 0, 16), share_cores(16, 15, 1), share_cores(16, 3, 1)
+    (1, 1, 13)
+    >>> share_cores(2, 2, 1), share_cores(16, 12, 2)
+    (1, 2)
+    """
+    return max(1, (int(cores) - int(busy)) // max(1, int(starting)))
 
 
 def auto_workers(tasks: int, cores: int | None = None) -> int:
@@ -101,10 +117,11 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
 
     Tasks start in the order given, the ones ``follow`` returned ahead of those not yet
     started (the work the rest waits on); at most ``workers`` run at once on a local
-    pool, each process with ``cores // workers`` numba threads. With ``workers`` 1 and no
-    ``scheduler`` they run in this process, one after the other; else never in this
-    process (what a task counts in its own thread is its own). On a Dask cluster every
-    ready task is submitted at once, the followers with a higher priority. A task's
+    pool, each with its share of the free cores as numba threads (:func:`share_cores`).
+    With ``workers`` 1 and no ``scheduler`` they run in this process, one after the
+    other; else never in this process (what a task counts in its own thread is its
+    own). On a Dask cluster every ready task is submitted at once, the followers with a
+    higher priority. A task's
     exception is raised here, and the tasks not yet finished are cancelled. ``preload``:
     modules the local pool's processes get imported (:func:`opa.engine.local_executor`).
 
@@ -128,18 +145,22 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
 
     from opa.engine import local_executor
 
-    workers = int(workers)
-    threads = threads_per_worker(workers)
+    workers, cores = int(workers), usable_cores()
     running: dict = {}
+    held: dict = {}  # the numba threads of each running task
     with local_executor(workers, preload) as pool:
         try:
             while ready or running:
                 while ready and len(running) < workers:
+                    threads = share_cores(cores, sum(held.values()),
+                                          min(len(ready), workers - len(running)))
                     key, fn, args = ready.popleft()
-                    running[pool.submit(_threaded, threads, fn, args)] = key
+                    future = pool.submit(_threaded, threads, fn, args)
+                    running[future], held[future] = key, threads
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 for future in sorted(done, key=lambda f: _order(running[f])):
                     key = running.pop(future)
+                    held.pop(future)
                     result = future.result()
                     ready.extendleft(reversed(list(follow(key, result))))
                     yield key, result
@@ -191,5 +212,5 @@ def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
             client.close()
 
 
-__all__ = ["CONNECT_TIMEOUT", "auto_workers", "dask_threads", "run_flow", "run_tasks",
-           "threads_per_worker", "usable_cores"]
+__all__ = ["CONNECT_TIMEOUT", "MAP_PRELOAD", "auto_workers", "dask_threads", "run_flow",
+           "run_tasks", "share_cores", "usable_cores"]

@@ -71,13 +71,8 @@ from opa.engine import (
     true_runs,
     Measure, opa_variants, provenance_attrs, run_elements, scan_splits,
     simulate_dmr, simulate_opa, SimulationError, SolverOptions, Store, System,
-    time_grid, true_system_work, uniform_edges, write_netcdf,
+    time_grid, true_system_work, uniform_edges,
 )
-
-#: what the map's worker processes import once, in the fork server they come from: its
-#: tasks, and the report's figures, drawn on processes of the same server
-#: (:func:`compare._report.draw_figures`)
-MAP_PRELOAD = ("compare._mapflow", "compare._report")
 
 #: a verdict hangs on the noise while OPA fails without the allowance for the noise but
 #: agrees with z + NOISE_BAND standard errors allowed (compare._trust.marginal): a
@@ -563,12 +558,16 @@ class _Map:
             self.bar.total += 1
             self.bar.update(1)
 
-    def run(self) -> xr.Dataset:
+    def run(self, tasks=None) -> xr.Dataset:
         """The map's dataset, with the phase table of this run (``phase_*`` attributes:
-        seconds not charged to a named phase go to "other": parts read back, loops)."""
+        seconds not charged to a named phase go to "other": parts read back, loops).
+
+        ``tasks(job, bar)``: the values' results and the frontier, computed elsewhere
+        (:func:`compare._mapflow.run_map_tasks`); without it every value is computed
+        here, one after the other."""
         before = true_system_work()
         with self.clock("other"):
-            ds = self._run()
+            ds = self._run(tasks)
         after = true_system_work()
         self.system_runs += after[0] - before[0]
         self.system_time += after[1] - before[1]
@@ -576,7 +575,7 @@ class _Map:
         ds.attrs["true_system_time"] = float(self.system_time)
         return ds.assign_attrs(self.clock.attrs())
 
-    def _run(self) -> xr.Dataset:
+    def _run(self, tasks) -> xr.Dataset:
         from tqdm.auto import tqdm
 
         cfg = self.cfg
@@ -589,8 +588,8 @@ class _Map:
         start = time.perf_counter()
         with tqdm(total=total, unit="point", desc="trust map", disable=not self.progress) as bar:
             self.bar = bar
-            if cfg.processes > 1 or cfg.scheduler is not None:
-                results = self._run_tasks(bar)
+            if tasks is not None:
+                results = tasks(self, bar)
             else:
                 results = {}
                 for i, value in enumerate(cfg.values):
@@ -652,54 +651,6 @@ class _Map:
             if self.bar is not None:
                 self.bar.update(1)
         return grid
-
-    def _run_tasks(self, bar) -> dict:
-        """The map as a flow of small tasks (:class:`compare._mapflow.MapFlow`, run by
-        :func:`compare._scaleout.run_flow`) on ``cfg.workers`` local processes or the
-        Dask cluster ``cfg.scheduler``: what each did (counts, phase seconds summed over
-        the workers, log lines) is added here; this process's wait is the phase "waiting
-        for workers"."""
-        from compare._mapflow import MapFlow
-        from compare._scaleout import run_flow
-
-        cfg = self.cfg
-        flow = MapFlow(cfg, self.parts)
-        first = flow.first()
-        where = (f"the Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
-                 else f"{cfg.processes} local processes")
-        self.log(f"{len(first)} tasks ({len(cfg.values)} split scans, "
-                 f"{len(cfg.values) * len(cfg.sigmas)} grid points"
-                 f"{', the frontier' if cfg.frontier else ''}), then each value's "
-                 f"bisections, on {where} ...")
-        results = {}
-        with self.clock("waiting for workers"):
-            for key, result in run_flow(first, flow.follow, workers=cfg.processes,
-                                        scheduler=cfg.scheduler, preload=MAP_PRELOAD):
-                for line in result.pop("log"):
-                    self.log(line)
-                work = result.pop("work")
-                self.mc_runs += work["mc_runs"]
-                self.true_runs += work["true_runs"]
-                self.true_periods += work["true_periods"]
-                self.opa_runs += work["opa_runs"]
-                self.system_runs += work["system_runs"]
-                self.system_time += work["system_time"]
-                self.parts.computed += work["parts_computed"]
-                self.parts.set_aside += work["parts_set_aside"]
-                for name, wall, cpu, calls in work["phases"]:
-                    self.clock.wall[name] = self.clock.wall.get(name, 0.0) + wall
-                    self.clock.cpu[name] = self.clock.cpu.get(name, 0.0) + cpu
-                    self.clock.calls[name] = self.clock.calls.get(name, 0) + calls
-                if key[0] == "point":
-                    bar.update(1)
-                elif key[0] == "value":
-                    results[key[1]] = result["result"]
-        if flow.frontier is not None:
-            if not flow.frontier.complete:
-                raise RuntimeError("the frontier's runs did not all finish")
-            with self.clock("frontier"):
-                results["frontier"] = flow.frontier.dataset()
-        return results
 
     def work(self, system: tuple[int, float] = (0, 0.0)) -> dict:
         """What this object computed: counts and the phase table; ``system``: the true
@@ -955,29 +906,4 @@ def _attrs(cfg: ValidateConfig) -> dict:
     return attrs
 
 
-def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
-                   started: float | None = None) -> xr.Dataset:
-    """Run the trust map and return its dataset (also written to OUTDIR/validate.nc).
-
-    ``started``: the ``time.perf_counter()`` reading at which the command started (the
-    one clock of a run); the attribute ``wall_seconds`` is the time from it to the
-    finished dataset (default: from the call)."""
-    started = time.perf_counter() if started is None else started
-    ds = _Map(cfg, progress=progress, log=log).run()
-    for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
-        if dim not in ds.coords:
-            ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
-                                         {"long_name": f"index along {dim}", "units": "1"})})
-    if "frontier_run" in ds.dims:
-        ds["frontier_run"].attrs.update(long_name="index of a run of the cost-accuracy study",
-                                        units="1")
-        for name, text in (("frontier_method", "method of the run"),
-                           ("frontier_law", "impact law of the run (true system: none)")):
-            if name in ds and "long_name" not in ds[name].attrs:
-                ds[name].attrs["long_name"] = text
-    ds.attrs["wall_seconds"] = time.perf_counter() - started
-    write_netcdf(ds, os.path.join(cfg.outdir, "validate.nc"))
-    return ds
-
-
-__all__ = ["run_validation"]
+__all__ = ["frontier", "frontier_part", "frontier_study"]

@@ -167,7 +167,7 @@ def cmd_validate(args) -> int:
     from compare._report import (bullet, first_screen, frontier_lines, process_started,
                                  verdict_grid, wall_text, write_report, cause, findings)
     from compare._config import load_config
-    from compare._trustmap import run_validation
+    from compare._mapflow import run_validation
 
     model = {name: getattr(args, name) for name in PARAMETER_NAMES
              if getattr(args, name, None) is not None}

@@ -4,8 +4,7 @@ which each one makes ready, and that the map they give is the one-process map.""
 import pytest
 
 from compare._config import load_config
-from compare._mapflow import SHARED_RUNS, FrontierRuns, MapFlow, planned_tasks
-from compare._trustmap import run_validation
+from compare._mapflow import SHARED_RUNS, FrontierRuns, MapFlow, run_validation
 from opa.engine import Store
 from tests.compare.test_scaleout import assert_same_map
 
@@ -26,7 +25,7 @@ def test_the_first_tasks_are_independent_and_each_value_waits_for_its_grid(tmp_p
     assert [key for key, _, _ in first] == [
         ("splits", 0), ("splits", 1), ("point", 0, 0), ("point", 0, 1), ("point", 1, 0),
         ("point", 1, 1)]
-    assert len(first) == planned_tasks(cfg)
+    assert len(first) == cfg.first_tasks
     # value 1's bisections are ready once both its points are done, the longest
     # horizon first; its value task once they and its split scan are
     assert flow.follow(("point", 1, 0), {}) == []

@@ -6,8 +6,8 @@ import pytest
 import xarray as xr
 
 from compare._config import load_config
-from compare._scaleout import auto_workers, run_flow, run_tasks, threads_per_worker
-from compare._trustmap import run_validation
+from compare._scaleout import auto_workers, run_flow, run_tasks, share_cores, usable_cores
+from compare._mapflow import run_validation
 from tests.compare.test_parts import RUN_ATTRS
 
 # two swept values and the frontier off: three sigmas, N = 0 and 2, two horizons
@@ -64,7 +64,25 @@ def _fail():
 def test_the_default_shares_the_cores_out():
     assert auto_workers(6, cores=2) == 2 and auto_workers(6, cores=16) == 6
     assert auto_workers(2, cores=16) == 1 and auto_workers(6, cores=1) == 1
-    assert threads_per_worker(1) >= 1
+    assert share_cores(16, 0, 16) == 1 and share_cores(16, 4, 2) == 6
+    assert share_cores(2, 2, 1) == 1  # never none
+
+
+def _numba_threads(_):
+    import numba
+
+    return numba.get_num_threads()
+
+
+@pytest.mark.skipif(usable_cores() < 2, reason="needs 2 cores")
+def test_a_pool_gives_the_last_task_the_cores_the_others_left():
+    """Two tasks on 2 processes: one thread each; one task alone: both cores."""
+    two = dict(run_flow([(i, _numba_threads, (i,)) for i in range(2)], workers=2))
+    assert two == {0: 1, 1: 1}
+    import numba
+
+    alone = dict(run_flow([(0, _numba_threads, (0,))], workers=2))
+    assert alone == {0: min(2, numba.config.NUMBA_NUM_THREADS)}
 
 
 @pytest.fixture(scope="module")
