@@ -1,21 +1,27 @@
 """compare: OPA against Monte Carlo — error metrics, the trust map, reports."""
 
-from compare._config import ValidateConfig, load_config
-from compare._metrics import compare_runs, error_metrics
-from compare._report import boundary_table, findings, verdict_grid, write_report
-from compare._mapdata import count_distribution
-from compare._mapflow import run_validation
-from compare._verify import verify
-
+#: where each public name lives: imported on first use, so that ``import compare`` (and
+#: any ``compare._module``) stays light until a name is used
+_HOMES = {
+    "ValidateConfig": "compare._config", "load_config": "compare._config",
+    "compare_runs": "compare._metrics", "error_metrics": "compare._metrics",
+    "boundary_table": "compare._report", "findings": "compare._report",
+    "verdict_grid": "compare._report", "write_report": "compare._report",
+    "count_distribution": "compare._mapdata", "run_validation": "compare._mapflow",
+    "verify": "compare._verify",
+    # the paper's figures: matplotlib only when they are asked for
+    "reproduce": "compare._figures", "FIGURES": "compare._figures",
+}
 
 
 def __getattr__(name: str):
-    """``compare.reproduce`` (the paper's figures) without importing matplotlib with
-    ``compare``."""
-    if name in ("reproduce", "FIGURES"):
-        from compare import _figures
+    """The public names, each from its module on first use."""
+    if name in _HOMES:
+        import importlib
 
-        return getattr(_figures, name)
+        value = getattr(importlib.import_module(_HOMES[name]), name)
+        globals()[name] = value
+        return value
     raise AttributeError(f"module 'compare' has no attribute {name!r}")
 
 

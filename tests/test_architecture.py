@@ -254,3 +254,14 @@ def test_one_name_one_meaning_for_module_constants():
                         and not target.id.startswith("_"):
                     defined.setdefault(target.id, []).append(module)
     assert {name: where for name, where in defined.items() if len(where) > 1} == {}
+
+
+def test_compare_imports_its_public_names_on_first_use():
+    """``import compare`` imports none of its modules; each public name is there on first
+    use, from the module that defines it."""
+    code = ("import sys, compare; before = sorted(m for m in sys.modules "
+            "if m.startswith('compare.')); names = [getattr(compare, n) for n in "
+            "compare.__all__]; print(before, all(n is not None for n in names))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, cwd=ROOT).stdout.strip()
+    assert out == "[] True"

@@ -163,6 +163,27 @@ def _check_outdir(path: str) -> None:
         raise ValueError(f"--outdir {path} cannot be created: {err.strerror}") from None
 
 
+def prestart(argv: list[str]) -> None:
+    """Start the fork server of ``opa-mc validate``'s worker processes now, when the
+    command line is validate's: the server imports the map's modules
+    (:data:`compare._scaleout.MAP_PRELOAD`, seconds of imports) while this process builds
+    its parser and imports them itself, side by side. Not for a map in one process
+    (``--workers 1``), on a cluster (``--scheduler``), for help, or on one core."""
+    if argv[:1] != ["validate"]:
+        return
+    rest = argv[1:]
+    single = any(a in ("--workers=1", "-h", "--help") or a.startswith("--scheduler")
+                 for a in rest) or any(a == "--workers" and b == "1"
+                                       for a, b in zip(rest, rest[1:]))
+    from compare._scaleout import MAP_PRELOAD, usable_cores
+
+    if single or usable_cores() < 2:
+        return
+    from opa.dynamics._sweep import start_fork_server
+
+    start_fork_server(MAP_PRELOAD)
+
+
 def cmd_validate(args) -> int:
     from compare._report import (bullet, first_screen, frontier_lines, process_started,
                                  verdict_grid, wall_text, write_report, cause, findings)

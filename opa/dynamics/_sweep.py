@@ -648,16 +648,34 @@ def local_executor(workers: int = DEFAULT_WORKERS, preload: tuple[str, ...] = ()
     kernel, about 2-3 s) once. The fork server and the workers end within about a second
     when this process ends, also when it is killed without a chance to shut them down.
     """
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["opa.dynamics._sweep", "opa.dynamics._warm_worker",
-                                *preload])
+    ctx = _forkserver(preload)
     # the workers must not outlive this process, even when it is killed (SIGKILL leaves
     # no chance to shut the pool down): see _init_worker and opa.dynamics._warm_worker
     return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx,
                                initializer=_init_worker, initargs=(os.getpid(),))
+
+
+def _forkserver(preload: tuple[str, ...]):
+    """The fork server's context, with what it imports before its first fork (used when
+    it starts: this process's first pool, or :func:`start_fork_server`)."""
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["opa.dynamics._sweep", "opa.dynamics._warm_worker",
+                                *preload])
+    return ctx
+
+
+def start_fork_server(preload: tuple[str, ...] = ()) -> None:
+    """Start the fork server of :func:`local_executor` now, importing ``preload``: it
+    imports them while this process goes on with its own work (its own imports), so the
+    first pool's workers start sooner. A no-op where the server runs already."""
+    from multiprocessing import forkserver
+
+    _forkserver(preload)
+    forkserver.ensure_running()
 
 
 def _run_dask(tasks, finish, scheduler) -> None:
@@ -911,6 +929,7 @@ __all__ = [
     "assemble",
     "compute_point",
     "local_executor",
+    "start_fork_server",
     "observed_seeds",
     "sweep",
     "sweep_times",

@@ -499,3 +499,22 @@ def test_stochastic_diagram_through_the_deterministic_doubling(tmp_path, capsys)
     assert not (tmp_path / "s.nc.parts").exists()  # kept only until the final write
     assert main(["stochastic", "--preset", "3.1", "--sweep", "c=0.04", "--keep-parts"]) == 2
     assert "--keep-parts has no effect without --out" in capsys.readouterr().err
+
+
+def test_validate_starts_its_workers_fork_server_before_its_own_imports(monkeypatch):
+    """``opa.cli._validate.prestart``: for a map on worker processes the fork server is
+    started (with the map's modules to import) before the parser is built; not for a map
+    in one process, on a cluster, for help, or another command."""
+    import opa.dynamics._sweep as sweep
+    from compare._scaleout import MAP_PRELOAD, usable_cores
+    from opa.cli._validate import prestart
+
+    started = []
+    monkeypatch.setattr(sweep, "start_fork_server", started.append)
+    for argv in (["validate", "--workers", "1"], ["validate", "--workers=1"],
+                 ["validate", "--scheduler", "tcp://h:1"], ["validate", "--help"],
+                 ["simulate", "mc"], []):
+        prestart(argv)
+    assert started == []
+    prestart(["validate", "--values", "3.98,4.2", "--quiet"])
+    assert started == ([MAP_PRELOAD] if usable_cores() >= 2 else [])
