@@ -300,7 +300,6 @@ def run_map_tasks(job: _Map, bar) -> dict:
     return results
 
 
-
 def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
                    started: float | None = None) -> xr.Dataset:
     """Run the trust map and return its dataset (also written to OUTDIR/validate.nc):

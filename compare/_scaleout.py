@@ -10,7 +10,8 @@ ready only once others have finished. :func:`run_flow` runs them
   server), each task with the numba threads of its share of the cores that no running
   task holds (:func:`share_cores`; the cores of this process's CPU affinity,
   :func:`usable_cores`): one each while there are more tasks than processes, more for
-  the last ones, so the cores are neither idle at the end nor oversubscribed;
+  the last ones, so that fewer cores idle at the end (a task keeps its threads: the
+  tasks made ready while it runs may find fewer cores free than they are given);
 * on a Dask cluster (``scheduler``: an address or a ``distributed.Client``), each task
   with its machine's cores shared out among the tasks that can run there at once (the
   Dask threads of every worker on that host, :func:`dask_threads`).
@@ -121,9 +122,9 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
     With ``workers`` 1 and no ``scheduler`` they run in this process, one after the
     other; else never in this process (what a task counts in its own thread is its
     own). On a Dask cluster every ready task is submitted at once, the followers with a
-    higher priority. A task's
-    exception is raised here, and the tasks not yet finished are cancelled. ``preload``:
-    modules the local pool's processes get imported (:func:`opa.engine.local_executor`).
+    higher priority. A task's exception is raised here, and the tasks not yet finished
+    are cancelled. ``preload``: modules the local pool's processes get imported
+    (:func:`opa.engine.local_executor`).
 
     >>> follow = lambda key, result: [("b", abs, (-result,))] if key == "a" else []
     >>> list(run_flow([("a", max, (1, 2))], follow))
