@@ -126,11 +126,25 @@ def _set_help(parser: argparse.ArgumentParser, dest: str, text: str, default) ->
             action.help = text
 
 
+class _FigureNames:
+    """The figures ``reproduce`` draws (:data:`compare._figures.FIGURES`) and "all", read
+    when the parser checks or lists them: building the parser imports no matplotlib."""
+
+    def _names(self) -> tuple[str, ...]:
+        from compare._figures import FIGURES
+
+        return (*FIGURES, "all")
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+    def __iter__(self):
+        return iter(self._names())
+
+
 def register(subparsers) -> None:
     """Add ``bifurcation`` and ``reproduce`` to the ``opa-mc`` subcommands (flags from
     ``opa.cli._flags``)."""
-    from compare._figures import FIGURES
-
     b = subparsers.add_parser(
         "bifurcation",
         help="parameter sweep: both Poincaré sections, period labels, grazing",
@@ -209,7 +223,8 @@ def register(subparsers) -> None:
         "differences from the paper as figN.txt. Default sizes took 58.5 s on 2 cores "
         "(docs/figures.md); --full uses the paper's resolution.",
     )
-    r.add_argument("figure", choices=list(FIGURES) + ["all"])
+    r.add_argument("figure", choices=_FigureNames(), metavar="FIGURE",
+                   help="a figure of the paper, fig2 to fig11, or all")
     r.add_argument("--outdir", default="figures", metavar="DIR",
                    help="where to write the PNG and netCDF files (default ./figures)")
     r.add_argument("--full", action="store_true",

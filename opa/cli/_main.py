@@ -363,10 +363,6 @@ def main(argv: list[str] | None = None) -> int:
     """Run one command. Mistakes print one line and return 2; a run that cannot be
     completed returns 3; anything unforeseen prints one line naming the error (set
     OPA_MC_TRACEBACK=1 for the traceback) and returns 1."""
-    if argv is None:  # the command line itself, not a call from Python
-        from opa.cli._validate import prestart
-
-        prestart(sys.argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)

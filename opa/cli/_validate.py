@@ -140,12 +140,14 @@ def register_validate(sub) -> None:
                    help="skip the cost-accuracy frontier (multi-element OPA, collocation, "
                         "MC and Sobol at the first value and the largest sigma)")
     g.add_argument("--workers", type=positive_int, default=None, metavar="W",
-                   help="local processes for the swept values and the frontier, each "
-                        "with cores/W numba threads (default: one per core up to the number "
-                        "of tasks when there are at least 3, else 1)")
+                   help="local processes for the map's tasks (split scans, grid points, "
+                        "bisections, the frontier's runs), each task with its share of the "
+                        "free cores as numba threads (default: one per core up to the "
+                        "number of first tasks when the values and the frontier are at "
+                        "least 3, else 1)")
     g.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                   help="Dask scheduler that runs the swept values and the frontier as "
-                        "tasks (each with its worker's --nthreads numba threads)")
+                   help="Dask scheduler that runs the map's tasks (each with its "
+                        "machine's cores shared out among the Dask threads there)")
     g.add_argument("--quiet", action="store_true", help="no progress bars or log lines")
     _solver_flags(p, tolerance=1e-9, defaults=False)
     _impulse_flags(p, defaults=False)
@@ -163,32 +165,8 @@ def _check_outdir(path: str) -> None:
         raise ValueError(f"--outdir {path} cannot be created: {err.strerror}") from None
 
 
-def prestart(argv: list[str]) -> None:
-    """Start the fork server of ``opa-mc validate``'s worker processes now, when the
-    command line is validate's: the server imports the map's modules
-    (:data:`compare._scaleout.MAP_PRELOAD`, seconds of imports) while this process builds
-    its parser and imports them itself, side by side. Not for a map in one process
-    (``--workers 1``), on a cluster (``--scheduler``), for help, or on one core."""
-    if argv[:1] != ["validate"]:
-        return
-    rest = argv[1:]
-    single = any(a in ("--workers=1", "-h", "--help") or a.startswith("--scheduler")
-                 for a in rest) or any(a == "--workers" and b == "1"
-                                       for a, b in zip(rest, rest[1:]))
-    from compare._scaleout import MAP_PRELOAD, usable_cores
-
-    if single or usable_cores() < 2:
-        return
-    from opa.dynamics._sweep import start_fork_server
-
-    start_fork_server(MAP_PRELOAD)
-
-
 def cmd_validate(args) -> int:
-    from compare._report import (bullet, first_screen, frontier_lines, process_started,
-                                 verdict_grid, wall_text, write_report, cause, findings)
     from compare._config import load_config
-    from compare._mapflow import run_validation
 
     model = {name: getattr(args, name) for name in PARAMETER_NAMES
              if getattr(args, name, None) is not None}
@@ -214,6 +192,16 @@ def cmd_validate(args) -> int:
         workers=args.workers, frontier=False if args.no_frontier else None, **impulse,
     )
     _check_outdir(cfg.outdir)
+    if cfg.processes > 1 and cfg.scheduler is None:
+        # the workers' fork server imports the map's modules while this process does
+        from compare._scaleout import MAP_PRELOAD
+        from opa.dynamics._sweep import start_fork_server
+
+        start_fork_server(MAP_PRELOAD)
+    from compare._mapflow import run_validation
+    from compare._report import (bullet, cause, findings, first_screen, frontier_lines,
+                                 process_started, verdict_grid, wall_text, write_report)
+
     start = process_started()  # the one clock of the run: every wall time below reads it
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     ds = run_validation(cfg, progress=not args.quiet, log=log, started=start)

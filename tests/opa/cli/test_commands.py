@@ -501,20 +501,38 @@ def test_stochastic_diagram_through_the_deterministic_doubling(tmp_path, capsys)
     assert "--keep-parts has no effect without --out" in capsys.readouterr().err
 
 
-def test_validate_starts_its_workers_fork_server_before_its_own_imports(monkeypatch):
-    """``opa.cli._validate.prestart``: for a map on worker processes the fork server is
-    started (with the map's modules to import) before the parser is built; not for a map
-    in one process, on a cluster, for help, or another command."""
+class _Started(Exception):
+    pass
+
+
+def test_validate_starts_its_workers_fork_server_before_the_maps_imports(monkeypatch,
+                                                                        tmp_path):
+    """``opa-mc validate`` on worker processes starts their fork server (with the map's
+    modules to import) once its input is checked, before it imports the map's modules
+    itself; a map in one process starts none, and building the parser imports no
+    matplotlib (the figure names of ``reproduce`` are read when asked for)."""
+    import subprocess
+    import sys
+
     import opa.dynamics._sweep as sweep
-    from compare._scaleout import MAP_PRELOAD, usable_cores
-    from opa.cli._validate import prestart
+    from compare._scaleout import MAP_PRELOAD
 
     started = []
-    monkeypatch.setattr(sweep, "start_fork_server", started.append)
-    for argv in (["validate", "--workers", "1"], ["validate", "--workers=1"],
-                 ["validate", "--scheduler", "tcp://h:1"], ["validate", "--help"],
-                 ["simulate", "mc"], []):
-        prestart(argv)
-    assert started == []
-    prestart(["validate", "--values", "3.98,4.2", "--quiet"])
-    assert started == ([MAP_PRELOAD] if usable_cores() >= 2 else [])
+
+    def start(preload):
+        started.append(preload)
+        raise _Started
+
+    monkeypatch.setattr(sweep, "start_fork_server", start)
+    tiny = ["--values", "3.98", "--sigmas", "0.01,0.03", "--orders", "0:2", "--horizons",
+            "2,4", "--samples", "64", "--max-samples", "128", "--no-frontier",
+            "--no-plots", "--quiet"]
+    assert main(["validate", *tiny, "--workers", "2", "--outdir", str(tmp_path / "a")]) == 1
+    assert started == [MAP_PRELOAD]
+    assert main(["validate", *tiny, "--workers", "1", "--outdir", str(tmp_path / "b")]) == 0
+    assert started == [MAP_PRELOAD]
+    code = ("import sys; from opa.cli._main import build_parser; build_parser(); "
+            "print('matplotlib' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "False"
