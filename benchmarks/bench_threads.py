@@ -134,6 +134,8 @@ def test_threads_smoke():
 
 @pytest.mark.slow
 def test_threads_scaling():
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    from opa.engine import usable_cores
+
+    cores = usable_cores()
     text = _table(_rates(_counts(cores), PER_THREAD, PERIODS))
     print(f"\n{_lscpu()}\nload average {os.getloadavg()[0]:.2f} after the runs\n{text}")

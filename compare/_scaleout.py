@@ -9,9 +9,10 @@ ready only once others have finished. :func:`run_flow` runs them
 * on ``workers`` local processes (:func:`opa.engine.local_executor`, started by a fork
   server), each task with the numba threads of its share of the cores that no running
   task holds (:func:`share_cores`; the cores of this process's CPU affinity,
-  :func:`usable_cores`): one each while there are more tasks than processes, more for
-  the last ones, so that fewer cores idle at the end (a task keeps its threads: the
-  tasks made ready while it runs may find fewer cores free than they are given);
+  :func:`opa.engine.usable_cores`): one each while there are more tasks than
+  processes, the cores the finished ones left for the last ones (a task keeps its
+  threads: the tasks made ready while it runs may find fewer cores free than they are
+  given);
 * on a Dask cluster (``scheduler``: an address or a ``distributed.Client``), each task
   with its machine's cores shared out among the tasks that can run there at once (the
   Dask threads of every worker on that host, :func:`dask_threads`).
@@ -22,9 +23,10 @@ the bit wherever it runs, and the map assembled from them is the same.
 
 from __future__ import annotations
 
-import os
 from collections import deque
 from collections.abc import Callable, Iterator
+
+from opa.engine import usable_cores
 
 
 #: seconds to wait for a Dask scheduler to answer
@@ -34,14 +36,6 @@ CONNECT_TIMEOUT = 5.0
 #: tasks, and the report's figures, drawn on processes of the same server
 #: (:func:`compare._report.draw_figures`)
 MAP_PRELOAD = ("compare._mapflow", "compare._report")
-
-
-def usable_cores() -> int:
-    """The cores this process may run on: its CPU affinity (``taskset``, a container's
-    cpuset) where the system tells it, else every core of the machine."""
-    if hasattr(os, "sched_getaffinity"):
-        return max(1, len(os.sched_getaffinity(0)))
-    return os.cpu_count() or 1
 
 
 def _threaded(threads: int | None, fn: Callable, args: tuple):
@@ -214,4 +208,4 @@ def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
 
 
 __all__ = ["CONNECT_TIMEOUT", "MAP_PRELOAD", "auto_workers", "dask_threads", "run_flow",
-           "run_tasks", "share_cores", "usable_cores"]
+           "run_tasks", "share_cores"]

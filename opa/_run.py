@@ -166,8 +166,7 @@ def compile_callees() -> None:
     global _HELPER
     if getattr(sys, "frozen", False) or not sys.executable or _threads() < 2:
         return
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    if (cores or 1) < 2:
+    if usable_cores() < 2:
         return
     import numba
 
@@ -190,6 +189,14 @@ def compile_callees() -> None:
 
 
 _HELPER: subprocess.Popen | None = None  # the last helper started (tests read it)
+
+
+def usable_cores() -> int:
+    """The cores this process may run on: its CPU affinity (``taskset``, a container's
+    cpuset) where the system tells it, else every core of the machine."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
 
 
 def _threads() -> int:

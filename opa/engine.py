@@ -46,7 +46,7 @@ from opa._model import (
     time_grid,
 )
 from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, output_times, \
-    run_batch, true_system_work
+    run_batch, true_system_work, usable_cores
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
     CHATTER_WINDOW,
@@ -79,6 +79,7 @@ __all__ = [
     "package_version", "parse", "phase_section", "preset", "provenance_attrs",
     "quadrature_order", "remove_store", "require_gpu", "run_batch", "run_elements", "run_measure",
     "true_system_work",
+    "usable_cores",
     "scan_splits", "simulate_dmr", "simulate_opa", "summary_lines", "surrogate",
     "surrogate_moments", "surrogate_values", "sweep", "sweep_times", "time_coord",
     "time_grid", "true_runs", "uniform_edges", "write_netcdf",

@@ -929,8 +929,8 @@ __all__ = [
     "assemble",
     "compute_point",
     "local_executor",
-    "start_fork_server",
     "observed_seeds",
+    "start_fork_server",
     "sweep",
     "sweep_times",
 ]

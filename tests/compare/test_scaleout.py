@@ -6,7 +6,8 @@ import pytest
 import xarray as xr
 
 from compare._config import load_config
-from compare._scaleout import auto_workers, run_flow, run_tasks, share_cores, usable_cores
+from compare._scaleout import auto_workers, run_flow, run_tasks, share_cores
+from opa.engine import usable_cores
 from compare._mapflow import run_validation
 from tests.compare.test_parts import RUN_ATTRS
 
