@@ -90,3 +90,16 @@ def test_the_frontier_as_tasks_gives_the_one_process_map(one_process_with_fronti
     again = run_validation(cfg, progress=False, log=lambda *a: None)
     assert again.attrs["parts_computed"] == 0
     assert_same_map(one_process_with_frontier, again)
+
+
+def test_element_variants_under_another_law_as_tasks_give_the_one_process_map(tmp_path):
+    """The flow composes with the map's other options: a uniform law of xi and adaptive
+    multi-element variants, with the frontier, on 2 processes equal one process."""
+    kw = dict(WITH_FRONTIER, distribution="uniform", elements="adaptive", max_elements=8)
+    one = run_validation(load_config(None, outdir=str(tmp_path / "one"), workers=1, **kw),
+                         progress=False, log=lambda *a: None)
+    two = run_validation(load_config(None, outdir=str(tmp_path / "two"), workers=2, **kw),
+                         progress=False, log=lambda *a: None)
+    assert any("ME-adaptive" in str(v) for v in two.variant.values)
+    assert two.attrs["distribution"] == "uniform"
+    assert_same_map(one, two)
