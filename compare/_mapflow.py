@@ -258,7 +258,7 @@ def run_map_tasks(job: _Map, bar) -> dict:
     local processes or the Dask cluster ``cfg.scheduler``: what each did (counts, phase
     seconds summed over the workers, log lines) is added to ``job``; this process's wait
     is the phase "waiting for workers". Returns the values' results and the frontier."""
-    from compare._scaleout import MAP_PRELOAD, run_flow
+    from compare._scaleout import map_preload, run_flow
 
     cfg = job.cfg
     flow = MapFlow(cfg, job.parts)
@@ -272,7 +272,7 @@ def run_map_tasks(job: _Map, bar) -> dict:
     results = {}
     with job.clock("waiting for workers"):
         for key, result in run_flow(first, flow.follow, workers=cfg.processes,
-                                    scheduler=cfg.scheduler, preload=MAP_PRELOAD):
+                                    scheduler=cfg.scheduler, preload=map_preload(cfg.plots)):
             for line in result.pop("log"):
                 job.log(line)
             work = result.pop("work")

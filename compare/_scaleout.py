@@ -7,12 +7,12 @@ ready only once others have finished. :func:`run_flow` runs them
 * in this process, one after the other (``workers=1``, no scheduler): numba's threads
   share the cores inside each task;
 * on ``workers`` local processes (:func:`opa.engine.local_executor`, started by a fork
-  server), each task with the numba threads of its share of the cores that no running
-  task holds (:func:`share_cores`; the cores of this process's CPU affinity,
-  :func:`opa.engine.usable_cores`): one each while there are more tasks than
-  processes, the cores the finished ones left for the last ones (a task keeps its
-  threads: the tasks made ready while it runs may find fewer cores free than they are
-  given);
+  server), the running tasks sharing the cores (:func:`share_cores`; the cores of this
+  process's CPU affinity, :func:`opa.engine.usable_cores`) as numba threads: one each
+  while as many tasks run as there are cores, more as fewer run. The shares are
+  recomputed whenever a task starts or ends, and a running task reads its own before
+  each parallel batch (:func:`opa.engine.follow_thread_grant`), so the last tasks of a
+  flow take the cores the finished ones left while they run;
 * on a Dask cluster (``scheduler``: an address or a ``distributed.Client``), each task
   with its machine's cores shared out among the tasks that can run there at once (the
   Dask threads of every worker on that host, :func:`dask_threads`).
@@ -36,6 +36,15 @@ CONNECT_TIMEOUT = 5.0
 #: tasks, and the report's figures, drawn on processes of the same server
 #: (:func:`compare._report.draw_figures`)
 MAP_PRELOAD = ("compare._mapflow", "compare._report")
+#: what the figures' processes import besides (0.6 s each on the 2-core machine, paid once
+#: in the server instead)
+FIGURE_PRELOAD = ("matplotlib.pyplot",)
+
+
+def map_preload(plots: bool) -> tuple[str, ...]:
+    """The fork server's imports for a map (:data:`MAP_PRELOAD`) and, where it draws
+    figures, matplotlib's (:data:`FIGURE_PRELOAD`)."""
+    return MAP_PRELOAD + (FIGURE_PRELOAD if plots else ())
 
 
 def _threaded(threads: int | None, fn: Callable, args: tuple):
@@ -47,6 +56,20 @@ def _threaded(threads: int | None, fn: Callable, args: tuple):
         threads = dask_threads()
     numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     return fn(*args)
+
+
+def _granted(slot: int, fn: Callable, args: tuple):
+    """``fn(*args)`` on a local pool's worker, with the numba threads of its slot in the
+    pool's grants (:func:`opa.engine.pool_shared`), read again before each parallel
+    batch: the cores other tasks free while it runs are its to take."""
+    from opa.engine import follow_thread_grant, pool_shared
+
+    grants = pool_shared()
+    follow_thread_grant(lambda: grants[slot])
+    try:
+        return fn(*args)
+    finally:
+        follow_thread_grant(None)
 
 
 def dask_threads() -> int:
@@ -65,18 +88,17 @@ def dask_threads() -> int:
     return max(1, usable_cores() // max(1, slots))
 
 
-def share_cores(cores: int, busy: int, starting: int) -> int:
-    """The numba threads of a task started now on a local pool: the cores that no
-    running task holds (``busy``: their threads) shared among the ``starting`` tasks, at
-    least one. While the pool has more tasks than processes every task gets one share of
-    the cores; the last tasks of a flow get the cores the finished ones left.
+def share_cores(cores: int, running: int) -> list[int]:
+    """The numba threads of each of the ``running`` tasks of a local pool, oldest first:
+    the cores shared out equally, the cores left over to the oldest tasks (the longest
+    chains of a flow start first), at least one each. Recomputed whenever a task starts
+    or ends, so the last tasks of a flow take the cores the finished ones left.
 
-    >>> share_cores(16, 0, 16), share_cores(16, 15, 1), share_cores(16, 3, 1)
-    (1, 1, 13)
-    >>> share_cores(2, 2, 1), share_cores(16, 12, 2)
-    (1, 2)
+    >>> share_cores(16, 16), share_cores(16, 3), share_cores(2, 1), share_cores(2, 3)
+    ([1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1], [6, 5, 5], [2], [1, 1, 1])
     """
-    return max(1, (int(cores) - int(busy)) // max(1, int(starting)))
+    cores, running = max(1, int(cores)), int(running)
+    return [max(1, cores // running + (k < cores % running)) for k in range(running)]
 
 
 def auto_workers(tasks: int, cores: int | None = None) -> int:
@@ -112,7 +134,8 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
 
     Tasks start in the order given, the ones ``follow`` returned ahead of those not yet
     started (the work the rest waits on); at most ``workers`` run at once on a local
-    pool, each with its share of the free cores as numba threads (:func:`share_cores`).
+    pool, sharing the cores as numba threads (:func:`share_cores`, read by each task
+    before each of its parallel batches).
     With ``workers`` 1 and no ``scheduler`` they run in this process, one after the
     other; else never in this process (what a task counts in its own thread is its
     own). On a Dask cluster every ready task is submitted at once, the followers with a
@@ -140,22 +163,28 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
 
     from opa.engine import local_executor
 
+    from multiprocessing.sharedctypes import RawArray
+
     workers, cores = int(workers), usable_cores()
-    running: dict = {}
-    held: dict = {}  # the numba threads of each running task
-    with local_executor(workers, preload) as pool:
+    # each running task's numba threads, by its slot: written here whenever a task
+    # starts or ends, read by the task before each of its parallel batches
+    grants = RawArray("q", workers)
+    free = list(range(workers - 1, -1, -1))
+    running: dict = {}  # future: (key, slot), oldest first
+    with local_executor(workers, preload, shared=grants) as pool:
         try:
             while ready or running:
-                while ready and len(running) < workers:
-                    threads = share_cores(cores, sum(held.values()),
-                                          min(len(ready), workers - len(running)))
-                    key, fn, args = ready.popleft()
-                    future = pool.submit(_threaded, threads, fn, args)
-                    running[future], held[future] = key, threads
+                starting = [(ready.popleft(), free.pop())
+                            for _ in range(min(len(ready), workers - len(running)))]
+                slots = [slot for _, slot in running.values()] + [s for _, s in starting]
+                for slot, threads in zip(slots, share_cores(cores, len(slots))):
+                    grants[slot] = threads  # before the new tasks start
+                for (key, fn, args), slot in starting:
+                    running[pool.submit(_granted, slot, fn, args)] = key, slot
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for future in sorted(done, key=lambda f: _order(running[f])):
-                    key = running.pop(future)
-                    held.pop(future)
+                for future in sorted(done, key=lambda f: _order(running[f][0])):
+                    key, slot = running.pop(future)
+                    free.append(slot)
                     result = future.result()
                     ready.extendleft(reversed(list(follow(key, result))))
                     yield key, result
@@ -207,5 +236,5 @@ def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
             client.close()
 
 
-__all__ = ["CONNECT_TIMEOUT", "MAP_PRELOAD", "auto_workers", "dask_threads", "run_flow",
-           "run_tasks", "share_cores"]
+__all__ = ["CONNECT_TIMEOUT", "FIGURE_PRELOAD", "MAP_PRELOAD", "auto_workers", "dask_threads",
+           "map_preload", "run_flow", "run_tasks", "share_cores"]

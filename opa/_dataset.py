@@ -448,9 +448,12 @@ class Store:
 
     def path(self, name: str, inputs, suffix: str = ".npz") -> str:
         """The file of part ``name`` with ``inputs``."""
+        return self._where(name, self.key(inputs), suffix)
+
+    def _where(self, name: str, key: str, suffix: str) -> str:
         if suffix not in _SUFFIXES:
             raise ValueError(f"a part's suffix must be one of {_SUFFIXES}, got {suffix!r}")
-        return os.path.join(self.directory, f"{name}_{self.key(inputs)[:12]}{suffix}")
+        return os.path.join(self.directory, f"{name}_{key[:12]}{suffix}")
 
     def load(self, name: str, inputs, suffix: str = ".npz", check=None):
         """The part, or None: absent, or damaged (then moved aside and logged).
@@ -458,10 +461,12 @@ class Store:
         ``.npz``: a dict (0-d entries as Python scalars); ``.nc``: an xarray Dataset;
         ``.json``: the JSON value saved. ``check(content)`` returns what is wrong with a
         part that reads and stores its key, or None."""
-        path = self.path(name, inputs, suffix)
+        key = self.key(inputs)
+        return self._load(self._where(name, key, suffix), key, suffix, check)
+
+    def _load(self, path: str, key: str, suffix: str, check):
         if not os.path.lexists(path):
             return None
-        key = self.key(inputs)
         try:
             stored, content = _READ[suffix](path)
         except Exception as err:  # noqa: BLE001 -- whatever makes it unreadable: recompute
@@ -487,8 +492,10 @@ class Store:
 
     def save(self, name: str, inputs, content, suffix: str = ".npz") -> None:
         """Write part ``name`` atomically, with its key."""
-        path = self.path(name, inputs, suffix)
         key = self.key(inputs)
+        self._save(self._where(name, key, suffix), key, content, suffix)
+
+    def _save(self, path: str, key: str, content, suffix: str) -> None:
         if suffix == ".npz" and KEY_ENTRY in content:
             raise ValueError(f"{KEY_ENTRY} is a reserved name in a part")
         atomic_write(path, lambda tmp: _WRITE[suffix](tmp, content, key), suffix=suffix,
@@ -498,13 +505,15 @@ class Store:
             check=None):
         """The part ``name`` with ``inputs``: loaded, or ``compute()``-d, saved and read
         back (so that a fresh result and a reused one are the same to the bit)."""
-        found = self.load(name, inputs, suffix, check)
+        key = self.key(inputs)  # once: the digest of large inputs is not free
+        path = self._where(name, key, suffix)
+        found = self._load(path, key, suffix, check)
         if found is not None:
             return found
         content = compute()  # before the temporary exists: a kill here leaves nothing
-        self.save(name, inputs, content, suffix)
+        self._save(path, key, content, suffix)
         self.computed += 1
-        return _READ[suffix](self.path(name, inputs, suffix))[1]
+        return _READ[suffix](path)[1]
 
 
 def remove_store(directory: str | os.PathLike) -> None:

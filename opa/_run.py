@@ -199,6 +199,36 @@ def usable_cores() -> int:
     return os.cpu_count() or 1
 
 
+#: where the numba threads of the work running now come from, read before each parallel
+#: batch (:func:`follow_thread_grant`); None: the calling thread's own count
+_THREAD_GRANT = None
+
+
+def follow_thread_grant(grant) -> None:
+    """Read this process's numba thread count from ``grant()`` now and before each
+    parallel batch of :func:`run_batch` (on the thread that calls it), so that work
+    running on a pool can take the cores that other work left
+    (``compare._scaleout.run_flow`` raises a task's grant as the tasks beside it end);
+    None: stop. The batches' results do not depend on the count."""
+    global _THREAD_GRANT
+    _THREAD_GRANT = grant
+    apply_thread_grant()
+
+
+def apply_thread_grant() -> int | None:
+    """Set numba's thread count for this thread to the grant followed
+    (:func:`follow_thread_grant`) and return it; None where none is followed."""
+    grant = _THREAD_GRANT
+    if grant is None:
+        return None
+    import numba
+
+    threads = max(1, min(int(grant()), numba.config.NUMBA_NUM_THREADS))
+    if threads != numba.get_num_threads():
+        numba.set_num_threads(threads)
+    return threads
+
+
 def _threads() -> int:
     """numba's thread count without starting its thread pool (a started pool makes a
     later fork of this process abort under OpenMP)."""
@@ -683,6 +713,7 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
             np.broadcast_to(y0, (B, dim)), include_start, times, inputs.p, cfgs,
             inputs.nodes, inputs.weights, inputs.basis, rtol, atol, capacity)
         return Batch(out, logs, counters, guarded)
+    apply_thread_grant()
     if own_states:
         prepare_kernels(K.run_batch_from)
         K.run_batch_from(np.ascontiguousarray(np.broadcast_to(y0, (B, dim))),

@@ -45,8 +45,8 @@ from opa._model import (
     preset,
     time_grid,
 )
-from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, output_times, \
-    run_batch, true_system_work, usable_cores
+from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, \
+    follow_thread_grant, output_times, run_batch, true_system_work, usable_cores
 from opa._simulate import opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
     CHATTER_WINDOW,
@@ -63,7 +63,8 @@ from opa._surrogate import run_measure, surrogate, surrogate_moments, surrogate_
 from opa._system import IMPULSE_FIELDS, System, as_system
 from opa.dynamics._orbits import MAX_CYCLE, impulse_cycle
 from opa.dynamics._sections import identify_motion, mean_state, phase_section
-from opa.dynamics._sweep import local_executor, locate_setup, summary_lines, sweep, sweep_times
+from opa.dynamics._sweep import local_executor, locate_setup, pool_shared, summary_lines, sweep, \
+    sweep_times
 
 __all__ = [
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
@@ -74,9 +75,10 @@ __all__ = [
     "as_system", "atomic_write", "chebyshev_u", "check_count", "check_device", "check_instance",
     "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",
     "collocation", "count_probabilities", "digest", "event_sequence", "gauss_nodes",
-    "global_coefficients", "identify_motion", "impulse_cycle", "local_executor",
+    "follow_thread_grant", "global_coefficients", "identify_motion", "impulse_cycle",
+    "local_executor",
     "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",
-    "package_version", "parse", "phase_section", "preset", "provenance_attrs",
+    "package_version", "parse", "phase_section", "pool_shared", "preset", "provenance_attrs",
     "quadrature_order", "remove_store", "require_gpu", "run_batch", "run_elements", "run_measure",
     "true_system_work",
     "usable_cores",

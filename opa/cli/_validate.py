@@ -194,10 +194,10 @@ def cmd_validate(args) -> int:
     _check_outdir(cfg.outdir)
     if cfg.processes > 1 and cfg.scheduler is None:
         # the workers' fork server imports the map's modules while this process does
-        from compare._scaleout import MAP_PRELOAD
+        from compare._scaleout import map_preload
         from opa.dynamics._sweep import start_fork_server
 
-        start_fork_server(MAP_PRELOAD)
+        start_fork_server(map_preload(cfg.plots))
     from compare._mapflow import run_validation
     from compare._report import (bullet, cause, findings, first_screen, frontier_lines,
                                  process_started, verdict_grid, wall_text, write_report)

@@ -191,8 +191,20 @@ def compute_point(task: PointTask) -> dict:
     }
 
 
-def _init_worker(owner: int | None = None) -> None:
-    """Set up a pool worker: one numba thread, and no life beyond the pool's owner.
+#: what the pool that made this worker process shares with it (``local_executor``'s
+#: ``shared``), or None
+_SHARED = None
+
+
+def pool_shared():
+    """The object shared by the pool this worker process belongs to (``shared`` of
+    :func:`local_executor`), or None."""
+    return _SHARED
+
+
+def _init_worker(owner: int | None = None, shared=None) -> None:
+    """Set up a pool worker: one numba thread, and no life beyond the pool's owner;
+    ``shared``: what the pool shares with its workers (:func:`pool_shared`).
 
     The worker's parent is the fork server, not ``owner`` (the process that made the
     pool); the fork server ends when ``owner`` does (:func:`exit_with_parent`, started by
@@ -202,6 +214,8 @@ def _init_worker(owner: int | None = None) -> None:
     """
     import numba
 
+    global _SHARED
+    _SHARED = shared
     numba.set_num_threads(1)
     _kill_on_parent_death()
     if owner is not None:
@@ -635,12 +649,15 @@ def _run_parallel(tasks, finish, scheduler, executor, workers) -> None:
             executor.shutdown(wait=True, cancel_futures=True)
 
 
-def local_executor(workers: int = DEFAULT_WORKERS, preload: tuple[str, ...] = ()):
+def local_executor(workers: int = DEFAULT_WORKERS, preload: tuple[str, ...] = (),
+                   shared=None):
     """A process pool for sweeps: ``workers`` processes with one numba thread each.
 
     ``preload``: more modules for the fork server to import before it forks the first
     worker, so that no worker imports them again (this process's first pool starts the
-    server; the ones after it share that server and its modules).
+    server; the ones after it share that server and its modules). ``shared``: an object
+    the workers get when they start (:func:`pool_shared`), e.g. a ``RawArray`` this
+    process writes to while they run.
 
     Processes come from a fork server (not a plain fork, which is unsafe once numba's
     thread pool has started in this process). Reuse it across sweeps with
@@ -654,7 +671,7 @@ def local_executor(workers: int = DEFAULT_WORKERS, preload: tuple[str, ...] = ()
     # the workers must not outlive this process, even when it is killed (SIGKILL leaves
     # no chance to shut the pool down): see _init_worker and opa.dynamics._warm_worker
     return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx,
-                               initializer=_init_worker, initargs=(os.getpid(),))
+                               initializer=_init_worker, initargs=(os.getpid(), shared))
 
 
 def _forkserver(preload: tuple[str, ...]):

@@ -1,6 +1,7 @@
 """The trust map's tasks on a local process pool and on a Dask cluster (compare._scaleout):
 the map they assemble equals the one computed in one process, bit for bit."""
 
+import numba
 import numpy as np
 import pytest
 import xarray as xr
@@ -65,25 +66,66 @@ def _fail():
 def test_the_default_shares_the_cores_out():
     assert auto_workers(6, cores=2) == 2 and auto_workers(6, cores=16) == 6
     assert auto_workers(2, cores=16) == 1 and auto_workers(6, cores=1) == 1
-    assert share_cores(16, 0, 16) == 1 and share_cores(16, 4, 2) == 6
-    assert share_cores(2, 2, 1) == 1  # never none
+    assert share_cores(16, 16) == [1] * 16 and share_cores(16, 2) == [8, 8]
+    assert share_cores(16, 3) == [6, 5, 5]  # every core, the spare one to the oldest
+    assert share_cores(2, 5) == [1] * 5  # never none
 
 
-def _numba_threads(_):
-    import numba
+def _numba_threads(hold: float):
+    """numba's thread count as the task starts, then ``hold`` seconds doing nothing (so
+    that tasks started together run together)."""
+    import time
 
-    return numba.get_num_threads()
+    threads = numba.get_num_threads()
+    time.sleep(hold)
+    return threads
 
 
-@pytest.mark.skipif(usable_cores() < 2, reason="needs 2 cores")
+def _threads_seen(seconds: float) -> list[int]:
+    """The thread counts this task is granted, in the order seen, until it has the two
+    cores or ``seconds`` pass."""
+    import time
+
+    from opa._run import apply_thread_grant
+
+    seen, end = [], time.monotonic() + seconds
+    while time.monotonic() < end:
+        threads = apply_thread_grant()
+        if not seen or seen[-1] != threads:
+            seen.append(threads)
+        if threads == 2:
+            break
+        time.sleep(0.01)
+    return seen
+
+
+def _sleep(seconds: float) -> float:
+    import time
+
+    time.sleep(seconds)
+    return seconds
+
+
+TWO_THREADS = pytest.mark.skipif(usable_cores() < 2 or numba.config.NUMBA_NUM_THREADS < 2,
+                                 reason="needs 2 cores")
+
+
+@TWO_THREADS
 def test_a_pool_gives_the_last_task_the_cores_the_others_left():
     """Two tasks on 2 processes: one thread each; one task alone: both cores."""
-    two = dict(run_flow([(i, _numba_threads, (i,)) for i in range(2)], workers=2))
+    two = dict(run_flow([(i, _numba_threads, (2.0,)) for i in range(2)], workers=2))
     assert two == {0: 1, 1: 1}
-    import numba
+    alone = dict(run_flow([(0, _numba_threads, (0.0,))], workers=2))
+    assert alone == {0: 2}
 
-    alone = dict(run_flow([(0, _numba_threads, (0,))], workers=2))
-    assert alone == {0: min(2, numba.config.NUMBA_NUM_THREADS)}
+
+@TWO_THREADS
+def test_a_running_task_takes_the_core_a_finished_one_left():
+    """A task beside a short one has one thread, then both cores once the short one has
+    ended, without starting again."""
+    done = dict(run_flow([("long", _threads_seen, (60.0,)), ("short", _sleep, (0.5,))],
+                         workers=2))
+    assert done["long"] == [1, 2]
 
 
 @pytest.fixture(scope="module")

@@ -515,7 +515,7 @@ def test_validate_starts_its_workers_fork_server_before_the_maps_imports(monkeyp
     import sys
 
     import opa.dynamics._sweep as sweep
-    from compare._scaleout import MAP_PRELOAD
+    from compare._scaleout import FIGURE_PRELOAD, MAP_PRELOAD
 
     started = []
 
@@ -528,9 +528,12 @@ def test_validate_starts_its_workers_fork_server_before_the_maps_imports(monkeyp
             "2,4", "--samples", "64", "--max-samples", "128", "--no-frontier",
             "--no-plots", "--quiet"]
     assert main(["validate", *tiny, "--workers", "2", "--outdir", str(tmp_path / "a")]) == 1
-    assert started == [MAP_PRELOAD]
+    assert started == [MAP_PRELOAD]  # --no-plots: no matplotlib for the server
     assert main(["validate", *tiny, "--workers", "1", "--outdir", str(tmp_path / "b")]) == 0
     assert started == [MAP_PRELOAD]
+    drawn = [a for a in tiny if a != "--no-plots"]
+    assert main(["validate", *drawn, "--workers", "2", "--outdir", str(tmp_path / "c")]) == 1
+    assert started == [MAP_PRELOAD, MAP_PRELOAD + FIGURE_PRELOAD]
     code = ("import sys; from opa.cli._main import build_parser; build_parser(); "
             "print('matplotlib' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
