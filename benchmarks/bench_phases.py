@@ -166,3 +166,20 @@ def test_timeline_tiny(tmp_path):
                                    ("bisect", 0, 0), ("bisect", 0, 1), ("value", 0)])
     assert keys[-1] == ("value", 0)
     assert all(cpu > 0 for _, _, cpu in rows)
+
+
+def test_figure_times_tiny(tmp_path):
+    """The smoke run of ``benchmarks/figure_times.py``: every figure of a tiny map's
+    report is drawn once and timed."""
+    from benchmarks.figure_times import figure_times
+    from compare._config import load_config
+    from compare._mapflow import run_validation
+    from compare._report import REPORT_FIGURES
+
+    cfg = load_config(None, outdir=str(tmp_path), values=(3.98,), sigmas=(0.01, 0.03),
+                      orders=(0, 2), horizons=(2, 4), samples=64, max_samples=128,
+                      frontier=False)
+    run_validation(cfg, progress=False, log=lambda *a: None)
+    rows = figure_times(str(tmp_path / "validate.nc"), str(tmp_path))
+    assert [name for name, _ in rows] == [name for name, _ in REPORT_FIGURES]
+    assert all(cpu > 0 and (tmp_path / name).stat().st_size > 0 for name, cpu in rows)

@@ -105,8 +105,15 @@ def value_task(cfg: ValidateConfig, value: float, found: list) -> dict:
     """:meth:`_Map.value_work` as a task, after :func:`splits_task`, the
     :func:`point_task` of its grid and the :func:`bisect_task` of every horizon
     (``found``, in horizon order): it reads those back and assembles the value's
-    datasets."""
-    return _task(cfg, "other", lambda job: job.value_work(value, found))
+    datasets. At the first value it also computes the phase portraits, kept as a part
+    (:meth:`_Map.details`), which the map would otherwise compute after the flow."""
+    def work(job):
+        result = job.value_work(value, found)
+        if value == cfg.values[0]:
+            job.details(result["phase_sigma"])
+        return result
+
+    return _task(cfg, "other", work)
 
 
 def frontier_runs_task(cfg: ValidateConfig, runs: tuple[str, ...], known: dict) -> dict:

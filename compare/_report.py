@@ -1085,8 +1085,8 @@ REPORT_FIGURES = (("trust_map.png", plot_map), ("error_vs_N.png", plot_error_vs_
            ("phase.png", plot_phase))
 
 #: CPU seconds of each figure of the default map on the 2-core machine (one process,
-#: matplotlib imported; /tmp timing in the closing note of issue 29): the order in which
-#: draw_figures hands them to its processes
+#: matplotlib imported first: ``python benchmarks/figure_times.py OUTDIR/validate.nc``):
+#: the order in which start_figures hands them to its processes
 FIGURE_COST = {"frontier.png": 1.67, "error_vs_N.png": 1.07, "trust_map.png": 0.75,
                "variance.png": 0.62, "mean_vs_mc.png": 0.45, "phase.png": 0.25}
 
@@ -1099,21 +1099,44 @@ def draw_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1,
     are the same either way). ``source``: a netCDF file that holds ``ds`` (the map's
     validate.nc), which the processes open instead of each receiving a copy of ``ds``.
     Returns the written paths in the order of the figures."""
+    return start_figures(ds, outdir, workers=workers, source=source)()
+
+
+def start_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1,
+                  source: str | None = None):
+    """:func:`draw_figures` in two steps: with ``workers`` > 1 the figures start on their
+    processes now, and the function returned waits for them (and ends the processes)
+    and returns the paths, so that this process can write the summary meanwhile; with
+    one, they are drawn here when that function is called."""
     jobs = [(fn, name) for name, fn in REPORT_FIGURES]
     if frontier_dataset(ds) is not None:
         jobs.append((_plot_frontier_of, "frontier.png"))
     if workers <= 1:
-        done = [fn(ds, os.path.join(outdir, name)) for fn, name in jobs]
-    else:
-        from opa.engine import local_executor
+        return lambda: _paths([fn(ds, os.path.join(outdir, name)) for fn, name in jobs])
+    from opa.engine import local_executor
 
-        data = ds if source is None else source
-        # the longest first, so that no long figure starts last (FIGURE_COST)
-        order = sorted(range(len(jobs)), key=lambda k: -FIGURE_COST.get(jobs[k][1], 0.0))
-        with local_executor(min(int(workers), len(jobs))) as pool:
-            futures = {k: pool.submit(_draw, jobs[k][0], data,
-                                      os.path.join(outdir, jobs[k][1])) for k in order}
-            done = [futures[k].result() for k in range(len(jobs))]
+    data = ds if source is None else source
+    # the longest first, so that no long figure starts last (FIGURE_COST)
+    order = sorted(range(len(jobs)), key=lambda k: -FIGURE_COST.get(jobs[k][1], 0.0))
+    pool = local_executor(min(int(workers), len(jobs)))
+    try:
+        futures = {k: pool.submit(_draw, jobs[k][0], data, os.path.join(outdir, jobs[k][1]))
+                   for k in order}
+    except BaseException:
+        pool.shutdown(cancel_futures=True)
+        raise
+
+    def finish() -> list[str]:
+        try:
+            return _paths([futures[k].result() for k in range(len(jobs))])
+        finally:
+            pool.shutdown(cancel_futures=True)
+
+    return finish
+
+
+def _paths(done) -> list[str]:
+    """The written paths of the figures, in order (a figure may write several)."""
     paths = []
     for written in done:
         paths += [written] if isinstance(written, str) else list(written)
@@ -1150,20 +1173,42 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     import time
 
     os.makedirs(outdir, exist_ok=True)
-    paths = []
-    if plots:
-        paths += draw_figures(ds, outdir, workers=workers, source=source)
+    # the figures' processes draw while this one writes the summary
+    figures = (start_figures(ds, outdir, workers=workers, source=source) if plots
+               else (lambda: []))
+    try:
+        lines = _summary_lines(ds, command)
+    finally:
+        paths = figures()
     a = ds.attrs
     seconds = {"total": float(a["wall_seconds"])}
     if started is not None:
         seconds = {"total": time.perf_counter() - started, "map": float(a["wall_seconds"])}
         seconds["report"] = seconds["total"] - seconds["map"]
+    lines = [line.replace(_WALL_TIME, wall_text(seconds)) for line in lines]
+    if plots:
+        lines += ["## Figures", ""] + [f"![{os.path.basename(p)}]({os.path.basename(p)})"
+                                       for p in paths] + [""]
     md = os.path.join(outdir, "summary.md")
+    with open(md, "w") as fh:
+        fh.write("\n".join(lines))
+    if timing is not None:
+        timing.update(seconds)
+    return [md] + paths
+
+
+#: where summary.md's wall time goes, once the figures are drawn
+_WALL_TIME = "\x00wall time\x00"
+
+
+def _summary_lines(ds: xr.Dataset, command: str) -> list[str]:
+    """summary.md's lines but its figures, the wall time a placeholder (``_WALL_TIME``)."""
+    a = ds.attrs
     value_text = ", ".join(_g(float(v)) for v in _vals(ds).values)
     lines = [
         "# opa-mc validate: where OPA agrees with Monte Carlo", "",
         "```text", *first_screen(ds), "```", "",
-        f"Command: `{command}` (wall time {wall_text(seconds)}; computed: "
+        f"Command: `{command}` (wall time {_WALL_TIME}; computed: "
         f"{a['mc_runs_computed']} Monte Carlo runs, {a['opa_runs_computed']} OPA runs, "
         f"{a['parts_computed']} parts in all (splits and the frontier included); the rest "
         f"reused from parts/).", "",
@@ -1216,17 +1261,11 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     lines += ["## Impact counts", ""]
     for h in range(len(ds.horizon)):
         lines += [count_table(ds, h), ""]
-    if plots:
-        lines += ["## Figures", ""] + [f"![{os.path.basename(p)}]({os.path.basename(p)})"
-                                       for p in paths] + [""]
-    with open(md, "w") as fh:
-        fh.write("\n".join(lines))
-    if timing is not None:
-        timing.update(seconds)
-    return [md] + paths
+    return lines
 
 
 __all__ = ["best_variant", "boundary_table", "cause", "draw_figures", "first_screen",
+           "start_figures",
            "run_failures",
            "short_cause", "wall_text", "bullet", "process_started", "complete_within",
            "count_table", "findings",
