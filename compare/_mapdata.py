@@ -8,6 +8,7 @@ parts), the distribution of impact counts, and the datasets of the map, built pe
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +16,7 @@ import xarray as xr
 
 from compare._config import CRITERIA, ValidateConfig
 from mc import semicircle_cdf
-from opa.engine import SPLIT_KINDS, STATUS_NAMES, Split, count_probabilities
+from opa.engine import SPLIT_KINDS, STATUS_NAMES, Split, atomic_write, count_probabilities
 
 
 @dataclass
@@ -364,10 +365,77 @@ def combine(cfg: ValidateConfig, points: list[list[xr.Dataset]],
     values (:func:`value_dataset`) joined over ``value`` and ``sigma``, the dimensions
     whose length differs padded (``PADDING``), with the map-wide ``variant_ran`` and the
     attribute ``element_failures`` (the grid points' failures; bisection probes say so in
-    the log)."""
-    grid = xr.combine_nested(points, concat_dim=["value", "sigma"], fill_value=PADDING,
+    the log): :func:`combine_slices` of each value's :func:`value_slice`."""
+    slices = [value_slice(cfg, v, row, by_value)
+              for v, row, by_value in zip(cfg.values, points, values)]
+    return combine_slices(cfg, slices)
+
+
+def value_slice(cfg: ValidateConfig, value: float, points: list[xr.Dataset],
+                by_value: xr.Dataset) -> xr.Dataset:
+    """One swept value's part of the map (``value`` of length 1): its grid points
+    (``points[s]``) joined over ``sigma`` and merged with its :func:`value_dataset`; its
+    points' failures in the attribute ``slice_failures`` (:func:`combine_slices` joins
+    the slices, which a map may keep on disk until then)."""
+    grid = xr.combine_nested([points], concat_dim=["value", "sigma"], fill_value=PADDING,
                              **_JOIN)
-    by_value = xr.concat(values, "value", fill_value=PADDING, **_JOIN)
+    one = xr.concat([by_value], "value", fill_value=PADDING, **_JOIN)
+    merged = xr.merge([grid, one], compat="no_conflicts", join="outer",
+                      combine_attrs="override")
+    failures = [f"{cfg.parameter} = {value:g}, sigma = {sigma:g}: "
+                f"{point.attrs['element_failure']}"
+                for sigma, point in zip(cfg.sigmas, points) if point.attrs["element_failure"]]
+    return merged.assign_attrs(slice_failures=" | ".join(failures))
+
+
+#: the dimension of the map's bulk: the variables along the output times (the OPA and
+#: Monte Carlo moments, 0.29 of the 0.30 MB per grid point of the default map) wait on
+#: disk from their value's end to validate.nc (:func:`spill`), never whole in memory
+STREAMED_DIM = "time"
+
+
+class SpilledArray:
+    """An array kept in a ``.npy`` file, read whole when indexed (dask's chunk of it)."""
+
+    def __init__(self, path: str, shape: tuple, dtype):
+        self.path, self.shape, self.dtype = path, tuple(shape), np.dtype(dtype)
+        self.ndim = len(self.shape)
+
+    def __getitem__(self, key):
+        return np.load(self.path)[key]
+
+
+def spill(ds: xr.Dataset, folder: str, name: str) -> tuple[xr.Dataset, list[str]]:
+    """``ds`` with its variables along ``STREAMED_DIM`` written to ``folder`` (one
+    ``.npy`` file each, ``<name>_<variable>.npy``) and read back lazily from there (dask,
+    one chunk each): the same values, dtypes and attributes, without their bytes.
+    Returns the dataset and the files (for the caller to remove once it is written)."""
+    import dask.array
+
+    os.makedirs(folder, exist_ok=True)
+    lazy, files = {}, []
+    for var, v in ds.data_vars.items():
+        if STREAMED_DIM not in v.dims:
+            continue
+        path = os.path.join(folder, f"{name}_{var}.npy")
+        data = np.asarray(v.values)
+        atomic_write(path, lambda tmp, data=data: np.save(tmp, data), suffix=".npy",
+                     clean=False)
+        lazy[var] = v.copy(data=dask.array.from_array(
+            SpilledArray(path, data.shape, data.dtype), chunks=data.shape,
+            name=f"spilled-{path}", meta=np.empty((0,) * data.ndim, data.dtype)))
+        files.append(path)
+    return ds.assign(lazy), files
+
+
+def combine_slices(cfg: ValidateConfig, slices: list[xr.Dataset]) -> xr.Dataset:
+    """The map from its values' :func:`value_slice` (in ``cfg.values`` order): joined over
+    ``value``, the dimensions whose length differs padded (``PADDING``), with the
+    map-wide ``variant_ran`` and the attribute ``element_failures``. Slices whose bulk is
+    on disk (:func:`spill`) give a map whose bulk is read as it is written."""
+    failures = [one.attrs["slice_failures"] for one in slices
+                if one.attrs.get("slice_failures")]
+    grid = xr.concat(slices, "value", fill_value=PADDING, **_JOIN)
     V, N, S = len(cfg.variants), len(cfg.orders), len(cfg.single_variants)
     ran = np.zeros((V, N), np.int8)
     ran[:S] = 1
@@ -376,15 +444,11 @@ def combine(cfg: ValidateConfig, points: list[list[xr.Dataset]],
                                        {"long_name": "1 where the variant is run at this N "
                                         "(multi-element variants: N = Nmax only)", **ONE})},
                       coords=_coords(cfg, "variant", "N"))
-    merged = xr.merge([grid, by_value, wide], compat="no_conflicts", join="outer",
+    merged = xr.merge([grid, wide], compat="no_conflicts", join="outer",
                       combine_attrs="override")
     # the grid's coordinates first, then the rest in the order they come (docs/datasets.md)
     first = ["value", "sigma"]
     ds = xr.Dataset({name: merged[name].variable for name in merged.data_vars},
                     coords={name: merged[name].variable
                             for name in first + [c for c in merged.coords if c not in first]})
-    failures = [f"{cfg.parameter} = {value:g}, sigma = {sigma:g}: "
-                f"{point.attrs['element_failure']}"
-                for value, row in zip(cfg.values, points)
-                for sigma, point in zip(cfg.sigmas, row) if point.attrs["element_failure"]]
     return ds.assign_attrs(element_failures=" | ".join(failures)) if failures else ds

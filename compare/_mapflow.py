@@ -32,8 +32,9 @@ import numpy as np
 import xarray as xr
 
 from compare._config import ValidateConfig
+from compare._mapdata import STREAMED_DIM
 from compare._convergence import PENDING, run_convergence
-from compare._trustmap import _Map, frontier, frontier_part, frontier_study
+from compare._trustmap import _Map, drop_spilled, frontier, frontier_part, frontier_study
 from opa.engine import Store, true_system_work, write_netcdf
 
 #: frontier runs that share one computation run as one task: the control-variate rows
@@ -102,13 +103,14 @@ def bisect_task(cfg: ValidateConfig, value: float, h: int) -> dict:
 
 
 def value_task(cfg: ValidateConfig, value: float, found: list) -> dict:
-    """:meth:`_Map.value_work` as a task, after :func:`splits_task`, the
+    """:meth:`_Map.value_part` as a task, after :func:`splits_task`, the
     :func:`point_task` of its grid and the :func:`bisect_task` of every horizon
-    (``found``, in horizon order): it reads those back and assembles the value's
-    datasets. At the first value it also computes the phase portraits, kept as a part
-    (:meth:`_Map.details`), which the map would otherwise compute after the flow."""
+    (``found``, in horizon order): it reads those back and assembles the value's slice
+    of the map, its bulk written to OUTDIR (:meth:`_Map.value_part`). At the first value
+    it also computes the phase portraits, kept as a part (:meth:`_Map.details`), which
+    the map would otherwise compute after the flow."""
     def work(job):
-        result = job.value_work(value, found)
+        result = job.value_part(value, found)
         if value == cfg.values[0]:
             job.details(result["phase_sigma"])
         return result
@@ -318,7 +320,8 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
     finished dataset (default: from the call)."""
     started = time.perf_counter() if started is None else started
     pooled = cfg.processes > 1 or cfg.scheduler is not None
-    ds = _Map(cfg, progress=progress, log=log).run(run_map_tasks if pooled else None)
+    job = _Map(cfg, progress=progress, log=log)
+    ds = job.run(run_map_tasks if pooled else None)
     for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
         if dim not in ds.coords:
             ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
@@ -331,7 +334,29 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
             if name in ds and "long_name" not in ds[name].attrs:
                 ds[name].attrs["long_name"] = text
     ds.attrs["wall_seconds"] = time.perf_counter() - started
-    write_netcdf(ds, os.path.join(cfg.outdir, "validate.nc"))
+    path = os.path.join(cfg.outdir, "validate.nc")
+    import dask
+
+    try:
+        # the bulk of the values' slices, one at a time, from their files to validate.nc,
+        # in this process
+        with dask.config.set(scheduler="synchronous"):
+            write_netcdf(ds, path)
+    finally:
+        drop_spilled(job.spilled)
+    return open_map(path)
+
+
+def open_map(path: str) -> xr.Dataset:
+    """validate.nc as the report reads it: every variable in memory but those along
+    ``STREAMED_DIM`` (the OPA and Monte Carlo moments, most of the map's bytes), of
+    which each use reads what it indexes from the file (``ds.opa_x_mean[q, s]``: that
+    point's), and nothing is kept."""
+    ds = xr.open_dataset(path, engine="netcdf4", decode_times=False, decode_timedelta=False,
+                         cache=False)
+    for variable in ds.variables.values():
+        if STREAMED_DIM not in variable.dims:
+            variable.load()
     return ds
 
 

@@ -324,7 +324,7 @@ def run_failures(ds) -> list[str]:
             if not bad.any():
                 continue
             n = int(round(float(H) * ds.attrs["per_period"])) + 1
-            x = ds.opa_x_mean.values[:, :, v, :, :n][:, :, ran[v]][bad]
+            x = ds.opa_x_mean[:, :, v, :, :n].values[:, :, ran[v]][bad]  # v's only
             stops = [t[np.flatnonzero(~np.isfinite(row))[0]] for row in x
                      if (~np.isfinite(row)).any()]
             when = (f"x_0 is NaN from t = {min(stops):.3g}–{max(stops):.3g} periods on"
@@ -531,7 +531,7 @@ def _table(title, head, rows, markdown):
 
 # -- findings -------------------------------------------------------------------------------
 def _window_sem(ds, q, s, n):
-    se = ds.mc_x_sem.values[q, s, :n]
+    se = ds.mc_x_sem[q, s, :n].values
     return float(np.sqrt(np.mean(se**2)))
 
 

@@ -47,8 +47,11 @@ of a version before the store is refused, naming it: remove it to start over.
 The map itself is assembled per point (:mod:`compare._mapdata`): each grid point (value,
 sigma) gives a dataset (``point_dataset``: its errors, verdicts, Monte Carlo moments,
 impact counts), each swept value one more (``value_dataset``: sigma*, the bisection
-probes, the splits), and ``combine`` joins them over the grid with the map-wide
-variables.
+probes, the splits); a value's are joined into its slice of the map (``value_slice``),
+its bulk (the time series) written to ``OUTDIR/slices/`` as the value is done
+(``spill``), and ``combine_slices`` joins the slices, the bulk read lazily from those
+files, with the map-wide variables: ``run_validation`` writes validate.nc from them
+without holding the whole map in memory, then removes the files.
 """
 
 from __future__ import annotations
@@ -60,8 +63,8 @@ import numpy as np
 import xarray as xr
 
 from compare._config import ELEMENT_TOLERANCE, ValidateConfig, noise_floor
-from compare._mapdata import (HorizonSplits, Point, combine, point_dataset, splits_from_arrays,
-                              splits_to_arrays, value_dataset)
+from compare._mapdata import (HorizonSplits, Point, combine_slices, point_dataset, spill,
+                              splits_from_arrays, splits_to_arrays, value_dataset, value_slice)
 from compare._pairs import REPLICATES, Control, Pairs, pair_point
 from compare._phases import PhaseClock
 from compare._trust import bisect_boundary, excess, window_errors_all
@@ -88,6 +91,7 @@ class _Map:
         self.log = log
         self.progress = progress
         self.parts = Store(os.path.join(cfg.outdir, "parts"), "trust map", log=log)
+        self.spilled: list[str] = []  # the files of the slices' bulk (value_part)
         self.floor = noise_floor(cfg.options)
         self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
         self.mc_runs = 0
@@ -584,7 +588,6 @@ class _Map:
                      f"interrupted run left behind: "
                      f"{', '.join(os.path.basename(p) for p in self.parts.removed)}")
         total = len(cfg.values) * len(cfg.sigmas)
-        points, values = [], []
         start = time.perf_counter()
         with tqdm(total=total, unit="point", desc="trust map", disable=not self.progress) as bar:
             self.bar = bar
@@ -593,17 +596,17 @@ class _Map:
             else:
                 results = {}
                 for i, value in enumerate(cfg.values):
-                    results[i] = self.value_work(value)
+                    results[i] = self.value_part(value)
                 if cfg.frontier:
                     self.log("cost-accuracy frontier at the largest sigma ...")
                     with self.clock("frontier"):
                         results["frontier"] = frontier(cfg, parts=self.parts)
-            for i in range(len(cfg.values)):
-                points.append(results[i]["points"])
-                values.append(results[i]["value"])
         self.bar = None
         with self.clock("assembly"):
-            ds = combine(cfg, points, values)
+            # each value's slice, its bulk on disk (compare._mapdata.spill): the map is
+            # written from them without ever being whole in this process's memory
+            ds = combine_slices(cfg, [results[i]["slice"] for i in range(len(cfg.values))])
+        self.spilled = [f for i in range(len(cfg.values)) for f in results[i]["files"]]
         ds = xr.merge([ds, self.details(results[0]["phase_sigma"])],
                       combine_attrs="drop_conflicts")
         if cfg.frontier:
@@ -622,6 +625,18 @@ class _Map:
                               else f"{cfg.processes} local processes" if cfg.processes > 1
                               else "one process")
         return ds
+
+    def value_part(self, value: float, found=None) -> dict:
+        """:meth:`value_work`, its datasets joined into the value's slice of the map
+        (:func:`compare._mapdata.value_slice`), its bulk written to ``OUTDIR/SLICES``
+        (:func:`compare._mapdata.spill`); returns the slice (``slice``), those files
+        (``files``) and the sigma of the phase portraits (``phase_sigma``)."""
+        result = self.value_work(value, found)
+        with self.clock("assembly"):
+            part, files = spill(value_slice(self.cfg, value, result["points"],
+                                            result["value"]),
+                                os.path.join(self.cfg.outdir, SLICES), self._name(value))
+        return {"slice": part, "files": files, "phase_sigma": result["phase_sigma"]}
 
     def value_work(self, value: float, found=None) -> dict:
         """Everything at one swept value: its split scan, its grid of points, the
@@ -672,6 +687,24 @@ class _Map:
         return self.parts.get(f"details_{self._name(value, sigma)}", inputs,
                               self._timed("phase portraits", lambda: _details(cfg, sigma)),
                               ".nc")
+
+
+#: the folder of OUTDIR where the bulk of each value's slice of the map waits, from the
+#: value's end to validate.nc's (a scratch: removed once validate.nc is written)
+SLICES = "slices"
+
+
+def drop_spilled(files: list[str]) -> None:
+    """Remove the spilled files of a map's slices (and their folder, once empty)."""
+    for path in files:
+        try:
+            os.remove(path)
+        except OSError:
+            pass
+    try:
+        os.rmdir(os.path.dirname(files[0]))
+    except (OSError, IndexError):  # not empty: something else lives there
+        pass
 
 
 FRONTIER_BUDGETS = (8, 16, 32, 64)

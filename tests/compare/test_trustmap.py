@@ -763,3 +763,67 @@ def test_a_doubled_ensemble_equals_one_run_whole(tmp_path, distribution):
     for name in ("x", "xi", "impacts"):
         np.testing.assert_array_equal(grown[name], whole[name])
     assert grown["rhs"] == whole["rhs"]
+
+
+def test_the_map_is_written_from_its_slices_without_holding_its_bulk(tmp_path, monkeypatch):
+    """Each value's slice waits with its time series on disk (compare._mapdata.spill):
+    the validate.nc written from them holds the map that the points' datasets joined in
+    memory give (compare._mapdata.combine, one step over the whole grid), the scratch
+    files are gone after it, and the dataset returned reads the time series from
+    validate.nc as they are used instead of holding them."""
+    import compare._trustmap as trustmap
+    from compare._mapdata import STREAMED_DIM, combine
+
+    got = []
+    work = trustmap._Map.value_work
+
+    def keep(self, value, found=None):
+        result = work(self, value, found)
+        got.append(result)
+        return result
+
+    monkeypatch.setattr(trustmap._Map, "value_work", keep)
+    cfg = load_config(None, outdir=str(tmp_path),
+                      **{**TINY, "frontier": False, "values": (3.98, 4.09)})
+    ds = run_validation(cfg, progress=False, log=lambda *a: None)
+    assert not (tmp_path / trustmap.SLICES).exists()
+    whole = combine(cfg, [r["points"] for r in got], [r["value"] for r in got])
+    with xr.open_dataset(tmp_path / "validate.nc") as back:
+        back = back.rename({cfg.parameter: "value"})
+        for name, variable in whole.variables.items():
+            if variable.dtype.kind not in "OU":  # text: object in memory, <U from a file
+                assert variable.dtype == back[name].dtype, name
+            if variable.dtype.kind in "fc":
+                assert np.array_equal(variable.values, back[name].values,
+                                      equal_nan=True), name
+            else:
+                assert np.array_equal(variable.values, back[name].values), name
+            attrs = back[name].attrs
+            assert list(variable.attrs) == list(attrs), name
+            assert all(np.array_equal(np.asarray(v), np.asarray(attrs[k]))
+                       for k, v in variable.attrs.items()), name
+    streamed = [n for n, v in ds.data_vars.items() if STREAMED_DIM in v.dims]
+    assert "opa_x_mean" in streamed and "mc_x_mean" in streamed
+    assert not any(ds[n].variable._in_memory for n in streamed)
+    assert all(ds[n].variable._in_memory for n in ds.data_vars if n not in streamed)
+    np.testing.assert_array_equal(ds.opa_x_mean[0, 1].values,
+                                  whole.opa_x_mean[0, 1].values)
+
+
+def test_spill_keeps_values_dtypes_and_attributes(tmp_path):
+    """A slice's time series written to .npy files and read back lazily: the same
+    dataset, its bulk no longer in memory; ``drop_spilled`` removes the files."""
+    from compare._mapdata import spill
+    from compare._trustmap import drop_spilled
+
+    ds = xr.Dataset({"x": (("value", "time"), np.arange(6.0).reshape(1, 6), {"units": "1"}),
+                     "n": (("value", "time"), np.arange(6).reshape(1, 6)),
+                     "k": (("value",), np.array([7], np.int8), {"long_name": "k"})},
+                    attrs={"slice_failures": ""})
+    lazy, files = spill(ds, str(tmp_path / "slices"), "omega3.98")
+    assert sorted(os.path.basename(f) for f in files) == ["omega3.98_n.npy",
+                                                          "omega3.98_x.npy"]
+    assert not lazy.x.variable._in_memory and lazy.k.variable._in_memory
+    assert lazy.identical(ds) and lazy.n.dtype == ds.n.dtype
+    drop_spilled(files)
+    assert not (tmp_path / "slices").exists()
