@@ -1087,8 +1087,8 @@ REPORT_FIGURES = (("trust_map.png", plot_map), ("error_vs_N.png", plot_error_vs_
 #: CPU seconds of each figure of the default map on the 2-core machine (one process,
 #: matplotlib imported first: ``python benchmarks/figure_times.py OUTDIR/validate.nc``):
 #: the order in which start_figures hands them to its processes
-FIGURE_COST = {"frontier.png": 1.67, "error_vs_N.png": 1.07, "trust_map.png": 0.75,
-               "variance.png": 0.62, "mean_vs_mc.png": 0.45, "phase.png": 0.25}
+FIGURE_COST = {"frontier.png": 2.11, "error_vs_N.png": 1.12, "trust_map.png": 0.95,
+               "variance.png": 0.64, "mean_vs_mc.png": 0.55, "phase.png": 0.24}
 
 
 def draw_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1,
