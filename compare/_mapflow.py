@@ -102,15 +102,17 @@ def bisect_task(cfg: ValidateConfig, value: float, h: int) -> dict:
     return _task(cfg, "other", work)
 
 
-def value_task(cfg: ValidateConfig, value: float, found: list) -> dict:
+def value_task(cfg: ValidateConfig, value: float, found: list, spill: bool = True) -> dict:
     """:meth:`_Map.value_part` as a task, after :func:`splits_task`, the
     :func:`point_task` of its grid and the :func:`bisect_task` of every horizon
     (``found``, in horizon order): it reads those back and assembles the value's slice
-    of the map, its bulk written to OUTDIR (:meth:`_Map.value_part`). At the first value
+    of the map, its bulk written to OUTDIR with ``spill`` (:meth:`_Map.value_part`;
+    else the slice is returned whole, for a machine that cannot read OUTDIR's disk). At
+    the first value
     it also computes the phase portraits, kept as a part (:meth:`_Map.details`), which
     the map would otherwise compute after the flow."""
     def work(job):
-        result = job.value_part(value, found)
+        result = job.value_part(value, found, spill=spill)
         if value == cfg.values[0]:
             job.details(result["phase_sigma"])
         return result
@@ -257,7 +259,9 @@ class MapFlow:
         if kind in ("bisect", "splits") and self.split[i] \
                 and len(self.found[i]) == len(cfg.horizons):
             found = [self.found[i][h] for h in range(len(cfg.horizons))]
-            return [(("value", i), value_task, (self.inner, cfg.values[i], found))]
+            # on a Dask cluster the slice travels whole: its workers may not share OUTDIR
+            return [(("value", i), value_task, (self.inner, cfg.values[i], found,
+                                                cfg.scheduler is None))]
         return []
 
 
@@ -313,7 +317,9 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
                    started: float | None = None) -> xr.Dataset:
     """Run the trust map and return its dataset (also written to OUTDIR/validate.nc):
     in this process, or as a flow of tasks on ``cfg.workers`` local processes or the
-    Dask cluster ``cfg.scheduler`` (:func:`run_map_tasks`), to the same bits.
+    Dask cluster ``cfg.scheduler`` (:func:`run_map_tasks`), to the same bits. The
+    dataset returned reads its time series (``STREAMED_DIM``) from validate.nc when they
+    are used (:func:`open_map`).
 
     ``started``: the ``time.perf_counter()`` reading at which the command started (the
     one clock of a run); the attribute ``wall_seconds`` is the time from it to the

@@ -63,8 +63,9 @@ import numpy as np
 import xarray as xr
 
 from compare._config import ELEMENT_TOLERANCE, ValidateConfig, noise_floor
-from compare._mapdata import (HorizonSplits, Point, combine_slices, point_dataset, spill,
+from compare._mapdata import (HorizonSplits, Point, combine_slices, point_dataset,
                               splits_from_arrays, splits_to_arrays, value_dataset, value_slice)
+from compare._mapdata import spill as spill_slice
 from compare._pairs import REPLICATES, Control, Pairs, pair_point
 from compare._phases import PhaseClock
 from compare._trust import bisect_boundary, excess, window_errors_all
@@ -626,16 +627,18 @@ class _Map:
                               else "one process")
         return ds
 
-    def value_part(self, value: float, found=None) -> dict:
+    def value_part(self, value: float, found=None, spill: bool = True) -> dict:
         """:meth:`value_work`, its datasets joined into the value's slice of the map
         (:func:`compare._mapdata.value_slice`), its bulk written to ``OUTDIR/SLICES``
-        (:func:`compare._mapdata.spill`); returns the slice (``slice``), those files
-        (``files``) and the sigma of the phase portraits (``phase_sigma``)."""
+        with ``spill`` (:func:`compare._mapdata.spill`); returns the slice (``slice``),
+        those files (``files``) and the sigma of the phase portraits (``phase_sigma``)."""
         result = self.value_work(value, found)
         with self.clock("assembly"):
-            part, files = spill(value_slice(self.cfg, value, result["points"],
-                                            result["value"]),
-                                os.path.join(self.cfg.outdir, SLICES), self._name(value))
+            part = value_slice(self.cfg, value, result["points"], result["value"])
+            files = []
+            if spill:
+                part, files = spill_slice(part, os.path.join(self.cfg.outdir, SLICES),
+                                          self._name(value))
         return {"slice": part, "files": files, "phase_sigma": result["phase_sigma"]}
 
     def value_work(self, value: float, found=None) -> dict:
