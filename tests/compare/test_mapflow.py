@@ -39,7 +39,20 @@ def test_the_first_tasks_are_independent_and_each_value_waits_for_its_grid(tmp_p
     assert flow.follow(("bisect", 1, 1), {"result": "long"}) == []
     assert flow.follow(("bisect", 1, 0), {"result": "short"}) == []
     (key, _, args), = flow.follow(("splits", 1), {})
-    assert key == ("value", 1) and args[1:] == (4.09, ["short", "long"])
+    # its slice's time series go to OUTDIR (spill): a local pool shares its disk
+    assert key == ("value", 1) and args[1:] == (4.09, ["short", "long"], True)
+
+
+def test_on_a_dask_cluster_a_value_task_returns_its_slice_whole(tmp_path):
+    """The cluster's workers may not share OUTDIR's disk: no spilled time series."""
+    cfg = load_config(None, outdir=str(tmp_path), values=(3.98,), sigmas=(0.01,),
+                      frontier=False, scheduler="tcp://127.0.0.1:8786")
+    flow = MapFlow(cfg, _store(tmp_path))
+    flow.follow(("point", 0, 0), {})
+    for h in (1, 0):
+        flow.follow(("bisect", 0, h), {"result": h})
+    (key, _, args), = flow.follow(("splits", 0), {})
+    assert key == ("value", 0) and args[-1] is False
 
 
 def test_the_frontier_asks_for_its_reference_alone_first(tmp_path):
