@@ -584,6 +584,9 @@ class _Map:
         from tqdm.auto import tqdm
 
         cfg = self.cfg
+        stale = drop_stale_slices(os.path.join(cfg.outdir, SLICES))
+        if stale:
+            self.log(f"slices: removed {len(stale)} file(s) an interrupted run left behind")
         if self.parts.removed:
             self.log(f"parts: removed {len(self.parts.removed)} temporary file(s) an "
                      f"interrupted run left behind: "
@@ -695,6 +698,24 @@ class _Map:
 #: the folder of OUTDIR where the bulk of each value's slice of the map waits, from the
 #: value's end to validate.nc's (a scratch: removed once validate.nc is written)
 SLICES = "slices"
+
+
+def drop_stale_slices(folder: str) -> list[str]:
+    """Remove the ``.npy`` files a killed map left in its ``SLICES`` folder (a map's
+    scratch: nothing else is kept there); returns their names."""
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return []
+    removed = []
+    for entry in entries:
+        if entry.name.endswith(".npy") and entry.is_file(follow_symlinks=False):
+            try:
+                os.remove(entry.path)
+                removed.append(entry.name)
+            except OSError:
+                pass
+    return sorted(removed)
 
 
 def drop_spilled(files: list[str]) -> None:

@@ -827,3 +827,18 @@ def test_spill_keeps_values_dtypes_and_attributes(tmp_path):
     assert lazy.identical(ds) and lazy.n.dtype == ds.n.dtype
     drop_spilled(files)
     assert not (tmp_path / "slices").exists()
+
+
+def test_a_rerun_removes_the_slices_a_killed_map_left(tiny):
+    """OUTDIR/slices is the map's scratch: what a killed run left there goes at the next
+    start, and the folder once the map is written."""
+    import compare._trustmap as trustmap
+
+    cfg, _, out = tiny
+    folder = out / trustmap.SLICES
+    folder.mkdir(exist_ok=True)
+    np.save(folder / "omega9_opa_x_mean.npy", np.zeros(3))
+    lines = []
+    run_validation(cfg, progress=False, log=lines.append)
+    assert "slices: removed 1 file(s) an interrupted run left behind" in lines
+    assert not folder.exists()
