@@ -108,9 +108,8 @@ def value_task(cfg: ValidateConfig, value: float, found: list, spill: bool = Tru
     (``found``, in horizon order): it reads those back and assembles the value's slice
     of the map, its bulk written to OUTDIR with ``spill`` (:meth:`_Map.value_part`;
     else the slice is returned whole, for a machine that cannot read OUTDIR's disk). At
-    the first value
-    it also computes the phase portraits, kept as a part (:meth:`_Map.details`), which
-    the map would otherwise compute after the flow."""
+    the first value it also computes the phase portraits, kept as a part
+    (:meth:`_Map.details`), which the map would otherwise compute after the flow."""
     def work(job):
         result = job.value_part(value, found, spill=spill)
         if value == cfg.values[0]:
