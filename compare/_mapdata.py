@@ -405,15 +405,15 @@ class SpilledArray:
         return np.load(self.path)[key]
 
 
-def spill(ds: xr.Dataset, folder: str, name: str) -> tuple[xr.Dataset, list[str]]:
+def spill(ds: xr.Dataset, folder: str, name: str) -> xr.Dataset:
     """``ds`` with its variables along ``STREAMED_DIM`` written to ``folder`` (one
-    ``.npy`` file each, ``<name>_<variable>.npy``) and read back lazily from there (dask,
-    one chunk each): the same values, dtypes and attributes, without their bytes.
-    Returns the dataset and the files (for the caller to remove once it is written)."""
+    ``.npy`` file each, ``<name>_<variable>.npy``, for the caller to remove once the
+    dataset is written) and read back lazily from there (dask, one chunk each): the same
+    values, dtypes and attributes, without their bytes."""
     import dask.array
 
     os.makedirs(folder, exist_ok=True)
-    lazy, files = {}, []
+    lazy = {}
     for var, v in ds.data_vars.items():
         if STREAMED_DIM not in v.dims:
             continue
@@ -424,8 +424,7 @@ def spill(ds: xr.Dataset, folder: str, name: str) -> tuple[xr.Dataset, list[str]
         lazy[var] = v.copy(data=dask.array.from_array(
             SpilledArray(path, data.shape, data.dtype), chunks=data.shape,
             name=f"spilled-{path}", meta=np.empty((0,) * data.ndim, data.dtype)))
-        files.append(path)
-    return ds.assign(lazy), files
+    return ds.assign(lazy)
 
 
 def combine_slices(cfg: ValidateConfig, slices: list[xr.Dataset]) -> xr.Dataset:

@@ -34,7 +34,8 @@ import xarray as xr
 from compare._config import ValidateConfig
 from compare._mapdata import STREAMED_DIM
 from compare._convergence import PENDING, run_convergence
-from compare._trustmap import _Map, drop_spilled, frontier, frontier_part, frontier_study
+from compare._trustmap import SLICES, _Map, clear_slices, frontier, frontier_part, \
+    frontier_study
 from opa.engine import Store, true_system_work, write_netcdf
 
 #: frontier runs that share one computation run as one task: the control-variate rows
@@ -325,8 +326,7 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
     finished dataset (default: from the call)."""
     started = time.perf_counter() if started is None else started
     pooled = cfg.processes > 1 or cfg.scheduler is not None
-    job = _Map(cfg, progress=progress, log=log)
-    ds = job.run(run_map_tasks if pooled else None)
+    ds = _Map(cfg, progress=progress, log=log).run(run_map_tasks if pooled else None)
     for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
         if dim not in ds.coords:
             ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
@@ -348,7 +348,7 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
         with dask.config.set(scheduler="synchronous"):
             write_netcdf(ds, path)
     finally:
-        drop_spilled(job.spilled)
+        clear_slices(os.path.join(cfg.outdir, SLICES))
     return open_map(path)
 
 

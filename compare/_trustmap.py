@@ -92,7 +92,6 @@ class _Map:
         self.log = log
         self.progress = progress
         self.parts = Store(os.path.join(cfg.outdir, "parts"), "trust map", log=log)
-        self.spilled: list[str] = []  # the files of the slices' bulk (value_part)
         self.floor = noise_floor(cfg.options)
         self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
         self.mc_runs = 0
@@ -584,7 +583,7 @@ class _Map:
         from tqdm.auto import tqdm
 
         cfg = self.cfg
-        stale = drop_stale_slices(os.path.join(cfg.outdir, SLICES))
+        stale = clear_slices(os.path.join(cfg.outdir, SLICES))
         if stale:
             self.log(f"slices: removed {len(stale)} file(s) an interrupted run left behind")
         if self.parts.removed:
@@ -610,7 +609,6 @@ class _Map:
             # each value's slice, its bulk on disk (compare._mapdata.spill): the map is
             # written from them without ever being whole in this process's memory
             ds = combine_slices(cfg, [results[i]["slice"] for i in range(len(cfg.values))])
-        self.spilled = [f for i in range(len(cfg.values)) for f in results[i]["files"]]
         ds = xr.merge([ds, self.details(results[0]["phase_sigma"])],
                       combine_attrs="drop_conflicts")
         if cfg.frontier:
@@ -633,16 +631,15 @@ class _Map:
     def value_part(self, value: float, found=None, spill: bool = True) -> dict:
         """:meth:`value_work`, its datasets joined into the value's slice of the map
         (:func:`compare._mapdata.value_slice`), its bulk written to ``OUTDIR/SLICES``
-        with ``spill`` (:func:`compare._mapdata.spill`); returns the slice (``slice``),
-        those files (``files``) and the sigma of the phase portraits (``phase_sigma``)."""
+        with ``spill`` (:func:`compare._mapdata.spill`); returns the slice (``slice``)
+        and the sigma of the phase portraits (``phase_sigma``)."""
         result = self.value_work(value, found)
         with self.clock("assembly"):
             part = value_slice(self.cfg, value, result["points"], result["value"])
-            files = []
             if spill:
-                part, files = spill_slice(part, os.path.join(self.cfg.outdir, SLICES),
-                                          self._name(value))
-        return {"slice": part, "files": files, "phase_sigma": result["phase_sigma"]}
+                part = spill_slice(part, os.path.join(self.cfg.outdir, SLICES),
+                                   self._name(value))
+        return {"slice": part, "phase_sigma": result["phase_sigma"]}
 
     def value_work(self, value: float, found=None) -> dict:
         """Everything at one swept value: its split scan, its grid of points, the
@@ -700,9 +697,10 @@ class _Map:
 SLICES = "slices"
 
 
-def drop_stale_slices(folder: str) -> list[str]:
-    """Remove the ``.npy`` files a killed map left in its ``SLICES`` folder (a map's
-    scratch: nothing else is kept there); returns their names."""
+def clear_slices(folder: str) -> list[str]:
+    """Remove the ``.npy`` files in a map's ``SLICES`` folder (its scratch: nothing else
+    is kept there), and the folder once empty; returns the names removed. A map calls it
+    as it starts (what a killed run left) and once validate.nc is written."""
     try:
         entries = list(os.scandir(folder))
     except OSError:
@@ -715,20 +713,11 @@ def drop_stale_slices(folder: str) -> list[str]:
                 removed.append(entry.name)
             except OSError:
                 pass
-    return sorted(removed)
-
-
-def drop_spilled(files: list[str]) -> None:
-    """Remove the spilled files of a map's slices (and their folder, once empty)."""
-    for path in files:
-        try:
-            os.remove(path)
-        except OSError:
-            pass
     try:
-        os.rmdir(os.path.dirname(files[0]))
-    except (OSError, IndexError):  # not empty: something else lives there
+        os.rmdir(folder)
+    except OSError:  # not empty: something else lives there
         pass
+    return sorted(removed)
 
 
 FRONTIER_BUDGETS = (8, 16, 32, 64)

@@ -812,20 +812,19 @@ def test_the_map_is_written_from_its_slices_without_holding_its_bulk(tmp_path, m
 
 def test_spill_keeps_values_dtypes_and_attributes(tmp_path):
     """A slice's time series written to .npy files and read back lazily: the same
-    dataset, its bulk no longer in memory; ``drop_spilled`` removes the files."""
+    dataset, its bulk no longer in memory; ``clear_slices`` removes the files."""
     from compare._mapdata import spill
-    from compare._trustmap import drop_spilled
+    from compare._trustmap import clear_slices
 
     ds = xr.Dataset({"x": (("value", "time"), np.arange(6.0).reshape(1, 6), {"units": "1"}),
                      "n": (("value", "time"), np.arange(6).reshape(1, 6)),
                      "k": (("value",), np.array([7], np.int8), {"long_name": "k"})},
                     attrs={"slice_failures": ""})
-    lazy, files = spill(ds, str(tmp_path / "slices"), "omega3.98")
-    assert sorted(os.path.basename(f) for f in files) == ["omega3.98_n.npy",
-                                                          "omega3.98_x.npy"]
+    lazy = spill(ds, str(tmp_path / "slices"), "omega3.98")
+    assert sorted(os.listdir(tmp_path / "slices")) == ["omega3.98_n.npy", "omega3.98_x.npy"]
     assert not lazy.x.variable._in_memory and lazy.k.variable._in_memory
     assert lazy.identical(ds) and lazy.n.dtype == ds.n.dtype
-    drop_spilled(files)
+    assert clear_slices(str(tmp_path / "slices")) == ["omega3.98_n.npy", "omega3.98_x.npy"]
     assert not (tmp_path / "slices").exists()
 
 
