@@ -62,6 +62,65 @@ def marginal(err, scale, sem, *, tol: float, z: float, floor: float, upto: int,
     return bool((strict <= 0).all()) != bool((loose <= 0).all())  # NaN: never marginal
 
 
+def bounded_verdict(err, width, scale_low, scale_high, *, tol: float,
+                    floor: float) -> tuple[str, int, int]:
+    """A verdict that holds whenever the true error and scale lie in their bands.
+
+    ``err`` (T,): the estimated error, whose true value lies within ``width`` of it at
+    every output; the true scale the tolerance multiplies (the spread, or the variance)
+    lies in ``[scale_low, scale_high]``. Inside the band ``|e_t| <= |err_t| + width_t``
+    and ``|e_t| >= max(|err_t| - width_t, 0)``, so, with ``R`` the running RMS:
+
+    * ``agrees`` when ``R(|err| + width) <= tol R(scale_low) + floor`` at every output:
+      an upper bound of the criterion's error is below the tolerance;
+    * ``disagrees`` when ``R(max(|err| - width, 0)) > tol R(scale_high) + floor`` at some
+      output: a lower bound is above it;
+    * ``undecided`` otherwise (or where an estimate is not finite).
+
+    Returns the verdict, the first output index where the lower bound exceeds the
+    tolerance (-1: none) and the first where the upper bound does (-1: none).
+
+    >>> ones = np.ones(4)
+    >>> bounded_verdict(0.05 * ones, 0.004 * ones, ones, ones, tol=0.1, floor=0.0)
+    ('agrees', -1, -1)
+    >>> bounded_verdict(0.2 * ones, 0.04 * ones, ones, ones, tol=0.1, floor=0.0)
+    ('disagrees', 0, 0)
+    >>> bounded_verdict(0.09 * ones, 0.04 * ones, ones, ones, tol=0.1, floor=0.0)
+    ('undecided', -1, 0)
+    """
+    err, width = np.asarray(err, dtype=float), np.asarray(width, dtype=float)
+    with np.errstate(invalid="ignore"):
+        upper = running_rms(np.abs(err) + width) - tol * running_rms(
+            np.maximum(np.asarray(scale_low, dtype=float), 0.0)) - floor
+        lower = running_rms(np.maximum(np.abs(err) - width, 0.0)) - tol * running_rms(
+            np.asarray(scale_high, dtype=float)) - floor
+    finite = np.isfinite(upper) & np.isfinite(lower)
+    above = np.flatnonzero(finite & (lower > 0))
+    over = np.flatnonzero(~(upper <= 0))
+    first_above = int(above[0]) if len(above) else -1
+    first_over = int(over[0]) if len(over) else -1
+    if first_above >= 0 and finite[:first_above + 1].all():
+        return "disagrees", first_above, first_over
+    if first_over < 0:
+        return "agrees", -1, -1
+    return "undecided", first_above, first_over
+
+
+def band_multiplier(alpha: float, outputs: int, dof, *, quantities: int = 2):
+    """The multiplier c of a band of Student's t intervals that holds at all ``outputs``
+    times ``quantities`` estimates at once with probability >= 1 - ``alpha`` (Bonferroni:
+    each two-sided interval misses with probability ``alpha / (outputs quantities)``),
+    per output from its degrees of freedom ``dof`` (inf: normal).
+
+    >>> round(float(band_multiplier(0.05, 1, np.inf, quantities=1)), 3)
+    1.96
+    """
+    from scipy import stats
+
+    each = alpha / (outputs * quantities)
+    return stats.t.ppf(1.0 - each / 2.0, np.asarray(dof, dtype=float))
+
+
 def window_errors(err: np.ndarray, scale: np.ndarray, sem: np.ndarray,
                   upto: int) -> tuple[float, float, float]:
     """RMS error over the first ``upto`` outputs: absolute, in MC standard errors, and
@@ -113,5 +172,6 @@ def bisect_boundary(agrees: Callable[[float], bool], lo: float, hi: float,
     return lo, hi, steps
 
 
-__all__ = ["bisect_boundary", "excess", "first_disagreement", "marginal", "running_rms",
-           "window_errors", "window_errors_all"]
+__all__ = ["band_multiplier", "bisect_boundary", "bounded_verdict", "excess",
+           "first_disagreement", "marginal", "running_rms", "window_errors",
+           "window_errors_all"]

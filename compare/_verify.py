@@ -9,38 +9,43 @@ differences ``d_m = x(t, xi_m) - x_hat(t, xi_m)`` estimate, without bias,
 
 with a variance Var(d) that shrinks as OPA gets better: the surrogate is a control
 variate (Glasserman 2004, ch. 4; multi-fidelity Monte Carlo: Peherstorfer, Willcox &
-Gunzburger 2016). So the same runs give
+Gunzburger 2016). So the same runs give the **error of the run** (``err_mean = -mean d``,
+``err_var = Var[x_hat] - Var_cv[x]``) with standard errors, a verdict, and
+**control-variate estimates** ``E_cv[x] = E[x_hat] + mean d``, ``Var_cv[x] = E[x_hat^2] +
+mean(x^2 - x_hat^2) - E_cv[x]^2`` with standard errors and degrees of freedom.
 
-* the **error of the run**: ``err_mean = E[x_hat] - (E[x_hat] + mean d) = -mean d`` and
-  ``err_var = Var[x_hat] - Var_cv[x]``, with standard errors, and a verdict under the trust
-  map's criterion (:mod:`compare._trust`: running RMS error <= tol x running RMS spread +
-  z x running RMS SE + floor);
-* **control-variate estimates** ``E_cv[x] = E[x_hat] + mean d`` and ``Var_cv[x] =
-  E[x_hat^2] + mean(x^2 - x_hat^2) - E_cv[x]^2`` with standard errors, and the variance
-  reduction factor Var(x) / Var(d).
-
-Where are the points? For a run of one element (or too few points for the strata below):
-scrambled Sobol' in R independent replicates (``mc.sample_xi``); every estimate is formed
-per replicate and its standard error is the spread of the R replicate estimates over
-sqrt(R), the honest error of randomised QMC. For a multi-element run of K elements with
-M >= 5K + 1: stratified by element (the elements are the strata, of known probability).
-First the true systems at the K + 1 edges: element k's indicator is the misfit of its own
-polynomial at its two ends (:func:`edge_indicator`), which follows the spread of d inside
-the element (correlation 0.978 of the logarithms in the case below), so no random pilot
-is spent or discarded. The other M - K - 1 points come in jittered groups of
-``GROUP`` = 4: element k gets n_k groups (one each, then half the rest in proportion to
-P_k times its indicator, half to P_k), cuts its law into n_k slices of equal probability
-and draws 4 independent points in each. The estimate sums the slices, its standard error
+**Where are the points?** Stratified, always (:mod:`compare._strata`). The strata are the
+run's elements cut at the changes of the impact sequence located in the support (a rare
+region of the law that makes an extra impact becomes a stratum of its own, so it cannot
+hide between the points). First the true systems at the S + 1 cuts: a stratum's
+indicator is the misfit of its element's polynomial at its two ends. Then jittered groups
+of ``GROUP`` = 4 points: stratum j gets n_j >= 1 groups (the rest half in proportion to
+P_j times its indicator, half to P_j), cuts its law into n_j slices of equal probability
+and draws 4 independent points in each. The estimate sums the slices; its standard error
 comes from the within-slice variances, with Welch-Satterthwaite degrees of freedom for
-Student's t intervals (``cv_x_mean_dof``). The paired differences are large only in the
-few elements whose polynomial cannot follow a split, and the strata spend the points
-there (section 3.2, omega = 3.98, sigma = 0.05, 10 periods, 8 outputs per period, 64
-elements, 512 true runs, 100 seeds: RMS error of E_cv[x] 8.7e-6, 95 % t-intervals
-covering 93.4 %; benchmarks/bench_verify.py). A later round adds an independent batch;
-the batches are summed with fixed weights (their groups), so the sum stays unbiased.
-Sequential: start at
-``samples`` points and double while a verdict hangs on the noise (it differs between no
-allowance and twice the allowance for the standard errors), up to ``max_samples``.
+Student's t intervals (``cv_x_mean_dof``). A later round adds an independent batch; the
+batches are summed with fixed weights (their groups), so the sum stays unbiased.
+
+**The verdict** (:func:`compare._trust.bounded_verdict`) has three outcomes. Round r of
+the sequential procedure spends ``alpha / 2^r`` of the error rate ``alpha``
+(``ALPHA`` = 0.01): a Bonferroni band of Student's t intervals holds for the mean's and
+the variance's estimates at every output at once with probability 1 - alpha / 2^r, so
+the bands of all rounds hold together with probability >= 1 - alpha, whatever round the
+procedure stops at. Inside the band the running RMS error (the trust map's criterion:
+``R_e(t) <= tol R_scale(t) + floor`` at every output) is bounded above and below:
+
+* **agrees**: the upper bound is within the tolerance at every output;
+* **disagrees**: the lower bound exceeds it at some output;
+* **undecided**: neither, after ``max_samples`` true systems.
+
+A round whose degrees of freedom fall below ``MIN_DOF`` at some output decides nothing (a
+variance estimated from too few points cannot bound anything): the procedure doubles. So
+the stated rate ``alpha`` bounds the chance that the verdict is wrong, over the doublings
+and the outputs; the tolerance is the map's, and the noise is no longer added to it.
+
+**What is certified** is what the run reports: before any true system runs, the run's
+``x_mean``, ``x_var`` and ``element_probability`` must follow from its coefficients and
+its law (:func:`check_reported`), or the run is refused.
 """
 
 from __future__ import annotations
@@ -51,28 +56,37 @@ import numbers
 import numpy as np
 import xarray as xr
 
-from compare._trust import first_disagreement, marginal
-from mc import cv_estimates, sample_xi
+from compare._strata import (
+    build_strata, group_allocation, least_samples, neyman_allocation, split_values,
+)
+from compare._trust import band_multiplier, bounded_verdict
+from mc import cv_estimates
 from opa.engine import (
     PARAMETER_NAMES, check_memory, check_opa_layout, Oscillator, run_measure, SolverOptions,
     surrogate, surrogate_moments, surrogate_values, System, true_runs,
 )
 
-#: points in each jittered group of a stratified certificate: 4 give each slice 3 degrees
-#: of freedom, and the t-intervals of the strata cover 93-97 % on the closed-form kink of
-#: tests/compare/test_verify.py (pairs fall outside, 0.98 with t, 0.92 with normal
-#: intervals); section 3.2 at 512 true runs over 100 seeds: RMS error 8.7e-6, 93.4 %
-#: coverage (benchmarks/bench_verify.py)
+#: points in each jittered group of a stratum: 4 give each slice 3 degrees of freedom
 GROUP = 4
 
-#: the trust map's criterion (README, "The main job")
+#: the trust map's tolerances (README, "The main job")
 MEAN_TOLERANCE = 0.1
 VAR_TOLERANCE = 0.25
-Z = 3.0
+#: the verdict's error rate over the whole sequential procedure and every output
+ALPHA = 0.01
+#: the fewest Welch-Satterthwaite degrees of freedom at any output before a round decides
+MIN_DOF = 10
+#: the fewest true systems of a first round (16 groups of 4: MIN_DOF with room to spare)
+MIN_SAMPLES = 64
+#: how far the reported moments may stand from those of the coefficients, relative to
+#: the response's scale (1 + |E[x]|, or the variance plus its scale squared)
+REPORTED_TOLERANCE = 1e-9
 
 
-def system_of(run: xr.Dataset) -> tuple[System, SolverOptions]:
-    """The System and solver options an OPA run was computed with, from its attributes."""
+def system_of(run: xr.Dataset, options: SolverOptions | None = None
+              ) -> tuple[System, SolverOptions]:
+    """The System and solver options an OPA run was computed with, from its attributes
+    (``options``: the solver options to use instead, e.g. with a ``max_step``)."""
     attrs = run.attrs
     oscillator = Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES})
     distribution = attrs.get("distribution", "semicircle")
@@ -82,25 +96,58 @@ def system_of(run: xr.Dataset) -> tuple[System, SolverOptions]:
                     allow_negative=bool(attrs.get("allow_negative", 0)),
                     impulse=str(attrs["impulse"]), pulse_width=float(attrs["pulse_width"]),
                     impulse_at_zero=bool(attrs["impulse_at_zero"]))
-    options = SolverOptions(rtol=float(attrs["rtol"]), atol=float(attrs["atol"]),
-                            method=str(attrs.get("method", "dop853")),
-                            chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))
+    if options is None:
+        options = SolverOptions(rtol=float(attrs["rtol"]), atol=float(attrs["atol"]),
+                                method=str(attrs.get("method", "dop853")),
+                                chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))
     return system, options
 
 
 def _check_count(name: str, value, least: int) -> int:
     if not (isinstance(value, numbers.Integral) and not isinstance(value, bool)
             and value >= least and value & (value - 1) == 0):
-        raise ValueError(f"{name} must be a power of two >= {least} (scrambled Sobol' "
-                         f"points in up to 16 replicates), got {value!r}")
+        raise ValueError(f"{name} must be a power of two >= {least}, got {value!r}"
+                         + (f": a verdict needs {MIN_DOF} degrees of freedom, so the "
+                            f"smallest that works is {name} {least}" if least == MIN_SAMPLES
+                            else ""))
     return int(value)
 
 
 def check_counts(samples, max_samples, *, flags: bool = False) -> tuple[int, int]:
-    """``samples`` and ``max_samples`` checked (``flags``: named as the CLI's flags)."""
+    """``samples`` and ``max_samples`` checked (``flags``: named as the CLI's flags):
+    powers of two, ``samples >= MIN_SAMPLES`` and ``max_samples >= samples``."""
     first, most = ("--verify", "--verify-max") if flags else ("samples", "max_samples")
-    samples = _check_count(first, samples, 8)
+    samples = _check_count(first, samples, MIN_SAMPLES)
     return samples, _check_count(most, max_samples, samples)
+
+
+def check_reported(run: xr.Dataset, measure) -> None:
+    """Refuse a run whose reported moments or element probabilities do not follow from
+    its coefficients and its law (a dataset edited after the run, or another run's
+    numbers): the certificate vouches for what the dataset says."""
+    moments = surrogate_moments(run)
+    mean, second = moments["x_mean"], moments["x_second"]
+    reported_mean, reported_var = run.x_mean.values, run.x_var.values
+    scale = 1.0 + np.abs(mean)
+    bad_mean = ~(np.abs(reported_mean - mean) <= REPORTED_TOLERANCE * scale)
+    bad_var = ~(np.abs(reported_var - (second - mean**2))
+                <= REPORTED_TOLERANCE * scale**2)
+    for name, bad in (("x_mean", bad_mean), ("x_var", bad_var)):
+        if bad.any():
+            t = int(np.flatnonzero(bad)[0])
+            raise ValueError(f"the run's {name} does not follow from its coefficients at "
+                             f"t = {float(run.time[t]):.6g} (and {int(bad.sum()) - 1} "
+                             f"other outputs): the dataset was changed after the run, so "
+                             f"it cannot be certified")
+    edges = run.element_edges.values
+    law = np.diff(np.asarray(measure.cdf(edges), dtype=float))
+    reported = run.element_probability.values
+    if not np.allclose(reported, law, rtol=1e-9, atol=1e-12):
+        k = int(np.argmax(np.abs(reported - law)))
+        raise ValueError(f"the run's element_probability[{k}] = {reported[k]:.6g} is not "
+                         f"the law's probability {law[k]:.6g} of the element "
+                         f"[{edges[k]:.6g}, {edges[k + 1]:.6g}]: the dataset was changed "
+                         f"after the run, so it cannot be certified")
 
 
 def paired_estimates(x: np.ndarray, x_hat: np.ndarray, replicates: int,
@@ -192,18 +239,6 @@ def stratified_estimates(x: list, x_hat: list, probability, surrogate_mean: np.n
             "variance_reduction": weighted_var(x) / var_d if var_d > 0 else math.inf}
 
 
-def neyman_allocation(total: int, probability, spread) -> np.ndarray:
-    """Points per stratum for ``total`` more points: proportional to P_k s_k (Neyman),
-    rounded so that they sum to ``total``; where every s_k is 0, proportional to P_k."""
-    weight = np.asarray(probability, float) * np.asarray(spread, float)
-    if not weight.sum() > 0:
-        weight = np.asarray(probability, float)
-    share = total * weight / weight.sum()
-    n = np.floor(share).astype(int)
-    n[np.argsort(n - share)[: total - int(n.sum())]] += 1  # largest remainders
-    return n
-
-
 def edge_indicator(x_coef: np.ndarray, edges, measure, x_edges: np.ndarray) -> np.ndarray:
     """How far each element's polynomial is from the truth at its ends.
 
@@ -229,22 +264,6 @@ def edge_indicator(x_coef: np.ndarray, edges, measure, x_edges: np.ndarray) -> n
     return out
 
 
-def group_allocation(groups: int, probability, indicator) -> np.ndarray:
-    """Jittered groups per element for ``groups`` in all: one each, then half the rest in
-    proportion to P_k times the indicator (Neyman with the indicator for the spread) and
-    half in proportion to P_k (defensive, for what the ends do not show).
-
-    >>> group_allocation(10, [0.5, 0.25, 0.25], [0.0, 1.0, 3.0]).tolist()
-    [3, 3, 4]
-    """
-    K = len(probability)
-    if groups < K:
-        raise ValueError(f"{groups} groups cannot give each of {K} elements one")
-    rest = groups - K
-    return 1 + neyman_allocation(rest // 2, probability, indicator) \
-        + neyman_allocation(rest - rest // 2, probability, np.ones(K))
-
-
 def interval_halfwidth(se, dof, level: float = 0.95):
     """Half-width of a two-sided ``level`` confidence interval: Student's t with ``dof``
     degrees of freedom (scalar or per time) times the standard error; R replicates give
@@ -254,44 +273,78 @@ def interval_halfwidth(se, dof, level: float = 0.95):
     return stats.t.ppf(0.5 + level / 2, np.asarray(dof, dtype=float)) * np.asarray(se)
 
 
+
+
+def stratum_indicator(x_coef: np.ndarray, edges, measure, strata, x_cuts: np.ndarray
+                      ) -> np.ndarray:
+    """:func:`edge_indicator` for strata inside elements: stratum j's indicator is the
+    larger over its two ends of the RMS over time of ``x(t, e) - x_hat_k(t, e)``, with
+    x_hat_k the polynomial of its element k; ``x_cuts`` (S + 1, T): the true systems at
+    the strata's cuts."""
+    edges = np.asarray(edges, dtype=float)
+    out = np.empty(len(strata))
+    for j, k in enumerate(strata.element):
+        ends = surrogate_values(x_coef[k:k + 1], edges[k:k + 2], measure,
+                                strata.cuts[j:j + 2])
+        out[j] = np.sqrt(np.mean((x_cuts[j:j + 2] - ends) ** 2, axis=1)).max()
+    return np.where(np.isfinite(out), out, np.nanmax(out, initial=0.0) + 1.0)
+
+
+def _check_rate(name: str, value, lo: float, hi: float) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+            or not (math.isfinite(value) and lo <= value <= hi):
+        raise ValueError(f"{name} must be a finite number in [{lo:g}, {hi:g}], got "
+                         f"{value!r}")
+    return float(value)
+
+
 def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed: int = 0,
            tolerance: float = MEAN_TOLERANCE, var_tolerance: float = VAR_TOLERANCE,
-           z: float = Z, sequential: bool = True, log=None) -> xr.Dataset:
+           alpha: float = ALPHA, sequential: bool = True,
+           options: SolverOptions | None = None, log=None) -> xr.Dataset:
     """The run with its paired Monte Carlo certificate and control-variate estimates.
 
     Parameters
     ----------
     run : an OPA dataset (any number of elements, any law of xi, any uncertain parameter).
-    samples : true systems of the first round (a power of two >= 8).
-    max_samples : the most a sequential certificate doubles to (a power of two).
-    seed : seed of the points (scrambled Sobol', or the random points of the strata).
-    tolerance, var_tolerance, z : the verdict's criterion for the mean and the variance
-        (the trust map's defaults 0.1, 0.25 and 3).
-    sequential : double the samples while a verdict hangs on the noise; False: one round.
+    samples : true systems of the first round (a power of two >= ``MIN_SAMPLES`` = 64);
+        a first round grows to the least power of two that gives every stratum a group.
+    max_samples : the most a sequential certificate doubles to (a power of two >=
+        ``samples``).
+    seed : seed of the random points.
+    tolerance, var_tolerance : the verdict's tolerances for the mean and the variance
+        (the trust map's 0.1 and 0.25).
+    alpha : the verdict's error rate over the whole procedure (default 0.01).
+    sequential : double the samples while the verdict is undecided; False: one round.
+    options : solver options of the true systems (default: the run's own attributes;
+        give them to pass a ``max_step``).
     log : callable taking a line of progress, or None.
 
     Returns
     -------
     A copy of ``run`` with ``verify_err_mean``, ``verify_err_var`` (OPA minus truth) and
-    their standard errors, the control-variate estimates ``cv_x_mean``, ``cv_x_var`` and
-    their standard errors and degrees of freedom (``cv_x_mean_dof``, ``cv_x_var_dof``)
-    over time, and the attributes ``verdict`` (``agrees`` | ``disagrees``),
+    their standard errors, the control-variate estimates ``cv_x_mean``, ``cv_x_var`` with
+    their standard errors and degrees of freedom (``cv_x_mean_dof``, ``cv_x_var_dof``),
+    and the attributes ``verdict`` (``agrees`` | ``disagrees`` | ``undecided``),
     ``verdict_mean``, ``verdict_var``, ``first_disagreement_mean`` and ``_var`` (forcing
-    periods; inf: none), ``verify_samples`` (the true runs of the estimate: the last
-    round's replicates, or with strata the edges and every round's batch),
-    ``verify_replicates`` (0 when stratified), ``verify_sampling``
-    (in words), ``verify_rounds``, ``variance_reduction`` and ``verify_rhs_evaluations``.
+    periods at which the error is certified above the tolerance; inf: nowhere),
+    ``verify_samples`` (true runs: the cuts and every round's batch), ``verify_strata``,
+    ``verify_splits``, ``verify_sampling`` (in words), ``verify_rounds``,
+    ``verify_alpha``, ``variance_reduction`` and ``verify_rhs_evaluations``.
     """
     check_opa_layout(run, "run")
     samples, max_samples = check_counts(samples, max_samples)
-    for name, value in (("tolerance", tolerance), ("var_tolerance", var_tolerance), ("z", z)):
-        if isinstance(value, bool) or not isinstance(value, numbers.Real) \
-                or not (math.isfinite(value) and value >= 0):
-            raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+    tolerance = _check_rate("tolerance", tolerance, 0.0, math.inf)
+    var_tolerance = _check_rate("var_tolerance", var_tolerance, 0.0, math.inf)
+    alpha = _check_rate("alpha", alpha, 1e-12, 0.5)
+    if not isinstance(sequential, (bool, np.bool_)):
+        raise ValueError(f"sequential must be True or False, got {sequential!r}")
+    if options is not None and not isinstance(options, SolverOptions):
+        raise ValueError(f"options must be SolverOptions or None, got {options!r}")
     if "failure" in run.attrs:
         raise ValueError(f"the run did not complete ({run.attrs['failure']}): nothing to "
                          f"verify")
-    system, options = system_of(run)
+    system, options = system_of(run, options)
     measure = run_measure(run)
     times = run.time.values
     # at t = 0 every sample is at x0 (x' may have jumped by an impulse at t = 0, by the
@@ -305,133 +358,161 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         raise ValueError("the run does not start from the x0, v0 of its attributes (an "
                          "OPA run continued with initial=...): the true systems it "
                          "describes are not known, so it cannot be verified")
+    check_reported(run, measure)
+    edges = run.element_edges.values
     check_memory("verification paths", max_samples * len(times) * 8 * 5,
                  f"max_samples {max_samples} x {len(times)} outputs x 5 arrays")
     moments = surrogate_moments(run)
     floor = 10 * (options.rtol + options.atol)
     T = 2 * math.pi / system.oscillator.omega
-    M, rounds, rhs = samples, 0, 0
-    P = run.element_probability.values / run.element_probability.values.sum()
-    edges = run.element_edges.values
-    stratify = len(P) >= 2 and samples >= len(P) + 1 + GROUP * len(P)
-    if stratify:
-        rng = np.random.default_rng(seed)
-        elements = [measure.restrict(float(a), float(b)) for a, b in zip(edges[:-1],
-                                                                         edges[1:])]
-        # the true systems at the K + 1 edges tell, before any random point, how far each
-        # element's polynomial is from the truth at its two ends
-        edge_paths, rhs = true_runs(system, options, edges, times, what="element edge")
-        indicator = edge_indicator(run.element_x_coef.values, edges, measure,
-                                   edge_paths[:, :, 0])
-        batches = []  # (x, x_hat, stratum probability) of each round's groups
 
-        def draw(total):
-            """A batch of ``total`` true runs in jittered groups, allocated by the
-            indicator: element k's n_k groups cut its law into n_k slices of equal
-            probability, with GROUP independent points in each (the last total % GROUP
-            points join the first group of the element with the most groups)."""
-            groups = group_allocation(total // GROUP, P, indicator)
-            size = [np.full(n, GROUP) for n in groups]
-            size[int(np.argmax(groups))][0] += total % GROUP
-            u = [(np.repeat(np.arange(n), m) + rng.random(m.sum())) / n
-                 for n, m in zip(groups, size)]
-            xi = np.concatenate([e.ppf(v) for e, v in zip(elements, u)])
-            paths, n_rhs = true_runs(system, options, xi, times, what="verification sample")
-            x_hat = surrogate(run, xi, measure=measure)[0]
-            cut = np.cumsum(np.concatenate(size))[:-1]
-            return (np.split(paths[:, :, 0], cut), np.split(x_hat, cut),
-                    np.repeat(P / groups, groups)), n_rhs
+    # the strata: the elements cut at the changes of the impact sequence
+    split_xi, complete = split_values(system, options, measure, float(times[-1]))
+    strata = build_strata(measure, edges, split_xi, complete=complete,
+                          max_strata=max(len(edges) - 1, (samples - 1) // (1 + GROUP)))
+    least = least_samples(len(strata), GROUP)
+    if least > samples and log is not None:
+        log(f"verify: {strata.describe()}: the first round grows to {least} true systems "
+            f"(the cuts and a group of {GROUP} in every stratum)")
+    M = max(samples, least)
+    max_samples = max(max_samples, M)
+    rng = np.random.default_rng(seed)
+    cut_paths, rhs = true_runs(system, options, strata.cuts, times, what="stratum cut")
+    indicator = stratum_indicator(run.element_x_coef.values, edges, measure, strata,
+                                  cut_paths[:, :, 0])
+    laws = [measure.restrict(float(a), float(b)) for a, b in zip(strata.cuts[:-1],
+                                                                 strata.cuts[1:])]
+    P = strata.probability
 
-    drawn = len(edges) if stratify else 0  # true runs so far
+    def draw(total, indicator):
+        """A batch of ``total`` true runs in jittered groups, allocated by the indicator:
+        stratum j's n_j groups cut its law into n_j slices of equal probability, with
+        GROUP independent points in each (the last total % GROUP points join the first
+        group of the stratum with the most groups)."""
+        groups = group_allocation(total // GROUP, P, indicator)
+        size = [np.full(n, GROUP) for n in groups]
+        size[int(np.argmax(groups))][0] += total % GROUP
+        u = [(np.repeat(np.arange(n), m) + rng.random(m.sum())) / n
+             for n, m in zip(groups, size)]
+        xi = np.concatenate([law.ppf(v) for law, v in zip(laws, u)])
+        paths, n_rhs = true_runs(system, options, xi, times, what="verification sample")
+        x_hat = surrogate(run, xi, measure=measure)[0]
+        cut = np.cumsum(np.concatenate(size))[:-1]
+        return (np.split(paths[:, :, 0], cut), np.split(x_hat, cut),
+                np.repeat(P / groups, groups), np.repeat(np.arange(len(P)), groups)), n_rhs
+
+    def observed(batches):
+        """Each stratum's spread of x - x_hat seen so far (RMS over time of the standard
+        deviation over its points): a later round allocates by it too, so a stratum
+        whose inside is rougher than its ends gets its share (the allocation is fixed
+        before the batch is drawn, so every batch stays a stratified sample)."""
+        out = np.zeros(len(P))
+        for j in range(len(P)):
+            d = [x - h for b in batches for x, h, k in zip(b[0], b[1], b[3]) if k == j]
+            d = np.concatenate(d)
+            out[j] = np.sqrt(np.mean(np.var(d, axis=0, ddof=1))) if len(d) > 1 else 0.0
+        return np.where(np.isfinite(out), out, 0.0)
+
+    drawn, rounds, batches = len(strata.cuts), 0, []
     while True:
         rounds += 1
-        if stratify:
-            batch, n_rhs = draw(M - drawn)
-            rhs += n_rhs
-            drawn = M
-            batches.append(batch)
-            # the rounds' batches are independent stratified estimates, weighted by their
-            # groups (fixed weights: the sum stays unbiased, its variance the weighted sum)
-            weight = np.concatenate([np.full(len(b[2]), len(b[2])) for b in batches])
-            est = stratified_estimates(
-                [s for b in batches for s in b[0]], [s for b in batches for s in b[1]],
-                np.concatenate([b[2] for b in batches]) * weight / len(weight),
-                moments["x_mean"], moments["x_second"])
-            replicates = 0
-        else:
-            replicates = min(16, M // 4)
-            xi, _ = sample_xi("sobol", M, seed, replicates, distribution=measure)
-            paths, n_rhs = true_runs(system, options, xi, times, what="verification sample")
-            rhs += n_rhs
-            drawn = M
-            est = paired_estimates(paths[:, :, 0], surrogate(run, xi, measure=measure)[0],
-                                   replicates, moments["x_mean"], moments["x_second"])
-        d_se = est["d_se"]
-        cv_mean, cv_mean_se, cv_var, cv_var_se = (est["mean"], est["mean_se"], est["var"],
-                                                  est["var_se"])
-        err_mean, err_var = -est["d"], run.x_var.values - cv_var
-        spread = np.sqrt(np.maximum(cv_var, 0.0))
-        hangs = [marginal(err_mean, spread, d_se, tol=tolerance, z=z, floor=floor,
-                          upto=len(times)),
-                 marginal(err_var, cv_var, cv_var_se, tol=var_tolerance, z=z, floor=floor,
-                          upto=len(times))]
+        batch, n_rhs = draw(M - drawn, indicator if not batches else
+                            np.maximum(indicator, observed(batches)))
+        rhs += n_rhs
+        drawn = M
+        batches.append(batch)
+        # the rounds' batches are independent stratified estimates, weighted by their
+        # groups (fixed weights: the sum stays unbiased, its variance the weighted sum)
+        weight = np.concatenate([np.full(len(b[2]), len(b[2])) for b in batches])
+        est = stratified_estimates(
+            [s for b in batches for s in b[0]], [s for b in batches for s in b[1]],
+            np.concatenate([b[2] for b in batches]) * weight / len(weight),
+            moments["x_mean"], moments["x_second"])
+        err_mean, err_var = -est["d"], run.x_var.values - est["var"]
+        # the band of this round: alpha / 2^r of the rate (one round: all of it)
+        spent = alpha / 2**rounds if sequential else alpha
+        width_mean = band_multiplier(spent, len(times), est["mean_dof"]) * est["d_se"]
+        width_var = band_multiplier(spent, len(times), est["var_dof"]) * est["var_se"]
+        var_low = np.maximum(est["var"] - width_var, 0.0)
+        var_high = est["var"] + width_var
+        # the degrees of freedom must be enough wherever the band matters: where it is
+        # wider than a tenth of what the tolerance allows (elsewhere the band, already
+        # widened by the t quantile of its few degrees of freedom, is a small part of
+        # the allowance), over the outputs the verdict reads: all of them for "agrees",
+        # those up to the first certain excess for "disagrees"
+        mean = bounded_verdict(err_mean, width_mean, np.sqrt(var_low), np.sqrt(var_high),
+                               tol=tolerance, floor=floor)
+        var = bounded_verdict(err_var, width_var, var_low, var_high, tol=var_tolerance,
+                              floor=floor)
+        verdicts, firsts, short = [], [], False
+        for (verdict, above, _), width, dof, allowance in (
+                (mean, width_mean, est["mean_dof"], tolerance * np.sqrt(var_low)),
+                (var, width_var, est["var_dof"], var_tolerance * var_low)):
+            reads = slice(None) if verdict == "agrees" else slice(0, above + 1)
+            weak = (width > 0.1 * (allowance + floor)) & (dof < MIN_DOF)
+            if verdict != "undecided" and weak[reads].any():
+                verdict, short = "undecided", True
+            verdicts.append(verdict)
+            firsts.append(times[above] / T if verdict == "disagrees" else math.inf)
+        decided = "disagrees" in verdicts or verdicts == ["agrees", "agrees"]
         if log is not None:
-            log(f"verify: {M} true systems, error of E[x] RMS "
+            log(f"verify: {M} true systems in {len(strata)} strata, error of E[x] RMS "
                 f"{float(np.sqrt(np.mean(err_mean**2))):.3g} ± "
-                f"{float(np.sqrt(np.mean(d_se**2))):.2g}"
-                + (" (verdict hangs on the noise: doubling)" if any(hangs)
-                   and sequential and M < max_samples else ""))
-        if not (sequential and any(hangs) and M < max_samples):
+                f"{float(np.sqrt(np.mean(est['d_se']**2))):.2g}: mean {verdicts[0]}, "
+                f"variance {verdicts[1]}"
+                + (f" (fewer than {MIN_DOF} degrees of freedom)" if short else "")
+                + (" (doubling)" if not decided and sequential and M < max_samples
+                   else ""))
+        if decided or not sequential or M >= max_samples:
             break
         M *= 2
-    first_mean = first_disagreement(times, err_mean, spread, d_se, tol=tolerance, z=z,
-                                    floor=floor)
-    first_var = first_disagreement(times, err_var, cv_var, cv_var_se, tol=var_tolerance,
-                                   z=z, floor=floor)
+
     one = {"units": "1"}
     out = run.copy()
     out["verify_err_mean"] = ("time", err_mean, {
         "long_name": "paired estimate of the error of E[x]: E[x_hat] - E[x]", **one})
-    out["verify_err_mean_sem"] = ("time", d_se, {
+    out["verify_err_mean_sem"] = ("time", est["d_se"], {
         "long_name": "standard error of verify_err_mean", **one})
     out["verify_err_var"] = ("time", err_var, {
         "long_name": "paired estimate of the error of Var[x]: Var[x_hat] - Var[x]", **one})
-    out["verify_err_var_sem"] = ("time", cv_var_se, {
+    out["verify_err_var_sem"] = ("time", est["var_se"], {
         "long_name": "standard error of verify_err_var", **one})
-    out["cv_x_mean"] = ("time", cv_mean, {
+    out["cv_x_mean"] = ("time", est["mean"], {
         "long_name": "control-variate estimate of E[x] (surrogate + paired differences)",
         **one})
-    out["cv_x_mean_sem"] = ("time", cv_mean_se, {"long_name": "standard error of cv_x_mean",
-                                                 **one})
-    out["cv_x_var"] = ("time", cv_var, {"long_name": "control-variate estimate of Var[x]",
-                                        **one})
-    out["cv_x_var_sem"] = ("time", cv_var_se, {"long_name": "standard error of cv_x_var",
-                                               **one})
+    out["cv_x_mean_sem"] = ("time", est["mean_se"], {
+        "long_name": "standard error of cv_x_mean", **one})
+    out["cv_x_var"] = ("time", est["var"], {"long_name": "control-variate estimate of Var[x]",
+                                            **one})
+    out["cv_x_var_sem"] = ("time", est["var_se"], {
+        "long_name": "standard error of cv_x_var", **one})
     for name in ("mean", "var"):
-        dof = est.get(f"{name}_dof", np.full(len(times), replicates - 1.0))
-        out[f"cv_x_{name}_dof"] = ("time", np.asarray(dof, dtype=float), {
-            "long_name": f"degrees of freedom of cv_x_{name}_sem (replicates - 1, or "
-            f"Welch-Satterthwaite over the strata): Student's t intervals", **one})
-    verdict_mean = "agrees" if math.isinf(first_mean) else "disagrees"
-    verdict_var = "agrees" if math.isinf(first_var) else "disagrees"
+        out[f"cv_x_{name}_dof"] = ("time", np.asarray(est[f"{name}_dof"], dtype=float), {
+            "long_name": f"Welch-Satterthwaite degrees of freedom of cv_x_{name}_sem over "
+            f"the strata: Student's t intervals", **one})
+    verdict_mean, verdict_var = verdicts
+    verdict = ("disagrees" if "disagrees" in verdicts else
+               "agrees" if verdicts == ["agrees", "agrees"] else "undecided")
     out.attrs.update(
-        verdict="agrees" if verdict_mean == verdict_var == "agrees" else "disagrees",
-        verdict_mean=verdict_mean, verdict_var=verdict_var,
-        first_disagreement_mean=first_mean / T, first_disagreement_var=first_var / T,
-        verify_samples=int(drawn), verify_replicates=int(replicates),
-        verify_sampling=(f"stratified by element: the true systems at the {len(edges)} "
-                         f"edges, then jittered groups of {GROUP} random points, one group "
-                         f"per element and the rest half in proportion to P_k times the "
-                         f"misfit at the element's ends, half to P_k" if stratify else
-                         f"scrambled Sobol' in {replicates} replicates"),
+        verdict=verdict, verdict_mean=verdict_mean, verdict_var=verdict_var,
+        first_disagreement_mean=float(firsts[0]),
+        first_disagreement_var=float(firsts[1]),
+        verify_samples=int(drawn), verify_replicates=0, verify_strata=int(len(strata)),
+        verify_splits=int(strata.splits), verify_splits_complete=int(strata.complete),
+        verify_sampling=(f"stratified: {strata.describe()}; the true systems at the "
+                         f"{len(strata.cuts)} cuts, then jittered groups of {GROUP} random "
+                         f"points, one group per stratum and the rest half in proportion "
+                         f"to P_j times the misfit at the stratum's ends, half to P_j"),
         verify_rounds=int(rounds), verify_seed=int(seed), verify_tolerance=float(tolerance),
-        verify_var_tolerance=float(var_tolerance), verify_z=float(z),
+        verify_var_tolerance=float(var_tolerance), verify_alpha=float(alpha),
+        verify_min_dof=int(MIN_DOF),
         variance_reduction=est["variance_reduction"],
         verify_rhs_evaluations=int(rhs),
     )
     return out
 
 
-__all__ = ["GROUP", "MEAN_TOLERANCE", "VAR_TOLERANCE", "Z", "check_counts", "edge_indicator",
-           "group_allocation", "interval_halfwidth", "neyman_allocation", "paired_estimates",
-           "stratified_estimates", "system_of", "verify"]
+__all__ = ["ALPHA", "GROUP", "MEAN_TOLERANCE", "MIN_DOF", "MIN_SAMPLES", "VAR_TOLERANCE",
+           "check_counts", "check_reported", "edge_indicator", "group_allocation",
+           "interval_halfwidth", "neyman_allocation", "paired_estimates",
+           "stratified_estimates", "stratum_indicator", "system_of", "verify"]

@@ -167,21 +167,28 @@ def _law_flag(parser: argparse.ArgumentParser, *, elements: bool = True) -> None
                    help="with --elements adaptive: the element budget (default 64)")
 
 
+#: --verify-max when not given (or --verify, when larger)
+DEFAULT_VERIFY_MAX = 4096
+
+
 def _verify_flags(parser: argparse.ArgumentParser) -> None:
     """The paired Monte Carlo certificate of an OPA run (simulate opa only)."""
     g = parser.add_argument_group("certificate (simulate opa)")
     g.add_argument("--verify", type=positive_int, default=None, metavar="M",
-                   help="run M true sampled systems at scrambled Sobol' points of the run's "
-                        "law of xi, paired with the OPA surrogate: the errors of the mean "
-                        "and the variance with standard errors, a verdict, and "
+                   help="run M true sampled systems at random points of the run's law of "
+                        "xi, stratified at its elements and at the changes of the impact "
+                        "sequence, paired with the OPA surrogate: the errors of the mean "
+                        "and the variance with standard errors, a verdict (agrees, "
+                        "disagrees or undecided, wrong with probability at most 0.01), and "
                         "control-variate estimates of E[x] and Var[x]; doubled while the "
-                        "verdict hangs on the noise (M a power of two >= 8)")
-    g.add_argument("--verify-max", type=positive_int, default=4096, metavar="M",
-                   help="the most --verify doubles to (default 4096)")
+                        "verdict is undecided (M a power of two >= 64)")
+    g.add_argument("--verify-max", type=positive_int, default=None, metavar="M",
+                   help=f"the most --verify doubles to (a power of two >= --verify; "
+                        f"default {DEFAULT_VERIFY_MAX}, or --verify when larger)")
     g.add_argument("--strict", action="store_true",
-                   help="with --verify: exit with status 4 when the run disagrees")
+                   help="with --verify: exit with status 4 unless the run agrees")
     g.add_argument("--seed", type=whole_number, default=0, metavar="K",
-                   help="with --verify: seed of the scrambled Sobol' points (default 0)")
+                   help="with --verify: seed of the random points (default 0)")
 
 
 def _solver_flags(parser: argparse.ArgumentParser, *, tolerance: float = 1e-10,

@@ -18,6 +18,7 @@ import numpy as np
 
 from opa.cli._args import EXIT_USAGE, Parser
 from opa.cli._flags import (
+    DEFAULT_VERIFY_MAX,
     EXIT_SIMULATION,
     EXIT_UNVERIFIED,
     CliError,
@@ -64,7 +65,8 @@ def cmd_simulate(args) -> int:
     if args.model == "opa" and args.verify is not None:
         from compare._verify import check_counts
 
-        check_counts(args.verify, max(args.verify, args.verify_max), flags=True)
+        check_counts(args.verify, args.verify_max if args.verify_max is not None
+                     else max(args.verify, DEFAULT_VERIFY_MAX), flags=True)
     start = time.perf_counter()
     if args.model == "dmr":
         from opa._simulate import simulate_dmr
@@ -89,9 +91,10 @@ def cmd_simulate(args) -> int:
         if args.verify is not None:
             from compare._verify import verify
 
-            ds = verify(ds, samples=args.verify, max_samples=max(args.verify,
-                                                                  args.verify_max),
-                        seed=args.seed, log=None if args.quiet else
+            ds = verify(ds, samples=args.verify, max_samples=args.verify_max
+                        if args.verify_max is not None else max(args.verify,
+                                                                DEFAULT_VERIFY_MAX),
+                        seed=args.seed, options=opts, log=None if args.quiet else
                         (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
     else:
         from mc import simulate_mc
@@ -152,9 +155,11 @@ def cmd_simulate(args) -> int:
         if args.plot:
             print(f"  wrote {args.plot}")
     if getattr(args, "strict", False) and ds.attrs["verdict"] != "agrees":
-        print(f"opa-mc: the OPA run disagrees with its Monte Carlo certificate (mean: "
-              f"{ds.attrs['verdict_mean']}, variance: {ds.attrs['verdict_var']}); --strict",
-              file=sys.stderr)
+        said = ("disagrees with" if ds.attrs["verdict"] == "disagrees" else
+                "is not certified by")
+        print(f"opa-mc: the OPA run {said} its Monte Carlo certificate (mean: "
+              f"{ds.attrs['verdict_mean']}, variance: {ds.attrs['verdict_var']}, after "
+              f"{ds.attrs['verify_samples']} true systems); --strict", file=sys.stderr)
         return EXIT_UNVERIFIED
     return 0
 
@@ -198,10 +203,8 @@ def _verify_lines(ds) -> list[str]:
         return "" if periods == float("inf") else f", first disagreement at {periods:.4g} periods"
 
     return [
-        f"certificate ({a['verify_samples']} true systems, "
-        + (f"{a['verify_replicates']} scrambled Sobol' replicates" if a["verify_replicates"]
-           else "stratified by element")
-        + f"): {a['verdict'].upper()} (mean {a['verdict_mean']}"
+        f"certificate ({a['verify_samples']} true systems in {a['verify_strata']} strata, "
+        f"error rate {a['verify_alpha']:g}): {a['verdict'].upper()} (mean {a['verdict_mean']}"
         f"{when(a['first_disagreement_mean'])}; variance {a['verdict_var']}"
         f"{when(a['first_disagreement_var'])})",
         f"error of E[x]: RMS {rms('verify_err_mean'):.3g} ± {rms('verify_err_mean_sem'):.2g}; "

@@ -111,7 +111,7 @@ def test_a_good_run_agrees_and_a_bad_one_does_not(reference):
         good = verify(simulate_opa(osc, order=1, elements="adaptive", **kw), samples=512)
     bad = verify(simulate_opa(osc, order=4, **kw), samples=256)
     assert good.attrs["verdict"] == "agrees" and good.attrs["variance_reduction"] > 100
-    assert good.attrs["verify_replicates"] == 0  # stratified by element
+    assert good.attrs["verify_strata"] >= 64  # the elements, cut at the splits
     assert bad.attrs["verdict"] == "disagrees" and bad.attrs["verdict_mean"] == "disagrees"
     assert np.isfinite(bad.attrs["first_disagreement_mean"])
     for v in (good, bad):
@@ -124,9 +124,12 @@ def test_a_good_run_agrees_and_a_bad_one_does_not(reference):
 
 @pytest.mark.parametrize("kw, message", [
     (dict(samples=100), "samples must be a power of two"),
-    (dict(samples=4), "samples must be a power of two >= 8"),
-    (dict(samples=64, max_samples=32), "max_samples must be a power of two >= 64"),
+    (dict(samples=32), "samples must be a power of two >= 64, got 32: a verdict needs 10 "
+                       "degrees of freedom, so the smallest that works is samples 64"),
+    (dict(samples=128, max_samples=64), "max_samples must be a power of two >= 128"),
     (dict(tolerance=-1.0), "tolerance must be a finite number"),
+    (dict(alpha=0.0), "alpha must be a finite number in"),
+    (dict(alpha=float("nan")), "alpha must be a finite number in"),
 ])
 def test_bad_arguments_are_named(kw, message):
     run = simulate_opa(Oscillator(), sigma=0.01, order=1, periods=1)
