@@ -97,8 +97,8 @@ def _runs():
                       distribution="uniform")),
         ("opa with its certificate",
          "compare.verify(simulate_opa(Oscillator(), sigma=0.01, order=2, periods=2), "
-         "samples=16, sequential=False)",
-         verify(simulate_opa(osc, sigma=0.01, order=2, periods=2), samples=16,
+         "samples=64, sequential=False)",
+         verify(simulate_opa(osc, sigma=0.01, order=2, periods=2), samples=64,
                 sequential=False)),
         ("mc", "simulate_mc(Oscillator(), sigma=0.01, samples=64, order=2, periods=2)",
          simulate_mc(osc, sigma=0.01, samples=64, order=2, periods=2, progress=False)),

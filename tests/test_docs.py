@@ -97,3 +97,82 @@ def test_the_elements_page_holds_for_a_fresh_convergence_study(tmp_path):
                                    summary="convergence.md",
                                    start="## Convergence against Monte Carlo",
                                    stop="## σ = 0.03") == []
+
+
+# ------------------------------------------------------------------ the documentation site
+ROOT = os.path.dirname(DOCS)
+GLOSSARY_TERMS = ("OPA", "EMR", "DMR", "ξ", "Law of ξ", "σ\\*", "Split", "Impact law",
+                  "`mean`", "`ensemble`", "`saltation`", "Truncation", "`galerkin`", "`paper`",
+                  "**N**", "**H**", "Elements", "Certificate", "Control variate", "Frontier")
+
+
+def _read(*parts):
+    with open(os.path.join(ROOT, *parts), encoding="utf-8") as fh:
+        return fh.read()
+
+
+def test_every_tutorial_is_an_executed_notebook_in_the_index():
+    """A tutorial is a MyST notebook (myst-nb runs it at build time, so it cannot go stale)
+    and the index lists it."""
+    index = _read("docs", "index.md")
+    tutorials = sorted(f for f in os.listdir(os.path.join(DOCS, "tutorials")) if f.endswith(".md"))
+    assert len(tutorials) >= 4
+    for name in tutorials:
+        text = _read("docs", "tutorials", name)
+        assert text.startswith("---\nfile_format: mystnb\n"), name
+        assert "```{code-cell} ipython3" in text, name
+        assert "placeholder" not in text, name
+        assert f"tutorials/{name[:-3]}\n" in index, f"the index does not list {name}"
+
+
+def test_the_glossary_explains_the_words_and_cites_the_paper():
+    import re
+
+    text = _read("docs", "glossary.md")
+    missing = [term for term in GLOSSARY_TERMS if term not in text]
+    assert missing == []
+    text = re.sub(r"\s*\n>?\s*", " ", text)  # the citation is a quote over several lines
+    for part in ("Huang", "Rajic", "Computer Modeling in Engineering & Sciences",
+                 "10.32604/cmes.2023.029215"):
+        assert part in text
+
+
+def test_the_docs_build_is_one_command_and_ci_runs_it_last():
+    """The docs extra holds what the build needs; .ci/run builds with warnings as errors
+    after the test steps."""
+    import tomllib
+
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as fh:
+        extras = tomllib.load(fh)["project"]["optional-dependencies"]
+    names = " ".join(extras["docs"])
+    for package in ("sphinx", "myst-nb", "numpydoc", "ipykernel"):
+        assert package in names
+    ci = _read(".ci", "run")
+    build = ci.index("sphinx-build -W")
+    assert ci.index("pip install -e '.[docs]'") < build
+    assert ci.index("--doctest-modules tests opa mc compare") < build
+    assert ci.index("benchmarks -m \"not slow\"") < build
+    command = "sphinx-build -W --keep-going -b html docs build/docs"
+    for page in (("README.md",), ("docs", "getting-started.md"), ("docs", "developers.md")):
+        assert command in _read(*page), page
+
+
+def test_the_reference_examples_run(tmp_path, monkeypatch):
+    """The Python blocks of docs/reference.md (the README's before) run as printed."""
+    import re
+
+    monkeypatch.chdir(tmp_path)
+    blocks = re.findall(r"```python\n(.*?)```", _read("docs", "reference.md"), re.S)
+    assert blocks
+    for block in blocks:
+        exec(compile(block, "docs/reference.md", "exec"), {})
+
+
+@pytest.mark.slow
+def test_the_docs_build_without_a_warning(tmp_path):
+    """The whole site, tutorials executed, warnings as errors (as .ci/run builds it)."""
+    import subprocess
+    import sys
+
+    subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html",
+                    DOCS, str(tmp_path / "html")], check=True, timeout=1200)

@@ -80,12 +80,67 @@ def _draw_extra(ax, ds: xr.Dataset, kind: str) -> None:
     ax.set_title("impacts per sample")
 
 
+#: colour of each verdict of a certificate (``compare.verify``); any other word is grey
+VERDICT_COLORS = {"agrees": "tab:green", "disagrees": "tab:red", "undecided": "tab:orange"}
+#: decades shown below the largest value of a log-scaled error panel
+DECADES = 5
+
+
+def _running_rms(values: np.ndarray) -> np.ndarray:
+    """sqrt of the mean of values² over the outputs up to each one (the verdict's measure)."""
+    return np.sqrt(np.cumsum(values ** 2) / np.arange(1, len(values) + 1))
+
+
+def _draw_certificate(ax, ds: xr.Dataset, periods: np.ndarray) -> None:
+    """The certificate of a verified run, as its verdict reads it: the running RMS of the
+    paired error of E[x] with a ± 2 standard-error band, against the tolerance
+    (``verify_tolerance`` × the running RMS standard deviation of x), and the verdict in
+    the title, coloured by its word (agrees, disagrees, undecided)."""
+    err = _running_rms(np.nan_to_num(ds.verify_err_mean.values))
+    sem = _running_rms(np.nan_to_num(ds.verify_err_mean_sem.values))
+    var = ds.cv_x_var.values if "cv_x_var" in ds else ds.x_var.values
+    tol = float(ds.attrs.get("verify_tolerance", 0.1)) \
+        * _running_rms(np.sqrt(np.maximum(np.nan_to_num(var), 0.0)))
+    # at t = 0 every sample starts at x0: an error of exactly 0 says nothing and would set
+    # a log axis by itself; so would one tiny error before the first impact: the axis
+    # shows DECADES decades below the largest value drawn, smaller values sit on its floor
+    shown = periods > 0
+    top = np.nanmax(np.concatenate([(err + 2 * sem)[shown], tol[shown], [0.0]]))
+    low = np.nanmin(np.concatenate([err[shown & (err > 0)], tol[shown & (tol > 0)],
+                                    [np.inf]]))
+    floor = max(low, top * 10.0 ** -DECADES) if top > 0 and np.isfinite(low) else 1e-16
+    ax.fill_between(periods[shown], np.maximum(err - 2 * sem, floor)[shown],
+                    (err + 2 * sem)[shown], color="tab:blue", alpha=0.3, lw=0,
+                    label="± 2 standard errors")
+    ax.plot(periods[shown], np.maximum(err, floor)[shown], color="tab:blue", lw=1.2,
+            label="OPA − truth, E[x] (paired)")
+    ax.plot(periods[shown], np.maximum(tol, floor)[shown], color="black", ls="--", lw=1,
+            label=f"tolerance: {ds.attrs.get('verify_tolerance', 0.1):g} × std of x")
+    first = float(ds.attrs.get("first_disagreement_mean", np.inf))
+    if np.isfinite(first):
+        ax.axvline(first, color=VERDICT_COLORS["disagrees"], lw=1, ls=":",
+                   label=f"first disagreement, t = {first:.3g}")
+    ax.set_yscale("log")
+    ax.set_ylim(floor / 1.5, top * 1.5 if top > 0 else 1.0)
+    ax.set_xlabel("t [forcing periods]")
+    ax.set_ylabel("running RMS over the outputs up to t")
+    verdict = str(ds.attrs.get("verdict", "?"))
+    ax.set_title(f"certificate ({int(ds.attrs.get('verify_samples', 0))} true systems): "
+                 f"{verdict.upper()}\n(mean {ds.attrs.get('verdict_mean', '?')}, variance "
+                 f"{ds.attrs.get('verdict_var', '?')})",
+                 color=VERDICT_COLORS.get(verdict, "tab:gray"), fontsize=10)
+    ax.legend(loc="lower right", fontsize=8)
+
+
 def plot_run(ds: xr.Dataset, path: str, *, per_period: int | None = None) -> None:
     """Time history and phase portrait of a dmr/opa/mc dataset; stroboscopic points marked.
 
     OPA runs (one element or several, any law of xi) and Monte Carlo ensembles draw their
     mean state with a band of ± 1 standard deviation; a multi-element run adds a panel of
-    its elements, an ensemble one of the impacts per sample.
+    its elements, an ensemble one of the impacts per sample, and a run with a certificate
+    (``compare.verify``, ``--verify``) one of the certificate: the paired error of E[x]
+    with its ± 2 standard-error band against the tolerance, and the verdict.
+    Times are in forcing periods 2π/ω.
     ``per_period`` (outputs per forcing period) locates the stroboscopic samples; it is
     inferred from the time grid when omitted.
     """
@@ -102,16 +157,19 @@ def draw_run(ds: xr.Dataset, *, per_period: int | None = None):
     if per_period is None:
         per_period = max(1, int(round(T / (t[1] - t[0])))) if len(t) > 1 else 1
     extra = _extra_panel(ds)
-    fig, axes = plt.subplots(1, 3 if extra else 2, figsize=(15.5 if extra else 11, 4.2))
+    certified = "verify_err_mean" in ds and "verify_err_mean_sem" in ds
+    panels = 2 + bool(extra) + certified
+    fig, axes = plt.subplots(1, panels, figsize=(5.5 * panels, 4.4))
     ax_t, ax_p = axes[0], axes[1]
+    periods = t / T
     dense = per_period >= 8  # lines between outputs only when they resolve the motion
     style = dict(lw=0.8) if dense else dict(ls="none", marker=".", ms=3)
-    ax_t.plot(t, x, label=label, **style)
+    ax_t.plot(periods, x, label=label, **style)
     if "x_var" in ds and label != "DMR":
         sd = np.sqrt(np.maximum(ds.x_var.values, 0.0))
-        ax_t.fill_between(t, x - sd, x + sd, alpha=0.25, label="± 1 std")
+        ax_t.fill_between(periods, x - sd, x + sd, alpha=0.3, label="± 1 std")
     ax_t.axhline(ds.attrs["delta"], color="k", lw=1, ls="--", label="wall x = Δ")
-    ax_t.set_xlabel("t")
+    ax_t.set_xlabel("t [forcing periods]")
     ax_t.set_ylabel("x" if label == "DMR" else "E[x]")
     ax_t.legend(loc="lower left", fontsize=8)
     ax_t.set_title("time history")
@@ -127,6 +185,8 @@ def draw_run(ds: xr.Dataset, *, per_period: int | None = None):
     ax_p.set_title("phase portrait" if label == "DMR" else "phase portrait of the mean")
     if extra:
         _draw_extra(axes[2], ds, extra)
+    if certified:
+        _draw_certificate(axes[-1], ds, periods)
     uncertain = ds.attrs.get("uncertain", "mu")
     fig.suptitle(
         f"{label}: ω = {ds.attrs['omega']:g}, c = {ds.attrs['c']:g}, σ = {ds.attrs['sigma']:g}"
