@@ -504,7 +504,7 @@ def fig2(ctx):
                      f"a1 = {osc.a1:g}", fontsize=10)
         ax.set_ylim(-0.005, 2.8 * osc.F0)
         ax.legend(fontsize=7, loc="upper center", ncol=2)
-    axes[-1].set_xlabel("t")
+    axes[-1].set_xlabel("t [time units]")  # the paper's axis: its caption counts 0..64
     shape = ("stems: the strengths of the Dirac impulses" if ctx.impulse == "dirac"
              else f"black: rectangular pulses of width {ctx.pulse_width:g}")
     caption = (f"Fig. 2: the impulse force F(t) for F0 = 0.1, a1 = 1, ω1 = 1, 0 ≤ t ≤ "

@@ -20,8 +20,8 @@ VARIANT_MARKERS = ("o", "s", "^", "v", "D")
 # the semicircle the paper-truncation variants are left out, and multi-element variants
 # named "<law>/ME-<K8|adaptive64>" follow the single-element ones).
 DRAWN_VARIANTS = ("mean/galerkin", "ensemble/galerkin", "saltation/galerkin")
-KIND_COLOURS = {"grazing": "tab:red", "extra impact": "tab:orange", "chatter": "tab:purple",
-                "impulse order": "tab:brown", "horizon": "0.6", "output crossing": "tab:cyan"}
+KIND_COLOURS = {"grazing": "tab:red", "extra impact": "gold", "chatter": "tab:cyan",
+                "impulse order": "white", "horizon": "0.6", "output crossing": "tab:cyan"}
 # Kinds of the split arrays that do not change the impact sequence.
 NOT_SPLITS = ("horizon", "output crossing")
 
@@ -535,6 +535,15 @@ def _window_sem(ds, q, s, n):
     return float(np.sqrt(np.mean(se**2)))
 
 
+def _window_tolerance(ds, q, s, n):
+    """The mean's verdict threshold over the first n outputs, as the RMS error of the
+    window is held against it: tol x RMS spread + z x RMS SE + the solver floor."""
+    spread = np.sqrt(np.maximum(ds.mc_x_var[q, s, :n].values, 0.0))
+    floor = 10 * (float(ds.attrs["rtol"]) + float(ds.attrs["atol"]))
+    return float(float(ds.attrs["tolerance"]) * np.sqrt(np.mean(spread**2))
+                 + float(ds.attrs["z"]) * _window_sem(ds, q, s, n) + floor)
+
+
 def findings(ds: xr.Dataset) -> list[str]:
     """Plain-language conclusions, each computed from the dataset."""
     out = []
@@ -669,9 +678,18 @@ def findings(ds: xr.Dataset) -> list[str]:
 
 
 # -- figures --------------------------------------------------------------------------------
-STAR_STYLES = (("k", "-", "o"), ("tab:green", "--", "s"), ("tab:purple", ":", "^"),
-               ("tab:orange", "-.", "v"), ("tab:brown", (0, (5, 1, 1, 1)), "D"),
-               ("tab:pink", (0, (1, 1)), "P"))
+# sigma* of each variant: colour, dash, marker. The markers are none of the verdicts' (o, x)
+# nor the splits' (KIND_MARKERS), so that one glyph has one meaning in the trust map.
+STAR_STYLES = (("k", "-", "s"), ("tab:green", "--", "D"), ("tab:purple", ":", "^"),
+               ("tab:orange", "-.", "p"), ("tab:brown", (0, (5, 1, 1, 1)), "h"),
+               ("tab:pink", (0, (1, 1)), "8"))
+#: the marker of a sigma* below the smallest sigma probed, drawn on the axis at sigma = 0
+BELOW_MARKER = "$\\downarrow$"
+#: the marker of each kind of split (and of an output crossing), distinct in shape
+KIND_MARKERS = {"grazing": "*", "extra impact": "P", "chatter": "X", "impulse order": "d",
+                "output crossing": "v", "horizon": "."}
+#: the fewest sigma-axis heights (a fraction of the axis) between two probes drawn
+PROBE_GAP = 0.012
 
 
 def _xlim(ax, x):
@@ -708,16 +726,30 @@ def _axes_legend(fig, axes, ncol):
     return _fig_legend(fig, handles, labels, ncol)
 
 
+def _thinned(values, gap):
+    """The finite values sorted, without those closer than gap to one kept before."""
+    kept = []
+    for v in np.sort(values[np.isfinite(values)]):
+        if not kept or v - kept[-1] >= gap:
+            kept.append(v)
+    return np.array(kept)
+
+
 def plot_map(ds, path, *, size=None):
     """Per horizon (rows) the mean and the variance (columns): the error at every grid point
     against the tolerance (diverging colours centred on it), the verdicts of the paper's
-    OPA, sigma* of every impact law drawn (lines), every sigma probed, the runs that did not
-    finish and the splits (the sigma at which each enters the ensemble)."""
+    OPA, sigma* of every impact law drawn (lines), the sigma probed, the runs that did not
+    finish, and for each kind of split the smallest sigma at which one enters the ensemble
+    (with the count of the others of that kind in the panel).
+
+    Reading aids: one glyph has one meaning (verdicts o and x, sigma* markers, split
+    markers and the below-resolution arrow are all different), probes closer than
+    ``PROBE_GAP`` of the axis are drawn once, and the legend lists only what is drawn."""
     plt = _pyplot()
     from matplotlib.colors import TwoSlopeNorm
 
     H = len(ds.horizon)
-    fig, axes = plt.subplots(H, 2, figsize=size or (11, 3.9 * H + 1.2), squeeze=False,
+    fig, axes = plt.subplots(H, 2, figsize=size or (11, 3.9 * H + 1.4), squeeze=False,
                              sharex=True, sharey=True, layout="constrained")
     x = _vals(ds).values.astype(float)
     y = ds.sigma.values
@@ -728,6 +760,7 @@ def plot_map(ds, path, *, size=None):
     centre = nominal(ds)
     X, Y = np.meshgrid(x, y, indexing="ij")
     norm = TwoSlopeNorm(vcenter=0.0, vmin=-3.0, vmax=2.0)
+    span = (x[-1] - x[0]) / max(1, len(x) - 1) if len(x) > 1 else 0.02 * abs(x[0])
     handles, labels = [], []
     for h in range(H):
         for c, (what, rel, tol) in enumerate((
@@ -739,43 +772,62 @@ def plot_map(ds, path, *, size=None):
                                  cmap="RdBu_r", norm=norm, shading="flat")
             a = ds.agrees.values[:, :, HEADLINE, -1, h, c].astype(bool)
             bad = ~np.isfinite(r)
-            ax.scatter(X[a], Y[a], marker="o", facecolor="white", edgecolor="k", s=26,
-                       label=f"{head} agrees", zorder=4)
-            ax.scatter(X[~a & ~bad], Y[~a & ~bad], marker="x", color="k", s=26,
-                       label=f"{head} does not", zorder=4)
+            if a.any():
+                ax.scatter(X[a], Y[a], marker="o", facecolor="white", edgecolor="k", s=26,
+                           label=f"{head} agrees", zorder=4)
+            if (~a & ~bad).any():
+                ax.scatter(X[~a & ~bad], Y[~a & ~bad], marker="x", color="k", s=26,
+                           label=f"{head} does not", zorder=4)
             if bad.any():
                 ax.scatter(X[bad], Y[bad], marker="$?$", color="k", s=40, zorder=4,
                            label="run did not finish (NaN)")
             ps = ds.probe_sigma.values
-            px = np.broadcast_to(x[:, None], ps.shape)
-            ok = np.isfinite(ps)
-            ax.scatter(px[ok], ps[ok], marker="_", color="0.3", s=30, lw=0.8, zorder=3,
-                       label="σ evaluated")
-            span = (x[-1] - x[0]) / max(1, len(x) - 1) if len(x) > 1 else 0.02 * abs(x[0])
+            for q in range(len(x)):  # probes drawn left of their column, thinned
+                kept = _thinned(ps[q], PROBE_GAP * smax)
+                if len(kept):
+                    ax.scatter(np.full(len(kept), x[q] - 0.2 * span), kept, marker="_",
+                               color="0.25", s=30, lw=0.8, zorder=3, label="σ probed")
             for j, (v, (colour, style, mark)) in enumerate(zip(drawn, STAR_STYLES)):
                 lo = ds.sigma_star.values[:, v, h, c]
                 hi = ds.sigma_star_upper.values[:, v, h, c]
                 top = np.where(np.isfinite(hi), lo, smax)
                 shift = (j - (len(drawn) - 1) / 2) * 0.04 * span  # coinciding lines show
-                ax.plot(x + shift, top, color=colour, ls=style, marker=mark, ms=5, lw=1.6,
-                        zorder=5, mfc="white", label=f"σ* {ds.variant.values[v]}")
+                below = np.isfinite(top) & (top <= 0)
+                line = np.where(below, 0.0, top)
+                ax.plot(x + shift, line, color=colour, ls=style, lw=1.6, zorder=5)
+                ax.plot((x + shift)[~below], line[~below], color=colour, ls="none",
+                        marker=mark, ms=5.5, mfc="white", zorder=5,
+                        label=f"σ* {ds.variant.values[v]}")
+                if below.any():
+                    ax.plot((x + shift)[below], line[below], color=colour, ls="none",
+                            marker=BELOW_MARKER, ms=9, zorder=5,
+                            label=f"σ* {ds.variant.values[v]} below the smallest σ probed")
             kind = ds.split_kind.values[:, h]
             dist = np.abs(ds.split_value.values[:, h] - centre)
-            sx = np.broadcast_to(x[:, None], kind.shape)
-            for k, name in enumerate(kinds):
-                sel = (kind == k) & (dist <= smax)
-                if name == "horizon" or not sel.any():
-                    continue
+            shown = [k for k, name in enumerate(kinds) if name != "horizon"]
+            for rank, k in enumerate(shown):
+                name = kinds[k]
                 crossing = name == "output crossing"
-                ax.scatter(sx[sel], dist[sel], marker="v" if crossing else "D", s=18,
-                           color=KIND_COLOURS[name], edgecolor="k", lw=0.4, zorder=6,
-                           label=f"{name} enters at this σ" if crossing
-                           else f"split ({name}) enters at this σ")
+                at = 0.12 * span + 0.07 * span * rank  # each kind its own lane, right
+                for q in range(len(x)):  # the first of each kind per column, and a count
+                    sel = (kind[q] == k) & (dist[q] <= smax)
+                    if not sel.any():
+                        continue
+                    first = float(dist[q][sel].min())
+                    ax.scatter([x[q] + at], [first], marker=KIND_MARKERS[name],
+                               s=60 if name == "grazing" else 34, color=KIND_COLOURS[name],
+                               edgecolor="k", lw=0.5, zorder=6,
+                               label=f"first {name} at this σ" if crossing
+                               else f"first split ({name}) at this σ")
+                    if sel.sum() > 1:
+                        ax.annotate(f"+{int(sel.sum()) - 1}", (x[q] + at, first),
+                                    xytext=(3, 3), textcoords="offset points", fontsize=6,
+                                    zorder=6)
             ax.set_ylim(-0.04 * smax, smax * 1.04)
             _xlim(ax, x)
             ax.set_title(f"{what}, H = {float(ds.horizon[h]):g} forcing periods", fontsize=9)
             if h == H - 1:
-                ax.set_xlabel(ds.attrs["parameter"])
+                ax.set_xlabel(_par(ds))
             if c == 0:
                 ax.set_ylabel("σ")
             cb = fig.colorbar(mesh, ax=ax, extend="both")
@@ -787,13 +839,8 @@ def plot_map(ds, path, *, size=None):
             hh, ll = ax.get_legend_handles_labels()
             handles, labels = handles + hh, labels + ll
     _fig_legend(fig, handles, labels, 3)
-    import textwrap
-
-    width = int(fig.get_size_inches()[0] * 72 / (9 * 0.6))  # characters of 9 pt that fit
-    fig.suptitle("\n".join(textwrap.wrap(
-        f"Where OPA (N = {int(ds.N.max())}) agrees with Monte Carlo. Colours and marks: "
-        f"{head} (blue: within the tolerance); lines: σ* of each variant (set a little apart "
-        f"sideways)", width)), fontsize=9)
+    fig.suptitle(f"Where OPA (N = {int(ds.N.max())}) agrees with Monte Carlo: colour and "
+                 f"marks {head}, lines σ* of each variant", fontsize=9)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
@@ -857,8 +904,16 @@ def plot_error_vs_order(ds, path, q=0, *, size=None):
                     ax.scatter(xs[nan], np.full(nan.sum(), 0.93), marker="$?$", s=30,
                                color=line.get_color(), transform=ax.get_xaxis_transform(),
                                label="run did not finish (NaN)")
-            ax.axhline(_window_sem(ds, q, s, n), color="k", ls="--", lw=1,
-                       label="MC noise floor (RMS SE)")
+            noise = _window_sem(ds, q, s, n)
+            ax.axhline(noise, color="k", ls="--", lw=1, label="MC noise floor (RMS SE)")
+            ax.axhline(_window_tolerance(ds, q, s, n), color="tab:red", ls="-", lw=1.2,
+                       label="the verdict's tolerance (mean)")
+            finite = err[np.isfinite(err)]
+            if len(finite) and noise > float(finite.max()):
+                ax.text(0.5, 0.5, "MC noise floor above every curve:\nthese errors are "
+                        "not resolved", transform=ax.transAxes, ha="center", va="center",
+                        fontsize=8, color="0.25",
+                        bbox=dict(facecolor="white", edgecolor="0.6", alpha=0.9))
             ax.set_title(f"σ = {float(ds.sigma[s]):g}: {title}", fontsize=9)
             if r == len(picks) - 1:
                 ax.set_xlabel("N")
@@ -871,33 +926,51 @@ def plot_error_vs_order(ds, path, q=0, *, size=None):
     return [path]
 
 
+#: colours of the orders N in one figure: distinct hues, none black (the Monte Carlo truth)
+ORDER_COLOURS = ("tab:purple", "tab:blue", "tab:green", "tab:orange", "tab:red", "tab:brown",
+                 "tab:pink", "tab:olive", "tab:cyan")
+
+
 def plot_mean(ds, path, q=0, *, size=None):
-    """x_0 for several N beside the MC mean with its 2-SE band, and |x_0 - E_MC[x]| against
-    2 SE, at a sigma that agrees and one that does not, over the first horizon."""
+    """x_0 for several N beside the MC mean, and |x_0 - E_MC[x]| against the band of 2 MC
+    standard errors, at a sigma that agrees and one that does not, over the first horizon.
+    (The 2-SE band of the mean is far thinner than a line at the scale of E[x], so it is
+    drawn where it can be seen: below, as the noise the errors are held against.)"""
     plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     orders = [int(n) for n in ds.N.values]
     show = [k for k, n in enumerate(orders) if n in (0, 1, 2, 4, 8) or k == len(orders) - 1]
     n = int(round(float(ds.horizon[0]) * ds.attrs["per_period"])) + 1
     t = _time(ds).values[:n]
-    colours = plt.get_cmap("viridis")(np.linspace(0.0, 0.85, len(show)))
     fig, axes = plt.subplots(2, len(picks), figsize=size or (6.5 * len(picks), 7.0),
                              squeeze=False, sharex=True, layout="constrained")
     every = max(1, n // 12)
+    later = t > 0  # at t = 0 every sample is at x0: no error to draw on a log axis
     for c, s in enumerate(picks):
         m = ds.mc_x_mean.values[q, s, :n]
         se = ds.mc_x_sem.values[q, s, :n]
         ax, ax2 = axes[0, c], axes[1, c]
-        ax.fill_between(t, m - 2 * se, m + 2 * se, color="0.8", label="MC mean ± 2 SE")
         ax.plot(t, m, "k-", lw=2.2, label="MC mean")
-        ax2.semilogy(t, np.maximum(2 * se, 1e-16), "k-", lw=2.2, label="2 MC SE")
+        shown = [2 * se[later]]
         for i, k in enumerate(show):
             x0 = ds.opa_x_mean.values[q, s, HEADLINE, k, :n]
-            style = dict(color=colours[i], ls=LINE_STYLES[i % len(LINE_STYLES)], lw=1.1,
+            style = dict(color=ORDER_COLOURS[i % len(ORDER_COLOURS)],
+                         ls=LINE_STYLES[i % len(LINE_STYLES)], lw=1.1,
                          marker=VARIANT_MARKERS[i % len(VARIANT_MARKERS)], ms=3.5,
                          markevery=(i * every // max(1, len(show)), every))
             ax.plot(t, x0, label=f"OPA N = {orders[k]}", **style)
-            ax2.semilogy(t, np.maximum(np.abs(x0 - m), 1e-16), **style)
+            gap = np.abs(x0 - m)[later]
+            ax2.semilogy(t[later], np.maximum(gap, 1e-300), **style)
+            shown.append(gap)
+        values = np.concatenate(shown)
+        values = values[np.isfinite(values) & (values > 0)]
+        top = float(values.max()) if len(values) else 1.0
+        bottom = max(float(values.min()) if len(values) else top * 1e-6, top * 1e-8)
+        ax2.fill_between(t[later], bottom / 10, np.maximum(2 * se[later], bottom / 10),
+                         color="0.55", alpha=0.35, lw=0, label="within 2 MC SE (noise)")
+        ax2.semilogy(t[later], np.maximum(2 * se[later], bottom / 10), "k-", lw=1.6,
+                     label="2 MC SE")
+        ax2.set_ylim(bottom / 2, top * 2)
         ax.set_title(f"σ = {float(ds.sigma[s]):g}", fontsize=9)
         ax2.set_xlabel("t [forcing periods]")
     axes[0, 0].set_ylabel("E[x]")
@@ -905,8 +978,8 @@ def plot_mean(ds, path, q=0, *, size=None):
     handles, labels = axes[0, 0].get_legend_handles_labels()
     hh, ll = axes[1, 0].get_legend_handles_labels()
     _fig_legend(fig, handles + hh, labels + ll, 4)
-    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}, {ds.variant.values[HEADLINE]}",
-                 fontsize=10)
+    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}, {ds.variant.values[HEADLINE]}: "
+                 f"OPA's mean against Monte Carlo", fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
@@ -978,25 +1051,32 @@ def plot_phase(ds, path, *, size=None):
 
 
 # -- the cost-accuracy frontier -------------------------------------------------------------
+#: markers of the frontier's methods, paired with the colours so that no two methods share
+#: a colour and a marker
+FRONTIER_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "h", "<", ">")
+
+
 def plot_frontier(conv, path, *, size=None):
     """The cost-accuracy study of the map (``frontier_dataset``): error against elements K,
     against N (one line per element count, so that K and N are never joined) and against
-    cost; every line its own colour, dash and marker; one legend below the panels."""
+    cost. A method (with its impact law) has one colour and one marker in every panel;
+    in the N panel the element counts of one method differ by the dash. Each panel has a
+    legend of its own lines."""
     plt = _pyplot()
     from compare._convergence import STUDY_LAWS, _select
 
-    fig, axes = plt.subplots(1, 3, figsize=size or (16, 6.2), layout="constrained")
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-    seen: dict = {}
+    fig, axes = plt.subplots(1, 3, figsize=size or (17, 6.8), layout="constrained")
+    colours = [c for c in plt.rcParams["axes.prop_cycle"].by_key()["color"]]
+    keys: dict = {}
 
-    def style(label):
-        if label not in seen:
-            k = len(seen)
-            seen[label] = dict(color=colours[k % len(colours)],
-                               ls=LINE_STYLES[k % len(LINE_STYLES)],
-                               marker=VARIANT_MARKERS[(k // 2) % len(VARIANT_MARKERS)],
-                               mfc="none" if k % 2 else None, ms=4, lw=1.1)
-        return seen[label]
+    def style(method, law, dash=0):
+        key = (method.removesuffix(", N"), law)
+        if key not in keys:
+            k = len(keys)
+            keys[key] = dict(color=colours[k % len(colours)],
+                             marker=FRONTIER_MARKERS[k % len(FRONTIER_MARKERS)])
+        return dict(keys[key], ls=LINE_STYLES[dash % len(LINE_STYLES)], ms=4.5, lw=1.2,
+                    mfc="none" if dash % 2 else None)
 
     ax = axes[0]
     for method in ("ME-OPA uniform", "ME-OPA adaptive", "ME-collocation uniform",
@@ -1004,22 +1084,23 @@ def plot_frontier(conv, path, *, size=None):
         for law in (*STUDY_LAWS, "true system"):
             idx = _select(conv, method, law)
             if len(idx):
-                label = f"{method} ({law})"
-                ax.loglog(conv["size"].values[idx], conv.error.values[idx], label=label,
-                          **style(label))
+                ax.loglog(conv["size"].values[idx], conv.error.values[idx],
+                          label=f"{method} ({law})", **style(method, law))
     ax.set_xlabel("elements K")
     ax.set_ylabel("RMS error of E[x]")
+    ax.set_title("against the number of elements", fontsize=9)
     ax = axes[1]
     for method in ("ME-OPA adaptive, N", "OPA (one element), N"):
         for law in STUDY_LAWS:
             idx = _select(conv, method, law)
-            for K in np.unique(conv["size"].values[idx]):
+            for dash, K in enumerate(np.unique(conv["size"].values[idx])):
                 sub = idx[conv["size"].values[idx] == K]
-                label = f"{method.removesuffix(', N')} ({law}), K = {int(K)}"
-                ax.semilogy(conv.order.values[sub], conv.error.values[sub], label=label,
-                            **style(label))
+                ax.semilogy(conv.order.values[sub], conv.error.values[sub],
+                            label=f"{method.removesuffix(', N')} ({law}), K = {int(K)}",
+                            **style(method, law, dash))
     ax.set_xlabel("N")
     ax.set_ylabel("RMS error of E[x]")
+    ax.set_title("against the order N", fontsize=9)
     ax = axes[2]
     for method in np.unique(conv.method.values):
         if method.endswith(", N"):
@@ -1027,21 +1108,21 @@ def plot_frontier(conv, path, *, size=None):
         for law in np.unique(conv.law.values):
             idx = _select(conv, method, law)
             if len(idx):
-                label = f"{method} ({law})"
                 ax.loglog(conv.rhs_evaluations.values[idx], conv.error.values[idx],
-                          label=label, **style(label))
+                          label=f"{method} ({law})", **style(method, law))
     ax.set_xlabel("right-hand-side evaluations")
     ax.set_ylabel("RMS error of E[x]")
+    ax.set_title("against the cost", fontsize=9)
     for ax in axes:
         ax.axhline(conv.attrs["reference_sem"], color="k", ls=":", lw=1,
-                   label="reference SE")
-    _axes_legend(fig, axes, 4)
+                   label="reference's standard error")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=1,
+                  frameon=False)
     fig.suptitle(f"σ = {conv.attrs['sigma']:g}, ω = {conv.attrs['omega']:g}, "
                  f"{conv.attrs['periods']:g} periods: error against K, N and cost", fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
-
 
 
 def frontier_dataset(ds):

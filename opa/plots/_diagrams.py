@@ -445,14 +445,16 @@ def section_bars(ax, ds: xr.Dataset, *, last: int, scale: float, spread: str, co
 
 
 def history(ax, runs, *, last: int = 10) -> None:
-    """Time histories of the last ``last`` periods of ``[(dataset, line style), ...]``."""
+    """Time histories of the last ``last`` periods of ``[(dataset, line style), ...]``,
+    over time in forcing periods 2π/ω (as the captions count it)."""
     for ds, style in runs:
         x, _, name = mean_state(ds)
         keep = window(ds, last)
-        ax.plot(ds.time.values[keep], x[keep], style, color=COLORS[name],
+        period = 2 * math.pi / float(ds.attrs["omega"])
+        ax.plot(ds.time.values[keep] / period, x[keep], style, color=COLORS[name],
                 lw=1.3 if name == "DMR" else 0.9, label=name)
     ax.axhline(runs[0][0].attrs["delta"], color="gray", lw=1.2, label="wall x = Δ")
-    ax.set_xlabel("t")
+    ax.set_xlabel("t [forcing periods]")
     ax.set_ylabel("x")
     ax.legend(fontsize=7, loc="best", framealpha=0.85)
 

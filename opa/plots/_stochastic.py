@@ -54,6 +54,37 @@ def section_density(ds: xr.Dataset, bins: int = X_BINS):
     return c_edges, x_edges, mass
 
 
+def _density_colours():
+    """Light blue (rare, still visible on white) to dark blue (likely): the rarest bins of
+    a log scale must not fade into the background."""
+    from matplotlib.colors import LinearSegmentedColormap
+
+    return LinearSegmentedColormap.from_list(
+        "density", plt.get_cmap("Blues")(np.linspace(0.35, 1.0, 256)))
+
+
+def _label_branches(ax, ds: xr.Dataset, c: np.ndarray) -> None:
+    """Name each attractor type's branch once, on its uppermost point at the control
+    value where the type is most likely (a type's points lie on several branches: the
+    median could fall between them)."""
+    types = ds.mc_type.values.astype(str)  # (value, sample)
+    x = ds.mc_x.values.astype(float)  # (value, sample, point)
+    for kind in ds.type.values:
+        share = (types == str(kind)).mean(axis=1)
+        if not share.any() or share.max() < 0.01:
+            continue
+        i = int(np.argmax(share))
+        points = x[i][types[i] == str(kind)]
+        points = points[np.isfinite(points)]
+        if not len(points):
+            continue
+        ax.annotate(str(kind), (c[i], float(points.max())), xytext=(6, -14),
+                    textcoords="offset points", fontsize=8, color="black",
+                    bbox=dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="0.5",
+                              alpha=0.85),
+                    arrowprops=dict(arrowstyle="-", color="0.4", lw=0.6))
+
+
 def draw_stochastic(ds: xr.Dataset):
     """The figure (not saved; the caller closes it). Axes in order: the shaded points,
     the probabilities, then (with the EMR) the EMR's diagram and the boundaries, or
@@ -79,10 +110,11 @@ def draw_stochastic(ds: xr.Dataset):
         c_edges, x_edges, mass = section_density(ds)
         shown = np.where(mass > 0, mass, np.nan)
         top = max(float(np.nanmax(shown)), 1e-3) if np.isfinite(shown).any() else 1.0
-        mesh = ax_pts.pcolormesh(c_edges, x_edges, shown.T, cmap="viridis_r",
+        mesh = ax_pts.pcolormesh(c_edges, x_edges, shown.T, cmap=_density_colours(),
                                  norm=LogNorm(vmin=max(top * 1e-4, 1e-6), vmax=top),
                                  shading="flat")
         fig.colorbar(mesh, ax=ax_pts, label="probability per bin", pad=0.01)
+        _label_branches(ax_pts, ds, c)
     else:
         ax_pts.text(0.5, 0.5, "no samples", ha="center", va="center",
                     transform=ax_pts.transAxes)

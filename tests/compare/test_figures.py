@@ -244,3 +244,275 @@ def test_reproduce_fig2_writes_png_and_text(tmp_path):
     assert sorted(os.path.basename(p) for p in paths) == ["fig2.png", "fig2.txt"]
     text = " ".join((tmp_path / "fig2.txt").read_text(encoding="utf-8").split())
     assert "n = 4 cycles through 0.1, 0.2, 0.1, 0" in text
+
+
+# --------------------------------------------------------------------------- read at a glance
+# Reading aids every figure of the project keeps (the paper's figures above, the trust map's
+# report, a run with its certificate, the stochastic diagram): a legend lists only what is
+# drawn, two differently named lines of one panel never share colour, dash and marker, a
+# band is opaque enough to be seen, a log axis is not stretched by the exact zero of t = 0,
+# and a time axis is in forcing periods, as the text counts time.
+
+#: the least opacity of a band (fill_between) that reads on paper and on screen
+MIN_BAND_ALPHA = 0.2
+#: decades a log axis may reach below its lowest value at t > 0
+SLACK_DECADES = 2
+
+
+def _drawn_labels(fig) -> set[str]:
+    """Labels of the artists that draw something."""
+    from matplotlib.collections import PathCollection
+
+    out = set()
+    for ax in fig.axes:
+        for line in ax.get_lines():
+            if len(line.get_xdata()) and line.get_visible():
+                out.add(line.get_label())
+        for coll in ax.collections:  # a scatter draws its offsets, a band its paths
+            if isinstance(coll, PathCollection):
+                if len(coll.get_offsets()):
+                    out.add(coll.get_label())
+            elif len(coll.get_paths()):
+                out.add(coll.get_label())
+        for cont in ax.containers:
+            out.add(cont.get_label())
+        for patch in ax.patches:
+            out.add(patch.get_label())
+    return out
+
+
+def _legends(fig):
+    return [ax.get_legend() for ax in fig.axes if ax.get_legend()] + list(fig.legends)
+
+
+def legend_entries_without_artist(fig) -> list[str]:
+    drawn = _drawn_labels(fig)
+    return [text.get_text() for legend in _legends(fig) for text in legend.get_texts()
+            if text.get_text() not in drawn]
+
+
+def shared_styles(fig) -> list[tuple[str, str]]:
+    """Pairs of differently named lines of one panel with the same colour, dash and marker."""
+    from matplotlib.colors import to_rgba
+
+    clashes = []
+    for ax in fig.axes:
+        seen = {}
+        for line in ax.get_lines():
+            label = line.get_label()
+            if label.startswith("_") or not len(line.get_xdata()):
+                continue
+            key = (to_rgba(line.get_color()), str(line.get_linestyle()), str(line.get_marker()))
+            if key in seen and seen[key] != label:
+                clashes.append((seen[key], label))
+            seen.setdefault(key, label)
+    return clashes
+
+
+def faint_bands(fig) -> list[str]:
+    from matplotlib.collections import FillBetweenPolyCollection, PolyCollection
+
+    kinds = (FillBetweenPolyCollection, PolyCollection)
+    return [f"{ax.get_title()}: {coll.get_label()} alpha {coll.get_alpha()}"
+            for ax in fig.axes for coll in ax.collections
+            if isinstance(coll, kinds) and coll.get_alpha() is not None
+            and coll.get_alpha() < MIN_BAND_ALPHA]
+
+
+def _is_time_axis(label: str) -> bool:
+    return label == "t" or label.startswith("t ") or label.startswith("t [")
+
+
+def log_axes_stretched_by_t0(fig) -> list[str]:
+    """Log y axes over time whose lower limit lies far below every value drawn at t > 0."""
+    bad = []
+    for ax in fig.axes:
+        if ax.get_yscale() != "log" or not _is_time_axis(ax.get_xlabel()):
+            continue
+        later = []
+        for line in ax.get_lines():
+            x = np.asarray(line.get_xdata(), float)
+            y = np.asarray(line.get_ydata(), float)
+            keep = (x > 0) & np.isfinite(y) & (y > 0)
+            later.extend(y[keep])
+        if later and ax.get_ylim()[0] < min(later) * 10.0 ** -SLACK_DECADES:
+            bad.append(f"{ax.get_title()}: bottom {ax.get_ylim()[0]:.1e}, "
+                       f"lowest at t > 0 {min(later):.1e}")
+    return bad
+
+
+def time_axes_not_in_periods(fig) -> list[str]:
+    """Time axes that do not say their unit: forcing periods, as the texts count time, or
+    time units where a caption counts in them (the paper's Fig. 2)."""
+    return [label for ax in fig.axes for label in (ax.get_xlabel(),)
+            if _is_time_axis(label) and label not in ("t [forcing periods]", "t [time units]")]
+
+
+def check_reads_at_a_glance(fig, name):
+    assert legend_entries_without_artist(fig) == [], name
+    assert shared_styles(fig) == [], name
+    assert faint_bands(fig) == [], name
+    assert log_axes_stretched_by_t0(fig) == [], name
+    assert time_axes_not_in_periods(fig) == [], name
+
+
+# the checks themselves fail on the defects they guard against
+
+
+def test_the_checks_catch_each_defect():
+    fig, ax = plt.subplots()
+    t = np.linspace(0, 10, 50)
+    ax.plot(t, t + 1, color="k", label="OPA N = 2")
+    ax.plot(t, t + 2, color="k", label="OPA N = 4")  # one style, two methods
+    ax.fill_between(t, t, t + 1, alpha=0.05, label="± 2 SE")  # invisible band
+    ax.scatter([], [], label="split")  # a legend entry for nothing
+    ax.legend()
+    ax.set_xlabel("t")  # time units
+    assert legend_entries_without_artist(fig) == ["split"]
+    assert shared_styles(fig) == [("OPA N = 2", "OPA N = 4")]
+    assert len(faint_bands(fig)) == 1
+    assert time_axes_not_in_periods(fig) == ["t"]
+    fig2, ax2 = plt.subplots()
+    ax2.semilogy(t, np.where(t == 0, 1e-16, 1e-3 + t * 1e-4))  # the exact zero at t = 0
+    ax2.set_xlabel("t [forcing periods]")
+    assert len(log_axes_stretched_by_t0(fig2)) == 1
+    plt.close(fig)
+    plt.close(fig2)
+
+
+@pytest.mark.parametrize("name", F.FIGURES)
+def test_paper_figures_read_at_a_glance(drawn, name):
+    _, figures = drawn
+    check_reads_at_a_glance(figures[name].fig, name)
+
+
+@pytest.fixture(scope="module")
+def report_figures(tmp_path_factory):
+    """Every figure of the trust map's report, drawn from a tiny map's validate.nc, kept
+    open for inspection."""
+    from matplotlib.figure import Figure
+
+    from compare import load_config, run_validation
+    from compare import _report as R
+
+    out = tmp_path_factory.mktemp("map")
+    cfg = load_config(None, outdir=str(out), values=(3.98, 4.035), sigmas=(0.01, 0.03),
+                      orders=(0, 1, 3), horizons=(4, 8), samples=64, max_samples=128,
+                      per_period=4)
+    run_validation(cfg, progress=False, log=lambda *a: None)
+    ds = xr.open_dataset(out / "validate.nc")
+    kept = {}
+    save = Figure.savefig
+
+    def keep(fig, path, *args, **kw):
+        kept[os.path.basename(str(path))] = fig
+        return save(fig, path, *args, **kw)
+
+    Figure.savefig = keep
+    try:
+        for name, draw in (("trust_map.png", R.plot_map),
+                           ("error_vs_N.png", R.plot_error_vs_order),
+                           ("mean_vs_mc.png", R.plot_mean),
+                           ("variance.png", R.plot_variance),
+                           ("phase.png", R.plot_phase),
+                           ("frontier.png", R._plot_frontier_of)):
+            draw(ds, str(out / name))
+    finally:
+        Figure.savefig = save
+    yield ds, kept
+    ds.close()
+
+
+@pytest.mark.parametrize("name", ["trust_map.png", "error_vs_N.png", "mean_vs_mc.png",
+                                  "variance.png", "phase.png", "frontier.png"])
+def test_report_figures_read_at_a_glance(report_figures, name):
+    _, kept = report_figures
+    check_reads_at_a_glance(kept[name], name)
+
+
+def test_trust_map_glyphs_have_one_meaning(report_figures):
+    """Verdicts, sigma* markers and split markers never share a glyph; sigma* below the
+    smallest probe has its own arrow; the swept parameter is named by its symbol."""
+    from compare import _report as R
+
+    _, kept = report_figures
+    fig = kept["trust_map.png"]
+    verdicts = {"o", "x"}
+    stars = {mark for _, _, mark in R.STAR_STYLES}
+    splits = set(R.KIND_MARKERS.values())
+    assert not (verdicts & stars) and not (verdicts & splits) and not (stars & splits)
+    assert R.BELOW_MARKER not in stars | splits | verdicts
+    assert all(ax.get_xlabel() in ("", "ω") for ax in fig.axes[:4])
+    assert "\n" not in fig._suptitle.get_text()
+
+
+def test_error_vs_n_draws_the_tolerance(report_figures):
+    _, kept = report_figures
+    for ax in kept["error_vs_N.png"].axes:
+        names = [line.get_label() for line in ax.get_lines()]
+        assert "the verdict's tolerance (mean)" in names
+        assert "MC noise floor (RMS SE)" in names
+
+
+def test_frontier_has_a_legend_per_panel_and_one_style_per_method(report_figures):
+    _, kept = report_figures
+    fig = kept["frontier.png"]
+    assert all(ax.get_legend() is not None for ax in fig.axes)
+    style = {}
+    for ax in fig.axes:
+        for line in ax.get_lines():
+            label = line.get_label()
+            if label.startswith("_") or "standard error" in label:
+                continue
+            method = label.split(", K =")[0]
+            key = (line.get_color(), line.get_marker())
+            assert style.setdefault(method, key) == key, method  # the same in every panel
+    assert len(set(style.values())) == len(style)  # and no two methods alike
+
+
+@pytest.mark.parametrize("verdict", ["agrees", "disagrees", "undecided"])
+def test_a_certified_run_draws_its_certificate(verdict):
+    """``plot_run`` of a run with a certificate draws it, in the verdict's colour, for each
+    of the three verdicts."""
+    import opa
+    from opa.plots._diagrams import VERDICT_COLORS, draw_run
+
+    run = opa.simulate_opa(opa.Oscillator(omega=3.98), sigma=0.01, order=2, periods=2,
+                           per_period=8)
+    n = run.sizes["time"]
+    ramp = np.linspace(0.0, 1e-4, n)
+    run = run.assign(verify_err_mean=("time", ramp), verify_err_mean_sem=("time", ramp / 5),
+                     cv_x_var=run.x_var)
+    run.attrs.update(verdict=verdict, verdict_mean=verdict, verdict_var="agrees",
+                     verify_samples=64, verify_tolerance=0.1)
+    fig = draw_run(run)
+    try:
+        cert = fig.axes[-1]
+        assert verdict.upper() in cert.get_title()
+        assert cert.title.get_color() == VERDICT_COLORS[verdict]
+        check_reads_at_a_glance(fig, f"certificate, {verdict}")
+    finally:
+        plt.close(fig)
+
+
+def test_stochastic_figure_names_its_branches_and_shows_rare_bins():
+    """The shaded panel's rarest colour is not near white, and each attractor type that
+    occurs is named on it."""
+    from matplotlib.colors import to_rgba
+
+    from opa import preset
+    from opa.dynamics import stochastic_diagram
+    from opa.plots._stochastic import _density_colours, draw_stochastic
+
+    rare = np.array(to_rgba(_density_colours()(0.0))[:3])
+    assert rare.min() < 0.8  # visible on a white background
+    ds = stochastic_diagram(preset("3.1", F0=0.0), "c", [0.0396996668, 0.05], sigma=0.03,
+                            samples=16, extra_states=0)
+    fig = draw_stochastic(ds)
+    try:
+        names = {text.get_text() for text in fig.axes[0].texts}
+        occurring = {str(t) for t in np.unique(ds.mc_type.values.astype(str)) if str(t)}
+        assert occurring and occurring <= names
+        check_reads_at_a_glance(fig, "stochastic")
+    finally:
+        plt.close(fig)
