@@ -311,7 +311,11 @@ def simulate_mc(
       variance ``s^2 = M / (M - 1) sum_m w_m (y_m - c_hat)^2 / W``.
 
     ``x_var_sem`` is the spread of the replicates' variances / sqrt(R), or without
-    replicates the normal-theory ``Var sqrt(2 / (M - 1))``.
+    replicates the normal-theory ``Var sqrt(2 / (M - 1))``. ``x_var`` (and ``v_var``) is
+    the weighted sample variance about the estimated mean, which misses that mean's own
+    variance: Bessel's ``M / (M - 1)`` restores it for ``random`` points; for scrambled
+    Sobol' points, whose mean varies far less, ``x_sem^2`` is added instead (with R > 1;
+    with R = 1 nothing).
 
     Raises
     ------
@@ -803,7 +807,11 @@ def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, se
         x_var_sem = np.full_like(x_var, np.nan)
         x_coef_sem = np.full_like(total.x_moment, np.nan)
     else:
-        corr = M / (M - 1) if M > 1 else math.nan
+        # the sample variance about the sample mean misses the variance of that mean:
+        # Var(mean) = Var / M for independent points (Bessel's M / (M - 1)); far less
+        # for scrambled Sobol' points, whose mean's variance is estimated from the
+        # replicates and added below (M / (M - 1) there was a bias of 1/M)
+        corr = (M / (M - 1) if M > 1 else math.nan) if sampler == "random" else 1.0
         x_var = total.x_m2 / total.weight * corr
         v_var = total.v_m2 / total.weight * corr
         if replicates > 1:
@@ -818,6 +826,9 @@ def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, se
             x_var_sem = np.std(var_r, axis=0, ddof=1) / np.sqrt(replicates)
             x_coef_sem = (np.std(total.x_moment_rep / share, axis=0, ddof=1)
                           / np.sqrt(replicates))
+            if sampler != "random":
+                x_var = x_var + x_sem**2
+                v_var = v_var + v_sem**2
         else:
             x_sem = np.sqrt(x_var / M)
             v_sem = np.sqrt(v_var / M)

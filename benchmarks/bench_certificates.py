@@ -1,0 +1,128 @@
+"""How often a certificate is wrong, and how well its intervals cover, on cases it was
+not tuned to (tests/certificate_cases.py: truths from 2^20 jittered true systems that
+owe nothing to ``compare``).
+
+For each case and seed:
+
+* the sequential certificate (``compare.verify``, 256 true systems doubling to 4096):
+  its verdict against the case's true verdict (the criterion evaluated with the truth);
+  a *false agree* is "agrees" where the truth disagrees, a *false disagree* the reverse;
+* one round at M = 256 and at M = 1024: whether the 95 % Student's t intervals of
+  ``cv_x_mean`` and ``cv_x_var`` hold the truth, over the seeds and the outputs (t = 0,
+  where every sample sits at x0, is left out; the truth's own standard error is added
+  in quadrature).
+
+The full table (100 seeds per case, about 20 minutes on 2 cores)::
+
+    python -m benchmarks.bench_certificates --seeds 100 --out certificates.md
+
+``pytest benchmarks -m "not slow"`` runs one case on 2 seeds with a 2^14-sample truth
+(the smoke CI runs); ``pytest benchmarks/bench_certificates.py -m slow`` the full table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from tests.certificate_cases import CASES, run_case, true_ratio, truth
+
+
+def _t_half(se, dof):
+    from scipy import stats
+
+    return stats.t.ppf(0.975, np.asarray(dof, dtype=float)) * se
+
+
+def judge(name: str, seeds: int, *, log2_truth: int = 20, sizes=(256, 1024),
+          sequential_from: int = 256, sequential_to: int = 4096) -> dict:
+    """The false-agree and false-disagree counts and the coverage of case ``name``."""
+    from compare import verify
+
+    run = run_case(name)
+    mean, var, mean_se, var_se = truth(name, log2_truth)
+    ratio = true_ratio(run, mean, var)
+    truly = "agrees" if max(ratio.values()) <= 1.0 else "disagrees"
+    verdicts = {"agrees": 0, "disagrees": 0, "undecided": 0}
+    samples = []
+    for seed in range(seeds):
+        v = verify(run, samples=sequential_from, max_samples=sequential_to, seed=seed)
+        verdicts[v.attrs["verdict"]] += 1
+        samples.append(int(v.attrs["verify_samples"]))
+    coverage = {}
+    for M in sizes:
+        hits = {"mean": [], "var": []}
+        for seed in range(seeds):
+            v = verify(run, samples=M, max_samples=M, sequential=False, seed=1000 + seed)
+            for key, want, want_se in (("mean", mean, mean_se), ("var", var, var_se)):
+                se = np.hypot(v[f"cv_x_{key}_sem"].values, want_se)
+                half = _t_half(se, v[f"cv_x_{key}_dof"].values)
+                hits[key].append((np.abs(v[f"cv_x_{key}"].values - want) <= half)[1:])
+        coverage[M] = {key: float(np.mean(h)) for key, h in hits.items()}
+    wrong = verdicts["agrees"] if truly == "disagrees" else verdicts["disagrees"]
+    return {"case": name, "ratio": ratio, "truly": truly, "verdicts": verdicts,
+            "wrong": wrong, "seeds": seeds, "median_samples": float(np.median(samples)),
+            "coverage": coverage}
+
+
+def table(rows: list[dict]) -> str:
+    sizes = sorted(rows[0]["coverage"])
+    head = ("| case | true error / tolerance (mean, var) | truly | agrees | disagrees | "
+            "undecided | wrong verdicts | median true runs | "
+            + " | ".join(f"coverage M={M} (mean, var)" for M in sizes) + " |")
+    lines = [head, "|" + "---|" * (8 + len(sizes))]
+    for r in rows:
+        v = r["verdicts"]
+        lines.append(
+            f"| {r['case']} | {r['ratio']['mean']:.3g}, {r['ratio']['var']:.3g} | "
+            f"{r['truly']} | {v['agrees']} | {v['disagrees']} | {v['undecided']} | "
+            f"{r['wrong']} of {r['seeds']} | {r['median_samples']:.0f} | "
+            + " | ".join(f"{r['coverage'][M]['mean']:.3f}, {r['coverage'][M]['var']:.3f}"
+                         for M in sizes) + " |")
+    return "\n".join(lines)
+
+
+def test_certificates_smoke():
+    """One case, two seeds, a small truth: the harness runs and its numbers are sane."""
+    row = judge("rare-2pct", 2, log2_truth=14, sizes=(256,), sequential_to=512)
+    assert row["truly"] == "disagrees" and sum(row["verdicts"].values()) == 2
+    assert 0.0 <= row["coverage"][256]["mean"] <= 1.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_certificate_error_rates(name):
+    """The targets: no more than 1 false agree in 100 seeds, 93-97 % coverage."""
+    row = judge(name, 100)
+    print("\n" + table([row]))
+    assert row["wrong"] <= 1
+    for M, cover in row["coverage"].items():
+        assert 0.93 <= cover["mean"] <= 0.97 and 0.93 <= cover["var"] <= 0.97, (M, cover)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=100)
+    parser.add_argument("--cases", default=",".join(CASES))
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args(argv)
+    rows = []
+    start = time.perf_counter()
+    for name in args.cases.split(","):
+        rows.append(judge(name, args.seeds))
+        print(f"{name}: {rows[-1]['verdicts']}, coverage {rows[-1]['coverage']} "
+              f"({time.perf_counter() - start:.0f} s)", file=sys.stderr, flush=True)
+    text = table(rows)
+    print(text)
+    if args.out:
+        with open(args.out, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
