@@ -125,6 +125,15 @@ def check_reported(run: xr.Dataset, measure) -> None:
     """Refuse a run whose reported moments or element probabilities do not follow from
     its coefficients and its law (a dataset edited after the run, or another run's
     numbers): the certificate vouches for what the dataset says."""
+    edges = run.element_edges.values
+    law = np.diff(np.asarray(measure.cdf(edges), dtype=float))
+    reported = run.element_probability.values
+    if not np.allclose(reported, law, rtol=1e-9, atol=1e-12):
+        k = int(np.argmax(np.abs(reported - law)))
+        raise ValueError(f"the run's element_probability[{k}] = {reported[k]:.6g} is not "
+                         f"the law's probability {law[k]:.6g} of the element "
+                         f"[{edges[k]:.6g}, {edges[k + 1]:.6g}]: the dataset was changed "
+                         f"after the run, so it cannot be certified")
     moments = surrogate_moments(run)
     mean, second = moments["x_mean"], moments["x_second"]
     reported_mean, reported_var = run.x_mean.values, run.x_var.values
@@ -139,15 +148,6 @@ def check_reported(run: xr.Dataset, measure) -> None:
                              f"t = {float(run.time[t]):.6g} (and {int(bad.sum()) - 1} "
                              f"other outputs): the dataset was changed after the run, so "
                              f"it cannot be certified")
-    edges = run.element_edges.values
-    law = np.diff(np.asarray(measure.cdf(edges), dtype=float))
-    reported = run.element_probability.values
-    if not np.allclose(reported, law, rtol=1e-9, atol=1e-12):
-        k = int(np.argmax(np.abs(reported - law)))
-        raise ValueError(f"the run's element_probability[{k}] = {reported[k]:.6g} is not "
-                         f"the law's probability {law[k]:.6g} of the element "
-                         f"[{edges[k]:.6g}, {edges[k + 1]:.6g}]: the dataset was changed "
-                         f"after the run, so it cannot be certified")
 
 
 def paired_estimates(x: np.ndarray, x_hat: np.ndarray, replicates: int,

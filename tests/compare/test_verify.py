@@ -210,3 +210,73 @@ def test_neyman_allocation_follows_p_times_s():
     n = neyman_allocation(100, [0.5, 0.25, 0.25], [0.0, 1.0, 3.0])
     assert n.sum() == 100 and list(n) == [0, 25, 75]
     assert list(neyman_allocation(4, [0.5, 0.5], [0.0, 0.0])) == [2, 2]
+
+
+def test_a_run_changed_after_the_fact_is_refused():
+    """The certificate vouches for what the dataset says: moments or element
+    probabilities that do not follow from the coefficients and the law are refused."""
+    run = simulate_opa(Oscillator(), sigma=0.01, order=2, periods=1, elements=2)
+    x_mean = run.x_mean.copy()
+    x_mean[-1] += 1e-6
+    with pytest.raises(ValueError, match="x_mean does not follow from its coefficients"):
+        verify(run.assign(x_mean=x_mean), samples=64)
+    x_var = run.x_var * 1.001
+    with pytest.raises(ValueError, match="x_var does not follow from its coefficients"):
+        verify(run.assign(x_var=x_var), samples=64)
+    P = run.element_probability.copy()
+    P[:] = [0.3, 0.7]
+    with pytest.raises(ValueError, match=r"element_probability\[0\] = 0.3 is not the law's"):
+        verify(run.assign(element_probability=P), samples=64)
+
+
+def test_the_strata_are_cut_at_a_rare_split():
+    """sigma = 0.025 at omega = 3.98: the samples with xi below about -0.90 make an extra
+    impact (located here by a bisection of the impact count, independent of the split
+    scan); the certificate cuts a stratum there, so the 2 % region gets points of its
+    own, and a wrong answer there is found."""
+    from compare._verify import system_of
+    from opa.engine import true_runs
+
+    run = simulate_opa(Oscillator(omega=3.98), sigma=0.025, order=4, periods=10,
+                       per_period=8, impact_law="saltation")
+    system, options = system_of(run)
+
+    def count(xi):
+        return true_runs(system, options, np.array([xi]), run.time.values, what="t",
+                         impacts=True)[2][0]
+
+    lo, hi = -1.0, 0.0
+    assert count(lo) != count(hi)
+    while hi - lo > 1e-9:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if count(mid) == count(-1.0) else (lo, mid)
+    v = verify(run, samples=256, seed=1)
+    assert v.attrs["verify_strata"] == 2 and v.attrs["verify_splits"] == 1
+    assert f"{-0.8975:.4f}" == f"{lo:.4f}"
+    assert v.attrs["verdict"] == "disagrees"
+
+
+def test_the_band_verdict_is_wrong_at_most_alpha_of_the_time():
+    """compare._trust.bounded_verdict with band_multiplier on synthetic estimates whose
+    truth is known: 20 outputs, each estimate the mean of 16 normal draws (15 degrees of
+    freedom, its standard error estimated from them). Where the true error is 1.05x the
+    tolerance at every output, "agrees" must come at most alpha = 0.05 of 2000 trials
+    (plus 3 binomial standard errors); where it is 0.5x with small noise, the band agrees
+    in most trials and never disagrees."""
+    from compare._trust import band_multiplier, bounded_verdict
+
+    rng = np.random.default_rng(11)
+    T, n, alpha = 20, 16, 0.05
+    scale = np.ones(T)
+
+    def trial(err, noise):
+        draws = err + noise * rng.standard_normal((n, T))
+        est, se = draws.mean(axis=0), draws.std(axis=0, ddof=1) / np.sqrt(n)
+        c = band_multiplier(alpha, T, np.full(T, n - 1.0), quantities=1)
+        return bounded_verdict(est, c * se, scale, scale, tol=0.1, floor=0.0)[0]
+
+    wrong = [trial(np.full(T, 0.105), 0.02) for _ in range(2000)]
+    rate = np.mean([w == "agrees" for w in wrong])
+    assert rate <= alpha + 3 * np.sqrt(alpha * (1 - alpha) / 2000)
+    right = [trial(np.full(T, 0.05), 0.01) for _ in range(500)]
+    assert right.count("disagrees") == 0 and right.count("agrees") > 400

@@ -546,6 +546,10 @@ BAD_CLI_31 = [
     ("wrongly accepted", OPA + ["--elements", "4", "--max-elements", "8"], "--max-elements"),
     ("wrongly accepted", OPA + ["--samples", "64"], ("--samples", "simulate mc")),
     ("wrongly accepted", OPA + ["--seed", "3"], ("--seed", "--verify")),
+    ("wrongly accepted", OPA + ["--verify", "256", "--verify-max", "128"],
+     ("--verify-max", ">= 256", "128")),
+    ("wrongly accepted", OPA + ["--verify", "8"], ("--verify", "smallest that works is "
+                                                   "--verify 64")),
     ("wrongly accepted", OPA + ["--keep-parts"], "--keep-parts"),
     ("wrongly accepted", MC + ["--keep-parts"], ("--keep-parts", "--out")),
     ("wrongly accepted", MC + ["--connect-timeout", "3"], ("--connect-timeout", "--scheduler")),

@@ -539,3 +539,21 @@ def test_validate_starts_its_workers_fork_server_before_the_maps_imports(monkeyp
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "False"
+
+
+@pytest.mark.parametrize("argv", [
+    # a rare change of the impact sequence: xi < -0.90 (2 % of the law) makes an extra
+    # impact; the true errors are 1.30x (mean) and 3.60x (variance) the tolerance
+    ["--impact-law", "saltation", "--order", "4", "--sigma", "0.025", "--verify", "256",
+     "--seed", "5016"],
+    # 8 elements at sigma = 0.03, true errors 1.24x and 8.3x the tolerance, the smallest M
+    ["--sigma", "0.03", "--elements", "8", "--verify", "64", "--seed", "3"],
+])
+def test_simulate_opa_strict_never_certifies_the_issues_wrong_answers(argv, capsys):
+    """The two commands that used to print AGREES and exit 0 under --strict (their true
+    errors from tests/certificate_cases.py): neither agrees now, and --strict exits 4."""
+    code = main(["simulate", "opa", "--periods", "10", "--per-period", "8", "--strict"]
+                + argv)
+    text = capsys.readouterr()
+    assert code == 4 and ": AGREES" not in text.out
+    assert ("DISAGREES" in text.out or "UNDECIDED" in text.out) and "--strict" in text.err
