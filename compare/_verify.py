@@ -88,6 +88,13 @@ def system_of(run: xr.Dataset, options: SolverOptions | None = None
     """The System and solver options an OPA run was computed with, from its attributes
     (``options``: the solver options to use instead, e.g. with a ``max_step``)."""
     attrs = run.attrs
+    needed = PARAMETER_NAMES + ("sigma", "uncertain", "impulse", "pulse_width",
+                                "impulse_at_zero") + (() if options else ("rtol", "atol"))
+    missing = [name for name in needed if name not in attrs]
+    if missing:
+        raise ValueError(f"the run lacks the attribute{'s' if len(missing) > 1 else ''} "
+                         f"{', '.join(missing)}: the true systems it describes are not "
+                         f"known, so it cannot be verified")
     oscillator = Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES})
     distribution = attrs.get("distribution", "semicircle")
     system = System(oscillator, sigma=float(attrs["sigma"]), order=0,
@@ -358,6 +365,12 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         raise ValueError("the run does not start from the x0, v0 of its attributes (an "
                          "OPA run continued with initial=...): the true systems it "
                          "describes are not known, so it cannot be verified")
+    for name in ("element_x_coef", "element_v_coef", "element_edges",
+                 "element_probability"):
+        bad = ~np.isfinite(run[name].values)
+        if bad.any():
+            raise ValueError(f"the run's {name} holds {int(bad.sum())} non-finite values "
+                             f"(a run that stopped, or an edited file): nothing to certify")
     check_reported(run, measure)
     edges = run.element_edges.values
     check_memory("verification paths", max_samples * len(times) * 8 * 5,

@@ -280,3 +280,17 @@ def test_the_band_verdict_is_wrong_at_most_alpha_of_the_time():
     assert rate <= alpha + 3 * np.sqrt(alpha * (1 - alpha) / 2000)
     right = [trial(np.full(T, 0.05), 0.01) for _ in range(500)]
     assert right.count("disagrees") == 0 and right.count("agrees") > 400
+
+
+def test_an_imperfect_run_is_refused_by_name():
+    """A run missing an attribute, or holding non-finite coefficients, is refused with
+    one line that names what is wrong (not a KeyError, not a verdict from NaN)."""
+    run = simulate_opa(Oscillator(), sigma=0.01, order=1, periods=1)
+    lacking = run.copy()
+    del lacking.attrs["pulse_width"]
+    with pytest.raises(ValueError, match="lacks the attribute pulse_width"):
+        verify(lacking, samples=64)
+    coef = run.element_x_coef.copy()
+    coef[0, 1, -1] = np.nan
+    with pytest.raises(ValueError, match="element_x_coef holds 1 non-finite values"):
+        verify(run.assign(element_x_coef=coef), samples=64)
