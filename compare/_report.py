@@ -794,14 +794,13 @@ def plot_map(ds, path, *, size=None):
                 shift = (j - (len(drawn) - 1) / 2) * 0.04 * span  # coinciding lines show
                 below = np.isfinite(top) & (top <= 0)
                 line = np.where(below, 0.0, top)
-                ax.plot(x + shift, line, color=colour, ls=style, lw=1.6, zorder=5)
-                ax.plot((x + shift)[~below], line[~below], color=colour, ls="none",
-                        marker=mark, ms=5.5, mfc="white", zorder=5,
-                        label=f"σ* {ds.variant.values[v]}")
+                ax.plot(x + shift, line, color=colour, ls=style, lw=1.6, zorder=5,
+                        marker=mark, markevery=[int(i) for i in np.flatnonzero(~below)],
+                        ms=5.5, mfc="white", label=f"σ* {ds.variant.values[v]}")
                 if below.any():
                     ax.plot((x + shift)[below], line[below], color=colour, ls="none",
                             marker=BELOW_MARKER, ms=9, zorder=5,
-                            label=f"σ* {ds.variant.values[v]} below the smallest σ probed")
+                            label=f"below the smallest σ probed: σ* {ds.variant.values[v]}")
             kind = ds.split_kind.values[:, h]
             dist = np.abs(ds.split_value.values[:, h] - centre)
             shown = [k for k, name in enumerate(kinds) if name != "horizon"]
@@ -839,8 +838,13 @@ def plot_map(ds, path, *, size=None):
             hh, ll = ax.get_legend_handles_labels()
             handles, labels = handles + hh, labels + ll
     _fig_legend(fig, handles, labels, 3)
-    fig.suptitle(f"Where OPA (N = {int(ds.N.max())}) agrees with Monte Carlo: colour and "
-                 f"marks {head}, lines σ* of each variant", fontsize=9)
+    import textwrap
+
+    # one line at the default size; wrapped only where a smaller figure cannot hold it
+    width = int(fig.get_size_inches()[0] * 72 / (9 * 0.6))  # characters of 9 pt that fit
+    fig.suptitle("\n".join(textwrap.wrap(
+        f"Where OPA (N = {int(ds.N.max())}) agrees with Monte Carlo: marks {head}, "
+        f"lines σ* per variant", width)), fontsize=9)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
@@ -978,8 +982,8 @@ def plot_mean(ds, path, q=0, *, size=None):
     handles, labels = axes[0, 0].get_legend_handles_labels()
     hh, ll = axes[1, 0].get_legend_handles_labels()
     _fig_legend(fig, handles + hh, labels + ll, 4)
-    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}, {ds.variant.values[HEADLINE]}: "
-                 f"OPA's mean against Monte Carlo", fontsize=10)
+    fig.suptitle(f"{_par(ds)} = {_g(float(_vals(ds)[q]))}, {ds.variant.values[HEADLINE]}",
+                 fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return [path]
