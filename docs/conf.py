@@ -61,17 +61,27 @@ def _without_missing_pages(app, docname, source):
 
 def _plain_docstring(app, what, name, obj, options, lines):
     """The docstrings are written to be read as text: a shape ``(*B, q)``, an absolute value
-    ``|x|`` and a literal broken over two lines of a numpydoc field are not reST markup."""
+    ``|x|`` and a literal broken over two lines of a numpydoc field are not reST markup.
+    Literals, ``:math:`` roles and ``.. math::`` blocks are left as they are."""
     open_literal = False
+    math_indent = None  # the indentation of the ``.. math::`` directive we are inside
     for i, line in enumerate(lines):
+        indent = len(line) - len(line.lstrip())
+        if math_indent is not None:
+            if not line.strip() or indent > math_indent:
+                continue
+            math_indent = None
+        if line.strip().startswith(".. math::"):
+            math_indent = indent
+            continue
         if open_literal:
             line = re.sub(r"^(\s*)", r"\1``", line, count=1)
             open_literal = False
         if line.count("``") % 2:
             line += "``"
             open_literal = True
-        parts = re.split(r"(``.*?``)", line)
-        for j in range(0, len(parts), 2):  # outside literals only
+        parts = re.split(r"(``.*?``|:math:`[^`]*`)", line)
+        for j in range(0, len(parts), 2):  # outside literals and math only
             text = parts[j]
             text = re.sub(r"(?<!\\)\|", r"\\|", text)
             text = re.sub(r"(?<=[(, \[])\*(?=\w)(?![^*]*\w\*)", r"\\*", text)
