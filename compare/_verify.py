@@ -57,7 +57,7 @@ import numpy as np
 import xarray as xr
 
 from compare._strata import (
-    build_strata, group_allocation, least_samples, neyman_allocation, split_values,
+    build_strata, group_allocation, least_samples, neyman_allocation, slices, split_values,
 )
 from compare._trust import band_multiplier, bounded_verdict
 from mc import cv_estimates
@@ -393,26 +393,33 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     cut_paths, rhs = true_runs(system, options, strata.cuts, times, what="stratum cut")
     indicator = stratum_indicator(run.element_x_coef.values, edges, measure, strata,
                                   cut_paths[:, :, 0])
-    laws = [measure.restrict(float(a), float(b)) for a, b in zip(strata.cuts[:-1],
-                                                                 strata.cuts[1:])]
     P = strata.probability
 
     def draw(total, indicator):
         """A batch of ``total`` true runs in jittered groups, allocated by the indicator:
-        stratum j's n_j groups cut its law into n_j slices of equal probability, with
-        GROUP independent points in each (the last total % GROUP points join the first
-        group of the stratum with the most groups)."""
+        stratum j's n_j groups cut it into n_j slices (:func:`compare._strata.slices`),
+        with GROUP independent points of the law in each (the last total % GROUP points
+        join the first group of the stratum with the most groups)."""
         groups = group_allocation(total // GROUP, P, indicator)
         size = [np.full(n, GROUP) for n in groups]
         size[int(np.argmax(groups))][0] += total % GROUP
-        u = [(np.repeat(np.arange(n), m) + rng.random(m.sum())) / n
-             for n, m in zip(groups, size)]
-        xi = np.concatenate([law.ppf(v) for law, v in zip(laws, u)])
+        xi, weight = [], []
+        for j, (n, m) in enumerate(zip(groups, size)):
+            bounds, p = slices(measure, strata.cuts[j], strata.cuts[j + 1], int(n))
+            lo = np.asarray(measure.cdf(bounds[:-1]), dtype=float)
+            u = np.repeat(lo, m) + rng.random(m.sum()) * np.repeat(p, m)
+            xi.append(np.clip(measure.ppf_full(u), np.repeat(bounds[:-1], m),
+                              np.repeat(bounds[1:], m)))
+            weight.append(p)
+        xi = np.concatenate(xi)
+        # each slice's probability under the law, the strata's summing to theirs
+        ends = np.asarray(measure.cdf(strata.cuts[[0, -1]]), dtype=float).ravel()
+        weight = np.concatenate(weight) / (ends[1] - ends[0])
         paths, n_rhs = true_runs(system, options, xi, times, what="verification sample")
         x_hat = surrogate(run, xi, measure=measure)[0]
         cut = np.cumsum(np.concatenate(size))[:-1]
-        return (np.split(paths[:, :, 0], cut), np.split(x_hat, cut),
-                np.repeat(P / groups, groups), np.repeat(np.arange(len(P)), groups)), n_rhs
+        return (np.split(paths[:, :, 0], cut), np.split(x_hat, cut), weight,
+                np.repeat(np.arange(len(P)), groups)), n_rhs
 
     def observed(batches):
         """Each stratum's spread of x - x_hat seen so far (RMS over time of the standard
@@ -427,6 +434,17 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         return np.where(np.isfinite(out), out, 0.0)
 
     drawn, rounds, batches = len(strata.cuts), 0, []
+    pilot = GROUP * len(P)
+    if M - drawn >= 4 * pilot:
+        # a pilot of one group per stratum, where the first round has room for it: it
+        # only allocates the rest of the round, by what it saw inside each stratum (the
+        # misfit at a stratum's ends cannot see a rough inside, such as a chatter zone),
+        # and is left out of the estimate (a batch of one slice per stratum would bring
+        # its few degrees of freedom to every standard error)
+        seen, n_rhs = draw(pilot, indicator)
+        rhs += n_rhs
+        drawn += pilot
+        indicator = np.maximum(indicator, observed([seen]))
     while True:
         rounds += 1
         batch, n_rhs = draw(M - drawn, indicator if not batches else

@@ -204,14 +204,6 @@ def test_the_edge_indicator_is_the_misfit_at_the_element_ends():
     assert np.all(got > 0)
 
 
-def test_neyman_allocation_follows_p_times_s():
-    from compare._verify import neyman_allocation
-
-    n = neyman_allocation(100, [0.5, 0.25, 0.25], [0.0, 1.0, 3.0])
-    assert n.sum() == 100 and list(n) == [0, 25, 75]
-    assert list(neyman_allocation(4, [0.5, 0.5], [0.0, 0.0])) == [2, 2]
-
-
 def test_a_run_changed_after_the_fact_is_refused():
     """The certificate vouches for what the dataset says: moments or element
     probabilities that do not follow from the coefficients and the law are refused."""
