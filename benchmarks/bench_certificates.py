@@ -48,10 +48,16 @@ def judge(name: str, seeds: int, *, log2_truth: int = 20, sizes=(256, 1024),
     ratio = true_ratio(run, mean, var)
     truly = "agrees" if max(ratio.values()) <= 1.0 else "disagrees"
     verdicts = {"agrees": 0, "disagrees": 0, "undecided": 0}
+    # per quantity: how often its own verdict contradicts its own truth
+    truly_each = {key: "agrees" if r <= 1.0 else "disagrees" for key, r in ratio.items()}
+    wrong_each = {"mean": 0, "var": 0}
     samples = []
     for seed in range(seeds):
         v = verify(run, samples=sequential_from, max_samples=sequential_to, seed=seed)
         verdicts[v.attrs["verdict"]] += 1
+        for key in wrong_each:
+            said = v.attrs[f"verdict_{key}"]
+            wrong_each[key] += said != "undecided" and said != truly_each[key]
         samples.append(int(v.attrs["verify_samples"]))
     coverage = {}
     for M in sizes:
@@ -65,22 +71,47 @@ def judge(name: str, seeds: int, *, log2_truth: int = 20, sizes=(256, 1024),
         coverage[M] = {key: float(np.mean(h)) for key, h in hits.items()}
     wrong = verdicts["agrees"] if truly == "disagrees" else verdicts["disagrees"]
     return {"case": name, "ratio": ratio, "truly": truly, "verdicts": verdicts,
-            "wrong": wrong, "seeds": seeds, "median_samples": float(np.median(samples)),
+            "wrong": wrong, "wrong_each": wrong_each, "seeds": seeds,
+            "median_samples": float(np.median(samples)),
             "coverage": coverage}
+
+
+def cost(name: str, seeds: int, *, log2_truth: int = 20, rms_at: int = 512) -> dict:
+    """What a default certificate (``verify(run)``: 256 doubling to 4096) costs on case
+    ``name``: the median true runs and seconds over ``seeds`` seeds, and the RMS error
+    of the control-variate E[x] over seeds and outputs from one round of ``rms_at``."""
+    from compare import verify
+
+    run = run_case(name)
+    mean = truth(name, log2_truth)[0]
+    verify(run, seed=0)  # compiled and warm
+    runs, seconds, errors = [], [], []
+    for seed in range(seeds):
+        start = time.perf_counter()
+        v = verify(run, seed=seed)
+        seconds.append(time.perf_counter() - start)
+        runs.append(int(v.attrs["verify_samples"]))
+        one = verify(run, samples=rms_at, max_samples=rms_at, sequential=False,
+                     seed=500 + seed)
+        errors.append(one.cv_x_mean.values - mean)
+    return {"case": name, "median_runs": float(np.median(runs)),
+            "median_seconds": float(np.median(seconds)),
+            "rms_error": float(np.sqrt(np.mean(np.square(errors)))), "rms_at": rms_at}
 
 
 def table(rows: list[dict]) -> str:
     sizes = sorted(rows[0]["coverage"])
     head = ("| case | true error / tolerance (mean, var) | truly | agrees | disagrees | "
-            "undecided | wrong verdicts | median true runs | "
+            "undecided | wrong verdicts | wrong (mean, var) | median true runs | "
             + " | ".join(f"coverage M={M} (mean, var)" for M in sizes) + " |")
-    lines = [head, "|" + "---|" * (8 + len(sizes))]
+    lines = [head, "|" + "---|" * (9 + len(sizes))]
     for r in rows:
         v = r["verdicts"]
         lines.append(
             f"| {r['case']} | {r['ratio']['mean']:.3g}, {r['ratio']['var']:.3g} | "
             f"{r['truly']} | {v['agrees']} | {v['disagrees']} | {v['undecided']} | "
-            f"{r['wrong']} of {r['seeds']} | {r['median_samples']:.0f} | "
+            f"{r['wrong']} of {r['seeds']} | {r['wrong_each']['mean']}, "
+            f"{r['wrong_each']['var']} | {r['median_samples']:.0f} | "
             + " | ".join(f"{r['coverage'][M]['mean']:.3f}, {r['coverage'][M]['var']:.3f}"
                          for M in sizes) + " |")
     return "\n".join(lines)
@@ -99,7 +130,7 @@ def test_certificate_error_rates(name):
     """The targets: no more than 1 false agree in 100 seeds, 93-97 % coverage."""
     row = judge(name, 100)
     print("\n" + table([row]))
-    assert row["wrong"] <= 1
+    assert row["wrong"] <= 1 and max(row["wrong_each"].values()) <= 1
     for M, cover in row["coverage"].items():
         assert 0.93 <= cover["mean"] <= 0.97 and 0.93 <= cover["var"] <= 0.97, (M, cover)
 
@@ -109,7 +140,14 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=100)
     parser.add_argument("--cases", default=",".join(CASES))
     parser.add_argument("--out", default=None)
+    parser.add_argument("--cost", action="store_true",
+                        help="the cost of a default certificate instead (median true runs "
+                             "and seconds, RMS error of the control-variate E[x])")
     args = parser.parse_args(argv)
+    if args.cost:
+        for name in args.cases.split(","):
+            print(cost(name, args.seeds))
+        return 0
     rows = []
     start = time.perf_counter()
     for name in args.cases.split(","):
