@@ -286,3 +286,17 @@ def test_an_imperfect_run_is_refused_by_name():
     coef[0, 1, -1] = np.nan
     with pytest.raises(ValueError, match="element_x_coef holds 1 non-finite values"):
         verify(run.assign(element_x_coef=coef), samples=64)
+
+
+def test_the_solver_options_reach_the_true_runs():
+    """options=SolverOptions(max_step=...) (the CLI's --max-step) is what the certificate's
+    true systems integrate with: a small step costs more right-hand sides, and the
+    estimates move by no more than the integration error."""
+    from opa import SolverOptions
+
+    run = simulate_opa(Oscillator(), sigma=0.01, order=2, periods=2)
+    plain = verify(run, samples=64, sequential=False, seed=4)
+    small = verify(run, samples=64, sequential=False, seed=4,
+                   options=SolverOptions(max_step=0.01))
+    assert small.attrs["verify_rhs_evaluations"] > 2 * plain.attrs["verify_rhs_evaluations"]
+    np.testing.assert_allclose(small.cv_x_mean, plain.cv_x_mean, rtol=0, atol=1e-8)
