@@ -373,8 +373,6 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                              f"(a run that stopped, or an edited file): nothing to certify")
     check_reported(run, measure)
     edges = run.element_edges.values
-    check_memory("verification paths", max_samples * len(times) * 8 * 5,
-                 f"max_samples {max_samples} x {len(times)} outputs x 5 arrays")
     moments = surrogate_moments(run)
     floor = 10 * (options.rtol + options.atol)
     T = 2 * math.pi / system.oscillator.omega
@@ -389,6 +387,8 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
             f"(the cuts and a group of {GROUP} in every stratum)")
     M = max(samples, least)
     max_samples = max(max_samples, M)
+    check_memory("verification paths", max_samples * len(times) * 8 * 5,
+                 f"max_samples {max_samples} x {len(times)} outputs x 5 arrays")
     rng = np.random.default_rng(seed)
     cut_paths, rhs = true_runs(system, options, strata.cuts, times, what="stratum cut")
     indicator = stratum_indicator(run.element_x_coef.values, edges, measure, strata,
