@@ -46,18 +46,6 @@ html_title = "opa-mc"
 html_theme_options = {"description": "OPA against Monte Carlo for vibro-impact oscillators",
                       "fixed_sidebar": True}
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-# docs/certificates.md is written by another page's author: until it lands, the index leaves
-# it out of its toctree and links to it are not errors
-CERTIFICATES = os.path.exists(os.path.join(HERE, "certificates.md"))
-if not CERTIFICATES:
-    suppress_warnings = ["myst.xref_missing"]
-
-
-def _without_missing_pages(app, docname, source):
-    if docname == "index" and not CERTIFICATES:
-        source[0] = source[0].replace("\ncertificate[s]\n", "\n")
-
 
 def _plain_docstring(app, what, name, obj, options, lines):
     """The docstrings are written to be read as text: a shape ``(*B, q)``, an absolute value
@@ -90,5 +78,4 @@ def _plain_docstring(app, what, name, obj, options, lines):
 
 
 def setup(app):
-    app.connect("source-read", _without_missing_pages)
     app.connect("autodoc-process-docstring", _plain_docstring, priority=100)

@@ -14,8 +14,6 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 DEVELOPERS = (ROOT / "docs" / "developers.md").read_text(encoding="utf-8")
-# pages another developer is writing at the same time; linked before they land
-WRITTEN_ELSEWHERE = {"docs/certificates.md"}
 TEST_COMMAND = 'python -m pytest -q -m "not slow" --doctest-modules tests opa mc compare'
 
 
@@ -63,8 +61,7 @@ def test_every_link_of_the_readme_resolves():
     links = re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", README)
     local = [link for link in links if "://" not in link]
     assert local
-    missing = [link for link in local if not (ROOT / link).exists()
-               and link not in WRITTEN_ELSEWHERE]
+    missing = [link for link in local if not (ROOT / link).exists()]
     assert missing == [], f"the README links to missing files {missing}"
 
 
