@@ -327,8 +327,9 @@ def run_failures(ds) -> list[str]:
             x = ds.opa_x_mean[:, :, v, :, :n].values[:, :, ran[v]][bad]  # v's only
             stops = [t[np.flatnonzero(~np.isfinite(row))[0]] for row in x
                      if (~np.isfinite(row)).any()]
-            when = (f"x_0 is NaN from t = {min(stops):.3g}–{max(stops):.3g} periods on"
-                    if stops else "no finite error")
+            span = (f"{min(stops):.3g}" if f"{min(stops):.3g}" == f"{max(stops):.3g}"
+                    else f"{min(stops):.3g}–{max(stops):.3g}") if stops else ""
+            when = f"x_0 is NaN from t = {span} periods on" if stops else "no finite error"
             why = ""
             if "opa_status" in ds:  # the kernel's reasons, counted
                 codes = ds.opa_status.values[:, :, v, :][:, :, ran[v]][bad]
@@ -634,7 +635,7 @@ def findings(ds: xr.Dataset) -> list[str]:
     n_pre = int(np.sum(_time(ds).values < first))
     if n_pre > 1:
         floor = np.array([_window_sem(ds, q, s, n_pre) for s in range(len(sig))])
-        ok = [f"σ = {_g(float(s))}: {_e(pre[i, -1])} (MC SE {_e(floor[i])})"
+        ok = [f"{_e(pre[i, -1])} at σ = {_g(float(s))} (MC SE {_e(floor[i])})"
               for i, s in enumerate(sig)]
         out.append(f"Before OPA's first impact (t < {first:.2f} periods at "
                    f"{par} = {_g(float(_vals(ds)[q]))}) the error of x_0 at N = {nmax} is "

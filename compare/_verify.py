@@ -465,7 +465,7 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         width_mean = band_multiplier(spent, len(times), est["mean_dof"]) * est["d_se"]
         width_var = band_multiplier(spent, len(times), est["var_dof"]) * est["var_se"]
         var_low = np.maximum(est["var"] - width_var, 0.0)
-        var_high = est["var"] + width_var
+        var_high = np.maximum(est["var"] + width_var, 0.0)  # a CV estimate may be < 0
         # the degrees of freedom must be enough wherever the band matters: where it is
         # wider than a tenth of what the tolerance allows (elsewhere the band, already
         # widened by the t quantile of its few degrees of freedom, is a small part of

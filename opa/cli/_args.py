@@ -26,11 +26,18 @@ _TRACKED: dict[type, type] = {}
 
 def _tracked(cls: type) -> type:
     """``cls`` whose calls (argparse calls an action only for a flag on the command line,
-    never for a default) record the flag as typed in ``namespace.given_flags``."""
+    never for a default) record the flag as typed in ``namespace.given_flags``; a flag
+    that takes one value and is given twice is refused (argparse would keep the last
+    one without a word)."""
     if cls not in _TRACKED:
         def __call__(self, parser, namespace, values, option_string=None):
             if option_string:
-                vars(namespace).setdefault("given_flags", {})[self.dest] = option_string
+                given = vars(namespace).setdefault("given_flags", {})
+                if self.dest in given and issubclass(cls, argparse._StoreAction):
+                    parser.error(f"{option_string} given twice ({given[self.dest]} "
+                                 f"{getattr(namespace, self.dest, '')!s}, then "
+                                 f"{option_string} {values!s}): give it once")
+                given[self.dest] = option_string
             cls.__call__(self, parser, namespace, values, option_string)
 
         _TRACKED[cls] = type(cls.__name__, (cls,), {"__call__": __call__})

@@ -568,6 +568,10 @@ BAD_CLI_31 = [
      ("--samples", "bifurcation mc")),
     ("wrongly accepted", ["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--keep-parts"],
      ("--keep-parts", "--out")),
+    # a one-value flag given twice: argparse kept the last without a word
+    ("silently wrong", OPA + ["--uncertain", "c", "--uncertain", "mu"],
+     ("--uncertain given twice", "c", "mu")),
+    ("silently wrong", MC + ["--seed", "3", "--seed=4"], ("--seed given twice", "3", "4")),
     # tracebacks and internal errors: ranges refused before they are built
     ("traceback", ["validate", "--orders", "0:1000000000"], ("--orders", "1000000001")),
     ("traceback", ["converge", "--budgets", "1:1000000000"], "--budgets"),
