@@ -282,6 +282,21 @@ def _usable(spec: str, make, values) -> Measure:
                      f"vanish); this law works up to {name}:{ok}")
 
 
+def _cut_tail(pdf, cdf, lo: float, hi: float) -> bool:
+    """Whether chaospy's support [lo, hi] is an unbounded law cut where its tails are
+    negligible (at about 8 standard deviations): probability left beyond an end, more
+    than roundoff (1e-12), or a roundoff's worth beside a density that has died out there
+    (below 1e-10 of its largest value; a uniform law's cdf(lo) may be 1.7e-16 with its
+    density at full height)."""
+    x = np.linspace(lo, hi, 201)
+    top = float(np.max(np.asarray(pdf(x), dtype=float)))
+    inside = 1e-9 * (hi - lo)
+    for left, edge in ((float(cdf(lo)), lo + inside), (1.0 - float(cdf(hi)), hi - inside)):
+        if left > 1e-12 or (left > 0.0 and float(pdf(edge)) < 1e-10 * top):
+            return True
+    return False
+
+
 def from_chaospy(dist) -> Measure:
     """A chaospy distribution of xi (bounded support). The end-point exponents of its
     density are measured numerically and factored out, so that Beta-type laws
@@ -296,8 +311,8 @@ def from_chaospy(dist) -> Measure:
         raise ValueError(f"distribution must be the law of one variable xi, got a joint law "
                          f"of {len(lower)} ({type(dist).__name__})")
     lo, hi = float(lower[0]), float(upper[0])
-    if (not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo > 1e6
-            or float(cdf(lo)) > 0.0 or float(cdf(hi)) < 1.0):  # chaospy cuts tails at ~8 sd
+    if not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo > 1e6 \
+            or _cut_tail(pdf, cdf, lo, hi):
         raise ValueError(f"the distribution of xi must have a bounded support, got "
                          f"[{lo}, {hi}] (use a truncated law)")
     width = hi - lo
