@@ -78,6 +78,11 @@ def cmd_stochastic(args) -> int:
     coexist = 64 if args.coexist is None else args.coexist
     if args.emr_order is not None and not args.emr:
         raise ValueError("--emr-order has no effect without --emr")
+    swept = args.sweep.partition("=")[0].strip().lstrip("-")
+    if swept == args.uncertain:
+        raise ValueError(f"--sweep {args.sweep!r}: {swept} is the uncertain parameter "
+                         f"(--uncertain {args.uncertain}); sweep another parameter, or "
+                         f"make another one uncertain")
     name, values, _ = parse_sweep(
         args.sweep, names=tuple(n for n in PARAMETER_NAMES
                                 if n not in (args.uncertain, "x0", "v0")))

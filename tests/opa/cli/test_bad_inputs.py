@@ -568,6 +568,9 @@ BAD_CLI_31 = [
      ("--samples", "bifurcation mc")),
     ("wrongly accepted", ["bifurcation", "dmr", "--sweep", "c=0.01:0.1:3", "--keep-parts"],
      ("--keep-parts", "--out")),
+    # the uncertain parameter swept: it was "unknown parameter"
+    ("unnamed culprit", ["stochastic", "--sweep", "mu=0.5:0.9:3"],
+     ("--sweep", "mu is the uncertain parameter", "--uncertain mu")),
     # a one-value flag given twice: argparse kept the last without a word
     ("silently wrong", OPA + ["--uncertain", "c", "--uncertain", "mu"],
      ("--uncertain given twice", "c", "mu")),
