@@ -344,6 +344,9 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     tolerance = _check_rate("tolerance", tolerance, 0.0, math.inf)
     var_tolerance = _check_rate("var_tolerance", var_tolerance, 0.0, math.inf)
     alpha = _check_rate("alpha", alpha, 1e-12, 0.5)
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, numbers.Integral) \
+            or seed < 0:
+        raise ValueError(f"seed must be a whole number >= 0, got {seed!r}")
     if not isinstance(sequential, (bool, np.bool_)):
         raise ValueError(f"sequential must be True or False, got {sequential!r}")
     if options is not None and not isinstance(options, SolverOptions):

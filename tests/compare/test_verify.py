@@ -129,6 +129,10 @@ def test_a_good_run_agrees_and_a_bad_one_does_not(reference):
     (dict(samples=128, max_samples=64), "max_samples must be a power of two >= 128"),
     (dict(tolerance=-1.0), "tolerance must be a finite number"),
     (dict(alpha=0.0), "alpha must be a finite number in"),
+    (dict(seed=-1), "seed must be a whole number >= 0, got -1"),
+    (dict(seed=1.5), "seed must be a whole number >= 0, got 1.5"),
+    (dict(sequential="yes"), "sequential must be True or False"),
+    (dict(options="fast"), "options must be SolverOptions or None"),
     (dict(alpha=float("nan")), "alpha must be a finite number in"),
 ])
 def test_bad_arguments_are_named(kw, message):
