@@ -558,9 +558,11 @@ class _Map:
         return star, steps, rows
 
     def _tick(self):
+        """One more bisection probe: counted beside the bar (its total stays the grid's
+        points, which are known up front; the probes are found as the bisection goes)."""
+        self.probes_run = getattr(self, "probes_run", 0) + 1
         if self.bar is not None:
-            self.bar.total += 1
-            self.bar.update(1)
+            self.bar.set_postfix(probes=self.probes_run)
 
     def run(self, tasks=None) -> xr.Dataset:
         """The map's dataset, with the phase table of this run (``phase_*`` attributes:

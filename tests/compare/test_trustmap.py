@@ -841,3 +841,21 @@ def test_a_rerun_removes_the_slices_a_killed_map_left(tiny):
     run_validation(cfg, progress=False, log=lines.append)
     assert "slices: removed 1 file(s) an interrupted run left behind" in lines
     assert not folder.exists()
+
+
+def test_bisection_probes_are_counted_beside_the_bar_not_in_its_total():
+    """The bar's total is the grid's points, known up front; probes found by the
+    bisections are a count beside it (the total used to grow from 3/3 to 6/6)."""
+    import io
+
+    from tqdm import tqdm
+
+    from compare._trustmap import _Map
+
+    job = _Map.__new__(_Map)
+    with tqdm(total=4, file=io.StringIO()) as bar:
+        job.bar = bar
+        job._tick()
+        job._tick()
+        assert bar.total == 4 and bar.n == 0
+        assert "probes=2" in bar.postfix
