@@ -23,6 +23,7 @@ The full table (100 seeds per case, about 20 minutes on 2 cores)::
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 
@@ -99,6 +100,33 @@ def cost(name: str, seeds: int, *, log2_truth: int = 20, rms_at: int = 512) -> d
             "rms_error": float(np.sqrt(np.mean(np.square(errors)))), "rms_at": rms_at}
 
 
+def coverage_by_dof(name: str, seeds: int, M: int = 256, *, log2_truth: int = 20,
+                    bands=((0, 10), (10, 30), (30, math.inf))) -> dict:
+    """Coverage of the 95 % intervals of case ``name`` at one round of ``M``, over seeds,
+    outputs and both estimates, split by the interval's Welch-Satterthwaite degrees of
+    freedom: a standard error that holds on average may still fail where its degrees of
+    freedom are few. Returns {(lo, hi): (cells, coverage)}."""
+    from compare import verify
+
+    run = run_case(name)
+    mean, var, mean_se, var_se = truth(name, log2_truth)
+    hits, dofs = [], []
+    for seed in range(seeds):
+        v = verify(run, samples=M, max_samples=M, sequential=False, seed=2000 + seed)
+        for key, want, want_se in (("mean", mean, mean_se), ("var", var, var_se)):
+            dof = v[f"cv_x_{key}_dof"].values
+            half = _t_half(np.hypot(v[f"cv_x_{key}_sem"].values, want_se), dof)
+            hits.append((np.abs(v[f"cv_x_{key}"].values - want) <= half)[1:])
+            dofs.append(dof[1:])
+    hits, dofs = np.concatenate(hits), np.concatenate(dofs)
+    out = {}
+    for lo, hi in bands:
+        inside = (dofs >= lo) & (dofs < hi)
+        out[(lo, hi)] = (int(inside.sum()),
+                         float(hits[inside].mean()) if inside.any() else math.nan)
+    return out
+
+
 def table(rows: list[dict]) -> str:
     sizes = sorted(rows[0]["coverage"])
     head = ("| case | true error / tolerance (mean, var) | truly | agrees | disagrees | "
@@ -146,7 +174,15 @@ def main(argv=None) -> int:
     parser.add_argument("--cost", action="store_true",
                         help="the cost of a default certificate instead (median true runs "
                              "and seconds, RMS error of the control-variate E[x])")
+    parser.add_argument("--by-dof", action="store_true",
+                        help="the coverage at M = 256 split by the intervals' degrees of "
+                             "freedom instead")
     args = parser.parse_args(argv)
+    if args.by_dof:
+        for name in args.cases.split(","):
+            for (lo, hi), (cells, cover) in coverage_by_dof(name, args.seeds).items():
+                print(f"{name}: dof in [{lo:g}, {hi:g}): {cells} cells, coverage {cover:.3f}")
+        return 0
     if args.cost:
         for name in args.cases.split(","):
             print(cost(name, args.seeds))
