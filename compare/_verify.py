@@ -18,13 +18,17 @@ mean(x^2 - x_hat^2) - E_cv[x]^2`` with standard errors and degrees of freedom.
 run's elements cut at the changes of the impact sequence located in the support (a rare
 region of the law that makes an extra impact becomes a stratum of its own, so it cannot
 hide between the points). First the true systems at the S + 1 cuts: a stratum's
-indicator is the misfit of its element's polynomial at its two ends. Then jittered groups
-of ``GROUP`` = 4 points: stratum j gets n_j >= 1 groups (the rest half in proportion to
-P_j times its indicator, half to P_j), cuts its law into n_j slices of equal probability
-and draws 4 independent points in each. The estimate sums the slices; its standard error
-comes from the within-slice variances, with Welch-Satterthwaite degrees of freedom for
-Student's t intervals (``cv_x_mean_dof``). A later round adds an independent batch; the
-batches are summed with fixed weights (their groups), so the sum stays unbiased.
+indicator is the misfit of its element's polynomial at its two ends; where the first round
+has room, a pilot group per stratum adds what it sees inside (it only allocates, and is
+left out of the estimate). Then jittered groups of ``GROUP`` = 4 points: stratum j gets
+n_j >= 1 groups (the rest half in proportion to P_j times its indicator, half to P_j),
+cuts itself into n_j slices (:func:`compare._strata.slices`: equal under half the law and
+half the uniform law) and draws 4 independent points of the law in each, weighted by the
+slice's probability. The estimate sums the slices; its standard error comes from the
+within-slice variances, with Welch-Satterthwaite degrees of freedom for Student's t
+intervals (``cv_x_mean_dof``). A later round adds an independent batch allocated by each
+stratum's spread seen so far too; the batches are summed with fixed weights (their
+groups), so the sum stays unbiased.
 
 **The verdict** (:func:`compare._trust.bounded_verdict`) has three outcomes. Round r of
 the sequential procedure spends ``alpha / 2^r`` of the error rate ``alpha``
