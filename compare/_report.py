@@ -1003,6 +1003,12 @@ def plot_variance(ds, path, q=0, *, size=None):
         se = ds.mc_x_var_sem.values[q, s, :n]
         ax.fill_between(t, np.maximum(var - 2 * se, 1e-16), var + 2 * se, color="0.75")
         ax.semilogy(t, np.maximum(var, 1e-16), "k-", lw=2.2, label="MC Var[x] ± 2 SE")
+        # the verdict's tolerance, drawn pointwise (the criterion reads its running RMS)
+        tol = float(ds.attrs.get("var_tolerance", 0.25))
+        for sign in (-1.0, 1.0):
+            ax.semilogy(t, np.maximum(var * (1.0 + sign * tol), 1e-16), color="0.35",
+                        ls=":", lw=1.0, label=(f"tolerance: MC Var × (1 ± {tol:g})"
+                                               if sign > 0 else None))
         for j, v in enumerate(_laws(ds) + _element_variants(ds)):
             colour, style, mark = STAR_STYLES[(j + 1) % len(STAR_STYLES)]
             ax.semilogy(t, np.maximum(ds.opa_x_var.values[q, s, v, -1, :n], 1e-16),

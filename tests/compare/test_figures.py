@@ -516,3 +516,20 @@ def test_stochastic_figure_names_its_branches_and_shows_rare_bins():
         check_reads_at_a_glance(fig, "stochastic")
     finally:
         plt.close(fig)
+
+
+def test_the_variance_figure_draws_the_verdicts_tolerance(report_figures):
+    """variance.png draws MC Var x (1 +- var_tolerance) in every panel: the lines lie at
+    exactly those multiples of the drawn MC variance."""
+    ds, kept = report_figures
+    tol = float(ds.attrs["var_tolerance"])
+    fig = kept["variance.png"]
+    labels = [t.get_text() for legend in fig.legends for t in legend.get_texts()]
+    assert f"tolerance: MC Var × (1 ± {tol:g})" in labels
+    for ax in fig.axes:
+        lines = ax.get_lines()
+        var = lines[0].get_ydata()  # the MC variance, drawn first
+        bounds = [line.get_ydata() for line in lines[1:3]]
+        keep = var * (1 - tol) > 1e-16
+        np.testing.assert_allclose(bounds[0][keep], var[keep] * (1 - tol), rtol=1e-12)
+        np.testing.assert_allclose(bounds[1][keep], var[keep] * (1 + tol), rtol=1e-12)
