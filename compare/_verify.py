@@ -268,10 +268,17 @@ def edge_indicator(x_coef: np.ndarray, edges, measure, x_edges: np.ndarray) -> n
     array([1.732, 0.   ])
     """
     edges = np.asarray(edges, dtype=float)
-    out = np.empty(len(edges) - 1)
-    for k in range(len(out)):
-        ends = surrogate_values(x_coef[k:k + 1], edges[k:k + 2], measure, edges[k:k + 2])
-        out[k] = np.sqrt(np.mean((x_edges[k:k + 2] - ends) ** 2, axis=1)).max()
+    return _misfit_at_ends(x_coef, edges, measure, edges, np.arange(len(edges) - 1),
+                           np.asarray(x_edges, dtype=float))
+
+
+def _misfit_at_ends(x_coef, edges, measure, cuts, element, x_cuts) -> np.ndarray:
+    """Piece j = [cuts[j], cuts[j + 1]] of element ``element[j]``: the larger over its two
+    ends of the RMS over time of the truth ``x_cuts`` minus that element's polynomial."""
+    out = np.empty(len(element))
+    for j, k in enumerate(element):
+        ends = surrogate_values(x_coef[k:k + 1], edges[k:k + 2], measure, cuts[j:j + 2])
+        out[j] = np.sqrt(np.mean((x_cuts[j:j + 2] - ends) ** 2, axis=1)).max()
     return out
 
 
@@ -292,12 +299,9 @@ def stratum_indicator(x_coef: np.ndarray, edges, measure, strata, x_cuts: np.nda
     larger over its two ends of the RMS over time of ``x(t, e) - x_hat_k(t, e)``, with
     x_hat_k the polynomial of its element k; ``x_cuts`` (S + 1, T): the true systems at
     the strata's cuts."""
-    edges = np.asarray(edges, dtype=float)
-    out = np.empty(len(strata))
-    for j, k in enumerate(strata.element):
-        ends = surrogate_values(x_coef[k:k + 1], edges[k:k + 2], measure,
-                                strata.cuts[j:j + 2])
-        out[j] = np.sqrt(np.mean((x_cuts[j:j + 2] - ends) ** 2, axis=1)).max()
+    out = _misfit_at_ends(x_coef, np.asarray(edges, dtype=float), measure, strata.cuts,
+                          strata.element, x_cuts)
+    # a non-finite misfit (a true run at a cut that went far) counts as the largest
     return np.where(np.isfinite(out), out, np.nanmax(out, initial=0.0) + 1.0)
 
 
