@@ -52,9 +52,9 @@ class ValidateConfig:
     0.05 (the paper's 0.01, 0.014, 0.02, 0.03 included), N = 0..8, all five variants,
     horizons of 10 and 50 forcing periods, 8 outputs per period, Sobol ensembles of 128
     samples (16 replicates) paired with every OPA run as a control variate and doubled up
-    to 8192 where a verdict hangs on the noise, tolerance 0.1 of the spread for the mean
-    and 0.25 of the variance for the variance, 3 standard errors of allowance, sigma* to
-    1e-3, splits located to 1e-6 in xi at the smallest sigma.
+    to 8192 while a verdict is undecided, tolerance 0.1 of the spread for the mean and
+    0.25 of the variance for the variance, each verdict wrong with probability at most
+    alpha = 0.01, sigma* to 1e-3, splits located to 1e-6 in xi at the smallest sigma.
     """
 
     preset: str = "3.2"
@@ -75,7 +75,7 @@ class ValidateConfig:
     seed: int = 0
     tolerance: float = 0.1
     var_tolerance: float = 0.25
-    z: float = 3.0
+    alpha: float = 0.01
     resolution: float = 1e-3
     split_resolution: float = 1e-6
     # the most splits one scan locates over each horizon longer than the shortest (the
@@ -141,7 +141,7 @@ class ValidateConfig:
                 isinstance(n, numbers.Integral) and not isinstance(n, bool)
                 for n in self.orders):
             raise ValueError(f"orders must be a list of integers, got {self.orders!r:.80}")
-        for name in ("tolerance", "var_tolerance", "z", "resolution", "split_resolution"):
+        for name in ("tolerance", "var_tolerance", "alpha", "resolution", "split_resolution"):
             value = getattr(self, name)
             if not isinstance(value, numbers.Real) or isinstance(value, bool):
                 raise ValueError(f"{name} must be a number, got {value!r}")
@@ -195,8 +195,9 @@ class ValidateConfig:
         if not 1e-12 <= self.split_resolution <= 1.0:
             raise ValueError(f"split_resolution must be in [1e-12, 1] (in xi, whose support "
                              f"is [-1, 1]), got {self.split_resolution:g}")
-        if not (math.isfinite(self.z) and self.z >= 0):
-            raise ValueError(f"z must be >= 0, got {self.z}")
+        if not 1e-9 <= self.alpha <= 0.5:
+            raise ValueError(f"alpha (the error rate of a verdict) must be in [1e-9, 0.5], "
+                             f"got {self.alpha:g}")
         for name in ("plots", "frontier"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name} must be true or false, got {getattr(self, name)!r}")
@@ -405,6 +406,10 @@ def load_config(path: str | None, **overrides) -> ValidateConfig:
             data.setdefault(name, solver.pop(name))
     known = {f.name for f in dataclasses.fields(ValidateConfig)} - {"oscillator", "options"}
     unknown = set(data) - known
+    if "z" in unknown or overrides.get("z") is not None:
+        raise ValueError("config key z is gone: a verdict no longer adds z standard errors to "
+                         "the tolerance; give alpha, the error rate of each verdict "
+                         "(default 0.01)")
     if unknown:
         raise ValueError(f"unknown config key(s) {sorted(unknown)}; known: {sorted(known)}")
     data.update({k: v for k, v in overrides.items() if v is not None})

@@ -39,7 +39,8 @@ class Point:
     failure: str = ""  # why a multi-element variant could not be run
     status: np.ndarray | None = None  # (variant, N) kernel status of the OPA run (-1: not run)
     reduction: np.ndarray | None = None  # (variant, N) Var(x) / Var(x - x_hat): pairing's gain
-    hangs: np.ndarray | None = None  # (variant, N, horizon, criterion) verdict hangs on noise
+    # (variant, N, horizon, criterion): 1 agrees, 0 undecided, -1 disagrees
+    verdict: np.ndarray | None = None
     evaluated: np.ndarray | None = None  # (horizon,) the horizons the point's runs reach
 
 
@@ -106,14 +107,18 @@ def count_distribution(centre, sigma, splits, count_at_centre, cdf=None,
 # --------------------------------------------------------------------------- the dataset
 
 ONE = {"units": "1"}
+#: the verdict of a horizon a point's runs do not reach
+NOT_FORMED = -2
+VERDICT_FLAGS = {"flag_values": np.array([NOT_FORMED, -1, 0, 1], np.int8),
+                 "flag_meanings": "not_formed disagrees undecided agrees"}
 #: the flag attributes of opa_status: the kernel's status codes and names, and -1 for a
 #: variant not run at that N
 STATUS_FLAGS = {"flag_values": np.arange(-1, len(STATUS_NAMES), dtype=np.int8),
                 "flag_meanings": " ".join(("not_run",) + STATUS_NAMES)}
 #: padding of the dimensions whose length differs between swept values or points
-PADDING = {"probe_sigma": np.nan, "probe_agrees": -1, "split_value": np.nan,
-           "split_kind": -1, "split_time": np.nan, "split_speed": np.nan, "split_left": -1,
-           "split_right": -1, "count_prob": 0.0}
+PADDING = {"probe_sigma": np.nan, "probe_agrees": -1, "probe_verdict": NOT_FORMED,
+           "split_value": np.nan, "split_kind": -1, "split_time": np.nan,
+           "split_speed": np.nan, "split_left": -1, "split_right": -1, "count_prob": 0.0}
 # concatenation and merging spelled out: xarray's defaults are changing
 _JOIN = dict(data_vars="all", coords="minimal", compat="override", join="outer",
              combine_attrs="override")
@@ -197,10 +202,15 @@ def point_dataset(cfg: ValidateConfig, value: float, point: Point, centre: float
         "err_var_rel": (vnh, e[..., 1, 2], {"long_name": "RMS variance error relative to the "
                                             "RMS MC variance", **ONE}),
         "agrees": (vnh + ("criterion",), point.agrees.astype(np.int8),
-                   {"long_name": "1 where OPA agrees with MC over the horizon", **ONE}),
+                   {"long_name": "1 where OPA is certified to agree with MC over the horizon",
+                    **ONE}),
+        "verdict": (vnh + ("criterion",), point.verdict.astype(np.int8),
+                    {"long_name": "three-valued verdict over the horizon, wrong with "
+                     "probability <= alpha", **VERDICT_FLAGS, **ONE}),
         "disagree_time": (vn + ("criterion",), point.disagree,
-                          {"long_name": "first time of disagreement (inf: never within the "
-                           "longest horizon)", "units": "forcing periods"}),
+                          {"long_name": "first time the estimated running RMS error exceeds "
+                           "the tolerance (inf: never within the longest horizon)",
+                           "units": "forcing periods"}),
         "pre_impact_err": (vn, point.pre_impact, {"long_name": "RMS error of x_0 before OPA's "
                                                   "first impact", **ONE}),
         "first_impact": (vn, point.first_impact, {"long_name": "time of OPA's first impact",
@@ -299,7 +309,8 @@ def value_dataset(cfg: ValidateConfig, value: float, centre: float,
             sleft[h, j], sright[h, j] = sp.left, sp.right
     ordered = sorted(probes.items())
     probe_sigma = np.array([sig for sig, _ in ordered], float)
-    probe_agrees = np.array([verdicts for _, verdicts in ordered], np.int8)
+    probe_verdict = np.array([verdicts for _, verdicts in ordered], np.int8)
+    probe_agrees = np.where(probe_verdict == NOT_FORMED, -1, probe_verdict == 1).astype(np.int8)
     kinds = {"flag_values": np.arange(len(SPLIT_KINDS), dtype=np.int8),
              "flag_meanings": " ".join(k.replace(" ", "_") for k in SPLIT_KINDS),
              "units": "1"}
@@ -316,8 +327,11 @@ def value_dataset(cfg: ValidateConfig, value: float, centre: float,
         "probe_sigma": ("probe", probe_sigma,
                         {"long_name": "every sigma evaluated (grid and bisection)", **ONE}),
         "probe_agrees": (("probe", *vhc), probe_agrees,
-                         {"long_name": "verdict at N = Nmax at each evaluated sigma (-1: none)",
-                          **ONE}),
+                         {"long_name": "1 where OPA (N = Nmax) is certified to agree at each "
+                          "evaluated sigma (-1: not formed)", **ONE}),
+        "probe_verdict": (("probe", *vhc), probe_verdict,
+                          {"long_name": "three-valued verdict at N = Nmax at each evaluated "
+                           "sigma", **VERDICT_FLAGS, **ONE}),
         "split_value": (hs, sv, {"long_name": f"value of {cfg.uncertain} where the sampled "
                                  "systems' event sequence changes", **ONE}),
         "split_kind": (hs, skind, {"long_name": "what happens at the split (-1: none)",

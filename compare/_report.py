@@ -537,12 +537,12 @@ def _window_sem(ds, q, s, n):
 
 
 def _window_tolerance(ds, q, s, n):
-    """The mean's verdict threshold over the first n outputs, as the RMS error of the
-    window is held against it: tol x RMS spread + z x RMS SE + the solver floor."""
+    """The mean's tolerance over the first n outputs, as the RMS error of the window is
+    held against it: tol x RMS spread + the solver floor (the verdict certifies the
+    error below it, or above it, at error rate alpha)."""
     spread = np.sqrt(np.maximum(ds.mc_x_var[q, s, :n].values, 0.0))
     floor = 10 * (float(ds.attrs["rtol"]) + float(ds.attrs["atol"]))
-    return float(float(ds.attrs["tolerance"]) * np.sqrt(np.mean(spread**2))
-                 + float(ds.attrs["z"]) * _window_sem(ds, q, s, n) + floor)
+    return float(float(ds.attrs["tolerance"]) * np.sqrt(np.mean(spread**2)) + floor)
 
 
 def findings(ds: xr.Dataset) -> list[str]:
@@ -1313,9 +1313,9 @@ def _summary_lines(ds: xr.Dataset, command: str) -> list[str]:
         f"N = {int(ds.N.min())}..{int(ds.N.max())}; rtol = {a['rtol']:g}, atol = "
         f"{a['atol']:g}; Monte "
         f"Carlo: scrambled Sobol, {a['samples']} samples, doubled up to {a['max_samples']} "
-        f"where the verdict hangs on the MC noise, seed {a['seed']}.", "",
+        f"while a verdict is undecided, seed {a['seed']}.", "",
         f"Criterion: {a['criterion_text']}; tol = {a['tolerance']:g} (mean), "
-        f"{a['var_tolerance']:g} (variance), z = {a['z']:g}.", "",
+        f"{a['var_tolerance']:g} (variance), alpha = {a['alpha']:g}.", "",
     ]
     if a.get("variants_dropped", "none") != "none":
         lines += [f"Variants left out: {a['variants_dropped']}.", ""]

@@ -62,6 +62,21 @@ def marginal(err, scale, sem, *, tol: float, z: float, floor: float, upto: int,
     return bool((strict <= 0).all()) != bool((loose <= 0).all())  # NaN: never marginal
 
 
+def bound_excess(err, width, scale_low, scale_high, *, tol: float,
+                 floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """The upper and lower bounds of the criterion's excess at every output (> 0: over
+    the tolerance), for many curves at once (..., T): ``R(|err| + width) - tol
+    R(scale_low) - floor`` and ``R(max(|err| - width, 0)) - tol R(scale_high) - floor``
+    (:func:`bounded_verdict`; NaN where an estimate is not finite)."""
+    err, width = np.asarray(err, dtype=float), np.asarray(width, dtype=float)
+    with np.errstate(invalid="ignore"):
+        upper = running_rms(np.abs(err) + width) - tol * running_rms(
+            np.maximum(np.asarray(scale_low, dtype=float), 0.0)) - floor
+        lower = running_rms(np.maximum(np.abs(err) - width, 0.0)) - tol * running_rms(
+            np.asarray(scale_high, dtype=float)) - floor
+    return upper, lower
+
+
 def bounded_verdict(err, width, scale_low, scale_high, *, tol: float,
                     floor: float) -> tuple[str, int, int]:
     """A verdict that holds whenever the true error and scale lie in their bands.
@@ -88,12 +103,7 @@ def bounded_verdict(err, width, scale_low, scale_high, *, tol: float,
     >>> bounded_verdict(0.09 * ones, 0.04 * ones, ones, ones, tol=0.1, floor=0.0)
     ('undecided', -1, 0)
     """
-    err, width = np.asarray(err, dtype=float), np.asarray(width, dtype=float)
-    with np.errstate(invalid="ignore"):
-        upper = running_rms(np.abs(err) + width) - tol * running_rms(
-            np.maximum(np.asarray(scale_low, dtype=float), 0.0)) - floor
-        lower = running_rms(np.maximum(np.abs(err) - width, 0.0)) - tol * running_rms(
-            np.asarray(scale_high, dtype=float)) - floor
+    upper, lower = bound_excess(err, width, scale_low, scale_high, tol=tol, floor=floor)
     finite = np.isfinite(upper) & np.isfinite(lower)
     above = np.flatnonzero(finite & (lower > 0))
     over = np.flatnonzero(~(upper <= 0))
@@ -172,6 +182,6 @@ def bisect_boundary(agrees: Callable[[float], bool], lo: float, hi: float,
     return lo, hi, steps
 
 
-__all__ = ["band_multiplier", "bisect_boundary", "bounded_verdict", "excess",
+__all__ = ["band_multiplier", "bisect_boundary", "bound_excess", "bounded_verdict", "excess",
            "first_disagreement", "marginal", "running_rms", "window_errors",
            "window_errors_all"]

@@ -4,8 +4,8 @@ Over a grid of the intensity sigma and one model parameter q (default: omega ove
 section 3.2 range), each point runs
 
 * a Monte Carlo ensemble of the true sampled impact system (scrambled Sobol, randomised-QMC
-  standard errors of the mean and the variance), with more samples only where the verdict
-  hangs on the MC noise (:func:`compare._trust.marginal`);
+  standard errors of the mean and the variance), with more samples only while a verdict
+  is undecided (:meth:`_Map._judge`: three-valued, as :func:`compare.verify`'s);
 * the OPA equivalent system for every N and every variant (impact law x truncation),
   all compared with that one ensemble; under a law of xi other than the semicircle
   (``distribution``) the single element runs in that law's orthonormal basis and the
@@ -19,7 +19,8 @@ section 3.2 range), each point runs
 
 and gives, per horizon, the RMS error of x_0 and of the variance (absolute, in MC standard
 errors, relative to the spread) with the verdict of :mod:`compare._trust`. For each q,
-``sigma*`` -- the largest sigma at which OPA at the highest N still agrees -- is located by
+``sigma*`` -- the largest sigma at which OPA at the highest N is certified to agree (an
+undecided verdict counts as not agreeing) -- is located by
 bisection in sigma between the last agreeing and the first failing grid value. The sampled
 systems' impact sequences are scanned along the uncertain parameter
 (:func:`opa._splits.scan_splits`): their splits, what happens there, and the distribution
@@ -63,12 +64,13 @@ import numpy as np
 import xarray as xr
 
 from compare._config import ELEMENT_TOLERANCE, ValidateConfig, noise_floor
-from compare._mapdata import (HorizonSplits, Point, combine_slices, point_dataset,
+from compare._mapdata import (NOT_FORMED, HorizonSplits, Point, combine_slices, point_dataset,
                               splits_from_arrays, splits_to_arrays, value_dataset, value_slice)
 from compare._mapdata import spill as spill_slice
 from compare._pairs import REPLICATES, Control, Pairs, pair_point
 from compare._phases import PhaseClock
-from compare._trust import bisect_boundary, excess, window_errors_all
+from compare._trust import (band_multiplier, bisect_boundary, bound_excess, excess,
+                            window_errors_all)
 from mc import sample_xi, simulate_mc
 from opa.engine import (
     CHATTER_WINDOW, MAX_CROSSINGS, MAX_SPLITS, MIN_SPLITS, adaptive_edges, collocate_element,
@@ -78,10 +80,8 @@ from opa.engine import (
     time_grid, true_system_work, uniform_edges,
 )
 
-#: a verdict hangs on the noise while OPA fails without the allowance for the noise but
-#: agrees with z + NOISE_BAND standard errors allowed (compare._trust.marginal): a
-#: disagreement more than NOISE_BAND SE past the verdict's own allowance is decided
-NOISE_BAND = 2.0
+#: how the map's verdicts are formed (a part stored under another rule is not reused)
+RULE = "bounded: Bonferroni t band, alpha / 2^round"
 
 
 class _Map:
@@ -165,13 +165,13 @@ class _Map:
                 "rhs": previous["rhs"] + rhs, "seconds": time.perf_counter() - start}
 
     def _round(self, value, sigma, samples, times, opa_inputs, controls, probabilities,
-               opa_mean, opa_var, first, state: dict) -> dict:
+               opa_mean, opa_var, first, state: dict, rounds: int) -> dict:
         """One round of the point's Monte Carlo: the ensemble of ``samples`` true systems,
         paired with every OPA run (:func:`compare._pairs.pair_point`) and judged
-        (:meth:`_judge`). The part keeps the verdicts, the reference curves and which
-        verdicts hang on the noise (what the next round's decision needs), not the paths:
-        ``state["paths"]`` holds the last ensemble run at the point in this process, which
-        the next round extends."""
+        (:meth:`_judge`, round ``rounds`` of the point's doubling). The part keeps the
+        verdicts (undecided ones are what the next round's decision needs) and the
+        reference curves, not the paths: ``state["paths"]`` holds the last ensemble run at
+        the point in this process, which the next round extends."""
         cfg = self.cfg
         T = cfg.oscillator_at(value).forcing_period
         shape = opa_mean.shape[:2]
@@ -184,21 +184,20 @@ class _Map:
             state["paths"] = ens
             pairs = pair_point(ens["x"], ens["xi"], controls, self.measure, probabilities,
                                shape)
-            judged = self._judge(pairs, opa_mean, opa_var, first, times / T)
+            judged = self._judge(pairs, opa_mean, opa_var, first, times / T, rounds)
             ref = pairs.reference
             return {**judged, "x_mean": ref["x_mean"], "x_var": ref["x_var"],
                     "x_sem": ref["x_sem"], "x_var_sem": ref["x_var_sem"],
                     "control": np.array(ref["control"] or (-1, -1), np.int64),
                     "reduction": pairs.reduction,
-                    "hangs": self._hangs(pairs),
                     "impacts": np.array([ens["impacts"].min(), ens["impacts"].max()]),
                     "rhs": ens["rhs"], "seconds": ens["seconds"]}
 
         inputs = {"system": cfg.system_at(value, sigma=sigma, order=0), "samples": samples,
                   "sampler": "sobol", "seed": cfg.seed, "replicates": REPLICATES,
                   "times": times, "options": cfg.options, "opa": opa_inputs,
-                  "criterion": [cfg.tolerance, cfg.var_tolerance, cfg.z, self.floor,
-                                list(cfg.horizons), NOISE_BAND],
+                  "criterion": [cfg.tolerance, cfg.var_tolerance, cfg.alpha, self.floor,
+                                list(cfg.horizons), RULE, rounds],
                   "estimator": "every run against the best control-variate reference"}
         return self.parts.get(f"mc_{self._name(value, sigma)}_M{samples}", inputs,
                               self._timed("pairs and verdicts", compute))
@@ -355,24 +354,24 @@ class _Map:
             opa_inputs.append(self._elements_inputs(value, sigma, cfg.nmax, times))
         # the last ensemble this process ran at the point, which a next round extends
         state = self.ensembles.setdefault((value, sigma, len(times)), {})
-        samples, mc_seconds = cfg.samples, 0.0
+        samples, mc_seconds, rounds = cfg.samples, 0.0, 1
         while True:
             judged = self._round(value, sigma, samples, times, opa_inputs, controls,
-                                 probabilities, opa_mean, opa_var, first, state)
+                                 probabilities, opa_mean, opa_var, first, state, rounds)
             mc_seconds += float(judged["seconds"])
-            if samples * 2 > cfg.max_samples or not self._hangs_on_noise(judged, focus):
+            if samples * 2 > cfg.max_samples or not self._undecided(judged, focus):
                 break
             samples *= 2
+            rounds += 1
         control = tuple(int(i) for i in judged["control"])
         mc = {name: judged[name] for name in ("x_mean", "x_var", "x_sem", "x_var_sem")}
         mc.update(impacts=tuple(int(i) for i in judged["impacts"]),
                   seconds=mc_seconds, rhs=int(judged["rhs"]),
                   control=None if control[0] < 0 else control)
-        agrees = judged["disagree"][:, :, None, :] > np.array(cfg.horizons)[None, None, :,
-                                                                              None]
+        verdict = np.where(evaluated[:, None], judged["verdict"], NOT_FORMED).astype(np.int8)
         point = Point(sigma, samples, mc, opa_mean, opa_var, first, judged["errors"],
-                      judged["pre"], judged["disagree"], agrees & evaluated[:, None],
-                      reduction=judged["reduction"], hangs=judged["hangs"],
+                      judged["pre"], judged["disagree"], verdict == 1,
+                      reduction=judged["reduction"], verdict=verdict,
                       evaluated=evaluated)
         point.seconds = seconds + mc_seconds
         point.elements = elements
@@ -381,65 +380,74 @@ class _Map:
         point.status = status
         return point
 
-    def _checks(self, pairs: Pairs):
-        """Per criterion (mean, variance): the paired errors and their standard errors
-        (variant, N, output), the scale and the tolerance and floor of the criterion."""
-        cfg = self.cfg
-        x_var = pairs.reference["x_var"]
-        return ((pairs.err_mean, pairs.err_mean_se, np.sqrt(x_var), cfg.tolerance,
-                 self.floor),
-                (pairs.err_var, pairs.err_var_se, x_var, cfg.var_tolerance, self.floor**2))
-
-    def _hangs(self, pairs: Pairs) -> np.ndarray:
-        """(variant, N, horizon, criterion): whether that verdict hangs on the noise
-        (:func:`compare._trust.marginal` with ``upper = z + NOISE_BAND``, for every
-        verdict at once: the running RMS up to an output does not depend on later ones)."""
-        cfg = self.cfg
-        V, N = pairs.err_mean.shape[:2]
-        hangs = np.zeros((V, N, len(cfg.horizons), 2), bool)
-        for c, (err, sem, scale, tol, floor) in enumerate(self._checks(pairs)):
-            strict = excess(err, scale, sem, tol=tol, z=0.0, floor=floor) <= 0
-            loose = excess(err, scale, sem, tol=tol, z=cfg.z + NOISE_BAND, floor=floor) <= 0
-            for h, n in enumerate(self.n_h):
-                if n <= err.shape[-1]:  # a horizon past the point's outputs: not judged
-                    hangs[:, :, h, c] = strict[..., :n].all(-1) != loose[..., :n].all(-1)
-        return hangs
-
-    def _hangs_on_noise(self, judged: dict, focus=None) -> bool:
-        """Whether any verdict of the round hangs on the noise, or with ``focus`` =
-        (variant, horizon, criterion) that verdict at N = Nmax, the one a bisection probe
-        decides."""
-        hangs = judged["hangs"]
+    def _undecided(self, judged: dict, focus=None) -> bool:
+        """Whether a verdict at N = Nmax (the order sigma* reads) is undecided: any of
+        them, or with ``focus`` = (variant, horizon, criterion) that one, which a
+        bisection probe decides. A verdict at a lower N does not double the samples (it
+        may stay undecided, and counts as not agreeing)."""
+        verdict = judged["verdict"]
         if focus is None:
-            return bool(hangs.any())
+            return bool((verdict[:, -1] == 0).any())
         v, h, c = focus
-        return bool(hangs[v, -1, h, c])
+        return bool(verdict[v, -1, h, c] == 0)
 
-    def _judge(self, pairs: Pairs, opa_mean, opa_var, first, periods) -> dict:
-        """The verdicts at one point from the paired estimates (:mod:`compare._pairs`):
-        each variant's errors with their own standard errors, scaled by the reference
-        spread and variance (:mod:`compare._trust`'s criterion and window errors, for
-        every variant and N at once). Returns errors (variant, N, horizon, criterion, 3),
-        pre (variant, N) and disagree (variant, N, criterion)."""
+    def _judge(self, pairs: Pairs, opa_mean, opa_var, first, periods, rounds: int) -> dict:
+        """The verdicts at one point from the paired estimates (:mod:`compare._pairs`), as
+        :func:`compare.verify` forms its own (:func:`compare._trust.bounded_verdict`).
+
+        Round ``rounds`` of the point's doubling spends ``alpha / 2^rounds`` of the error
+        rate: per horizon H (its n outputs) a Bonferroni band of Student's t intervals
+        (R - 1 degrees of freedom, R replicates) holds for the reference's E[x] and Var[x]
+        at all n outputs at once, so each verdict (variant, N, H, criterion) is wrong with
+        probability <= alpha over all the rounds. Inside the band the running RMS error is
+        bounded above and below: 1 (agrees) when the upper bound is within the tolerance at
+        every output up to H, -1 (disagrees) when the lower bound exceeds it somewhere, 0
+        (undecided) otherwise. An OPA run that stopped (NaN) disagrees from where it
+        stopped. Returns verdict (variant, N, horizon, criterion), errors (variant, N,
+        horizon, criterion, 3), disagree (variant, N, criterion): the first time, in
+        periods, at which the estimated running RMS error exceeds the tolerance, over the
+        longest horizon the point reaches (inf: never), and pre (variant, N): the RMS error
+        of the mean before OPA's first impact."""
         cfg = self.cfg
-        V, N = opa_mean.shape[:2]
+        V, N, T = opa_mean.shape
         H = len(cfg.horizons)
-        errors = np.empty((V, N, H, 2, 3))
-        disagree = np.empty((V, N, 2))
-        for c, (err, sem, scale, tol, floor) in enumerate(self._checks(pairs)):
-            # not <= 0 rather than > 0: a run that stopped (NaN) disagrees from there
-            bad = ~(excess(err, scale, sem, tol=tol, z=cfg.z, floor=floor) <= 0)
-            disagree[:, :, c] = np.where(bad.any(-1), periods[np.argmax(bad, axis=-1)],
-                                         np.inf)
-            for h, n in enumerate(self.n_h):
-                errors[:, :, h, c] = (window_errors_all(err, scale, sem, n)
-                                      if n <= err.shape[-1] else np.nan)
+        ref = pairs.reference
+        errors = np.full((V, N, H, 2, 3), np.nan)
+        verdict = np.zeros((V, N, H, 2), np.int8)
+        disagree = np.full((V, N, 2), np.inf)
+        spent = cfg.alpha / 2**rounds
+        quantities = (
+            (pairs.err_mean, pairs.err_mean_se, opa_mean, cfg.tolerance, self.floor),
+            (pairs.err_var, pairs.err_var_se, opa_var, cfg.var_tolerance, self.floor**2))
+        for h, n in sorted(enumerate(self.n_h), key=lambda item: item[1]):
+            if n > T:  # a horizon past the point's outputs: not judged
+                continue
+            c_band = float(band_multiplier(spent, n, REPLICATES - 1))
+            var, var_band = ref["x_var"][:n], c_band * ref["x_var_sem"][:n]
+            var_low, var_high = np.maximum(var - var_band, 0), np.maximum(var + var_band, 0)
+            scales = ((np.sqrt(var_low), np.sqrt(var_high)), (var_low, var_high))
+            for c, (err, sem, opa, tol, floor) in enumerate(quantities):
+                upper, lower = bound_excess(err[..., :n], c_band * sem[..., :n], *scales[c],
+                                            tol=tol, floor=floor)
+                stopped = ~np.isfinite(opa[..., :n])  # the OPA run stopped: over from there
+                lower = np.where(stopped, np.inf, lower)
+                upper = np.where(stopped, np.inf, upper)
+                known = np.logical_and.accumulate(np.isfinite(lower) | stopped, axis=-1)
+                verdict[:, :, h, c] = np.where(
+                    (known & (lower > 0)).any(-1), -1, np.where((upper <= 0).all(-1), 1, 0))
+                scale = np.sqrt(np.maximum(ref["x_var"], 0)) if c == 0 else ref["x_var"]
+                # not <= 0 rather than > 0: a run that stopped (NaN) is over from there
+                over = ~(excess(err[..., :n], scale[:n], sem[..., :n], tol=tol,
+                                floor=floor) <= 0)
+                disagree[:, :, c] = np.where(over.any(-1), periods[np.argmax(over, axis=-1)],
+                                             np.inf)
+                errors[:, :, h, c] = window_errors_all(err, scale, sem, n)
         with np.errstate(invalid="ignore"):
             before = periods[None, None, :] < first[:, :, None]
             square = np.where(before, pairs.err_mean**2, 0.0)
             count = before.sum(-1)
             pre = np.where(count > 0, np.sqrt(square.sum(-1) / np.maximum(count, 1)), np.nan)
-        return {"errors": errors, "pre": pre, "disagree": disagree}
+        return {"verdict": verdict, "errors": errors, "disagree": disagree, "pre": pre}
 
     # -- one value of the swept parameter ------------------------------------------------
     def splits(self, value: float) -> tuple[float, list[HorizonSplits]]:
@@ -498,19 +506,19 @@ class _Map:
         all its bisections, and the horizons are independent of each other
         (:meth:`boundary_at`; ``found``: their results, computed elsewhere, in
         ``cfg.horizons`` order). Returns the brackets, the steps, and every sigma
-        evaluated with its verdicts (variant, horizon, criterion) at N = Nmax (-1: not
-        formed)."""
+        evaluated with its verdicts (variant, horizon, criterion) at N = Nmax (1 agrees, 0
+        undecided, -1 disagrees, ``NOT_FORMED``)."""
         cfg = self.cfg
         k = -1  # N = Nmax; the probes run that order only
         V, H, C = len(cfg.variants), len(cfg.horizons), 2
         star = np.full((V, H, C, 2), np.nan)
         steps = np.zeros((V, H, C), dtype=np.int64)
-        verdicts = {s: point.agrees[:, k].astype(np.int8) for s, point in grid.items()}
+        verdicts = {s: point.verdict[:, k].astype(np.int8) for s, point in grid.items()}
         for h in range(H):
             star[:, h], steps[:, h], rows = (self.boundary_at(value, grid, h)
                                              if found is None else found[h])
             for s, row_h in rows.items():
-                row = verdicts.setdefault(s, np.full((V, H, C), -1, np.int8))
+                row = verdicts.setdefault(s, np.full((V, H, C), NOT_FORMED, np.int8))
                 row[:, h] = row_h
         return star, steps, verdicts
 
@@ -530,9 +538,9 @@ class _Map:
                 def agrees(s, v=v, c=c):
                     s = float(np.round(s, 12))
                     known = probes.get(s)
-                    # a probe another bisection made may hang on the noise for this
-                    # verdict: its rounds go on (the ones done are read back)
-                    if known is None or (known.hangs[v, -1, h, c]
+                    # a probe another bisection made may leave this verdict
+                    # undecided: its rounds go on (the ones done are read back)
+                    if known is None or (known.verdict[v, -1, h, c] == 0
                                          and known.samples * 2 <= cfg.max_samples):
                         probes[s] = self.evaluate(value, s, orders=(cfg.nmax,),
                                                   focus=(v, h, c), horizon=h)
@@ -554,7 +562,7 @@ class _Map:
                 # the probes are stored under sigma rounded to 12 digits
                 star[v, c] = (np.round(lo, 12), np.round(hi, 12))
                 steps[v, c] = n
-        rows = {s: point.agrees[:, k, h] for s, point in probes.items() if s not in grid}
+        rows = {s: point.verdict[:, k, h] for s, point in probes.items() if s not in grid}
         return star, steps, rows
 
     def _tick(self):
@@ -942,14 +950,19 @@ def _attrs(cfg: ValidateConfig) -> dict:
     attrs.update(
         preset=cfg.preset, parameter=cfg.parameter, samples=int(cfg.samples),
         max_samples=int(cfg.max_samples), per_period=int(cfg.per_period),
-        tolerance=float(cfg.tolerance), var_tolerance=float(cfg.var_tolerance), z=float(cfg.z),
+        tolerance=float(cfg.tolerance), var_tolerance=float(cfg.var_tolerance),
+        alpha=float(cfg.alpha),
         resolution=float(cfg.resolution), split_resolution=float(cfg.split_resolution),
         long_splits=int(cfg.long_splits),
         floor=noise_floor(cfg.options),
         criterion_text=(
-            "agrees over H when, at every output t <= H, the running RMS error <= tol x the "
-            "running RMS of the MC spread (variance: of the MC variance) + z x the running "
-            "RMS MC standard error + floor (variance: floor squared)"),
+            "agrees over H when an upper confidence bound of the running RMS error is <= tol "
+            "x the running RMS of the MC spread (variance: of the MC variance) + floor "
+            "(variance: floor squared) at every output t <= H; disagrees when a lower bound "
+            "exceeds it at some output; else undecided (counted as not agreeing). The bounds "
+            "come from a Bonferroni band of Student's t intervals (15 degrees of freedom) "
+            "over the outputs, round r of the doubling spending alpha / 2^r, so each "
+            "verdict is wrong with probability <= alpha"),
     )
     return attrs
 

@@ -113,19 +113,21 @@ def register_validate(sub) -> None:
                    help="horizons in forcing periods (default 10,50)")
     g.add_argument("--tolerance", type=float, default=None, metavar="TOL",
                    help="the mean agrees while its running RMS error <= TOL x the running RMS "
-                        "MC spread + z MC standard errors (default 0.1)")
+                        "MC spread, certified at error rate ALPHA (default 0.1)")
     g.add_argument("--var-tolerance", type=float, default=None, metavar="TOL",
                    help="the same for the variance, relative to the MC variance (default 0.25)")
-    g.add_argument("--z", type=float, default=None, metavar="Z",
-                   help="MC standard errors allowed for the reference's noise (default 3)")
+    g.add_argument("--alpha", type=float, default=None, metavar="ALPHA",
+                   help="the error rate of each verdict: agrees / disagrees hold with "
+                        "probability >= 1 - ALPHA over the doublings and the outputs "
+                        "(default 0.01)")
     g.add_argument("--resolution", type=float, default=None, metavar="DS",
                    help="bisection resolution of sigma* (default 1e-3)")
     g.add_argument("--samples", type=positive_int, default=None, metavar="M",
                    help="Sobol samples of a point's first round, paired with every OPA "
                    "run (default 128; 16 replicates)")
     g.add_argument("--max-samples", type=positive_int, default=None, metavar="M",
-                   help="samples are doubled up to M where the verdict hangs on the MC "
-                        "noise (default 8192)")
+                   help="samples are doubled up to M while a verdict is undecided "
+                        "(default 8192)")
     g.add_argument("--long-splits", type=positive_int, default=None, metavar="K",
                    help="the most splits located per value over each horizon but the "
                         "shortest (default 128; the shortest: 1024); past it the impact "
@@ -185,7 +187,7 @@ def cmd_validate(args) -> int:
         distribution=args.distribution, elements=args.elements,
         max_elements=args.max_elements, horizons=args.horizons, tolerance=args.tolerance,
         var_tolerance=args.var_tolerance,
-        z=args.z, resolution=args.resolution, samples=args.samples,
+        alpha=args.alpha, resolution=args.resolution, samples=args.samples,
         max_samples=args.max_samples, seed=args.seed, per_period=args.per_period,
         long_splits=args.long_splits,
         outdir=args.outdir, plots=False if args.no_plots else None, scheduler=args.scheduler,

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+from scipy import stats
 
 from compare import load_config, run_validation, write_report
 from compare._config import VARIANTS
@@ -38,12 +39,27 @@ def _running_rms(a):
     return np.array(out)
 
 
-def _agrees(err, scale, sem, n, tol, z, floor):
-    """The documented criterion, written out: running RMS error within tol running RMS
-    spread + z running RMS SE + floor at every output of the first n."""
-    lhs = _running_rms(err[:n])
-    rhs = tol * _running_rms(scale[:n]) + z * _running_rms(sem[:n]) + floor
-    return bool(np.all(lhs <= rhs))
+def _verdict(err, sem, var, var_sem, n, tol, floor, *, spread, alpha, rounds):
+    """The documented three-valued verdict, written out: the band's half-width is the
+    Student's t quantile (R - 1 degrees of freedom) at two-sided level alpha / 2^rounds
+    split over 2 n intervals, times each standard error; the scale (the spread when
+    ``spread``, else the variance) runs from the band's low to its high end. 1 when the
+    running RMS of |err| + band is within tol running RMS low scale + floor at every output
+    of the first n, -1 when that of max(|err| - band, 0) exceeds tol running RMS high scale
+    + floor at one (a stopped run, NaN, from where it stopped), else 0."""
+    q = stats.t.ppf(1 - alpha / 2**rounds / (2 * n) / 2, R - 1)
+    low = np.maximum(var[:n] - q * var_sem[:n], 0)
+    high = np.maximum(var[:n] + q * var_sem[:n], 0)
+    if spread:
+        low, high = np.sqrt(low), np.sqrt(high)
+    e, b = np.abs(err[:n]), q * sem[:n]
+    upper = _running_rms(e + b) - tol * _running_rms(low) - floor
+    lower = _running_rms(np.maximum(e - b, 0)) - tol * _running_rms(high) - floor
+    if not np.isfinite(e).all():
+        stop = int(np.argmax(~np.isfinite(e)))
+        return -1 if stop == 0 or (lower[:stop] > 0).any() or np.isfinite(lower[:stop]).all() \
+            else 0
+    return 1 if (upper <= 0).all() else -1 if (lower > 0).any() else 0
 
 
 R = 16  # the replicates of the map's scrambled Sobol' points
@@ -98,16 +114,20 @@ def _check_point(cfg, ds, q, s, ens, runs):
     np.testing.assert_allclose(ds.mc_x_mean.values[q, s], best["mean"], rtol=0, atol=1e-12)
     var = np.maximum(best["var"], 0.0)
     floor = 10 * (cfg.options.rtol + cfg.options.atol)
+    rounds = 1 + int(round(math.log2(x.shape[0] / cfg.samples)))
     for (v, k), run in runs.items():
         # every run against the reference, whose standard errors are the errors' own
         err = run.x_mean.values - best["mean"]
         verr = run.x_var.values - best["var"]
         for h, H in enumerate(cfg.horizons):
             n = int(round(H * cfg.per_period)) + 1
-            assert ds.agrees.values[q, s, v, k, h, 0] == _agrees(
-                err, np.sqrt(var), best["mean_se"], n, cfg.tolerance, cfg.z, floor), (v, k, h)
-            assert ds.agrees.values[q, s, v, k, h, 1] == _agrees(
-                verr, var, best["var_se"], n, cfg.var_tolerance, cfg.z, floor**2), (v, k, h)
+            for c, (e, se, tol, fl) in enumerate(((err, best["mean_se"], cfg.tolerance, floor),
+                                                  (verr, best["var_se"], cfg.var_tolerance,
+                                                   floor**2))):
+                verdict = _verdict(e, se, best["var"], best["var_se"], n, tol, fl,
+                                   spread=c == 0, alpha=cfg.alpha, rounds=rounds)
+                assert ds.verdict.values[q, s, v, k, h, c] == verdict, (v, k, h, c)
+                assert ds.agrees.values[q, s, v, k, h, c] == (verdict == 1), (v, k, h, c)
             np.testing.assert_allclose(ds.err_mean.values[q, s, v, k, h],
                                        rms(err[:n]), rtol=1e-7)
             np.testing.assert_allclose(ds.err_mean_rel.values[q, s, v, k, h],
@@ -134,14 +154,14 @@ def test_verdicts_match_direct_comparisons(tiny, q, s):
     _check_point(cfg, ds, q, s, ens, runs)
 
 
-def test_the_tiny_map_has_both_verdicts(tiny):
-    """So that the comparison above can fail both ways."""
+def test_the_tiny_map_has_all_three_verdicts(tiny):
+    """So that the comparison above can fail every way."""
     _, ds, _ = tiny
     for c in range(2):
         a = ds.agrees.values[..., c]
         assert a.any() or c == 1
         assert not a.all()
-    assert ds.agrees.values[..., 0].any()
+    assert set(np.unique(ds.verdict.values[..., 0])) == {-1, 0, 1}
 
 
 def test_sigma_star_brackets_the_verdicts_it_probed(tiny):
@@ -154,6 +174,8 @@ def test_sigma_star_brackets_the_verdicts_it_probed(tiny):
                 lo = ds.sigma_star.values[q, v, h, 0]
                 hi = ds.sigma_star_upper.values[q, v, h, 0]
                 verdict = ds.probe_agrees.values[q, ok, v, h, 0]
+                three = ds.probe_verdict.values[q, ok, v, h, 0]
+                np.testing.assert_array_equal(verdict, np.where(three == -2, -1, three == 1))
                 probed = sig[ok]
                 if np.isfinite(hi):
                     assert hi - lo <= cfg.resolution + 1e-15
@@ -175,7 +197,7 @@ def test_netcdf_round_trip(tiny):
             np.testing.assert_array_equal(a, b, err_msg=name)
         else:
             assert (a == b).all(), name
-    for name in ("parameter", "uncertain", "tolerance", "z", "resolution", "floor", "mu",
+    for name in ("parameter", "uncertain", "tolerance", "alpha", "resolution", "floor", "mu",
                  "rtol", "seed", "criterion_text"):
         assert back.attrs[name] == ds.attrs[name], name
     assert list(back.variant.values) == [f"{a}/{b}" for a, b in VARIANTS]
@@ -352,7 +374,10 @@ def test_config_errors_name_the_key(tmp_path):
         load_config(None, parameter="f")
     with pytest.raises(ValueError, match="long_splits must be >= 1, got 0"):
         load_config(None, long_splits=0)
-    for key, value, message in (("z", "3", "z must be a number"),
+    for key, value, message in (("alpha", "3", "alpha must be a number"),
+                                ("alpha", 0.9, r"alpha \(the error rate of a verdict\) must "
+                                 r"be in \[1e-9, 0.5\], got 0.9"),
+                                ("z", 3.0, "config key z is gone"),
                                 ("max_samples", "x", "max_samples must be an integer"),
                                 ("outdir", 3, "outdir must be a non-empty string")):
         with pytest.raises(ValueError, match=message):
