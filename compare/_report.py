@@ -776,9 +776,15 @@ def plot_map(ds, path, *, size=None):
             if a.any():
                 ax.scatter(X[a], Y[a], marker="o", facecolor="white", edgecolor="k", s=26,
                            label=f"{head} agrees", zorder=4)
-            if (~a & ~bad).any():
-                ax.scatter(X[~a & ~bad], Y[~a & ~bad], marker="x", color="k", s=26,
-                           label=f"{head} does not", zorder=4)
+            undecided = (ds.verdict.values[:, :, HEADLINE, -1, h, c] == 0 if "verdict" in ds
+                         else np.zeros_like(a))
+            if (~a & ~bad & ~undecided).any():
+                ax.scatter(X[~a & ~bad & ~undecided], Y[~a & ~bad & ~undecided], marker="x",
+                           color="k", s=26, label=f"{head} does not", zorder=4)
+            if (undecided & ~bad).any():
+                ax.scatter(X[undecided & ~bad], Y[undecided & ~bad], marker="s",
+                           facecolor="none", edgecolor="k", s=22, zorder=4,
+                           label=f"{head} undecided (counts as does not)")
             if bad.any():
                 ax.scatter(X[bad], Y[bad], marker="$?$", color="k", s=40, zorder=4,
                            label="run did not finish (NaN)")

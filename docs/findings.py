@@ -20,7 +20,8 @@ and for docs/figures.md against the captions of ``opa-mc reproduce all`` (all of
 Every number of sections 1-6 of the document must be one the run gives, to the digits the
 document prints: the lines of ``results/summary.md`` (written by ``opa-mc validate`` from
 the dataset) and a few values the document reads off the dataset directly (the impact-count
-shares ``count_prob``, the relative errors ``err_mean_rel`` and ``err_var_rel``). Numbers
+shares ``count_prob``, the relative errors ``err_mean_rel`` and ``err_var_rel``, the errors
+in standard errors ``err_mean_se``). Numbers
 that describe the method rather than the run (the grid, tolerances, the paper's values) are
 in ``METHOD_NUMBERS``, and wall times (a number followed by "s") measure the machine, not
 the method, so they are not compared; anything else that does not match is printed with
@@ -84,7 +85,7 @@ def run_numbers(results: Path, summary: str = "summary.md") -> list[float]:
     if not (results / "validate.nc").exists():
         return found
     with xr.open_dataset(results / "validate.nc") as ds:
-        for name in ("count_prob", "err_mean_rel", "err_var_rel", "split_value",
+        for name in ("count_prob", "err_mean_rel", "err_var_rel", "err_mean_se", "split_value",
                      "split_speed", "first_impact"):
             if name in ds:
                 values = np.asarray(ds[name].values, dtype=float).ravel()

@@ -729,6 +729,34 @@ def test_trust_map_draws_both_verdicts_and_every_sigma_star(tiny, tmp_path, monk
                         for ax in bars)
 
 
+def test_trust_map_marks_an_undecided_verdict_apart(tiny, tmp_path, monkeypatch):
+    """Every undecided verdict at N = Nmax gets its own glyph at its grid point, in its
+    panel only (one made undecided here besides those of the tiny map's capped ensembles);
+    the certain ones keep theirs."""
+    from compare._report import HEADLINE, plot_map
+
+    _, ds, _ = tiny
+    ds = ds.copy(deep=True)
+    ds.verdict.values[0, 0, HEADLINE, -1, 0, 0] = 0
+    ds.agrees.values[0, 0, HEADLINE, -1, 0, 0] = 0
+    fig, = _drawn(monkeypatch, lambda: plot_map(ds, str(tmp_path / "m.png")))
+    values = ds[ds.attrs["parameter"]].values
+    panels = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    for h in range(ds.sizes["horizon"]):
+        for c, what in enumerate(("mean", "variance")):
+            ax, = [a for a in panels
+                   if a.get_title().startswith(f"{what}, H = {float(ds.horizon[h]):g} ")]
+            want = {(float(values[q]), float(ds.sigma[s])) for q, s in
+                    zip(*np.nonzero(ds.verdict.values[:, :, HEADLINE, -1, h, c] == 0))}
+            got = {tuple(map(float, xy)) for col in ax.collections
+                   if "undecided" in col.get_label() for xy in col.get_offsets()}
+            crosses = {tuple(map(float, xy)) for col in ax.collections
+                       if col.get_label().endswith("does not") for xy in col.get_offsets()}
+            assert got == want and not got & crosses, (h, c)
+    assert (3.98, 0.01) in {tuple(map(float, xy)) for col in panels[0].collections
+                            if "undecided" in col.get_label() for xy in col.get_offsets()}
+
+
 def test_single_value_map_has_sensible_limits(tiny, tmp_path, monkeypatch):
     """With one value of the swept parameter the x axis spans a few per cent around it and
     sigma* is still drawn (as a marker)."""
