@@ -40,7 +40,10 @@ procedure stops at. Inside the band the running RMS error (the trust map's crite
 
 * **agrees**: the upper bound is within the tolerance at every output;
 * **disagrees**: the lower bound exceeds it at some output;
-* **undecided**: neither, after ``max_samples`` true systems.
+* **undecided**: neither, after ``max_samples`` true systems; or whatever the bounds say
+  when the split scan hit its limit (``verify_splits_complete`` 0): a change of the
+  impact sequence it did not reach may hide inside a stratum, where no standard error
+  sees it, so nothing is certified (``verify_undecided_because``).
 
 A round whose degrees of freedom fall below ``MIN_DOF`` at some output decides nothing (a
 variance estimated from too few points cannot bound anything): the procedure doubles. So
@@ -505,7 +508,8 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                 + (f" (fewer than {MIN_DOF} degrees of freedom)" if short else "")
                 + (" (doubling)" if not decided and sequential and M < max_samples
                    else ""))
-        if decided or not sequential or M >= max_samples:
+        # an incomplete split scan certifies nothing: more points cannot change that
+        if decided or not sequential or M >= max_samples or not strata.complete:
             break
         M *= 2
 
@@ -532,6 +536,17 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         out[f"cv_x_{name}_dof"] = ("time", np.asarray(est[f"{name}_dof"], dtype=float), {
             "long_name": f"Welch-Satterthwaite degrees of freedom of cv_x_{name}_sem over "
             f"the strata: Student's t intervals", **one})
+    because = ""
+    if not strata.complete:
+        # a change of the impact sequence the scan did not reach may sit inside a stratum,
+        # where no standard error sees it: nothing is certified
+        because = ("the split scan hit its limit, so a change of the impact sequence may "
+                   "hide inside a stratum: the bounds do not hold")
+        if log is not None and verdicts != ["undecided", "undecided"]:
+            log(f"verify: {because}; the verdicts ({verdicts[0]}, {verdicts[1]}) are "
+                f"reported as undecided")
+        verdicts = ["undecided", "undecided"]
+        firsts = [math.inf, math.inf]
     verdict_mean, verdict_var = verdicts
     verdict = ("disagrees" if "disagrees" in verdicts else
                "agrees" if verdicts == ["agrees", "agrees"] else "undecided")
@@ -547,7 +562,7 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                          f"to P_j times the misfit at the stratum's ends, half to P_j"),
         verify_rounds=int(rounds), verify_seed=int(seed), verify_tolerance=float(tolerance),
         verify_var_tolerance=float(var_tolerance), verify_alpha=float(alpha),
-        verify_min_dof=int(MIN_DOF),
+        verify_min_dof=int(MIN_DOF), verify_undecided_because=because or "none",
         variance_reduction=est["variance_reduction"],
         verify_rhs_evaluations=int(rhs),
     )

@@ -206,7 +206,9 @@ def _verify_lines(ds) -> list[str]:
         f"certificate ({a['verify_samples']} true systems in {a['verify_strata']} strata, "
         f"error rate {a['verify_alpha']:g}): {a['verdict'].upper()} (mean {a['verdict_mean']}"
         f"{when(a['first_disagreement_mean'])}; variance {a['verdict_var']}"
-        f"{when(a['first_disagreement_var'])})",
+        f"{when(a['first_disagreement_var'])})"
+        + (f": {a['verify_undecided_because']}"
+           if a.get("verify_undecided_because", "none") != "none" else ""),
         f"error of E[x]: RMS {rms('verify_err_mean'):.3g} ± {rms('verify_err_mean_sem'):.2g}; "
         f"of Var[x]: RMS {rms('verify_err_var'):.3g} ± {rms('verify_err_var_sem'):.2g} "
         f"(paired estimates ± standard errors)",

@@ -252,6 +252,31 @@ def test_the_strata_are_cut_at_a_rare_split():
     assert v.attrs["verdict"] == "disagrees"
 
 
+def test_an_incomplete_split_scan_certifies_nothing(monkeypatch):
+    """Where the split scan hits its limit, a change of the impact sequence may hide inside
+    a stratum: the verdict is undecided whatever the bounds say, with the reason, and the
+    procedure does not double for nothing. The same run with the scan complete is decided
+    (disagrees: the 2 % region of the test above)."""
+    import compare._verify as V
+
+    run = simulate_opa(Oscillator(omega=3.98), sigma=0.025, order=4, periods=10,
+                       per_period=8, impact_law="saltation")
+    whole = verify(run, samples=256, seed=1)
+    assert whole.attrs["verdict"] == "disagrees"
+    assert whole.attrs["verify_undecided_because"] == "none"
+    real = V.split_values
+    monkeypatch.setattr(V, "split_values", lambda *a: (real(*a)[0], False))
+    said = []
+    cut = verify(run, samples=256, seed=1, log=said.append)
+    assert cut.attrs["verify_splits_complete"] == 0
+    assert (cut.attrs["verdict"], cut.attrs["verdict_mean"], cut.attrs["verdict_var"]) \
+        == ("undecided",) * 3
+    assert "split scan hit its limit" in cut.attrs["verify_undecided_because"]
+    assert cut.attrs["verify_samples"] == whole.attrs["verify_samples"]
+    assert math.isinf(cut.attrs["first_disagreement_mean"])
+    assert any("reported as undecided" in line for line in said)
+
+
 def test_the_band_verdict_is_wrong_at_most_alpha_of_the_time():
     """compare._trust.bounded_verdict with band_multiplier on synthetic estimates whose
     truth is known: 20 outputs, each estimate the mean of 16 normal draws (15 degrees of
