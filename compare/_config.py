@@ -260,6 +260,13 @@ class ValidateConfig:
                      f"{self.per_period}", outputs * (2 * self.nmax + 8) * 8 * len(self.variants))
         for value in self.values:  # checks the impulse model (e.g. pulse_width < 2 pi/omega1)
             self.system_at(value)
+        from opa._work import check_work
+
+        # the grid's ensembles at their largest (the bisections' probes come on top)
+        check_work("this trust map", len(self.values) * len(self.sigmas) * self.max_samples
+                   * max(self.horizons),
+                   [("values", len(self.values)), ("sigmas", len(self.sigmas)),
+                    ("max_samples", self.max_samples), ("horizons", f"{max(self.horizons):g}")])
 
     @property
     def nmax(self) -> int:

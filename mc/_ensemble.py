@@ -365,6 +365,12 @@ def simulate_mc(
         raise ValueError(f"control needs sampler='sobol' with replicates >= 2 (its "
                          f"standard errors are the replicates' spread), got sampler="
                          f"{sampler!r}, replicates={replicates}")
+    from opa._work import check_work
+
+    check_work("this Monte Carlo ensemble",
+               samples * float(times[-1] - times[0]) / oscillator.forcing_period,
+               [("samples", samples),
+                ("periods", f"{(times[-1] - times[0]) / oscillator.forcing_period:g}")])
     size = min(_chunk_size(T, chunk_size, device), samples)
     if keep_paths:
         check_memory("keep_paths", samples * T * 2 * 8,

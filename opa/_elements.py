@@ -310,8 +310,9 @@ def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, 
     has none; the change is the error estimate of the step before it)."""
     if not (isinstance(max_elements, numbers.Integral) and not isinstance(max_elements, bool)
             and type(max_elements).__name__ not in ("bool_", "bool")
-            and 1 <= max_elements <= MAX_ELEMENTS):
-        raise ValueError(f"max_elements must be an integer in 1..{MAX_ELEMENTS}, got "
+            and 2 <= max_elements <= MAX_ELEMENTS):
+        raise ValueError(f"max_elements must be an integer in 2..{MAX_ELEMENTS} (a budget of "
+                         f"one element cannot refine: give elements=1 instead), got "
                          f"{max_elements!r}")
     if isinstance(tolerance, (bool, str, bytes)) or not (
             isinstance(tolerance, numbers.Real) and tolerance > 0 and math.isfinite(tolerance)):

@@ -75,6 +75,29 @@ def simulate_dmr(
     return ds
 
 
+def check_opa_work(system: System, times: np.ndarray, elements, max_elements: int) -> None:
+    """Refuse an OPA run beyond the work budget (:mod:`opa._work`): its systems of 2 (N + 1)
+    states over the run, per element, and for adaptive elements the split scan that places
+    them (up to ``SPLIT_BUDGET`` splits, each bisected over the whole run)."""
+    from opa._elements import SPLIT_BUDGET
+    from opa._work import check_work
+
+    periods = float(times[-1] - times[0]) / system.oscillator.forcing_period
+    order = int(system.order)
+    adaptive = isinstance(elements, str) and elements == "adaptive"
+    count = max_elements if adaptive else (1 if elements is None else
+                                           np.size(elements) - 1 if np.ndim(elements) else
+                                           int(elements))
+    work = (order + 1) * max(count, 1) * periods
+    drivers = [("periods", f"{periods:g}"), ("order", order)]
+    if adaptive:
+        work += SPLIT_BUDGET * 60 * periods  # ~60 bisection runs to 1e-6 in xi per split
+        drivers.append(("elements", f"adaptive (its split scan: up to {SPLIT_BUDGET} splits)"))
+    elif count > 1:
+        drivers.append(("elements", count))
+    check_work("this OPA run", work, drivers)
+
+
 def simulate_opa(
     system: System | Oscillator | None = None,
     *,
@@ -160,6 +183,8 @@ def simulate_opa(
     system = as_system(system, options, where="simulate_opa", **fields)
     system.check_samples()
     oscillator, order = system.oscillator, system.order
+    check_opa_work(system, output_times(oscillator, periods, per_period, times), elements,
+                   max_elements)
     if system.distribution is not None or elements is not None:
         from opa._elements import simulate_elements
 

@@ -359,8 +359,38 @@ def build_parser() -> argparse.ArgumentParser:
     register_bifurcation(sub)
     register_stability(sub)
     register_stochastic(sub)
-
+    for leaf in _leaves(sub):
+        leaf.add_argument("--work-budget", type=_duration, default=None, metavar="T",
+                          help="refuse work estimated to take longer than T (30m, 12h, 2d, "
+                               "inf; a bare number is hours); default $OPA_MC_WORK_BUDGET, "
+                               "else 4h")
     return parser
+
+
+def _leaves(subparsers):
+    """The parsers that run a command (simulate's models, not simulate itself)."""
+    for parser in subparsers.choices.values():
+        nested = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if nested:
+            yield from _leaves(nested[0])
+        else:
+            yield parser
+
+
+def _duration(text: str) -> float:
+    from opa._work import parse_duration
+
+    try:
+        return parse_duration(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+#: the flag of each keyword a work estimate names (opa._work.WorkBudgetError.drivers)
+WORK_FLAGS = {"samples": "--samples", "periods": "--periods", "order": "--order",
+              "elements": "--elements", "values": "--sweep values", "transient": "--transient",
+              "record": "--record", "sigmas": "--sigmas", "max_samples": "--max-samples",
+              "horizons": "--horizons", "states": "--extra-states"}
 
 
 def _one_line(err: BaseException) -> str:
@@ -379,8 +409,14 @@ def main(argv: list[str] | None = None) -> int:
     from opa._dataset import COMMAND
 
     token = COMMAND.set(("opa-mc", *args.argv))
+    from opa._work import WorkBudgetError, budget
+
     try:
-        return args.func(args)
+        with budget(getattr(args, "work_budget", None)):
+            return args.func(args)
+    except WorkBudgetError as err:
+        print(f"opa-mc: error: {_one_line(err.message(WORK_FLAGS))}", file=sys.stderr)
+        return EXIT_USAGE
     except (ValueError, CliError) as err:
         print(f"opa-mc: error: {_one_line(err)}", file=sys.stderr)
         return EXIT_USAGE

@@ -283,3 +283,26 @@ def test_adaptive_refinement_does_not_get_worse_with_the_budget():
         errors.append(float(np.sqrt(np.mean((ds.x_mean.values - ref.x_mean.values) ** 2))))
     assert all(b <= a for a, b in zip(errors, errors[1:])), errors
     assert errors[-1] < 0.05 * errors[0]
+
+
+@pytest.mark.parametrize("budget", [0, 1, 257, 2.5, True])
+def test_the_element_budget_has_one_rule_everywhere(budget, capsys):
+    """max_elements is an integer in 2..256 in simulate_opa as in validate's config (a budget
+    of one element cannot refine); the CLI refuses it naming the value, exit status 2."""
+    from compare import load_config
+    from opa.cli._main import main
+
+    with pytest.raises(ValueError, match=r"max_elements must be an integer in 2\.\.256"):
+        simulate_opa(Oscillator(), sigma=0.01, order=1, periods=1, elements="adaptive",
+                     max_elements=budget)
+    with pytest.raises(ValueError, match=r"max_elements must be an integer in 2\.\.256"):
+        load_config(None, elements="adaptive", max_elements=budget)
+    if isinstance(budget, int) and not isinstance(budget, bool):
+        try:
+            status = main(["simulate", "opa", "--periods", "1", "--elements", "adaptive",
+                           "--max-elements", str(budget)])
+        except SystemExit as exit:  # argparse's own refusal of a type
+            status = exit.code
+        assert status == 2
+        err = capsys.readouterr().err
+        assert "max" in err and str(budget) in err and err.count("\n") == 1

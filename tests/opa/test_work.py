@@ -1,0 +1,83 @@
+"""The work budget (opa._work): durations, the budget's sources, and refusals before any
+work starts, named by keyword in the API and by flag on the CLI."""
+
+import math
+import time
+
+import pytest
+
+from opa import Oscillator, simulate_opa
+from opa._work import (WORK_BUDGET_ENV, WorkBudgetError, budget, check_work, parse_duration,
+                       work_budget)
+from opa.cli._main import main
+
+
+@pytest.mark.parametrize("text, seconds", [("90s", 90.0), ("30m", 1800.0), ("12h", 43200.0),
+                                           ("2d", 172800.0), ("1.5", 5400.0),
+                                           (" 2H ", 7200.0), ("inf", math.inf)])
+def test_durations(text, seconds):
+    assert parse_duration(text) == seconds
+
+
+@pytest.mark.parametrize("text", ["0", "-1h", "1y", "", "nan", "h", "1e3h"])
+def test_bad_durations_are_refused(text):
+    with pytest.raises(ValueError, match="positive duration"):
+        parse_duration(text)
+
+
+def test_the_budget_comes_from_the_flag_then_the_environment_then_the_default(monkeypatch):
+    monkeypatch.delenv(WORK_BUDGET_ENV, raising=False)
+    assert work_budget() == 4 * 3600.0
+    monkeypatch.setenv(WORK_BUDGET_ENV, "30m")
+    assert work_budget() == 1800.0
+    with budget(60.0):
+        assert work_budget() == 60.0
+    assert work_budget() == 1800.0
+    monkeypatch.setenv(WORK_BUDGET_ENV, "soon")
+    with pytest.raises(ValueError, match=WORK_BUDGET_ENV):
+        work_budget()
+
+
+def test_a_job_past_the_budget_is_refused_naming_what_drives_it(monkeypatch):
+    monkeypatch.setattr("opa._work.PERIODS_PER_SECOND", 1.0)
+    monkeypatch.setattr("opa._work.os.cpu_count", lambda: 1)
+    with budget(100.0):
+        assert check_work("a job", 99.0, [("samples", 9)]) == 99.0
+        with pytest.raises(WorkBudgetError, match=r"a job would integrate about 1e\+02 "
+                           r"forcing periods of impact systems \(samples 101\).*about 1[0-9]"
+                           r"{2} s on 1 core, more than the work budget of 100 s"):
+            check_work("a job", 101.0, [("samples", 101)])
+
+
+def test_an_adaptive_opa_run_of_100000_periods_is_refused_at_once():
+    start = time.perf_counter()
+    with pytest.raises(WorkBudgetError, match="periods 100000 x order 4 x elements adaptive"):
+        simulate_opa(Oscillator(), sigma=0.01, order=4, periods=100000, elements="adaptive")
+    assert time.perf_counter() - start < 5
+
+
+@pytest.mark.parametrize("argv, flags", [
+    (["simulate", "opa", "--periods", "100000", "--elements", "adaptive"],
+     ("--periods 100000", "--elements adaptive")),
+    (["simulate", "mc", "--periods", "100000", "--samples", "100000"],
+     ("--samples 100000", "--periods 100000")),
+    (["validate", "--sweep", "omega=3.9:4.3:1000", "--outdir", "OUT"],
+     ("--sweep values 1000", "--sigmas 8", "--max-samples 8192", "--horizons 50")),
+])
+def test_the_cli_refuses_at_once_naming_its_flags(argv, flags, tmp_path, capsys):
+    argv = [str(tmp_path / "v") if a == "OUT" else a for a in argv]
+    start = time.perf_counter()
+    assert main(argv) == 2
+    assert time.perf_counter() - start < 20
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "Traceback" not in err
+    assert all(flag in err for flag in flags), err
+    assert "--work-budget" in err
+
+
+def test_the_cli_budget_flag_lets_the_work_run(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr("opa._work.PERIODS_PER_SECOND", 1.0)
+    argv = ["simulate", "mc", "--periods", "2", "--samples", "64", "--quiet"]
+    assert main(argv + ["--work-budget", "10s"]) == 2  # 128 periods at 1 per second
+    assert "more than the work budget of 10 s" in capsys.readouterr().err
+    assert main(argv + ["--work-budget", "inf"]) == 0
