@@ -133,10 +133,10 @@ class ValidateConfig:
         if self.scheduler is not None and self.workers > 1:
             raise ValueError("workers has no effect with a scheduler (the Dask cluster's "
                              "workers run the tasks): give one or the other")
-        if self.scheduler is not None and (not isinstance(self.scheduler, str)
-                                           or not self.scheduler.strip()):
-            raise ValueError(f"scheduler must be an address such as tcp://host:8786, got "
-                             f"{self.scheduler!r:.60}")
+        if self.scheduler is not None:
+            from mc import check_scheduler_address
+
+            check_scheduler_address(self.scheduler)
         if not isinstance(self.orders, tuple) or not all(
                 isinstance(n, numbers.Integral) and not isinstance(n, bool)
                 for n in self.orders):

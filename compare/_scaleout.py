@@ -199,15 +199,12 @@ def _order(key) -> str:
 
 
 def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
-    from distributed import as_completed, Client
+    from distributed import as_completed
 
-    own = not isinstance(scheduler, Client)
-    try:
-        client = Client(scheduler, timeout=CONNECT_TIMEOUT) if own else scheduler
-    except (OSError, TimeoutError) as err:
-        raise ValueError(f"scheduler {scheduler!r} did not answer as a Dask scheduler "
-                         f"within {CONNECT_TIMEOUT:g} s ({type(err).__name__}); check the "
-                         f"address and that the scheduler runs") from None
+    from mc import connect_scheduler
+
+    # an endpoint that is not a Dask scheduler is refused within CONNECT_TIMEOUT
+    client, own = connect_scheduler(scheduler, CONNECT_TIMEOUT)
     keys: dict = {}
 
     def submit(batch, priority):

@@ -2,12 +2,14 @@
 
 from mc._checkpoint import remove_checkpoint
 from mc._control import cv_estimates
-from mc._ensemble import DaskError, simulate_mc
+from mc._ensemble import DaskError, check_scheduler_address, connect_scheduler, simulate_mc
 from mc._source import sweep_source
 from mc._sampling import SAMPLERS, sample_xi, semicircle_cdf, semicircle_ppf
 
 __all__ = [
     "simulate_mc",
+    "connect_scheduler",
+    "check_scheduler_address",
     "remove_checkpoint",
     "DaskError",
     "sample_xi",

@@ -351,7 +351,9 @@ def simulate_mc(
     if checkpoint is not None and not isinstance(checkpoint, (str, os.PathLike)):
         raise ValueError(f"checkpoint must be a directory path, got {checkpoint!r:.60}")
     if scheduler is not None and not isinstance(scheduler, str):
-        _connect(scheduler, connect_timeout)  # only checks that it is a Client
+        connect_scheduler(scheduler, connect_timeout)  # only checks that it is a Client
+    elif scheduler is not None:
+        check_scheduler_address(scheduler)
     system.check_samples()
     if control is not None:
         times = check_control(control, system, times)
@@ -395,7 +397,8 @@ def simulate_mc(
     args = (times, system, options, int(order), keep_paths, recurrence)
 
     # connect before the checkpoint is made: a wrong address leaves nothing behind
-    client, own = (None, False) if scheduler is None else _connect(scheduler, connect_timeout)
+    client, own = ((None, False) if scheduler is None
+                   else connect_scheduler(scheduler, connect_timeout))
     try:
         check = _chunk_check(T, order, replicates, keep_paths)
         store, finished = None, set()
@@ -695,7 +698,25 @@ class _Chunks:
                 unsaved.discard(j)
 
 
-def _connect(scheduler, connect_timeout: float):
+def check_scheduler_address(address: str) -> str:
+    """``address`` if it reads as a Dask scheduler's (``tcp://host:port``, ``tls://``,
+    ``ws://``, ``wss://`` or ``ucx://`` with a port, ``inproc://...``, or ``host:port``),
+    else one line naming it; nothing is contacted.
+
+    >>> check_scheduler_address("tcp://10.0.0.5:8786")
+    'tcp://10.0.0.5:8786'
+    """
+    import re
+
+    text = address.strip() if isinstance(address, str) else ""
+    if re.fullmatch(r"inproc://\S+", text) or re.fullmatch(
+            r"(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9a-fA-F:.]+\]|[\w.-]+):\d{1,5}", text):
+        return text
+    raise ValueError(f"scheduler must be a Dask scheduler address such as tcp://host:8786 "
+                     f"(a host and a port), got {address!r:.60}")
+
+
+def connect_scheduler(scheduler, connect_timeout: float):
     """(client, whether we own it) for an address or a distributed.Client; a Client is
     returned as it is, so this also checks the type of ``scheduler``."""
     try:

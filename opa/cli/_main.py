@@ -360,6 +360,9 @@ def build_parser() -> argparse.ArgumentParser:
     register_stability(sub)
     register_stochastic(sub)
     for leaf in _leaves(sub):
+        for action in leaf._actions:  # one rule for every command's --scheduler
+            if "--scheduler" in action.option_strings:
+                action.type = _scheduler
         leaf.add_argument("--work-budget", type=_duration, default=None, metavar="T",
                           help="refuse work estimated to take longer than T (30m, 12h, 2d, "
                                "inf; a bare number is hours); default $OPA_MC_WORK_BUDGET, "
@@ -375,6 +378,15 @@ def _leaves(subparsers):
             yield from _leaves(nested[0])
         else:
             yield parser
+
+
+def _scheduler(text: str) -> str:
+    from mc import check_scheduler_address
+
+    try:
+        return check_scheduler_address(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def _duration(text: str) -> float:

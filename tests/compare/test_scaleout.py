@@ -173,6 +173,32 @@ def test_a_scheduler_that_does_not_answer_is_named(tmp_path):
         run_validation(cfg, progress=False, log=lambda *a: None)
 
 
+def test_a_silent_endpoint_is_refused_within_the_connect_timeout(tmp_path):
+    """An endpoint that accepts the connection and never speaks Dask (it hung the map for
+    120 s): one line naming it, within the map's CONNECT_TIMEOUT."""
+    import socket
+    import time
+
+    from compare._scaleout import CONNECT_TIMEOUT
+
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+        cfg = load_config(None, outdir=str(tmp_path), scheduler=address, **SMALL)
+        start = time.perf_counter()
+        with pytest.raises(ValueError, match=f"scheduler '{address}' did not answer"):
+            run_validation(cfg, progress=False, log=lambda *a: None)
+    assert time.perf_counter() - start < CONNECT_TIMEOUT + 10
+
+
+@pytest.mark.parametrize("address", ["garbage", "tcp://host", "tcp://:8786", "", "  "])
+def test_an_address_that_is_not_one_is_refused_before_anything_runs(address, tmp_path):
+    with pytest.raises(ValueError, match="scheduler must be a Dask scheduler address"):
+        load_config(None, outdir=str(tmp_path), scheduler=address, **SMALL)
+    assert not any(tmp_path.iterdir())
+
+
 @pytest.mark.slow
 def test_the_default_map_on_a_4_process_local_cluster(tmp_path):
     """Issue 29's target: the embedded default map on a LocalCluster of 4 worker

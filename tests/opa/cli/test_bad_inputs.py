@@ -269,6 +269,19 @@ def test_a_silent_scheduler_fails_within_the_connect_timeout(capsys, tmp_path, m
     assert seconds < 15
 
 
+@pytest.mark.parametrize("command", [["validate", "--outdir", "OUT"], ["simulate", "mc"],
+                                     ["stochastic", "--sweep", "c=0.01:0.02:2"],
+                                     ["bifurcation", "--sweep", "c=0.01:0.02:2"]])
+def test_a_scheduler_that_is_not_an_address_names_the_flag(command, capsys, tmp_path,
+                                                         monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = [str(tmp_path / "v") if a == "OUT" else a for a in command]
+    status, out, err, seconds = run_cli(argv + ["--scheduler", "garbage"], capsys)
+    assert status == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert "--scheduler" in err and "'garbage'" in err and seconds < 10
+    assert not (tmp_path / "v").exists()
+
+
 def test_negative_lists_plot_folders_and_symlinks(capsys, tmp_path, monkeypatch):
     """Negative comma lists are values; --plot may name a new folder; --out through a
     symlink writes the link's target and keeps the link."""
