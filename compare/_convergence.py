@@ -94,6 +94,15 @@ class ConvergenceConfig:
                 raise ValueError(f"{name} must be non-negative integers, got {seq}")
         if not self.budgets or not self.mc_samples:
             raise ValueError("budgets and mc_samples must not be empty")
+        from opa.engine import MAX_ELEMENTS
+
+        # the element rules of simulate_opa: counts 1..MAX_ELEMENTS, budgets 2..MAX_ELEMENTS
+        for name, least, what in (("uniform", 1, "element counts of the uniform runs"),
+                                  ("budgets", 2, "element budgets of the adaptive runs")):
+            bad = [int(v) for v in getattr(self, name) if not least <= v <= MAX_ELEMENTS]
+            if bad:
+                raise ValueError(f"{name} ({what}) must be integers in {least}.."
+                                 f"{MAX_ELEMENTS}, got {bad[0]}")
         if self.reference < 1024:
             raise ValueError(f"reference must be >= 1024 samples, got {self.reference}")
         if self.reference_method not in ("sobol", "control"):

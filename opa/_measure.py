@@ -311,10 +311,21 @@ def from_chaospy(dist) -> Measure:
         raise ValueError(f"distribution must be the law of one variable xi, got a joint law "
                          f"of {len(lower)} ({type(dist).__name__})")
     lo, hi = float(lower[0]), float(upper[0])
+    if math.isfinite(lo) and math.isfinite(hi) and hi - lo <= 1e6:
+        from scipy import integrate
+
+        mass = integrate.quad(lambda x: float(np.ravel(pdf(x))[0]), lo, hi, limit=200)[0]
+        if not abs(mass - 1.0) <= 1e-6:
+            raise ValueError(
+                f"distribution {type(dist).__name__}: its density integrates to {mass:.6g} "
+                f"over its support [{lo:g}, {hi:g}], not 1, so its cdf and quantiles "
+                f"disagree with it (chaospy 4.3's Trunc of a normal law does this); give a "
+                f"law whose density "
+                f"integrates to 1, e.g. 'normal-trunc:K' for a truncated normal")
     if not (math.isfinite(lo) and math.isfinite(hi)) or hi - lo > 1e6 \
             or _cut_tail(pdf, cdf, lo, hi):
         raise ValueError(f"the distribution of xi must have a bounded support, got "
-                         f"[{lo}, {hi}] (use a truncated law)")
+                         f"[{lo}, {hi}] (use a truncated law such as 'normal-trunc:K')")
     width = hi - lo
 
     def exponent(end, sign):

@@ -59,8 +59,9 @@ MAX_GRID = 1000
 
 def _finite(name: str, value) -> float:
     """``value`` as a finite float; bools and strings are refused, not converted."""
-    if isinstance(value, (bool, str, bytes)) or (type(value).__module__ == "numpy"
-                                                  and type(value).__name__ in ("bool_", "bool")):
+    if isinstance(value, (bool, str, bytes)) or (type(value).__module__ == "numpy" and (
+            type(value).__name__ in ("bool_", "bool") or getattr(value, "dtype", None) is not None
+            and value.dtype.kind == "b")):  # numpy bools, and 0-d boolean arrays
         raise ValueError(f"{name} must be a real number, got {value!r}")
     try:
         value = float(value)

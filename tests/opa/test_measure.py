@@ -132,3 +132,19 @@ def test_a_chaospy_law_whose_cdf_rounds_at_its_ends_is_bounded():
     np.testing.assert_allclose(law.cdf(x), stats.uniform(0.04, 0.02).cdf(x), atol=1e-12)
     with pytest.raises(ValueError, match="bounded support"):
         from_chaospy(chaospy.Normal(0, 1))
+
+
+def test_a_chaospy_law_whose_density_does_not_integrate_to_one_is_refused_saying_so():
+    """chaospy's Trunc of a normal law on [-0.5, 0.5]: its density integrates to 0.80
+    (scipy quad here), so its cdf and quantiles cannot both be its law's; refused with
+    the mass it has. A law on a sub-interval whose density is right is taken."""
+    import chaospy
+    from scipy import integrate
+
+    bad = chaospy.Trunc(chaospy.Normal(0, 1), lower=-0.5, upper=0.5)
+    mass = integrate.quad(lambda x: float(bad.pdf(x)), -0.5, 0.5)[0]
+    assert abs(mass - 1) > 0.1
+    with pytest.raises(ValueError, match=f"integrates to {mass:.6g} over its support"):
+        parse(bad)
+    good = parse(chaospy.Beta(2, 2, lower=-0.5, upper=0.5))
+    assert (good.lo, good.hi) == (-0.5, 0.5)

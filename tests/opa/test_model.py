@@ -253,3 +253,14 @@ def test_bad_output_grid_is_refused_by_name(kwargs, name, value):
 def test_bad_explicit_times_are_refused(times):
     with pytest.raises(ValueError, match="times"):
         simulate_dmr(Oscillator(), times=times)
+
+
+@pytest.mark.parametrize("value", [True, np.bool_(True), np.array(True), np.array([0.8]),
+                                   "0.8", b"0.8", None, [0.8]])
+def test_a_parameter_refuses_bools_of_every_kind_strings_and_arrays(value):
+    with pytest.raises(ValueError, match="mu must be a real number"):
+        Oscillator(mu=value)
+
+
+def test_a_parameter_takes_numpy_scalars_and_0d_float_arrays():
+    assert Oscillator(mu=np.float64(0.8)).mu == Oscillator(mu=np.array(0.8)).mu == 0.8
