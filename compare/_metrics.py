@@ -14,6 +14,11 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
+from compare._inputs import (
+    check_attribute_number, check_dataset, check_finite, check_number,
+    check_standard_error, require_attributes, require_time, require_variables,
+)
+
 
 def _check_same_grid(a: xr.Dataset, b: xr.Dataset) -> None:
     ta, tb = a.time.values, b.time.values
@@ -31,38 +36,91 @@ SYSTEM_ATTRS = ("uncertain", "distribution", "sigma", "mu", "a", "c", "f", "omeg
                 "impulse_at_zero")
 
 
+#: the fields of SYSTEM_ATTRS that are words; the others are numbers
+_WORDS = ("uncertain", "distribution", "impulse")
+
+
 def _check_same_system(a: xr.Dataset, b: xr.Dataset) -> None:
     """Refuse, naming the field, two runs of different systems. A field neither dataset
     carries (a dataset built by hand) is not compared; the law of xi defaults to the
-    semicircle, as in every run before it was recorded."""
+    semicircle, as in every run before it was recorded. A field one run lacks (an older
+    or partial dataset) cannot be compared: refused, naming the run that lacks it."""
+    def shown(value):
+        return repr(value) if isinstance(value, str) else f"{float(value):g}"
+
     for name in SYSTEM_ATTRS:
         default = "semicircle" if name == "distribution" else None
         va, vb = a.attrs.get(name, default), b.attrs.get(name, default)
         if va is None and vb is None:
             continue
-        same = (va == vb if isinstance(va, str) or isinstance(vb, str)
-                else va is not None and vb is not None
-                and np.isclose(float(va), float(vb), rtol=1e-12, atol=0.0))
+        if va is None or vb is None:
+            lacking, other, value = (("opa", "mc", vb) if va is None else
+                                     ("mc", "opa", va))
+            raise ValueError(f"the {lacking} dataset lacks the attribute {name} "
+                             f"({shown(value)} in the {other} dataset): the runs cannot be "
+                             f"told to be of one system")
+        if name not in _WORDS:
+            for side, ds in (("opa", a), ("mc", b)):
+                check_attribute_number(ds, f"the {side} dataset", name)
+        same = (va == vb if name in _WORDS
+                else np.isclose(float(va), float(vb), rtol=1e-12, atol=0.0))
         if not same:
-            def shown(value):
-                return repr(value) if isinstance(value, str) or value is None \
-                    else f"{float(value):g}"
-
             raise ValueError(f"the runs are of different systems: {name} = {shown(va)} in "
                              f"the opa dataset, {shown(vb)} in the mc dataset")
 
 
 def _check_models(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
     for name, ds, want in (("opa_ds", opa_ds, "opa"), ("mc_ds", mc_ds, "mc")):
-        if not isinstance(ds, xr.Dataset):
-            raise ValueError(f"{name} must be an xarray.Dataset of an {want} run, got "
-                             f"{type(ds).__name__}")
+        check_dataset(ds, name, f"an {want} run")
         model = ds.attrs.get("model", want)
         if model != want:
             raise ValueError(f"{name} must be an {want} run, got model = {model!r}")
-    missing = [v for v in ("x_mean", "x_var") if v not in opa_ds]
+
+
+#: the element layout, from which the coefficients of a run without x_coef follow
+_ELEMENTS = ("element_x_coef", "element_edges", "element_probability")
+
+
+def _check_contents(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
+    """Refuse, naming the dataset and the culprit, a run that lacks what compare_runs
+    reads or holds a non-finite value in it. NaN is documented, and accepted, in two
+    places only (docs/datasets.md): the standard errors of a Gauss quadrature
+    (``sampler = "gauss"``: no sampling error), and an OPA run that stopped
+    (``simulate_opa(partial=True)``: ``attrs["failure"]``, NaN from the stop on)."""
+    opa, mc = "the opa dataset", "the mc dataset"
+    require_time(opa_ds, opa)
+    require_time(mc_ds, mc)
+    require_attributes(opa_ds, opa, ("omega",), hint=" (the forcing frequency: the "
+                       "forcing period of error_metrics' windows)")
+    check_attribute_number(opa_ds, opa, "omega", positive=True)
+    require_variables(opa_ds, opa, ("x_mean", "x_var"))
+    coefficients = ("x_coef",) if "x_coef" in opa_ds else _ELEMENTS
+    for needed in ((("x_coef", "element_x_coef"),), coefficients):
+        require_variables(opa_ds, opa, needed, hint=" (its coefficients: x_coef, or the "
+                          "element layout element_x_coef, element_edges, "
+                          "element_probability)")
+    require_variables(mc_ds, mc, ("x_mean", "x_var", "x_coef"))
+    missing = [name for name in ("x_sem", "x_var_sem", "x_coef_sem") if name not in mc_ds]
     if missing:
-        raise ValueError(f"the opa dataset lacks {', '.join(missing)}")
+        raise ValueError(f"the mc dataset lacks the standard errors {missing} (written by "
+                         f"an older simulate_mc?); run the ensemble again")
+    # a run that stopped: NaN from its first non-finite output on, and only there
+    allowed, where = None, ""
+    if "failure" in opa_ds.attrs:
+        t = opa_ds["time"].values
+        stopped = ~np.isfinite(np.asarray(opa_ds.x_mean.values, dtype=float))
+        stop = t[np.argmax(stopped)] if stopped.any() else np.inf
+        allowed = xr.DataArray(t >= stop, dims="time", coords={"time": opa_ds["time"]})
+        where = " before the run stopped"
+    for name in ("x_mean", "x_var") + coefficients:
+        ok = None if allowed is None or "time" not in opa_ds[name].dims else \
+            allowed.broadcast_like(opa_ds[name]).transpose(*opa_ds[name].dims).values
+        check_finite(opa_ds, opa, name, allowed=ok, where=where if ok is not None else "")
+    for name in ("x_mean", "x_var", "x_coef"):
+        check_finite(mc_ds, mc, name)
+    quadrature = mc_ds.attrs.get("sampler") == "gauss"
+    for name in ("x_sem", "x_var_sem", "x_coef_sem"):
+        check_standard_error(mc_ds, mc, name, nan=quadrature)
 
 
 def _opa_coefficients(opa_ds: xr.Dataset, order: int):
@@ -117,9 +175,9 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
         same time grid: the estimates
         ``x_mean, x_var``, ``x_coef`` and their standard errors ``x_sem, x_var_sem``,
         ``x_coef_sem``.
-    z : width of the noise band in standard errors.
+    z : width of the noise band in standard errors (a finite number >= 0).
     floor : absolute tolerance added to the band (the integrators' accuracy where the
-        ensemble has no spread, e.g. the mean at t = 0).
+        ensemble has no spread, e.g. the mean at t = 0; a finite number >= 0).
 
     Returns
     -------
@@ -134,7 +192,13 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     ValueError
         Runs of different systems (naming the field), different time grids, or an ``mc``
         dataset without the standard errors (written before ``x_coef_sem`` existed: run
-        the ensemble again).
+        the ensemble again); a dataset that is not an ``opa`` (``mc``) run, lacks a
+        variable, ``omega`` or the coordinate ``time`` (``periods`` in older files), holds
+        a non-finite value where its data contract has none (NaN is accepted in the
+        standard errors of a Gauss quadrature, ``sampler = "gauss"``, and after the stop
+        of an OPA run that stopped, ``attrs["failure"]``), or a negative standard error;
+        ``z`` or ``floor`` not a finite number >= 0. Each message names the dataset and
+        the culprit.
 
     Examples
     --------
@@ -147,12 +211,11 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
         cmp.coef_within_noise[1:, 0]  # all 1
     """
     _check_models(opa_ds, mc_ds)
+    z = check_number("z", z)
+    floor = check_number("floor", floor)
+    _check_contents(opa_ds, mc_ds)
     _check_same_system(opa_ds, mc_ds)
     _check_same_grid(opa_ds, mc_ds)
-    missing = [name for name in ("x_sem", "x_var_sem", "x_coef_sem") if name not in mc_ds]
-    if missing:
-        raise ValueError(f"the mc dataset lacks the standard errors {missing} (written by "
-                         f"an older simulate_mc?); run the ensemble again")
     n = min(opa_ds.sizes["order"], mc_ds.sizes["order"])
     coef = _opa_coefficients(opa_ds, n - 1)
     if coef is None:
@@ -204,8 +267,23 @@ def error_metrics(cmp: xr.Dataset, *, window_periods: float | None = None,
     the first output where the error leaves the MC noise band (inf if never).
     ``until`` (a time) further restricts the window to ``t < until``, e.g. to the time
     before the first impact.
+
+    ``cmp`` must be a :func:`compare_runs` result (``err_mean``, ``mc_sem``,
+    ``within_noise``, ``err_var`` over ``time``, the attribute ``omega``);
+    ``window_periods`` a finite number > 0 or None, ``until`` a number or None (inf: no
+    limit). Anything else is refused with a ValueError naming it.
     """
-    T = 2 * np.pi / cmp.attrs["omega"]
+    check_dataset(cmp, "cmp", "a compare_runs result")
+    require_time(cmp, "cmp")
+    require_attributes(cmp, "cmp", ("omega",), hint=" (a compare_runs result carries it)")
+    omega = check_attribute_number(cmp, "cmp", "omega", positive=True)
+    require_variables(cmp, "cmp", ("err_mean", "mc_sem", "within_noise", "err_var"),
+                      hint=" (not a compare_runs result?)")
+    if window_periods is not None:
+        window_periods = check_number("window_periods", window_periods, strict=True)
+    if until is not None:
+        until = check_number("until", until, least=-np.inf, finite=False)
+    T = 2 * np.pi / omega
     t = cmp.time.values
     in_window = np.ones(t.size, bool) if window_periods is None else t <= window_periods * T + 1e-9
     if until is not None:
