@@ -63,6 +63,7 @@ import numbers
 import numpy as np
 import xarray as xr
 
+from compare._inputs import check_attribute_number, check_dataset, require_time
 from compare._strata import (
     build_strata, group_allocation, least_samples, neyman_allocation, slices, split_values,
 )
@@ -102,6 +103,10 @@ def system_of(run: xr.Dataset, options: SolverOptions | None = None
         raise ValueError(f"the run lacks the attribute{'s' if len(missing) > 1 else ''} "
                          f"{', '.join(missing)}: the true systems it describes are not "
                          f"known, so it cannot be verified")
+    words = ("uncertain", "impulse", "distribution", "method")
+    for name in needed:
+        if name not in words:
+            check_attribute_number(run, "the run", name)
     oscillator = Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES})
     distribution = attrs.get("distribution", "semicircle")
     system = System(oscillator, sigma=float(attrs["sigma"]), order=0,
@@ -139,6 +144,9 @@ def check_reported(run: xr.Dataset, measure) -> None:
     """Refuse a run whose reported moments or element probabilities do not follow from
     its coefficients and its law (a dataset edited after the run, or another run's
     numbers): the certificate vouches for what the dataset says."""
+    check_dataset(run, "the run", "an OPA run")
+    check_opa_layout(run, "the run")
+    require_time(run, "the run")
     edges = run.element_edges.values
     law = np.diff(np.asarray(measure.cdf(edges), dtype=float))
     reported = run.element_probability.values
@@ -316,6 +324,22 @@ def _check_rate(name: str, value, lo: float, hi: float) -> float:
     return float(value)
 
 
+def _non_finite_estimate(est: dict, err_mean: np.ndarray, err_var: np.ndarray) -> str:
+    """Why no verdict can be read off the round's estimates: the first of them (by the
+    name it gets in the dataset) that holds a non-finite value, or "" if none does."""
+    for name, values in (("verify_err_mean", err_mean), ("verify_err_mean_sem", est["d_se"]),
+                         ("verify_err_var", err_var), ("verify_err_var_sem", est["var_se"]),
+                         ("cv_x_mean", est["mean"]), ("cv_x_var", est["var"]),
+                         ("cv_x_mean_dof", est["mean_dof"]),
+                         ("cv_x_var_dof", est["var_dof"])):
+        bad = ~np.isfinite(np.asarray(values, dtype=float))
+        if bad.any():
+            return (f"{name} has {int(bad.sum())} non-finite value"
+                    f"{'' if bad.sum() == 1 else 's'} of {bad.size} (a true system or the "
+                    f"surrogate went far?): no verdict is read off it")
+    return ""
+
+
 def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed: int = 0,
            tolerance: float = MEAN_TOLERANCE, var_tolerance: float = VAR_TOLERANCE,
            alpha: float = ALPHA, sequential: bool = True,
@@ -349,8 +373,24 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     ``verify_samples`` (true runs: the cuts and every round's batch), ``verify_strata``,
     ``verify_splits``, ``verify_sampling`` (in words), ``verify_rounds``,
     ``verify_alpha``, ``variance_reduction`` and ``verify_rhs_evaluations``.
+
+    A verdict is never read off a non-finite estimate: if any estimate a round forms (the
+    errors, the control-variate estimates, their standard errors or degrees of freedom)
+    holds NaN or inf, the verdict is ``undecided`` and ``verify_undecided_because`` names
+    the estimate and how many of its values are not finite; no further round is drawn.
+
+    Raises
+    ------
+    ValueError
+        Naming the culprit: ``run`` not an OPA dataset, lacking a variable of the OPA
+        layout, the coordinate ``time`` (``periods`` in older files) or an attribute of
+        the system (:func:`system_of`), holding a non-finite value in its coefficients,
+        moments or system attributes, or moments that do not follow from its coefficients
+        (:func:`check_reported`); a keyword out of its range (NaN included).
     """
-    check_opa_layout(run, "run")
+    check_dataset(run, "the run", "an OPA run")
+    check_opa_layout(run, "the run")
+    require_time(run, "the run")
     samples, max_samples = check_counts(samples, max_samples)
     tolerance = _check_rate("tolerance", tolerance, 0.0, math.inf)
     var_tolerance = _check_rate("var_tolerance", var_tolerance, 0.0, math.inf)
@@ -380,11 +420,12 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                          "OPA run continued with initial=...): the true systems it "
                          "describes are not known, so it cannot be verified")
     for name in ("element_x_coef", "element_v_coef", "element_edges",
-                 "element_probability"):
+                 "element_probability", "x_mean", "x_var"):
         bad = ~np.isfinite(run[name].values)
         if bad.any():
             raise ValueError(f"the run's {name} holds {int(bad.sum())} non-finite values "
-                             f"(a run that stopped, or an edited file): nothing to certify")
+                             f"of {bad.size} (a run that stopped, or an edited file): "
+                             f"nothing to certify")
     check_reported(run, measure)
     edges = run.element_edges.values
     moments = surrogate_moments(run)
@@ -499,6 +540,9 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                 verdict, short = "undecided", True
             verdicts.append(verdict)
             firsts.append(times[above] / T if verdict == "disagrees" else math.inf)
+        broken = _non_finite_estimate(est, err_mean, err_var)
+        if broken:  # no verdict is read off NaN; more points cannot mend those drawn
+            verdicts, firsts = ["undecided", "undecided"], [math.inf, math.inf]
         decided = "disagrees" in verdicts or verdicts == ["agrees", "agrees"]
         if log is not None:
             log(f"verify: {M} true systems in {len(strata)} strata, error of E[x] RMS "
@@ -509,7 +553,7 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                 + (" (doubling)" if not decided and sequential and M < max_samples
                    else ""))
         # an incomplete split scan certifies nothing: more points cannot change that
-        if decided or not sequential or M >= max_samples or not strata.complete:
+        if decided or not sequential or M >= max_samples or not strata.complete or broken:
             break
         M *= 2
 
@@ -547,6 +591,10 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                 f"reported as undecided")
         verdicts = ["undecided", "undecided"]
         firsts = [math.inf, math.inf]
+    if broken:
+        because = (because + "; " if because else "") + broken
+        if log is not None:
+            log(f"verify: {broken}")
     verdict_mean, verdict_var = verdicts
     verdict = ("disagrees" if "disagrees" in verdicts else
                "agrees" if verdicts == ["agrees", "agrees"] else "undecided")
