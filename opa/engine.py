@@ -31,6 +31,7 @@ from opa._elements import (
 )
 from opa._gpu import check_device
 from opa._gpu import require as require_gpu
+from opa._lock import OutputLock
 from opa._measure import Measure, parse
 from opa._memory import check_memory
 from opa._model import (
@@ -70,6 +71,7 @@ __all__ = [
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
+    "OutputLock",
     "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
     "as_system", "atomic_write", "chebyshev_u", "check_count", "check_device", "check_instance",
