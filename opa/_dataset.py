@@ -16,12 +16,14 @@ import sys
 import tempfile
 import time
 import warnings
+import weakref
 from collections.abc import Callable
 from importlib import metadata
 
 import numpy as np
 
 from opa._lazy import lazy
+from opa._lock import LOCK_NAME, OutputLock, forget, holder_elsewhere, pid_alive
 from opa._model import PARAMETER_NAMES, SolverOptions
 
 xr = lazy("xarray")
@@ -155,18 +157,6 @@ def current_umask() -> int:
     return old
 
 
-def _pid_alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OverflowError, OSError):
-        return True  # another user's process, or not ours to judge
-    return True
-
-
 def clean_stale_temporaries(directory: str | os.PathLike) -> list[str]:
     """Remove the temporaries that interrupted writes left in ``directory``.
 
@@ -190,7 +180,7 @@ def clean_stale_temporaries(directory: str | os.PathLike) -> list[str]:
         match = _TEMPORARY.match(entry.name)
         try:
             if match:
-                stale = not _pid_alive(int(match[1]))
+                stale = not pid_alive(int(match[1]))
             elif _LEGACY.fullmatch(entry.name):
                 info = entry.stat(follow_symlinks=False)
                 stale = info.st_size == 0 and now - info.st_mtime > _LEGACY_AGE
@@ -265,11 +255,15 @@ def write_netcdf(ds: xr.Dataset, path: str | os.PathLike) -> None:
 # --------------------------------------------------------------------------- the store
 
 #: the format of a store folder, written to its marker file: a folder without the marker
-#: (the parts of a version before the one store) or with another format is refused
-STORE_FORMAT = "opa-mc store 1"
+#: (the parts of a version before the one store) or with another format is refused.
+#: 2: every part carries the digest of its content (``DIGEST_ENTRY``); the parts of
+#: format 1 do not, and cannot be trusted
+STORE_FORMAT = "opa-mc store 2"
 STORE_MARKER = "store.json"
 #: where a part keeps its key: an ``.npz`` entry, a netCDF attribute, a JSON member
 KEY_ENTRY = "store_key"
+#: where a part keeps the digest of its content (:func:`content_digest`), likewise
+DIGEST_ENTRY = "store_digest"
 _SUFFIXES = (".npz", ".nc", ".json")
 _PART = re.compile(r".+_[0-9a-f]{12}\.(npz|nc|json)(\.bad)?")
 
@@ -317,6 +311,38 @@ def _canonical(value):
     raise TypeError(f"digest: cannot hash a {type(value).__name__} ({value!r:.60})")
 
 
+def content_digest(key: str, content) -> str:
+    """The digest a part is written with and checked against on every read: sha256 of
+    its key and its content as it reads back (:func:`digest`; a part's arrays by dtype,
+    shape and bytes, a Dataset by :func:`_dataset_form`)."""
+    return digest({"key": key, "content": content})
+
+
+def _dataset_form(ds) -> dict:
+    """What a netCDF part holds, for :func:`content_digest`: every variable's dims,
+    values and attributes, and the global attributes but the store's own."""
+    return {"attrs": _attrs_form(ds.attrs),
+            "variables": {str(name): {"dims": list(v.dims), "values": _values_form(v.values),
+                                      "attrs": _attrs_form(v.attrs)}
+                          for name, v in ds.variables.items()}}
+
+
+def _attrs_form(attrs) -> dict:
+    return {str(k): _values_form(v) for k, v in attrs.items()
+            if k not in (KEY_ENTRY, DIGEST_ENTRY)}
+
+
+def _values_form(value):
+    if isinstance(value, bytes):
+        return {"__bytes__": value.hex()}
+    if isinstance(value, np.ndarray) and value.dtype.hasobject:
+        return {"__objects__": list(value.shape),
+                "items": [_values_form(v) for v in value.ravel().tolist()]}
+    if isinstance(value, (list, tuple)):
+        return [_values_form(v) for v in value]
+    return value
+
+
 def _plain(value):
     """``value`` as JSON gives it back (tuples as lists, numpy scalars as Python)."""
     return json.loads(json.dumps(value, default=lambda v: v.item()))
@@ -346,27 +372,41 @@ def _short(value) -> str:
 
 class Store:
     """The one resume store: a folder of the finished parts of long jobs, each found again
-    by a hash of its inputs (:func:`digest`).
+    by a hash of its inputs (:func:`digest`), each trusted only with the content it was
+    written with (:func:`content_digest`).
 
     Layout::
 
         store.json                    the format (STORE_FORMAT), the job, its settings
-        <name>_<key[:12]>.npz         a part: arrays, numbers, strings (+ its full key)
-        <name>_<key[:12]>.nc          a part: an xarray Dataset (its key an attribute)
-        <name>_<key[:12]>.json        a part: JSON values (its key a member)
+        <name>_<key[:12]>.npz         a part: arrays, numbers, strings (+ key, digest)
+        <name>_<key[:12]>.nc          a part: an xarray Dataset (key, digest: attributes)
+        <name>_<key[:12]>.json        a part: JSON values (key, digest: members)
+        .opa-mc.lock                  with ``lock``: the process writing the folder
 
     The key of a part is the digest of the store's settings and the part's ``inputs``
     (everything the part depends on), and the file stores it: a part copied or left from
-    other inputs is found out. Every file is written to a temporary beside it, flushed
-    and renamed (:func:`atomic_write`), so a file under its final name is complete;
-    temporaries of a killed writer are removed when a store opens the folder
-    (``removed``). A part that cannot be read, stores another key or fails the caller's
-    ``check`` is damaged: moved aside to ``<file>.bad`` (replacing an older one), named
-    in one ``log`` line, and computed again.
+    other inputs is found out. The file also stores the digest of its key and content as
+    they read back, checked on every read: a part edited after it was written (a value
+    changed on disk, a NaN set) is found out too. Every file is written to a temporary
+    beside it, flushed and renamed (:func:`atomic_write`), so a file under its final name
+    is complete; temporaries of a killed writer are removed when a store opens the folder
+    (``removed``). A part that cannot be read, stores another key or another content
+    than its digest, or fails the caller's ``check`` is damaged: moved aside to
+    ``<file>.bad`` (replacing an older one), named in one ``log`` line, and computed
+    again.
 
     A folder without ``store.json`` that holds anything (the parts of an opa-mc version
     before this store, or files that are not a store's) is refused with one message
-    naming it: remove it to start over. So is a folder of another format or another job.
+    naming it: remove it to start over. So is a folder of another format (format 1: its
+    parts carry no content digest) or another job.
+
+    With ``lock``, the store takes the folder's lock (:class:`opa._lock.OutputLock`)
+    before it looks at anything: a folder another running process writes is refused
+    (``OutputInUse``, a ValueError naming that process), a lock left by a dead process is
+    taken over (one ``log`` line). The lock is held until :meth:`close` (or the end of a
+    ``with`` block, or the store's collection, or :func:`remove_store` of the folder in
+    this process). Stores written by several processes at once (the trust map's tasks,
+    each with its own ``Store`` of OUTDIR/parts) take none: their run locks OUTDIR.
 
     Parameters
     ----------
@@ -376,8 +416,9 @@ class Store:
         one run (a checkpoint, a sweep's points): a folder written with other settings is
         refused naming the first difference. None: the folder is shared by runs (the
         trust map's parts), each part found by its own inputs alone.
-    log : callable taking one line (damaged parts); default ``warnings.warn``
-        (RuntimeWarning).
+    log : callable taking one line (damaged parts, a stale lock taken over); default
+        ``warnings.warn`` (RuntimeWarning) for parts, the ``opa_mc`` logger for a lock.
+    lock : take the folder's lock (above); default False.
 
     Examples
     --------
@@ -390,7 +431,7 @@ class Store:
     """
 
     def __init__(self, directory: str | os.PathLike, job: str, settings: dict | None = None,
-                 log: Callable[[str], object] | None = None):
+                 log: Callable[[str], object] | None = None, *, lock: bool = False):
         self.directory = os.fspath(directory)
         self.job = job
         self.log = log if log is not None else _warn
@@ -398,6 +439,19 @@ class Store:
         self.set_aside = 0  # damaged parts it moved aside
         if os.path.exists(self.directory) and not os.path.isdir(self.directory):
             raise ValueError(f"{job} {self.directory!r} is not a directory")
+        self.lock = None
+        self._release = None
+        if lock:
+            self.lock = OutputLock(self.directory, job, folder=True, log=log).acquire()
+            self._release = weakref.finalize(self, self.lock.release)
+        try:
+            self._open(settings)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, settings: dict | None) -> None:
+        job = self.job
         os.makedirs(self.directory, exist_ok=True)
         self.removed = sorted(clean_stale_temporaries(self.directory))
         header = {"format": STORE_FORMAT, "job": job,
@@ -406,7 +460,8 @@ class Store:
         if os.path.exists(marker):
             self._check(marker, header)
         else:
-            found = sorted(n for n in os.listdir(self.directory) if not n.startswith(TEMP_PREFIX))
+            found = sorted(n for n in os.listdir(self.directory)
+                           if not n.startswith((TEMP_PREFIX, LOCK_NAME)))
             if found:
                 raise ValueError(
                     f"{job} {self.directory!r} holds files but no {STORE_MARKER} ({found[0]}"
@@ -418,6 +473,17 @@ class Store:
                          clean=False)
         self.header = header
 
+    def close(self) -> None:
+        """Release the folder's lock, if the store took it (again: nothing)."""
+        if self._release is not None:
+            self._release()
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def _check(self, marker: str, header: dict) -> None:
         where = f"{self.job} {self.directory!r}"
         try:
@@ -428,6 +494,11 @@ class Store:
         except (OSError, ValueError) as err:
             raise ValueError(f"{where} has an unreadable {STORE_MARKER} ({err}); remove it "
                              f"to start over") from None
+        if old.get("format") == "opa-mc store 1":
+            raise ValueError(f"{where} holds parts of format 'opa-mc store 1', written "
+                             f"without the digests of their contents that this version "
+                             f"({STORE_FORMAT!r}) checks on resume: remove it to start "
+                             f"over")
         if old.get("format") != STORE_FORMAT:
             raise ValueError(f"{where} holds parts of another format ({old.get('format')!r}; "
                              f"this version reads {STORE_FORMAT!r}): remove it to start over")
@@ -460,7 +531,7 @@ class Store:
 
         ``.npz``: a dict (0-d entries as Python scalars); ``.nc``: an xarray Dataset;
         ``.json``: the JSON value saved. ``check(content)`` returns what is wrong with a
-        part that reads and stores its key, or None."""
+        part that reads, stores its key and matches its digest, or None."""
         key = self.key(inputs)
         return self._load(self._where(name, key, suffix), key, suffix, check)
 
@@ -468,15 +539,22 @@ class Store:
         if not os.path.lexists(path):
             return None
         try:
-            stored, content = _READ[suffix](path)
-        except Exception as err:  # noqa: BLE001 -- whatever makes it unreadable: recompute
-            reason = f"cannot be read ({type(err).__name__}: {err})".replace("\n", " ")
-        else:
+            stored, sealed, content, form = _READ[suffix](path)
             if stored is None:
                 reason = "stores no key"
             elif stored != key:
                 reason = f"stores the key {stored[:12]}, not {key[:12]}: other inputs"
+            elif sealed is None:
+                reason = "stores no digest of its content (written by another version?)"
+            elif sealed != content_digest(key, form):
+                reason = ("its content differs from the digest it was written with: "
+                          "edited or corrupted since")
             else:
+                reason = None
+        except Exception as err:  # noqa: BLE001 -- whatever makes it unreadable: recompute
+            reason = f"cannot be read ({type(err).__name__}: {err})".replace("\n", " ")
+        else:
+            if reason is None:
                 reason = None if check is None else check(content)
                 if reason is None:
                     return content
@@ -491,13 +569,13 @@ class Store:
         return None
 
     def save(self, name: str, inputs, content, suffix: str = ".npz") -> None:
-        """Write part ``name`` atomically, with its key."""
+        """Write part ``name`` atomically, with its key and the digest of its content."""
         key = self.key(inputs)
         self._save(self._where(name, key, suffix), key, content, suffix)
 
     def _save(self, path: str, key: str, content, suffix: str) -> None:
-        if suffix == ".npz" and KEY_ENTRY in content:
-            raise ValueError(f"{KEY_ENTRY} is a reserved name in a part")
+        if suffix == ".npz" and (KEY_ENTRY in content or DIGEST_ENTRY in content):
+            raise ValueError(f"{KEY_ENTRY} and {DIGEST_ENTRY} are reserved names in a part")
         atomic_write(path, lambda tmp: _WRITE[suffix](tmp, content, key), suffix=suffix,
                      clean=False)
 
@@ -513,18 +591,19 @@ class Store:
         content = compute()  # before the temporary exists: a kill here leaves nothing
         self._save(path, key, content, suffix)
         self.computed += 1
-        return _READ[suffix](path)[1]
+        return _READ[suffix](path)[2]
 
 
 def remove_store(directory: str | os.PathLike) -> None:
     """Delete a store folder's files once its job's result is safely written.
 
-    Only what a store holds (its marker, part files, ``.bad`` parts, stale temporaries)
-    is removed; the folder itself goes when nothing else is left in it. A missing folder
-    is fine.
+    Only what a store holds (its marker, part files, ``.bad`` parts, stale temporaries,
+    this process's lock or a stale one) is removed; the folder itself goes when nothing
+    else is left in it. A missing folder is fine; a folder whose lock another running
+    process holds is left alone.
     """
     directory = os.fspath(directory)
-    if not os.path.isdir(directory):
+    if not os.path.isdir(directory) or holder_elsewhere(directory, folder=True) is not None:
         return
     clean_stale_temporaries(directory)
     for name in os.listdir(directory):
@@ -534,6 +613,12 @@ def remove_store(directory: str | os.PathLike) -> None:
                 os.remove(os.path.join(directory, name))
             except OSError:
                 pass
+    forget(directory, folder=True)  # this process's lock
+    if holder_elsewhere(directory, folder=True) is None:
+        try:
+            os.remove(os.path.join(directory, LOCK_NAME))  # a stale one
+        except OSError:
+            pass
     try:
         os.rmdir(directory)
     except OSError:  # something else lives there
@@ -545,33 +630,53 @@ def _write_text(path: str, text: str) -> None:
         file.write(text)
 
 
+# Each reader returns (key, digest stored, content, what the digest covers); each writer
+# stores the digest of the content as its reader gives it back.
+
 def _write_npz(path: str, content: dict, key: str) -> None:
+    arrays = {name: np.asanyarray(value) for name, value in content.items()}
     with open(path, "wb") as file:
-        np.savez(file, **content, **{KEY_ENTRY: np.str_(key)})
+        np.savez(file, **arrays, **{KEY_ENTRY: np.str_(key),
+                                    DIGEST_ENTRY: np.str_(content_digest(key, arrays))})
 
 
 def _read_npz(path: str):
     # our own handle: np.load leaks its file when the archive is damaged
     with open(path, "rb") as file, np.load(file, allow_pickle=False) as npz:
-        content = {name: npz[name] for name in npz.files}  # reads, CRCs all
-    content = {name: (a.item() if a.ndim == 0 else a) for name, a in content.items()}
-    stored = content.pop(KEY_ENTRY, None)
-    return (None if stored is None else str(stored)), content
+        arrays = {name: npz[name] for name in npz.files}  # reads, CRCs all
+    stored, sealed = arrays.pop(KEY_ENTRY, None), arrays.pop(DIGEST_ENTRY, None)
+    content = {name: (a.item() if a.ndim == 0 else a) for name, a in arrays.items()}
+    return (None if stored is None else str(stored)), \
+        (None if sealed is None else str(sealed)), content, arrays
 
 
 def _write_nc(path: str, ds, key: str) -> None:
-    ds.assign_attrs({KEY_ENTRY: key}).to_netcdf(path, engine="netcdf4")
+    ds = ds.copy(deep=False)
+    ds.attrs = {k: v for k, v in ds.attrs.items() if k != DIGEST_ENTRY}
+    ds.attrs[KEY_ENTRY] = key
+    ds.to_netcdf(path, engine="netcdf4")
+    # the digest of the dataset as it reads back (netCDF turns attributes into numpy
+    # values, masks fill values, ...), added beside the key
+    form = _read_nc(path)[3]
+    import netCDF4
+
+    with netCDF4.Dataset(path, "a") as nc:
+        nc.setncattr(DIGEST_ENTRY, content_digest(key, form))
 
 
 def _read_nc(path: str):
     with xr.open_dataset(path, engine="netcdf4") as ds:
         ds = ds.load()
     stored = ds.attrs.pop(KEY_ENTRY, None)
-    return (None if stored is None else str(stored)), ds
+    sealed = ds.attrs.pop(DIGEST_ENTRY, None)
+    return (None if stored is None else str(stored)), \
+        (None if sealed is None else str(sealed)), ds, _dataset_form(ds)
 
 
 def _write_json(path: str, content, key: str) -> None:
-    _write_text(path, json.dumps({KEY_ENTRY: key, "content": content}))
+    content = json.loads(json.dumps(content))  # as it reads back
+    _write_text(path, json.dumps({KEY_ENTRY: key, DIGEST_ENTRY: content_digest(key, content),
+                                  "content": content}))
 
 
 def _read_json(path: str):
@@ -579,8 +684,9 @@ def _read_json(path: str):
         data = json.load(file)
     if not isinstance(data, dict) or "content" not in data:
         raise ValueError("not a part")
-    stored = data.get(KEY_ENTRY)
-    return (None if stored is None else str(stored)), data["content"]
+    stored, sealed = data.get(KEY_ENTRY), data.get(DIGEST_ENTRY)
+    return (None if stored is None else str(stored)), \
+        (None if sealed is None else str(sealed)), data["content"], data["content"]
 
 
 _WRITE = {".npz": _write_npz, ".nc": _write_nc, ".json": _write_json}

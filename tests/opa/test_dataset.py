@@ -10,6 +10,7 @@ import stat
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -222,8 +223,15 @@ def test_a_folder_of_an_older_version_or_of_another_run_is_refused(tmp_path):
     marker["format"] = "opa-mc store 0"
     (folder / "store.json").write_text(json.dumps(marker))
     with pytest.raises(ValueError, match=r"another format \('opa-mc store 0'; this version "
-                                         r"reads 'opa-mc store 1'\)"):
+                                         r"reads 'opa-mc store 2'\)"):
         Store(folder, "job", settings={"a": 1, "b": {"c": [1, 2]}})
+    # the previous format: its parts carry no digest of their contents
+    marker["format"] = "opa-mc store 1"
+    (folder / "store.json").write_text(json.dumps(marker))
+    with pytest.raises(ValueError, match=r"holds parts of format 'opa-mc store 1', written "
+                                         r"without the digests .*remove it") as err:
+        Store(folder, "job", settings={"a": 1, "b": {"c": [1, 2]}})
+    assert "\n" not in str(err.value)
     (tmp_path / "file").write_text("")
     with pytest.raises(ValueError, match="is not a directory"):
         Store(tmp_path / "file", "job")
@@ -265,3 +273,130 @@ def test_a_write_that_fails_names_the_file_asked_for_and_leaves_nothing(tmp_path
         assert raised.value.filename == str(target) and raised.value.errno == code
         assert text in raised.value.strerror
         assert list(tmp_path.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- edited parts
+
+
+def _edit_one_number(path: str, suffix: str) -> None:
+    """Change one number of a part on disk, leaving its key and digest as they were."""
+    if suffix == ".npz":
+        with np.load(path) as stored:
+            arrays = {name: stored[name] for name in stored.files}
+        assert {"store_key", "store_digest"} <= set(arrays)
+        arrays["a"] = arrays["a"].copy()
+        arrays["a"][1] += 1e-12
+        with open(path, "wb") as file:
+            np.savez(file, **arrays)
+    elif suffix == ".nc":
+        import netCDF4
+
+        with netCDF4.Dataset(path, "a") as nc:
+            assert "store_digest" in nc.ncattrs()
+            nc["x"][1] = np.nan
+    else:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+        assert "store_digest" in data
+        data["content"]["a"][0] = 2.5
+        with open(path, "w", encoding="utf-8") as file:
+            json.dump(data, file)
+
+
+PARTS = [
+    (".npz", {"a": np.arange(3.0), "s": "text", "n": 7}),
+    (".json", {"a": [1.5, None], "s": "text"}),
+    (".nc", xr.Dataset({"x": ("t", np.arange(3.0), {"units": "1"})},
+                       coords={"t": np.arange(3)}, attrs={"model": "m", "level": 2})),
+]
+
+
+def _same(out, content, suffix):
+    if suffix == ".nc":
+        xr.testing.assert_identical(out, content)
+    else:
+        assert set(out) == set(content)
+        for name in content:
+            np.testing.assert_array_equal(out[name], content[name])
+
+
+@pytest.mark.parametrize(("suffix", "content"), PARTS)
+def test_a_part_edited_on_disk_is_set_aside_named_and_recomputed(tmp_path, suffix, content):
+    """Issue 45: a part whose content was changed after it was written (key and digest
+    left as they were) is found out on reading, moved aside to .bad, named in one line
+    and computed again; an untouched part beside it is read back."""
+    store = Store(tmp_path, "job")
+    for k in (1, 2):
+        store.get("thing", {"k": k}, lambda: content, suffix)
+    edited = store.path("thing", {"k": 1}, suffix)
+    _edit_one_number(edited, suffix)
+
+    lines = []
+    again = Store(tmp_path, "job", log=lines.append)
+    got = again.get("thing", {"k": 1}, lambda: content, suffix)
+    kept = again.get("thing", {"k": 2}, lambda: pytest.fail("recomputed"), suffix)
+    assert again.computed == 1 and again.set_aside == 1
+    assert len(lines) == 1 and "\n" not in lines[0]
+    assert lines[0].startswith(f"job part {edited} is damaged (its content differs from the "
+                               f"digest it was written with")
+    assert os.path.exists(edited + ".bad")
+    _same(got, content, suffix)
+    _same(kept, content, suffix)
+    assert again.load("thing", {"k": 1}, suffix) is not None  # the recomputed one is whole
+
+
+def test_the_digest_is_of_the_content_not_of_the_bytes(tmp_path):
+    """A JSON part written out again with other spacing holds the same content: kept."""
+    store = Store(tmp_path, "job")
+    store.get("p", {}, lambda: {"a": [0.1, 2], "b": "x"}, ".json")
+    path = store.path("p", {}, ".json")
+    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    with open(path, "w", encoding="utf-8") as file:
+        json.dump(data, file, indent=4, sort_keys=True)
+    assert Store(tmp_path, "job", log=pytest.fail).load("p", {}, ".json") == \
+        {"a": [0.1, 2], "b": "x"}
+
+
+def test_a_part_without_its_digest_is_set_aside(tmp_path):
+    lines = []
+    store = Store(tmp_path, "job", log=lines.append)
+    store.get("p", {}, lambda: {"v": np.arange(3)})
+    path = store.path("p", {})
+    with np.load(path) as stored:
+        arrays = {name: stored[name] for name in stored.files if name != "store_digest"}
+    with open(path, "wb") as file:
+        np.savez(file, **arrays)
+    assert store.get("p", {}, lambda: {"v": np.arange(3)})["v"].tolist() == [0, 1, 2]
+    assert len(lines) == 1 and "stores no digest of its content" in lines[0]
+    with pytest.raises(ValueError, match="reserved"):
+        store.save("q", {}, {"store_digest": 1})
+
+
+def test_an_edited_slice_of_a_stochastic_diagram_is_recomputed(tmp_path):
+    """Issue 45's case end to end: the parts of a stochastic diagram, one slice's
+    probability scaled and another's Monte Carlo type changed on disk between two runs:
+    the rerun names both, computes them again and gives the clean run's diagram (it
+    wrote NaN probabilities and exited 0 before)."""
+    from opa import preset
+    from opa.dynamics._stochastic import stochastic_diagram
+
+    kw = dict(sigma=0.03, samples=8, transient=200, extra_states=1, coexist=4,
+              parts=str(tmp_path / "parts"))
+    values = [0.04, 0.05]
+    clean = stochastic_diagram(preset("3.1"), "c", values, **kw)
+    slices = sorted((tmp_path / "parts").glob("slice-*.npz"))
+    assert len(slices) == 2
+    for path, (entry, edit) in zip(slices, [("prob_value", lambda a: a * 0.5),
+                                            ("mc_type", lambda a: np.full_like(a, "2/2"))]):
+        with np.load(path) as stored:
+            arrays = {name: stored[name] for name in stored.files}
+        arrays[entry] = edit(arrays[entry])
+        with open(path, "wb") as file:
+            np.savez(file, **arrays)
+    lines = []
+    again = stochastic_diagram(preset("3.1"), "c", values, **kw, log=lines.append)
+    damaged = [line for line in lines if " is damaged " in line]
+    assert len(damaged) == 2 and all(str(p) in line for p, line in zip(slices, damaged))
+    assert all(p.with_name(p.name + ".bad").exists() for p in slices)
+    assert np.isfinite(again.probability.values).all()
+    for name in ("probability", "mc_probability", "mc_type", "mc_xi", "boundary_xi"):
+        np.testing.assert_array_equal(again[name].values, clean[name].values, err_msg=name)
