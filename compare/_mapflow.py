@@ -36,7 +36,7 @@ from compare._mapdata import STREAMED_DIM
 from compare._convergence import PENDING, run_convergence
 from compare._trustmap import SLICES, _Map, clear_slices, frontier, frontier_part, \
     frontier_study
-from opa.engine import Store, true_system_work, write_netcdf
+from opa.engine import OutputLock, Store, true_system_work, write_netcdf
 
 #: frontier runs that share one computation run as one task: the control-variate rows
 #: each use the same adaptive ME-OPA control run, done once per task
@@ -323,33 +323,42 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
 
     ``started``: the ``time.perf_counter()`` reading at which the command started (the
     one clock of a run); the attribute ``wall_seconds`` is the time from it to the
-    finished dataset (default: from the call)."""
-    started = time.perf_counter() if started is None else started
-    pooled = cfg.processes > 1 or cfg.scheduler is not None
-    ds = _Map(cfg, progress=progress, log=log).run(run_map_tasks if pooled else None)
-    for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
-        if dim not in ds.coords:
-            ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
-                                         {"long_name": f"index along {dim}", "units": "1"})})
-    if "frontier_run" in ds.dims:
-        ds["frontier_run"].attrs.update(long_name="index of a run of the cost-accuracy study",
-                                        units="1")
-        for name, text in (("frontier_method", "method of the run"),
-                           ("frontier_law", "impact law of the run (true system: none)")):
-            if name in ds and "long_name" not in ds[name].attrs:
-                ds[name].attrs["long_name"] = text
-    ds.attrs["wall_seconds"] = time.perf_counter() - started
-    path = os.path.join(cfg.outdir, "validate.nc")
-    import dask
+    finished dataset (default: from the call).
 
-    try:
-        # the bulk of the values' slices, one at a time, from their files to validate.nc,
-        # in this process
-        with dask.config.set(scheduler="synchronous"):
-            write_netcdf(ds, path)
-    finally:
-        clear_slices(os.path.join(cfg.outdir, SLICES))
-    return open_map(path)
+    OUTDIR is locked (``OUTDIR/.opa-mc.lock``, :class:`opa.engine.OutputLock`) from the
+    start to the write of validate.nc: while one run holds it, another run with the same
+    OUTDIR raises ValueError at once, naming the path and the holder's pid and command
+    line (the CLI: exit status 2); the lock of a killed run is taken over (one ``log``
+    line)."""
+    started = time.perf_counter() if started is None else started
+    # OUTDIR is locked from before the first part to validate.nc: a second run there is
+    # refused at once, naming this one (its tasks share OUTDIR/parts, unlocked)
+    with OutputLock(cfg.outdir, "output folder", folder=True, log=log):
+        pooled = cfg.processes > 1 or cfg.scheduler is not None
+        ds = _Map(cfg, progress=progress, log=log).run(run_map_tasks if pooled else None)
+        for dim in ds.dims:  # every dimension has a coordinate (the frontier's run has none)
+            if dim not in ds.coords:
+                ds = ds.assign_coords({dim: (dim, np.arange(ds.sizes[dim]),
+                                             {"long_name": f"index along {dim}", "units": "1"})})
+        if "frontier_run" in ds.dims:
+            ds["frontier_run"].attrs.update(long_name="index of a run of the cost-accuracy study",
+                                            units="1")
+            for name, text in (("frontier_method", "method of the run"),
+                               ("frontier_law", "impact law of the run (true system: none)")):
+                if name in ds and "long_name" not in ds[name].attrs:
+                    ds[name].attrs["long_name"] = text
+        ds.attrs["wall_seconds"] = time.perf_counter() - started
+        path = os.path.join(cfg.outdir, "validate.nc")
+        import dask
+
+        try:
+            # the bulk of the values' slices, one at a time, from their files to validate.nc,
+            # in this process
+            with dask.config.set(scheduler="synchronous"):
+                write_netcdf(ds, path)
+        finally:
+            clear_slices(os.path.join(cfg.outdir, SLICES))
+        return open_map(path)
 
 
 def open_map(path: str) -> xr.Dataset:

@@ -14,8 +14,15 @@ version, and the format of the chunk files (``FORMAT``). A rerun with the same d
 and identical settings loads the finished chunks; any difference means the directory
 belongs to another run and is refused, naming the first difference; so is a directory of
 an older version (without ``store.json``). A chunk file that is damaged or does not fit
-is moved aside to ``.bad``, named in the log and computed again. The chunks are merged in
+is moved aside to ``.bad``, named in the log and computed again; so is a chunk file edited
+since it was written (each carries the digest of its content). The chunks are merged in
 their fixed order whether loaded or computed, so the resumed result is bit-identical.
+
+The directory is locked while the checkpoint is open (``Store(lock=True)``,
+:mod:`opa._lock`): a second run on the same directory is refused at once with one line
+naming the process that writes it; the lock of a killed run is taken over (one log line).
+It is released by :meth:`Checkpoint.close`, when the checkpoint is collected (at the end
+of ``simulate_mc``), by ``remove_checkpoint`` in the same process, or at exit.
 """
 
 from __future__ import annotations
@@ -45,14 +52,19 @@ class Checkpoint:
     Raises
     ------
     ValueError
-        The directory belongs to another run, to an older version, or is not a directory.
+        The directory belongs to another run, to an older version, is not a directory,
+        or another running process writes it (``OutputInUse``, naming that process).
     """
 
     def __init__(self, directory: str | os.PathLike, manifest: dict,
                  log: Callable[[str], object] | None = None):
         self.store = Store(directory, "Monte Carlo checkpoint",
-                           settings={"format": FORMAT, **manifest}, log=log)
+                           settings={"format": FORMAT, **manifest}, log=log, lock=True)
         self.directory = self.store.directory
+
+    def close(self) -> None:
+        """Release the directory's lock (also done when the checkpoint is collected)."""
+        self.store.close()
 
     @staticmethod
     def _name(index: int) -> str:

@@ -61,10 +61,13 @@ class OutputInUse(ValueError):
 # lock file (real path) -> [pid of the holding process, holds, token]
 _HELD: dict[str, list] = {}
 _GUARD = threading.Lock()
+_TAKING = threading.Lock()
 
 
 def _forget_in_child() -> None:
+    global _GUARD, _TAKING
     _HELD.clear()
+    _GUARD, _TAKING = threading.Lock(), threading.Lock()  # a thread may have held them
 
 
 if hasattr(os, "register_at_fork"):
@@ -80,8 +83,8 @@ def lock_file(path: str | os.PathLike, folder: bool) -> str:
 def command_line(pid: int | None = None) -> str | None:
     """The command line of process ``pid`` (default: this one) as a lock records it
     (``opa-mc validate --outdir DIR``: the program's base name, white space collapsed, at
-    most 200 characters: its start and end), read from ``/proc``; this process's falls back on sys.argv.
-    None where it cannot be read."""
+    most 200 characters: its start and end), read from ``/proc``; for this process, from
+    sys.argv where ``/proc`` cannot be read. None where it cannot be read."""
     try:
         with open(f"/proc/{'self' if pid is None else pid}/cmdline", "rb") as file:
             argv = [a.decode(errors="replace") for a in file.read().split(b"\0") if a]
@@ -236,6 +239,10 @@ class OutputLock:
         """Take the lock (module docstring); returns ``self``."""
         if self.held:
             return self
+        with _TAKING:  # one thread of this process at a time: none sees another's lock
+            return self._acquire()  # between its creation and its registration
+
+    def _acquire(self) -> OutputLock:
         key = os.path.realpath(self.lockfile)
         with _GUARD:
             entry = _HELD.get(key)

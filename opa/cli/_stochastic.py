@@ -2,14 +2,18 @@
 probabilities along a control parameter, boundaries in xi, Monte Carlo beside them).
 
 Wired into ``opa.cli._main.build_parser`` by ``register_stochastic(sub)``. User mistakes
-raise ``ValueError`` (reported by ``opa.cli._main.main`` as one line, exit 2).
+raise ``ValueError`` (reported by ``opa.cli._main.main`` as one line, exit 2), and so does
+a second run to the same ``--out`` while the first runs (the lock of ``OUT.parts``,
+:mod:`opa._lock`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 
+from opa._lock import OutputLock
 from opa.cli._args import parse_sweep, positive_int, whole_number
 from opa._model import PARAMETER_NAMES
 from opa.cli._flags import _model_flags, _output_flags, _solver_flags
@@ -89,23 +93,27 @@ def cmd_stochastic(args) -> int:
     osc = oscillator_from(args)
     start = time.perf_counter()
     log = None if args.quiet else (lambda line: print(f"opa-mc: {line}", file=sys.stderr))
-    ds = stochastic_diagram(osc, name, values, sigma=args.sigma, uncertain=args.uncertain,
-                            distribution=args.distribution, samples=args.samples,
-                            seed=args.seed, options=options_from(args),
-                            transient=args.transient, record=args.record,
-                            extra_states=args.extra_states, coexist=coexist,
-                            emr=args.emr, emr_order=args.emr_order or 4,
-                            workers=args.workers, scheduler=args.scheduler,
-                            parts=f"{args.out}.parts" if args.out else None, log=log)
-    elapsed = time.perf_counter() - start
-    if args.out:
-        import shutil
+    parts = f"{args.out}.parts" if args.out else None
+    # the lock of OUT.parts, held from before the first value to the final write of OUT
+    # and the removal of the parts: a second run to the same --out is refused at once
+    with contextlib.ExitStack() as held:
+        if parts is not None:
+            held.enter_context(OutputLock(parts, "stochastic diagram", folder=True, log=log))
+        ds = stochastic_diagram(osc, name, values, sigma=args.sigma, uncertain=args.uncertain,
+                                distribution=args.distribution, samples=args.samples,
+                                seed=args.seed, options=options_from(args),
+                                transient=args.transient, record=args.record,
+                                extra_states=args.extra_states, coexist=coexist,
+                                emr=args.emr, emr_order=args.emr_order or 4,
+                                workers=args.workers, scheduler=args.scheduler,
+                                parts=parts, log=log)
+        elapsed = time.perf_counter() - start
+        if args.out:
+            from opa._dataset import remove_store, write_netcdf
 
-        from opa._dataset import write_netcdf
-
-        write_netcdf(ds, args.out)
-        if not args.keep_parts:  # each value was kept as it finished: a killed run resumes
-            shutil.rmtree(f"{args.out}.parts", ignore_errors=True)
+            write_netcdf(ds, args.out)
+            if not args.keep_parts:  # each value was kept as it finished: a killed run resumes
+                remove_store(parts)
     if args.plot:
         from opa.plots._stochastic import plot_stochastic
 

@@ -323,8 +323,11 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     parts : a folder where each finished control value is kept as it finishes, a
         :class:`opa._dataset.Store` keyed by everything the value depends on; a rerun
         with the same folder reads them back instead of computing them again (an
-        interrupted diagram resumes), and a damaged file is set aside, named (``log``,
-        else a warning) and computed again. None: nothing is kept.
+        interrupted diagram resumes), and a damaged file (unreadable, or edited since it
+        was written: each part carries the digest of its content) is set aside, named
+        (``log``, else a warning) and computed again. The folder is locked while the
+        diagram runs: another process writing it is refused (ValueError naming it).
+        None: nothing is kept.
     log : callable taking a progress line, or None.
 
     Returns
@@ -400,53 +403,57 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                        settings=settings, xtol=float(xtol), extra_states=extra_states,
                        coexist=min(coexist, int(samples)))
              for i, v in enumerate(values)]
-    store = None if parts is None else Store(parts, "stochastic diagram", log=log)
+    store = (None if parts is None else
+             Store(parts, "stochastic diagram", log=log, lock=True))
+    try:  # the lock of the parts folder is held until the diagram is assembled
+        def inputs(task):
+            return {"task": repr(task), "version": package_version()}
 
-    def inputs(task):
-        return {"task": repr(task), "version": package_version()}
+        def name(task):
+            return f"slice-{parameter}{task.value:g}"
 
-    def name(task):
-        return f"slice-{parameter}{task.value:g}"
+        results = {}
+        todo = []
+        for i, task in enumerate(tasks):
+            found = None if store is None else store.load(name(task), inputs(task))
+            if found is not None:
+                results[i] = found
+                _log(log, i, len(tasks), parameter, found, reused=True)
+            else:
+                todo.append(i)
 
-    results = {}
-    todo = []
-    for i, task in enumerate(tasks):
-        found = None if store is None else store.load(name(task), inputs(task))
-        if found is not None:
-            results[i] = found
-            _log(log, i, len(tasks), parameter, found, reused=True)
+        def finish(i, piece):
+            if store is not None:
+                store.save(name(tasks[i]), inputs(tasks[i]), piece)
+                piece = store.load(name(tasks[i]), inputs(tasks[i]))  # as a rerun reads it
+            results[i] = piece
+            _log(log, i, len(tasks), parameter, piece, reused=False)
+
+        if scheduler is not None and todo:
+            _run_slices_dask(tasks, todo, finish, scheduler)
         else:
-            todo.append(i)
+            _run_slices(tasks, todo, finish, workers)
+        slices = [results[i] for i in range(len(tasks))]
+        ds = _dataset(slices, parameter, values, system, options, measure, settings, seed,
+                      samples, xtol, extra_states, coexist)
+        if emr:
+            from opa.dynamics._sweep import sweep
 
-    def finish(i, piece):
+            if log is not None:
+                log(f"the EMR (OPA N = {emr_order}, sigma = {sigma:g}) over {len(values)} "
+                    f"values of {parameter}")
+            opa = sweep("opa", parameter, values, system.replace(order=emr_order),
+                        transient=EMR_TRANSIENT, record=EMR_RECORD, options=options,
+                        workers=workers, scheduler=scheduler, progress=False, locate=False)
+            ds["emr_x"] = ((parameter, "emr_point"), opa.section_x.values, {
+                "long_name": f"stroboscopic x_0 of the EMR (OPA N = {emr_order}) after "
+                f"{EMR_TRANSIENT} periods, {EMR_RECORD} recorded", "units": "1"})
+            ds.attrs.update(emr_order=int(emr_order), emr_transient=EMR_TRANSIENT,
+                            emr_record=EMR_RECORD)
+        return ds
+    finally:
         if store is not None:
-            store.save(name(tasks[i]), inputs(tasks[i]), piece)
-            piece = store.load(name(tasks[i]), inputs(tasks[i]))  # as a rerun reads it
-        results[i] = piece
-        _log(log, i, len(tasks), parameter, piece, reused=False)
-
-    if scheduler is not None and todo:
-        _run_slices_dask(tasks, todo, finish, scheduler)
-    else:
-        _run_slices(tasks, todo, finish, workers)
-    slices = [results[i] for i in range(len(tasks))]
-    ds = _dataset(slices, parameter, values, system, options, measure, settings, seed,
-                  samples, xtol, extra_states, coexist)
-    if emr:
-        from opa.dynamics._sweep import sweep
-
-        if log is not None:
-            log(f"the EMR (OPA N = {emr_order}, sigma = {sigma:g}) over {len(values)} "
-                f"values of {parameter}")
-        opa = sweep("opa", parameter, values, system.replace(order=emr_order),
-                    transient=EMR_TRANSIENT, record=EMR_RECORD, options=options,
-                    workers=workers, scheduler=scheduler, progress=False, locate=False)
-        ds["emr_x"] = ((parameter, "emr_point"), opa.section_x.values, {
-            "long_name": f"stroboscopic x_0 of the EMR (OPA N = {emr_order}) after "
-            f"{EMR_TRANSIENT} periods, {EMR_RECORD} recorded", "units": "1"})
-        ds.attrs.update(emr_order=int(emr_order), emr_transient=EMR_TRANSIENT,
-                        emr_record=EMR_RECORD)
-    return ds
+            store.close()
 
 
 def _run_slices(tasks, todo, finish, workers) -> None:

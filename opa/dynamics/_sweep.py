@@ -19,9 +19,12 @@ to ``<out>.parts/point-NNNNN_<key>.npz`` (temporary file, fsync, atomic rename),
 (:class:`opa._dataset.Store`) whose ``store.json`` holds the sweep's settings. A rerun with
 the same settings reads the finished points back and computes only the others (a
 continuation resumes from the last finished point's final state); other settings, or a
-folder of an older version, are refused naming the folder; a damaged point is set aside
+folder of an older version, are refused naming the folder; a damaged point (unreadable,
+or edited since it was written: each part carries the digest of its content) is set aside
 with a warning and computed again. When all are done the dataset is written atomically to
-``out`` and the parts are removed. Each point starts at t = 0: continuation carries the
+``out`` and the parts are removed. The sweep holds the lock of ``<out>.parts`` from the
+start to the final write (:mod:`opa._lock`): a second sweep to the same ``out`` is refused
+at once, naming the first one's process. Each point starts at t = 0: continuation carries the
 state over, not the clock (the forcing phase is the same at the handover, since runs end
 at a multiple of 2 pi/omega, but the impulse train restarts).
 """
@@ -304,12 +307,16 @@ def _open_parts(out: str | None, manifest: dict, count: int) -> tuple[Store | No
     it holds another sweep) and the finished points it holds, by index."""
     if out is None:
         return None, {}
-    parts = Store(_parts_dir(out), "sweep", settings=manifest)
+    parts = Store(_parts_dir(out), "sweep", settings=manifest, lock=True)
     done = {}
-    for index in range(count):
-        result = parts.load(_part_name(index), {"index": index})
-        if result is not None:
-            done[index] = result
+    try:
+        for index in range(count):
+            result = parts.load(_part_name(index), {"index": index})
+            if result is not None:
+                done[index] = result
+    except BaseException:
+        parts.close()
+        raise
     return parts, done
 
 
@@ -479,47 +486,50 @@ def sweep(
                          {**kw, "continuation": continuation})
     out = None if out is None else os.fspath(out)
     parts, done = _open_parts(out, manifest, len(tasks))
+    try:  # the lock of <out>.parts is held to the final write
+        if progress is None:
+            progress = sys.stderr.isatty()
+        from tqdm.auto import tqdm
 
-    if progress is None:
-        progress = sys.stderr.isatty()
-    from tqdm.auto import tqdm
+        results = dict(done)
+        with tqdm(total=len(tasks), initial=len(done), unit="point", disable=not progress,
+                  desc=f"{model} sweep over {param}") as bar:
 
-    results = dict(done)
-    with tqdm(total=len(tasks), initial=len(done), unit="point", disable=not progress,
-              desc=f"{model} sweep over {param}") as bar:
+            def finish(result):
+                if parts is not None:
+                    _write_part(parts, result)
+                results[int(result["index"])] = result
+                bar.update(1)
 
-        def finish(result):
-            if parts is not None:
-                _write_part(parts, result)
-            results[int(result["index"])] = result
-            bar.update(1)
-
-        if continuation == "fixed":
-            todo = [t for t in tasks if t.index not in done]
-            _run_parallel(todo, finish, scheduler, executor, workers)
+            if continuation == "fixed":
+                todo = [t for t in tasks if t.index not in done]
+                _run_parallel(todo, finish, scheduler, executor, workers)
+            else:
+                order_ = tasks if continuation == "forward" else tasks[::-1]
+                _run_continuation(order_, done, finish, scheduler)
+        computed = len(tasks) - len(done)
+        ordered = [results[i] for i in range(len(tasks))]
+        ds = assemble(model, param, values, ordered, base, options, kw, continuation)
+        ds.attrs.update(points_resumed=len(done), points_computed=computed)
+        if system is None:
+            ds = add_located(ds, [], method=f"not located: {not_located}")
         else:
-            order_ = tasks if continuation == "forward" else tasks[::-1]
-            _run_continuation(order_, done, finish, scheduler)
-    computed = len(tasks) - len(done)
-    ordered = [results[i] for i in range(len(tasks))]
-    ds = assemble(model, param, values, ordered, base, options, kw, continuation)
-    ds.attrs.update(points_resumed=len(done), points_computed=computed)
-    if system is None:
-        ds = add_located(ds, [], method=f"not located: {not_located}")
-    else:
-        from opa.dynamics._continuation import locate_bifurcations
+            from opa.dynamics._continuation import locate_bifurcations
 
-        seeds = observed_seeds(param, values, ordered, base, kw)
-        points = locate_bifurcations(system, param, float(values[0]), float(values[-1]),
-                                     seeds=seeds)
-        ds = add_located(ds, points, method=(
-            "continuation of the observed periodic attractors (locate_bifurcations, "
-            f"{len(seeds)} seeds)"))
-    if out is not None:
-        write_netcdf(ds, out)
-        if not keep_parts:
-            remove_store(parts.directory)
-    return ds
+            seeds = observed_seeds(param, values, ordered, base, kw)
+            points = locate_bifurcations(system, param, float(values[0]), float(values[-1]),
+                                         seeds=seeds)
+            ds = add_located(ds, points, method=(
+                "continuation of the observed periodic attractors (locate_bifurcations, "
+                f"{len(seeds)} seeds)"))
+        if out is not None:
+            write_netcdf(ds, out)
+            if not keep_parts:
+                remove_store(parts.directory)
+        return ds
+    finally:
+        if parts is not None:
+            parts.close()
 
 
 # --------------------------------------------------------------------------- located points

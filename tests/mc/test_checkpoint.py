@@ -45,6 +45,20 @@ def chunk_files(directory) -> list[str]:
     return sorted(n for n in os.listdir(directory) if n.startswith("chunk-"))
 
 
+def forge_chunk(directory, name, arrays) -> None:
+    """Write ``arrays`` as chunk file ``name`` the way the checkpoint itself writes a
+    chunk (its key, the digest of its content): a chunk that passes the store's checks
+    and only the checkpoint's own can find wrong."""
+    from opa._dataset import Store
+
+    settings = json.loads((directory / "store.json").read_text())["settings"]
+    stem = name.rsplit("_", 1)[0]  # chunk-IIIIII-LO-HI
+    lo, hi = (int(v) for v in stem.split("-")[2:])
+    store = Store(directory, "Monte Carlo checkpoint", settings=settings)
+    assert store.path(stem, [lo, hi]) == str(directory / name)
+    store.save(stem, [lo, hi], arrays)
+
+
 @pytest.fixture
 def counted(monkeypatch):
     """The chunks computed (not loaded), by their first sample."""
@@ -107,6 +121,70 @@ def test_a_damaged_chunk_warns_by_default(tmp_path, fresh):
     assert_identical(resumed, fresh)
 
 
+@pytest.mark.parametrize(("entry", "edit"), [
+    ("x_mean", lambda a: a * 1.5),  # a value scaled
+    ("x_mean", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 3, np.nan, a)),
+    ("n_impacts", lambda a: a + 1),
+])  # fmt: skip
+def test_a_chunk_edited_on_disk_is_set_aside_and_recomputed(tmp_path, fresh, counted, entry,
+                                                           edit):
+    """Issue 45: a chunk whose numbers were changed after it was written (its key and
+    its digest left as they were) is named, moved aside and computed again; the other
+    chunks are read back, and the result is the uninterrupted run's, bit for bit."""
+    parts = tmp_path / "run.nc.parts"
+    mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
+    name = chunk_files(parts)[2]
+    with np.load(parts / name) as data:
+        arrays = {k: data[k] for k in data.files}
+    assert entry in arrays and "store_digest" in arrays
+    arrays[entry] = edit(arrays[entry])
+    with open(parts / name, "wb") as file:
+        np.savez(file, **arrays)
+    counted.clear()
+    lines = []
+    resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, log=lines.append, **RUN)
+    damaged = [line for line in lines if " is damaged " in line]
+    assert len(damaged) == 1 and str(parts / name) in damaged[0]
+    assert "differs from the digest it was written with" in damaged[0]
+    assert counted == [16]  # that chunk alone
+    assert (parts / (name + ".bad")).exists()
+    assert_identical(resumed, fresh)
+
+
+def test_a_second_process_is_refused_the_checkpoint_while_the_first_writes_it(tmp_path,
+                                                                             fresh):
+    """A run of the checkpoint in another process (SIGSTOPped while it holds the
+    directory: it writes no more) makes a run here fail at once naming its pid; once it
+    is killed, its lock is taken over (one line) and the run resumes from its chunks."""
+    parts = tmp_path / "parts"
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    script = textwrap.dedent(KILLED_RUN).replace("samples=1024", "samples=96").replace(
+        "chunk_size=8", "chunk_size=16")
+    child = subprocess.Popen([sys.executable, "-c", script, str(parts)], cwd=root)
+    try:
+        deadline = time.monotonic() + 120
+        while (not parts.exists() or not chunk_files(parts)) and child.poll() is None:
+            assert time.monotonic() < deadline, "no chunk file within 120 s"
+            time.sleep(0.01)
+        child.send_signal(signal.SIGSTOP)
+        assert child.poll() is None, "the run finished before it could be stopped"
+        with pytest.raises(ValueError, match=rf"Monte Carlo checkpoint '.*parts' is in use "
+                                             rf"by process {child.pid} \(python -c ") as err:
+            mc.simulate_mc(OSC, checkpoint=parts, **KILLED_KW)
+        assert "\n" not in str(err.value)
+    finally:
+        child.send_signal(signal.SIGKILL)
+        child.wait()
+    kept = len(chunk_files(parts))
+    lines = []
+    resumed = mc.simulate_mc(OSC, checkpoint=parts, log=lines.append, **KILLED_KW)
+    taken = [line for line in lines if "took over the lock" in line]
+    assert len(taken) == 1 and f"process {child.pid} " in taken[0]
+    assert any(f"{kept} of 6 chunks already finished" in line for line in lines), lines
+    np.testing.assert_array_equal(resumed.x_mean.values,
+                                  mc.simulate_mc(OSC, **KILLED_KW).x_mean.values)
+
+
 def test_a_chunk_with_wrong_contents_is_recomputed(tmp_path, fresh):
     """A readable file whose arrays do not fit (here: a chunk of the statistics without
     paths, copied over) is damage too."""
@@ -114,9 +192,9 @@ def test_a_chunk_with_wrong_contents_is_recomputed(tmp_path, fresh):
     mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
     name = chunk_files(parts)[2]
     with np.load(parts / name) as data:
-        arrays = {k: data[k] for k in data.files if k != "paths"}
-    with open(parts / name, "wb") as file:
-        np.savez(file, **arrays)
+        arrays = {k: data[k] for k in data.files if k not in ("paths", "store_key",
+                                                              "store_digest")}
+    forge_chunk(parts, name, arrays)
     lines = []
     resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, log=lines.append, **RUN)
     assert any("missing or unexpected" in line for line in lines)
@@ -131,9 +209,9 @@ def test_a_chunk_without_the_coefficient_sums_of_squares_is_recomputed(tmp_path,
     mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, **RUN)
     name = chunk_files(parts)[1]
     with np.load(parts / name) as data:
-        arrays = {k: data[k] for k in data.files if k not in ("x_moment_m2", "x_moment_rep")}
-    with open(parts / name, "wb") as file:
-        np.savez(file, **arrays)
+        arrays = {k: data[k] for k in data.files if k not in ("x_moment_m2", "x_moment_rep",
+                                                              "store_key", "store_digest")}
+    forge_chunk(parts, name, arrays)
     lines = []
     resumed = mc.simulate_mc(OSC, keep_paths=True, checkpoint=parts, log=lines.append, **RUN)
     damaged = [line for line in lines if " is damaged " in line]
@@ -244,6 +322,11 @@ mc.simulate_mc(opa.preset("3.2", omega=3.98), sigma=0.05, samples=1024, sampler=
                options=opa.SolverOptions(rtol=1e-9, atol=1e-9), progress=False,
                checkpoint=sys.argv[1])
 """
+
+
+KILLED_KW = dict(sigma=0.05, samples=96, sampler="sobol", seed=5, periods=40, per_period=2,
+                 chunk_size=16, order=2, options=opa.SolverOptions(rtol=1e-9, atol=1e-9),
+                 progress=False)  # fmt: skip
 
 
 def test_a_run_killed_mid_way_resumes_bit_identical(tmp_path):
