@@ -66,11 +66,13 @@ class Pairs:
 
 def pair_point(x: np.ndarray, xi: np.ndarray, controls: dict, measure: Measure,
                probabilities: dict, shape: tuple[int, int],
-               replicates: int = REPLICATES) -> Pairs:
+               replicates: int = REPLICATES, weights=None) -> Pairs:
     """Paired estimates for every control at one grid point.
 
     ``x`` (M, T): the true systems at ``xi`` (M,), replicate r holding rows
-    ``r M/R .. (r+1) M/R - 1``; ``controls``: (variant, N index) -> :class:`Control`
+    ``r M/R .. (r+1) M/R - 1``, weighted by ``weights`` (M,: each replicate's sum to 1;
+    default equal, the plain randomised QMC; a stratified design gives P_j / n_j,
+    :func:`compare._strata.replicate_points`); ``controls``: (variant, N index) -> :class:`Control`
     (missing: not run, NaN); ``probabilities``: (variant, N index) -> element
     probabilities (K,); ``shape``: (variants, Ns). A control with NaN coefficients (a run
     that stopped) gives NaN estimates from where it stopped: it disagrees there.
@@ -86,22 +88,24 @@ def pair_point(x: np.ndarray, xi: np.ndarray, controls: dict, measure: Measure,
     n = M // replicates
     if M % replicates or replicates < 2:
         raise ValueError(f"{M} points cannot form {replicates} replicates of equal size")
+    # each replicate's weights sum to 1 (plain: 1/n each; stratified: P_j / n_j)
+    w = np.full(M, 1.0 / n) if weights is None else np.asarray(weights, dtype=float)
     out = {name: np.full((V, N, T), np.nan)
            for name in ("err_mean", "err_mean_se", "err_var", "err_var_se")}
     reduction = np.full((V, N), np.nan)
-    x_r = x.reshape(replicates, n, T)
-    x1, x2 = x_r.mean(axis=1), (x_r**2).mean(axis=1)  # (R, T)
+    x_r, w_r = x.reshape(replicates, n, T), w.reshape(replicates, n, 1)
+    x1, x2 = (w_r * x_r).sum(axis=1), (w_r * x_r**2).sum(axis=1)  # (R, T)
     plain = cv_estimates(x1, x2, np.zeros(T), np.zeros(T), np.zeros_like(x1),
                        np.zeros_like(x1))
     best, best_se, best_key = plain, _rms(plain["mean_se"]), None
-    total = float(np.var(x, axis=0).sum())
+    total = float((x2.mean(axis=0) - x1.mean(axis=0) ** 2).sum())  # Var(x), all points
     cache: dict = {}
     exact = {}  # (v, k) -> the run's exact E[x_hat] and Var[x_hat]
     for (v, k), control in controls.items():
         key = (control.closed_form, tuple(np.asarray(control.edges, float)))
         if key not in cache:
             cache[key] = _Moments(x, xi, control, measure, replicates,
-                                  max(c.coef.shape[1] for c in controls.values()))
+                                  max(c.coef.shape[1] for c in controls.values()), w)
         moments = cache[key]
         mean, second = control.moments(probabilities[(v, k)])
         h1, h2, cross = moments.of(control.coef)
@@ -134,9 +138,11 @@ def pair_point(x: np.ndarray, xi: np.ndarray, controls: dict, measure: Measure,
 class _Moments:
     """The replicate means of one basis at the points: ``b1[r, k, j] = mean_r(1_k phi_j)``,
     ``b2[r, k, j, l] = mean_r(1_k phi_j phi_l)`` (element k's indicator 1_k) and
-    ``g[k, j, t] = mean(1_k phi_j x(t))`` over all M points, up to degree ``J - 1``."""
+    ``g[k, j, t] = mean(1_k phi_j x(t))`` over all M points, up to degree ``J - 1``; each
+    mean weighted by ``w`` (a replicate's weights sum to 1)."""
 
-    def __init__(self, x, xi, control: Control, measure: Measure, replicates: int, J: int):
+    def __init__(self, x, xi, control: Control, measure: Measure, replicates: int, J: int,
+                 w: np.ndarray):
         M = len(xi)
         edges = np.asarray(control.edges, float)
         K = len(edges) - 1
@@ -149,10 +155,11 @@ class _Moments:
                                   control.closed_form)
         n = M // replicates
         phi_r = phi.reshape(replicates, n, K, J)
-        self.b1 = phi_r.mean(axis=1)
-        self.b2 = np.einsum("rmkj,rmkl->rkjl", phi_r, phi_r) / n
+        w_r = w.reshape(replicates, n)
+        self.b1 = np.einsum("rm,rmkj->rkj", w_r, phi_r)
+        self.b2 = np.einsum("rm,rmkj,rmkl->rkjl", w_r, phi_r, phi_r)
         # as (T, M) @ (M, KJ): the fast order of the product on this machine's BLAS
-        self.g = (x.T @ phi.reshape(M, K * J)).T.reshape(K, J, -1) / M
+        self.g = (x.T @ (w[:, None] * phi.reshape(M, K * J))).T.reshape(K, J, -1) / replicates
 
     def of(self, coef: np.ndarray):
         """Replicate means of x_hat and x_hat^2 (R, T) and mean(x x_hat) (T,) for the

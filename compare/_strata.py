@@ -147,6 +147,64 @@ def build_strata(measure, edges, split_xi, *, max_strata: int,
                   bool(complete))
 
 
+def replicate_allocation(per_replicate: int, probability) -> np.ndarray:
+    """Points per stratum in each replicate of ``per_replicate`` points: one each, the rest
+    in proportion to the strata's probabilities (largest remainders).
+
+    >>> replicate_allocation(8, [0.02, 0.98]).tolist()
+    [1, 7]
+    """
+    probability = np.asarray(probability, float)
+    rest = int(per_replicate) - len(probability)
+    if rest < 0:
+        raise ValueError(f"{len(probability)} strata need at least one point each, got "
+                         f"{per_replicate} per replicate")
+    return 1 + neyman_allocation(rest, probability, np.ones(len(probability)))
+
+
+def replicate_points(measure, strata: Strata, allocation, replicates: int, seed: int,
+                     scale: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Stratified randomised QMC in independent replicates: in replicate r, stratum j gets
+    ``scale * allocation[j]`` points, the first points of its own scrambled Sobol'
+    sequence (seeded by ``(seed, r, j)``) mapped through the law conditioned on the
+    stratum, each weighing ``P_j / (scale * allocation[j])``. Returns xi, the weights (each
+    replicate's sum to 1) and the replicate of each point, rows ordered by replicate, then
+    stratum. The points at ``2 scale`` hold those at ``scale`` (each sequence goes on), so
+    every replicate is an unbiased estimate, independent of the others, and a doubling
+    adds points only (:func:`grown_rows`)."""
+    from scipy.stats import qmc
+    import warnings
+
+    xi, weight, which = [], [], []
+    cuts = strata.cuts
+    for r in range(replicates):
+        for j, n in enumerate(np.asarray(allocation, int) * int(scale)):
+            stream = qmc.Sobol(1, scramble=True,
+                               seed=np.random.default_rng(np.random.SeedSequence([seed, r, j])))
+            with warnings.catch_warnings():  # n need not be a power of two
+                warnings.simplefilter("ignore", UserWarning)
+                u = stream.random(int(n))[:, 0]
+            xi.append(measure.restrict(float(cuts[j]), float(cuts[j + 1])).ppf(u))
+            weight.append(np.full(int(n), strata.probability[j] / n))
+            which.append(np.full(int(n), r))
+    return np.concatenate(xi), np.concatenate(weight), np.concatenate(which)
+
+
+def grown_rows(allocation, replicates: int, scale: int) -> np.ndarray:
+    """Where the rows of :func:`replicate_points` at ``scale`` sit among those at ``2
+    scale`` (each stratum's first ``scale * allocation[j]`` points are the same).
+
+    >>> grown_rows([1, 2], 2, 1).tolist()
+    [0, 2, 3, 6, 8, 9]
+    """
+    rows, base = [], 0
+    for _ in range(replicates):
+        for n in np.asarray(allocation, int) * int(scale):
+            rows.extend(range(base, base + int(n)))
+            base += 2 * int(n)
+    return np.asarray(rows, dtype=np.int64)
+
+
 def neyman_allocation(total: int, probability, spread) -> np.ndarray:
     """Points per stratum for ``total`` more points: proportional to P_k s_k (Neyman),
     rounded so that they sum to ``total``; where every s_k is 0, proportional to P_k.

@@ -69,9 +69,11 @@ from compare._mapdata import (NOT_FORMED, HorizonSplits, Point, combine_slices, 
 from compare._mapdata import spill as spill_slice
 from compare._pairs import REPLICATES, Control, Pairs, pair_point
 from compare._phases import PhaseClock
+from compare._strata import (CONTINUOUS_KINDS, Strata, build_strata, grown_rows,
+                             replicate_allocation, replicate_points)
 from compare._trust import (band_multiplier, bisect_boundary, bound_excess, excess,
                             window_errors_all)
-from mc import sample_xi, simulate_mc
+from mc import simulate_mc
 from opa.engine import (
     CHATTER_WINDOW, MAX_CROSSINGS, MAX_SPLITS, MIN_SPLITS, adaptive_edges, collocate_element,
     true_runs,
@@ -81,7 +83,7 @@ from opa.engine import (
 )
 
 #: how the map's verdicts are formed (a part stored under another rule is not reused)
-RULE = "bounded: Bonferroni t band, alpha / 2^round"
+RULE = "bounded: Bonferroni t band, alpha / 2^round; replicates stratified at the splits"
 
 
 class _Map:
@@ -123,46 +125,66 @@ class _Map:
 
     # -- one point ---------------------------------------------------------------------
     def _ensemble(self, value, sigma, samples, times, previous=None) -> dict:
-        """The true sampled systems at ``samples`` scrambled Sobol' points in
-        ``REPLICATES`` replicates: x (M, T) with replicate r in rows r M/R .. (r+1) M/R - 1,
-        xi (M,), impacts (M,), rhs and wall seconds. The points at 2M contain those at M
-        (each replicate's Sobol' sequence goes on), so given the ensemble at M/2
-        (``previous``) only the new half is run; the result is the same to the bit."""
+        """The true sampled systems of the point's stratified design (:meth:`_design`) at
+        ``samples`` points in ``REPLICATES`` replicates: x (M, T) with replicate r in rows
+        r M/R .. (r+1) M/R - 1, xi (M,), weights (M,), impacts (M,), rhs and wall seconds.
+        The points at 2M hold those at M (each stratum's Sobol' sequence goes on), so
+        given the ensemble at M/2 (``previous``) only the new half is run; the result is
+        the same to the bit."""
         with self.clock("Monte Carlo runs"):
             return self._run_ensemble(value, sigma, samples, times, previous)
+
+    def _design(self, value, sigma, times) -> tuple[Strata, np.ndarray]:
+        """The point's strata and points per stratum in each replicate at the first round.
+
+        The law of xi is cut at the changes of the impact sequence up to the point's last
+        output that the value's split scan located within sigma (continuous kinds left
+        out; cascades are zones, merged until at most half the first round's points per
+        replicate, :func:`compare._strata.build_strata`), so a rare region that makes
+        other impacts has points of its own in every replicate and every replicate is an
+        estimate of the same quantity (the failure of plain replicates the certificate
+        suite measured). ``complete``: the scan listed every such change within sigma."""
+        cfg = self.cfg
+        centre, scans = self.splits(value)
+        end = float(times[-1]) / cfg.oscillator_at(value).forcing_period
+        reach = [scan for scan in scans if scan.horizon <= end + 1e-9]
+        lo, hi = self.measure.lo, self.measure.hi
+        cuts = sorted({(sp.value - centre) / sigma for scan in reach for sp in scan.splits
+                       if sp.kind not in CONTINUOUS_KINDS})
+        cuts = np.array([c for c in cuts if lo < c < hi])
+        complete = all(scan.complete_within >= sigma for scan in reach)
+        per_replicate = cfg.samples // REPLICATES
+        strata = build_strata(self.measure, [lo, hi], cuts, complete=complete,
+                              max_strata=max(1, per_replicate // 2))
+        return strata, replicate_allocation(per_replicate, strata.probability)
 
     def _run_ensemble(self, value, sigma, samples, times, previous) -> dict:
         cfg = self.cfg
         start = time.perf_counter()
         system = cfg.system_at(value, sigma=sigma, order=0)
         self.mc_runs += 1
-        if previous is None or cfg.scheduler is not None:
-            ds = simulate_mc(system, samples=samples, sampler="sobol", seed=cfg.seed,
-                             replicates=REPLICATES, times=times, options=cfg.options,
-                             keep_paths=True, scheduler=cfg.scheduler, progress=False)
-            self.true_runs += samples
-            self.true_periods += samples * float(times[-1]) / system.oscillator.forcing_period
-            return {"x": ds.x.values, "xi": ds.xi.values, "impacts": ds.n_impacts.values,
-                    "rhs": int(ds.attrs["rhs_evaluations"]),
-                    "seconds": time.perf_counter() - start}
-        xi, _ = sample_xi("sobol", samples, cfg.seed, REPLICATES, distribution=self.measure
-                          if not cfg.semicircle else None)
-        R, half = REPLICATES, samples // (2 * REPLICATES)
-        new = xi.reshape(R, 2 * half)[:, half:].ravel()
-        paths, rhs, impacts = true_runs(system, cfg.options, new, times,
+        strata, allocation = self._design(value, sigma, times)
+        scale = samples // cfg.samples
+        xi, weights, _ = replicate_points(self.measure, strata, allocation, REPLICATES,
+                                          cfg.seed, scale)
+        if previous is None:
+            old = np.zeros(0, dtype=np.int64)
+        else:
+            old = grown_rows(allocation, REPLICATES, scale // 2)
+        new = np.setdiff1d(np.arange(len(xi)), old)
+        paths, rhs, impacts = true_runs(system, cfg.options, xi[new], times,
                                         what="Monte Carlo sample", impacts=True)
         self.true_runs += len(new)
         self.true_periods += len(new) * float(times[-1]) / system.oscillator.forcing_period
-
-        def merge(old, fresh):
-            old, fresh = np.asarray(old), np.asarray(fresh)
-            return np.concatenate([old.reshape(R, half, *old.shape[1:]),
-                                   fresh.reshape(R, half, *fresh.shape[1:])],
-                                  axis=1).reshape(samples, *old.shape[1:])
-
-        return {"x": merge(previous["x"], paths[:, :, 0]), "xi": merge(previous["xi"], new),
-                "impacts": merge(previous["impacts"], impacts),
-                "rhs": previous["rhs"] + rhs, "seconds": time.perf_counter() - start}
+        x = np.empty((len(xi), len(times)))
+        count = np.empty(len(xi), dtype=np.int64)
+        x[new], count[new] = paths[:, :, 0], impacts
+        if len(old):
+            x[old], count[old] = previous["x"], previous["impacts"]
+        return {"x": x, "xi": xi, "weights": weights, "impacts": count,
+                "strata": len(strata), "complete": strata.complete,
+                "rhs": (previous["rhs"] if previous is not None else 0) + rhs,
+                "seconds": time.perf_counter() - start}
 
     def _round(self, value, sigma, samples, times, opa_inputs, controls, probabilities,
                opa_mean, opa_var, first, state: dict, rounds: int) -> dict:
@@ -183,18 +205,25 @@ class _Map:
             ens = self._ensemble(value, sigma, samples, times, previous)
             state["paths"] = ens
             pairs = pair_point(ens["x"], ens["xi"], controls, self.measure, probabilities,
-                               shape)
-            judged = self._judge(pairs, opa_mean, opa_var, first, times / T, rounds)
+                               shape, weights=ens["weights"])
+            judged = self._judge(pairs, opa_mean, opa_var, first, times / T, rounds,
+                                 complete)
             ref = pairs.reference
             return {**judged, "x_mean": ref["x_mean"], "x_var": ref["x_var"],
                     "x_sem": ref["x_sem"], "x_var_sem": ref["x_var_sem"],
                     "control": np.array(ref["control"] or (-1, -1), np.int64),
                     "reduction": pairs.reduction,
                     "impacts": np.array([ens["impacts"].min(), ens["impacts"].max()]),
-                    "rhs": ens["rhs"], "seconds": ens["seconds"]}
+                    "strata": ens["strata"], "rhs": ens["rhs"], "seconds": ens["seconds"]}
 
+        strata, allocation = self._design(value, sigma, times)
+        _, scans = self.splits(value)
+        # per horizon: whether its split list is complete within sigma (else nothing over
+        # it is certified: a change the scan did not reach may hide inside a stratum)
+        complete = np.array([scan.complete_within >= sigma for scan in scans])
         inputs = {"system": cfg.system_at(value, sigma=sigma, order=0), "samples": samples,
-                  "sampler": "sobol", "seed": cfg.seed, "replicates": REPLICATES,
+                  "sampler": "stratified sobol", "seed": cfg.seed, "replicates": REPLICATES,
+                  "design": [strata.cuts.tolist(), allocation.tolist(), complete.tolist()],
                   "times": times, "options": cfg.options, "opa": opa_inputs,
                   "criterion": [cfg.tolerance, cfg.var_tolerance, cfg.alpha, self.floor,
                                 list(cfg.horizons), RULE, rounds],
@@ -384,14 +413,16 @@ class _Map:
         """Whether a verdict at N = Nmax (the order sigma* reads) is undecided: any of
         them, or with ``focus`` = (variant, horizon, criterion) that one, which a
         bisection probe decides. A verdict at a lower N does not double the samples (it
-        may stay undecided, and counts as not agreeing)."""
-        verdict = judged["verdict"]
+        may stay undecided, and counts as not agreeing), nor does one over a horizon whose
+        split list is incomplete within sigma (more samples cannot certify it)."""
+        open_ = judged["open"]
         if focus is None:
-            return bool((verdict[:, -1] == 0).any())
+            return bool(open_[:, -1].any())
         v, h, c = focus
-        return bool(verdict[v, -1, h, c] == 0)
+        return bool(open_[v, -1, h, c])
 
-    def _judge(self, pairs: Pairs, opa_mean, opa_var, first, periods, rounds: int) -> dict:
+    def _judge(self, pairs: Pairs, opa_mean, opa_var, first, periods, rounds: int,
+               complete) -> dict:
         """The verdicts at one point from the paired estimates (:mod:`compare._pairs`), as
         :func:`compare.verify` forms its own (:func:`compare._trust.bounded_verdict`).
 
@@ -403,7 +434,12 @@ class _Map:
         bounded above and below: 1 (agrees) when the upper bound is within the tolerance at
         every output up to H, -1 (disagrees) when the lower bound exceeds it somewhere, 0
         (undecided) otherwise. An OPA run that stopped (NaN) disagrees from where it
-        stopped. Returns verdict (variant, N, horizon, criterion), errors (variant, N,
+        stopped. Over a horizon h whose split list is incomplete within sigma
+        (``complete[h]`` False) nothing else is certified: a change of the impact sequence
+        the scan did not reach may hide inside a stratum, where no standard error sees it;
+        such a verdict is undecided and not ``open`` (more samples cannot decide it).
+        Returns verdict (variant, N, horizon, criterion), open (the same shape: undecided
+        on the bounds, which more samples may decide), errors (variant, N,
         horizon, criterion, 3), disagree (variant, N, criterion): the first time, in
         periods, at which the estimated running RMS error exceeds the tolerance, over the
         longest horizon the point reaches (inf: never), and pre (variant, N): the RMS error
@@ -414,6 +450,7 @@ class _Map:
         ref = pairs.reference
         errors = np.full((V, N, H, 2, 3), np.nan)
         verdict = np.zeros((V, N, H, 2), np.int8)
+        open_ = np.zeros((V, N, H, 2), bool)
         disagree = np.full((V, N, 2), np.inf)
         spent = cfg.alpha / 2**rounds
         quantities = (
@@ -433,8 +470,12 @@ class _Map:
                 lower = np.where(stopped, np.inf, lower)
                 upper = np.where(stopped, np.inf, upper)
                 known = np.logical_and.accumulate(np.isfinite(lower) | stopped, axis=-1)
-                verdict[:, :, h, c] = np.where(
-                    (known & (lower > 0)).any(-1), -1, np.where((upper <= 0).all(-1), 1, 0))
+                bounded = np.where((known & (lower > 0)).any(-1), -1,
+                                   np.where((upper <= 0).all(-1), 1, 0))
+                if complete[h]:
+                    verdict[:, :, h, c], open_[:, :, h, c] = bounded, bounded == 0
+                else:
+                    verdict[:, :, h, c] = np.where(stopped.any(-1), -1, 0)
                 scale = np.sqrt(np.maximum(ref["x_var"], 0)) if c == 0 else ref["x_var"]
                 # not <= 0 rather than > 0: a run that stopped (NaN) is over from there
                 over = ~(excess(err[..., :n], scale[:n], sem[..., :n], tol=tol,
@@ -447,7 +488,8 @@ class _Map:
             square = np.where(before, pairs.err_mean**2, 0.0)
             count = before.sum(-1)
             pre = np.where(count > 0, np.sqrt(square.sum(-1) / np.maximum(count, 1)), np.nan)
-        return {"verdict": verdict, "errors": errors, "disagree": disagree, "pre": pre}
+        return {"verdict": verdict, "open": open_, "errors": errors, "disagree": disagree,
+                "pre": pre}
 
     # -- one value of the swept parameter ------------------------------------------------
     def splits(self, value: float) -> tuple[float, list[HorizonSplits]]:

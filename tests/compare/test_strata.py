@@ -70,3 +70,63 @@ def test_least_samples_holds_the_cuts_and_a_group_per_stratum():
     for strata in (1, 2, 11, 64, 100):
         m = least_samples(strata, 4)
         assert m & (m - 1) == 0 and m >= strata + 1 + 4 * strata > m // 2
+
+
+def _rare_jump(xi):
+    """A response with a rare region: smooth, plus a jump of 2 on xi < -0.9 (about 1.5 %
+    of the semicircle law), as an extra impact makes."""
+    return np.sin(2.0 * xi) + 2.0 * (xi < -0.9)
+
+
+def _replicate_interval(values, weights, replicates):
+    """The 95 % t interval of the replicates' weighted means."""
+    per = (weights * values).reshape(replicates, -1).sum(axis=1)
+    half = stats.t.ppf(0.975, replicates - 1) * per.std(ddof=1) / np.sqrt(replicates)
+    return per.mean() - half, per.mean() + half
+
+
+def test_stratified_replicates_cover_a_rare_region_that_plain_replicates_miss():
+    """The trust map's design (replicate_points) against plain scrambled Sobol' replicates
+    on 128 points in 16 replicates, 400 seeds each, with the truth by scipy quad: cut at
+    the jump, the 95 % replicate intervals cover 95 % of the seeds within 3 binomial
+    standard errors (1.1 % each); uncut, the jump's 1.5 % is missed by most replicates
+    and the intervals cover less than 92 % (89.5 % when this was written)."""
+    from scipy import integrate
+
+    from compare._strata import replicate_allocation, replicate_points
+    from mc import sample_xi
+
+    law = semicircle()
+    density = stats.beta(1.5, 1.5, loc=-1, scale=2).pdf
+    truth = integrate.quad(lambda t: _rare_jump(t) * density(t), -1, 1, points=[-0.9],
+                           epsabs=1e-13)[0]
+    strata = build_strata(law, [-1.0, 1.0], np.array([-0.9]), max_strata=4)
+    allocation = replicate_allocation(8, strata.probability)
+    assert allocation.tolist() == [1, 7]
+    hits = {"stratified": 0, "plain": 0}
+    for seed in range(400):
+        xi, w, rep = replicate_points(law, strata, allocation, 16, seed)
+        assert np.allclose(np.bincount(rep, weights=w), 1.0)
+        lo, hi = _replicate_interval(_rare_jump(xi), w, 16)
+        hits["stratified"] += lo <= truth <= hi
+        xi, _ = sample_xi("sobol", 128, seed, 16)
+        lo, hi = _replicate_interval(_rare_jump(xi), np.full(128, 1 / 8), 16)
+        hits["plain"] += lo <= truth <= hi
+    assert 0.917 * 400 <= hits["stratified"] <= 0.983 * 400, hits
+    assert hits["plain"] < 0.92 * 400, hits
+
+
+def test_a_doubled_design_holds_the_points_before_it():
+    from compare._strata import grown_rows, replicate_allocation, replicate_points
+
+    law = uniform()
+    strata = build_strata(law, [-1.0, 1.0], np.array([-0.5, 0.9]), max_strata=4)
+    allocation = replicate_allocation(8, strata.probability)
+    one, w1, _ = replicate_points(law, strata, allocation, 4, seed=7, scale=1)
+    two, w2, _ = replicate_points(law, strata, allocation, 4, seed=7, scale=2)
+    rows = grown_rows(allocation, 4, 1)
+    np.testing.assert_array_equal(two[rows], one)
+    np.testing.assert_allclose(2 * w2[rows], w1)
+    for j, (a, b) in enumerate(zip(strata.cuts[:-1], strata.cuts[1:])):
+        inside = (two >= a) & (two <= b)
+        assert inside.sum() == 4 * 2 * allocation[j]

@@ -12,7 +12,6 @@ from scipy import stats
 
 from compare import load_config, run_validation, write_report
 from compare._config import VARIANTS
-from mc import simulate_mc
 from opa import simulate_opa
 from opa._surrogate import surrogate
 from opa.cli._main import main
@@ -65,15 +64,57 @@ def _verdict(err, sem, var, var_sem, n, tol, floor, *, spread, alpha, rounds):
 R = 16  # the replicates of the map's scrambled Sobol' points
 
 
-def _paired(x, x_hat, mean_hat, second_hat):
-    """The paired estimates written out from the paths: per replicate r the means of
-    d = x - x_hat and q = x^2 - x_hat^2; E_cv[x] = E[x_hat] + d_r, Var_cv[x] = E[x_hat^2]
-    + q_r - E_cv[x]^2; estimates are the replicate averages, standard errors their spread
-    over sqrt(R). Returns OPA's errors of the mean and the variance with their standard
-    errors, and the control-variate E[x], Var[x] with theirs."""
+def _design_ensemble(cfg, ds, q, s, times):
+    """The map's point (q, s) ensemble rebuilt: the points of its stratified design
+    (compare._strata.replicate_points, whose strata are checked here against the split
+    values the dataset lists within sigma) and the true systems there (opa.engine's
+    true_runs). Returns x (M, T), xi, and the weights (each replicate's summing to 1)."""
+    from types import SimpleNamespace
+
+    from compare._strata import replicate_points
+    from compare._trustmap import _Map
+    from opa.engine import true_runs
+
+    value, sigma = cfg.values[q], cfg.sigmas[s]
+    job = _Map(cfg, progress=False, log=lambda *a: None)
+    strata, allocation = job._design(value, sigma, times)
+    samples = int(ds.mc_samples[q, s])
+    xi, w, rep = replicate_points(job.measure, strata, allocation, R, cfg.seed,
+                                  samples // cfg.samples)
+    assert len(xi) == samples and np.allclose(np.bincount(rep, weights=w), 1.0)
+    # the strata cut the law of xi at every change of the impact sequence the dataset
+    # lists within sigma (a cascade merged into one stratum: its ends are cuts)
+    listed = ds.split_value.values[q, -1]
+    kinds = [str(k) for k in ds.split_kind.attrs["flag_meanings"].split()]
+    kind = ds.split_kind.values[q, -1]
+    centre = getattr(cfg.oscillator_at(value), cfg.uncertain)
+    jumps = [(v - centre) / sigma for v, k in zip(listed, kind)
+             if k >= 0 and kinds[k] not in ("horizon", "output_crossing")
+             and abs(v - centre) < sigma]
+    def listed_jump(c):
+        return any(abs(c - j) < 1e-9 for j in jumps)
+
+    for x in jumps:  # on a cut, or inside a zone: a stratum from one jump to another
+        assert listed_jump(x) and (np.min(np.abs(strata.cuts - x)) < 1e-9 or any(
+            a < x < b and listed_jump(a) and listed_jump(b)
+            for a, b in zip(strata.cuts[:-1], strata.cuts[1:])))
+    system = cfg.system_at(value, sigma=sigma, order=0)
+    paths = true_runs(system, cfg.options, xi, times, what="test")[0][:, :, 0]
+    return SimpleNamespace(x=SimpleNamespace(values=paths), xi=SimpleNamespace(values=xi),
+                           w=w)
+
+
+def _paired(x, x_hat, mean_hat, second_hat, w):
+    """The paired estimates written out from the paths: per replicate r the weighted
+    means (weights w, summing to 1 in each replicate) of d = x - x_hat and q = x^2 -
+    x_hat^2; E_cv[x] = E[x_hat] + d_r, Var_cv[x] = E[x_hat^2] + q_r - E_cv[x]^2;
+    estimates are the replicate averages, standard errors their spread over sqrt(R).
+    Returns OPA's errors of the mean and the variance with their standard errors, and
+    the control-variate E[x], Var[x] with theirs."""
     M, T = x.shape
-    d = (x - x_hat).reshape(R, M // R, T).mean(axis=1)
-    q = (x**2 - x_hat**2).reshape(R, M // R, T).mean(axis=1)
+    w = w.reshape(R, M // R, 1)
+    d = (w * (x - x_hat).reshape(R, M // R, T)).sum(axis=1)
+    q = (w * (x**2 - x_hat**2).reshape(R, M // R, T)).sum(axis=1)
     mean_r = mean_hat + d
     var_r = second_hat + q - mean_r**2
 
@@ -94,12 +135,12 @@ def _check_point(cfg, ds, q, s, ens, runs):
     are against it, with its standard errors."""
     x, xi = ens.x.values, ens.xi.values
     zero = np.zeros(x.shape[1])
-    best = _paired(x, np.zeros_like(x), zero, zero)
+    best = _paired(x, np.zeros_like(x), zero, zero, ens.w)
     pairs = {}
     for (v, k), run in runs.items():
         x_hat = surrogate(run, xi)[0]
         mean_hat = run.x_mean.values
-        pairs[v, k] = _paired(x, x_hat, mean_hat, run.x_var.values + mean_hat**2)
+        pairs[v, k] = _paired(x, x_hat, mean_hat, run.x_var.values + mean_hat**2, ens.w)
         np.testing.assert_allclose(ds.opa_x_mean.values[q, s, v, k], mean_hat, rtol=0,
                                    atol=1e-12)
     K = len(cfg.orders) - 1
@@ -143,10 +184,7 @@ def test_verdicts_match_direct_comparisons(tiny, q, s):
     value, sigma = cfg.values[q], cfg.sigmas[s]
     osc = cfg.oscillator.replace(omega=value)
     times = time_grid(value, max(cfg.horizons), cfg.per_period)
-    samples = int(ds.mc_samples[q, s])
-    ens = simulate_mc(osc, sigma=sigma, samples=samples, sampler="sobol", seed=cfg.seed,
-                      replicates=R, order=0, uncertain="mu", times=times,
-                      options=cfg.options, progress=False, keep_paths=True)
+    ens = _design_ensemble(cfg, ds, q, s, times)
     runs = {(v, k): simulate_opa(osc, sigma=sigma, order=order, uncertain="mu",
                                  truncation=trunc, impact_law=law, times=times,
                                  options=cfg.options, partial=True)
@@ -473,13 +511,8 @@ def test_law_and_element_verdicts_match_direct_comparisons(tiny_law, s):
     from simulate_opa and simulate_mc with the documented criterion."""
     cfg, ds, _ = tiny_law
     value, sigma = cfg.values[0], cfg.sigmas[s]
-    osc = cfg.oscillator.replace(omega=value)
     times = time_grid(value, max(cfg.horizons), cfg.per_period)
-    ens = simulate_mc(osc, sigma=sigma, samples=int(ds.mc_samples[0, s]), sampler="sobol",
-                      seed=cfg.seed, replicates=R, order=0, uncertain="mu",
-                      distribution="uniform", times=times, options=cfg.options,
-                      progress=False, keep_paths=True)
-    assert ens.attrs["distribution"] == "uniform"
+    ens = _design_ensemble(cfg, ds, 0, s, times)
     cases = [(v, k, law, None) for v, law in enumerate(("mean", "ensemble", "saltation"))
              for k in range(len(cfg.orders))]
     cases += [(3 + v, len(cfg.orders) - 1, law, "adaptive")
