@@ -12,6 +12,11 @@ import os
 import numpy as np
 import xarray as xr
 
+from compare._inputs import (
+    check_dataset, check_finite, check_standard_error, require_attributes, require_time,
+    require_variables,
+)
+
 # Variant shown where one must be picked: the paper's OPA (mean impact law) with the
 # exact Galerkin truncation.
 HEADLINE = 0
@@ -35,6 +40,104 @@ def _pyplot():
     import matplotlib.pyplot as plt
 
     return plt
+
+# -- what each entry point reads off the map (issue 45) -------------------------------------
+# A map that lacks it (an older or partial validate.nc, or another kind of dataset) is
+# refused by name, never with a KeyError. Read only when present, so not listed: the
+# variables of newer maps that older ones lack (verdict, variant_ran, opa_status,
+# count_unknown, variant_collocated, nominal_slowest_*, crossing_complete_sigma, the
+# frontier); `time` may be called `periods` (files written before issue 26).
+_MAP = "the trust-map dataset"
+#: coordinates and attributes every entry point reads (and the swept parameter's
+#: coordinate, named by the attribute `parameter`; the nominal value, by `uncertain`)
+_MAP_COORDS = ("sigma", "variant", "N", "horizon", "criterion")
+_MAP_ATTRS = ("parameter", "uncertain")
+_STARS = ("sigma_star", "sigma_star_upper")
+_SPLITS = ("split_value", "split_kind", "split_time", "split_speed", "split_left",
+           "split_right", ("split_complete_sigma", "split_truncated"))
+_CAUSE = _STARS + _SPLITS + ("agrees", "disagree_time")
+_FAILURES = ("err_mean", "opa_x_mean")
+#: entry point -> (variables, attributes, reads the time coordinate)
+MAP_NEEDS = {
+    "run_failures": (_FAILURES, ("per_period",), True),
+    "cause": (_CAUSE, ("resolution", "per_period"), False),
+    "first_screen": (_CAUSE + _FAILURES, ("tolerance", "var_tolerance", "resolution",
+                                          "per_period"), True),
+    "boundary_table": (_STARS + _SPLITS, ("resolution",), False),
+    "verdict_grid": (("agrees",), (), False),
+    "count_table": (("count_prob",) + _SPLITS[-1:], (), False),
+    "findings": (_STARS + _SPLITS + ("err_mean", "agrees", "pre_impact_err", "first_impact",
+                                     "mc_x_sem", "emr0_dmr_difference",
+                                     "emr0_n0_dmr_difference"),
+                 ("resolution", "var_tolerance"), True),
+    "plot_map": (_STARS + ("agrees", "err_mean_rel", "err_var_rel", "probe_sigma",
+                           "split_kind", "split_value"), ("tolerance", "var_tolerance"), False),
+    "plot_error_vs_order": (("agrees", "err_mean", "first_impact", "pre_impact_err",
+                             "mc_x_sem", "mc_x_var"),
+                            ("per_period", "rtol", "atol", "tolerance"), True),
+    "plot_mean": (("agrees", "mc_x_mean", "mc_x_sem", "opa_x_mean"), ("per_period",), True),
+    "plot_variance": (("agrees", "mc_x_var", "mc_x_var_sem", "opa_x_var"), ("per_period",),
+                      True),
+    "plot_phase": (("law", "phase_time", "phase_opa_x", "phase_opa_v", "phase_mc_x",
+                    "phase_mc_v", "phase_sample_x", "phase_sample_v"),
+                   ("delta", "phase_value", "phase_sigma"), False),
+}
+
+
+def _union(*entries: str) -> tuple:
+    """The needs of several entry points together."""
+    variables, attributes = [], []
+    for entry in entries:
+        v, a, _ = MAP_NEEDS[entry]
+        variables += [x for x in v if x not in variables]
+        attributes += [x for x in a if x not in attributes]
+    return tuple(variables), tuple(attributes), any(MAP_NEEDS[e][2] for e in entries)
+
+
+MAP_NEEDS["figures"] = _union("plot_map", "plot_error_vs_order", "plot_mean",
+                              "plot_variance", "plot_phase")
+MAP_NEEDS["write_report"] = _union("first_screen", "boundary_table", "verdict_grid",
+                                   "count_table", "findings")
+MAP_NEEDS["write_report"] = (MAP_NEEDS["write_report"][0], MAP_NEEDS["write_report"][1] + (
+    "wall_seconds", "mc_runs_computed", "opa_runs_computed", "parts_computed", "preset",
+    "impulse", "rtol", "atol", "samples", "max_samples", "seed", "criterion_text", "alpha"),
+    True)
+
+
+def check_map(ds, entry: str) -> None:
+    """Refuse, with one ValueError naming the culprit, a dataset that is not a trust map
+    (``opa-mc validate``'s validate.nc, docs/datasets.md) or lacks what ``entry`` (a key
+    of :data:`MAP_NEEDS`) reads, or whose Monte Carlo estimates or standard errors are not
+    finite, or whose standard errors are negative, or whose OPA curves are not finite
+    where ``opa_status`` says the run finished (after a stop they are NaN, as
+    documented)."""
+    check_dataset(ds, _MAP, "a trust map (opa-mc validate's validate.nc)")
+    model = ds.attrs.get("model", "validate")
+    if model != "validate":
+        raise ValueError(f"{_MAP} must be a trust map (opa-mc validate's validate.nc, "
+                         f"attribute model = 'validate'), got model = {model!r}")
+    variables, attributes, time = MAP_NEEDS[entry]
+    require_attributes(ds, _MAP, _MAP_ATTRS + attributes)
+    require_attributes(ds, _MAP, (str(ds.attrs["uncertain"]),),
+                       hint=" (the nominal value of the uncertain parameter)")
+    require_variables(ds, _MAP, _MAP_COORDS + (str(ds.attrs["parameter"]),) + variables)
+    if time:
+        require_time(ds, _MAP, old_name=True)
+    if "split_kind" in variables and "flag_meanings" not in ds.split_kind.attrs:
+        raise ValueError(f"{_MAP}'s split_kind lacks its attribute flag_meanings")
+    for name in ("mc_x_mean", "mc_x_var"):
+        if name in variables:
+            check_finite(ds, _MAP, name)
+    for name in ("mc_x_sem", "mc_x_var_sem"):
+        if name in variables:
+            check_standard_error(ds, _MAP, name)
+    for name in ("opa_x_mean", "opa_x_var"):
+        if name in variables and "opa_status" in ds:
+            finished = ds.opa_status == 0
+            stopped = ~finished.broadcast_like(ds[name]).transpose(*ds[name].dims).values
+            check_finite(ds, _MAP, name, allowed=stopped,
+                         where=" where opa_status says the run finished")
+
 
 def _kinds(ds) -> list[str]:
     return [k.replace("_", " ") for k in ds.split_kind.attrs["flag_meanings"].split()]
@@ -268,6 +371,7 @@ def cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
 
 def short_cause(ds, q: int, h: int, v: int = HEADLINE, c: int = 0) -> str:
     """The cause of :func:`cause` in a few words (the first screen)."""
+    check_map(ds, "cause")
     lo, hi = (float(ds.sigma_star.values[q, v, h, c]),
               float(ds.sigma_star_upper.values[q, v, h, c]))
     res = float(ds.attrs["resolution"])
@@ -313,6 +417,7 @@ def run_failures(ds) -> list[str]:
     """Runs whose error is NaN (the OPA trajectory stopped before the horizon): counted per
     variant and horizon, with the times at which they stop. They count as 'does not
     agree'."""
+    check_map(ds, "run_failures")
     out = []
     ran = ds.variant_ran.values.astype(bool) if "variant_ran" in ds else \
         np.ones((ds.sizes["variant"], ds.sizes["N"]), bool)
@@ -379,6 +484,7 @@ def first_screen(ds) -> list[str]:
     """The answer at a glance, lines of at most 100 characters: per swept value and horizon,
     sigma* of the mean and of the variance (the paper's OPA), the best variant with its
     sigma*, and the cause in one line; then the runs that did not finish."""
+    check_map(ds, "first_screen")
     par, unc = _par(ds), _unc(ds)
     smax = float(ds.sigma.max())
     head = str(ds.variant.values[HEADLINE])
@@ -423,6 +529,7 @@ def boundary_table(ds: xr.Dataset, *, markdown: bool = False, criterion: int = 0
     """sigma* (at N = Nmax, per variant) of the mean (``criterion=0``, beside the nearest
     split of the impact sequence) or of the variance (``criterion=1``) for every swept
     value and horizon."""
+    check_map(ds, "boundary_table")
     par, unc = _par(ds), _unc(ds)
     variants = [str(v) for v in ds.variant.values]
     smax = float(ds.sigma.max())
@@ -460,6 +567,7 @@ def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 
                  markdown: bool = False, compact: bool = False) -> str:
     """Rows: swept values; columns: sigma; cell: the smallest N from which OPA agrees
     at every larger N of the map, or '✗' where N = Nmax does not."""
+    check_map(ds, "verdict_grid")
     par = _par(ds)
     agrees = ds.agrees.values[:, :, v, :, h, criterion]  # value, sigma, N
     orders = [int(n) for n in ds.N.values]
@@ -491,6 +599,7 @@ def verdict_grid(ds: xr.Dataset, h: int, *, v: int = HEADLINE, criterion: int = 
 def count_table(ds: xr.Dataset, h: int, *, markdown: bool = True) -> str:
     """The distribution of impact counts up to the horizon at every grid point whose
     ensemble is not all alike."""
+    check_map(ds, "count_table")
     head = [_par(ds), "σ", "impacts: probability"]
     rows = []
     for q, value in enumerate(_vals(ds).values):
@@ -547,6 +656,7 @@ def _window_tolerance(ds, q, s, n):
 
 def findings(ds: xr.Dataset) -> list[str]:
     """Plain-language conclusions, each computed from the dataset."""
+    check_map(ds, "findings")
     out = []
     par = _par(ds)
     orders = [int(n) for n in ds.N.values]
@@ -746,6 +856,7 @@ def plot_map(ds, path, *, size=None):
     Reading aids: one glyph has one meaning (verdicts o and x, sigma* markers, split
     markers and the below-resolution arrow are all different), probes closer than
     ``PROBE_GAP`` of the axis are drawn once, and the legend lists only what is drawn."""
+    check_map(ds, "plot_map")
     plt = _pyplot()
     from matplotlib.colors import TwoSlopeNorm
 
@@ -887,6 +998,7 @@ LINE_STYLES = ("-", "--", ":", "-.", (0, (5, 1, 1, 1)), (0, (1, 1)), (0, (3, 1, 
 def plot_error_vs_order(ds, path, q=0, *, size=None):
     """RMS error of x_0 against N, before OPA's first impact and over each horizon, for
     every variant (distinct markers, offset in N), with the MC noise floor."""
+    check_map(ds, "plot_error_vs_order")
     plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     H = len(ds.horizon)
@@ -947,6 +1059,7 @@ def plot_mean(ds, path, q=0, *, size=None):
     standard errors, at a sigma that agrees and one that does not, over the first horizon.
     (The 2-SE band of the mean is far thinner than a line at the scale of E[x], so it is
     drawn where it can be seen: below, as the noise the errors are held against.)"""
+    check_map(ds, "plot_mean")
     plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     orders = [int(n) for n in ds.N.values]
@@ -997,6 +1110,7 @@ def plot_mean(ds, path, q=0, *, size=None):
 
 
 def plot_variance(ds, path, q=0, *, size=None):
+    check_map(ds, "plot_variance")
     plt = _pyplot()
     picks = _pick_sigmas(ds, q)
     n = int(round(float(ds.horizon[0]) * ds.attrs["per_period"])) + 1
@@ -1036,6 +1150,7 @@ def plot_variance(ds, path, q=0, *, size=None):
 
 def plot_phase(ds, path, *, size=None):
     """Dense-output phase portraits: OPA (both laws) against the MC mean and samples."""
+    check_map(ds, "plot_phase")
     plt = _pyplot()
     fig, axes = plt.subplots(1, 2, figsize=size or (11, 5.0), layout="constrained")
     ax = axes[0]
@@ -1206,6 +1321,7 @@ def start_figures(ds: xr.Dataset, outdir: str, *, workers: int = 1,
     processes now, and the function returned waits for them (and ends the processes)
     and returns the paths, so that this process can write the summary meanwhile; with
     one, they are drawn here when that function is called."""
+    check_map(ds, "figures")
     jobs = [(fn, name) for name, fn in REPORT_FIGURES]
     if frontier_dataset(ds) is not None:
         jobs.append((_plot_frontier_of, "frontier.png"))
@@ -1270,6 +1386,7 @@ def write_report(ds: xr.Dataset, outdir: str, *, plots: bool = True,
     those times (keys total, map, report), for the caller to print the same numbers."""
     import time
 
+    check_map(ds, "write_report")
     os.makedirs(outdir, exist_ok=True)
     # the figures' processes draw while this one writes the summary
     figures = (start_figures(ds, outdir, workers=workers, source=source) if plots
