@@ -34,6 +34,8 @@ THEMES = {
     "tests/mc/test_dask.py": "the Dask backend of simulate_mc",
     "tests/compare/test_parts.py":
         "the trust map's parts on disk (compare._trustmap, opa._dataset.Store)",
+    "tests/compare/test_hostile_inputs.py":
+        "the hostile-input corpus of compare's entry points (compare._inputs)",
 }
 
 #: source modules without a test module of their own -> the test modules that cover them
@@ -50,6 +52,7 @@ TESTED_IN = {
     "compare/_report.py": ("tests/compare/test_trustmap.py",),
     "compare/_config.py": ("tests/compare/test_trustmap.py",),
     "compare/_mapdata.py": ("tests/compare/test_trustmap.py", "tests/compare/test_trust.py"),
+    "compare/_inputs.py": ("tests/compare/test_hostile_inputs.py",),
 }
 
 #: what a covering test module must contain to name the source module
@@ -66,6 +69,7 @@ NAMED_AS = {
     "compare/_report.py": "write_report",
     "compare/_config.py": "load_config",
     "compare/_mapdata.py": "compare._mapdata",
+    "compare/_inputs.py": "compare._inputs",
 }
 
 
