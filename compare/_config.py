@@ -113,9 +113,9 @@ class ValidateConfig:
 
     @property
     def first_tasks(self) -> int:
-        """The tasks the map starts with on a pool or a cluster
-        (:meth:`compare._mapflow.MapFlow.first`: every value's split scan and grid points,
-        and the frontier's reference): what the cores are shared among."""
+        """The tasks of the map's first stages on a pool or a cluster
+        (:class:`compare._mapflow.MapFlow`: every value's split scan, then its grid
+        points, and the frontier's reference): what the cores are shared among."""
         return len(self.values) * (1 + len(self.sigmas)) + bool(self.frontier)
 
     def __post_init__(self):
@@ -260,7 +260,7 @@ class ValidateConfig:
                      f"{self.per_period}", outputs * (2 * self.nmax + 8) * 8 * len(self.variants))
         for value in self.values:  # checks the impulse model (e.g. pulse_width < 2 pi/omega1)
             self.system_at(value)
-        from opa._work import check_work
+        from opa.engine import check_work
 
         # the grid's ensembles at their largest (the bisections' probes come on top)
         check_work("this trust map", len(self.values) * len(self.sigmas) * self.max_samples

@@ -6,12 +6,13 @@ map has 5 values and the frontier. :class:`MapFlow` cuts the same work finer, in
 that share nothing but the parts folder (:class:`opa._dataset.Store`):
 
 * first, all independent of each other: the split scan of every value
-  (:func:`splits_task`), every grid point (value, sigma) with its OPA runs and its Monte
-  Carlo rounds (:func:`point_task`), and the frontier's reference;
+  (:func:`splits_task`) and the frontier's reference;
 * as they finish, the tasks they make ready (:func:`compare._scaleout.run_flow` starts
-  these ahead of the rest): a value whose grid points are all done gets the bisections
-  of its sigma*, one task per horizon (:func:`bisect_task`: the horizons' bisections
-  are independent); once these and its split scan are done, its value task
+  these ahead of the rest): a value whose split scan is done gets its grid points
+  (value, sigma) with their OPA runs and Monte Carlo rounds (:func:`point_task`: the
+  ensembles are stratified at the value's splits); a value whose grid points are all
+  done gets the bisections of its sigma*, one task per horizon (:func:`bisect_task`: the
+  horizons' bisections are independent); once these are done, its value task
   (:func:`value_task`) reads them back and assembles its datasets
   (:meth:`compare._trustmap._Map.value_work`); the frontier's runs once its reference
   is known (:class:`FrontierRuns`), and those that need the edges of earlier runs once
@@ -233,15 +234,15 @@ class MapFlow:
     def first(self) -> list[tuple]:
         cfg, inner = self.cfg, self.inner
         tasks = self.frontier.ready() if self.frontier is not None else []
+        # a value's grid points follow its split scan: their ensembles are cut at its splits
         tasks += [(("splits", i), splits_task, (inner, value))
                   for i, value in enumerate(cfg.values)]
-        tasks += [(("point", i, j), point_task, (inner, value, float(sigma)))
-                  for i, value in enumerate(cfg.values) for j, sigma in enumerate(cfg.sigmas)]
         return tasks
 
     def follow(self, key, result: dict) -> list[tuple]:
-        """A value's bisections, the longest horizon first, once its grid points are
-        done; its value task once these and its split scan are."""
+        """A value's grid points once its split scan is done (their ensembles are cut at
+        its splits); its bisections, the longest horizon first, once its grid points are;
+        its value task once these are."""
         kind, cfg = key[0], self.cfg
         if kind == "frontier":
             return self.frontier.done(result["result"])
@@ -256,8 +257,9 @@ class MapFlow:
             self.found[i][key[2]] = result["result"]
         elif kind == "splits":
             self.split[i] = True
-        if kind in ("bisect", "splits") and self.split[i] \
-                and len(self.found[i]) == len(cfg.horizons):
+            return [(("point", i, j), point_task, (self.inner, cfg.values[i], float(sigma)))
+                    for j, sigma in enumerate(cfg.sigmas)]
+        if kind == "bisect" and self.split[i] and len(self.found[i]) == len(cfg.horizons):
             found = [self.found[i][h] for h in range(len(cfg.horizons))]
             # on a Dask cluster the slice travels whole: its workers may not share OUTDIR
             return [(("value", i), value_task, (self.inner, cfg.values[i], found,

@@ -367,7 +367,7 @@ def simulate_mc(
         raise ValueError(f"control needs sampler='sobol' with replicates >= 2 (its "
                          f"standard errors are the replicates' spread), got sampler="
                          f"{sampler!r}, replicates={replicates}")
-    from opa._work import check_work
+    from opa.engine import check_work
 
     check_work("this Monte Carlo ensemble",
                samples * float(times[-1] - times[0]) / oscillator.forcing_period,

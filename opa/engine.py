@@ -62,6 +62,7 @@ from opa._splits import (
 )
 from opa._surrogate import run_measure, surrogate, surrogate_moments, surrogate_values
 from opa._system import IMPULSE_FIELDS, System, as_system
+from opa._work import check_work
 from opa.dynamics._orbits import MAX_CYCLE, impulse_cycle
 from opa.dynamics._sections import identify_motion, mean_state, phase_section
 from opa.dynamics._sweep import local_executor, locate_setup, pool_shared, summary_lines, sweep, \
@@ -71,7 +72,7 @@ __all__ = [
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
-    "OutputLock",
+    "OutputLock", "check_work",
     "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
     "as_system", "atomic_write", "chebyshev_u", "check_count", "check_device", "check_instance",

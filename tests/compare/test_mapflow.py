@@ -22,12 +22,14 @@ def test_the_first_tasks_are_independent_and_each_value_waits_for_its_grid(tmp_p
                       frontier=False)
     flow = MapFlow(cfg, _store(tmp_path))
     first = flow.first()
-    assert [key for key, _, _ in first] == [
-        ("splits", 0), ("splits", 1), ("point", 0, 0), ("point", 0, 1), ("point", 1, 0),
-        ("point", 1, 1)]
-    assert len(first) == cfg.first_tasks
-    # value 1's bisections are ready once both its points are done, the longest
-    # horizon first; its value task once they and its split scan are
+    assert [key for key, _, _ in first] == [("splits", 0), ("splits", 1)]
+    # a value's grid points once its split scan is done (they are stratified at its
+    # splits); its bisections once both its points are done, the longest horizon first;
+    # its value task once they are
+    points = flow.follow(("splits", 1), {}) + flow.follow(("splits", 0), {})
+    assert [key for key, _, _ in points] == [
+        ("point", 1, 0), ("point", 1, 1), ("point", 0, 0), ("point", 0, 1)]
+    assert len(first) + len(points) == cfg.first_tasks
     assert flow.follow(("point", 1, 0), {}) == []
     assert flow.follow(("point", 0, 0), {}) == []
     bisect = flow.follow(("point", 1, 1), {})
@@ -37,8 +39,7 @@ def test_the_first_tasks_are_independent_and_each_value_waits_for_its_grid(tmp_p
     assert args[1:] == (4.09, 1)
     assert args[0].workers == 1 and args[0].scheduler is None  # no pool inside a task
     assert flow.follow(("bisect", 1, 1), {"result": "long"}) == []
-    assert flow.follow(("bisect", 1, 0), {"result": "short"}) == []
-    (key, _, args), = flow.follow(("splits", 1), {})
+    (key, _, args), = flow.follow(("bisect", 1, 0), {"result": "short"})
     # its slice's time series go to OUTDIR (spill): a local pool shares its disk
     assert key == ("value", 1) and args[1:] == (4.09, ["short", "long"], True)
 
@@ -48,10 +49,10 @@ def test_on_a_dask_cluster_a_value_task_returns_its_slice_whole(tmp_path):
     cfg = load_config(None, outdir=str(tmp_path), values=(3.98,), sigmas=(0.01,),
                       frontier=False, scheduler="tcp://127.0.0.1:8786")
     flow = MapFlow(cfg, _store(tmp_path))
+    flow.follow(("splits", 0), {})
     flow.follow(("point", 0, 0), {})
-    for h in (1, 0):
-        flow.follow(("bisect", 0, h), {"result": h})
-    (key, _, args), = flow.follow(("splits", 0), {})
+    flow.follow(("bisect", 0, 1), {"result": 1})
+    (key, _, args), = flow.follow(("bisect", 0, 0), {"result": 0})
     assert key == ("value", 0) and args[-1] is False
 
 
