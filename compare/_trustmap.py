@@ -82,8 +82,11 @@ from opa.engine import (
     time_grid, true_system_work, uniform_edges,
 )
 
+#: the variance criterion's floor holds this many units of roundoff of E[x^2]
+VAR_ROUNDOFF = 16
 #: how the map's verdicts are formed (a part stored under another rule is not reused)
-RULE = "bounded: Bonferroni t band, alpha / 2^round; replicates stratified at the splits"
+RULE = ("bounded: Bonferroni t band, alpha / 2^round; replicates stratified at the splits; "
+        "variance floor with roundoff")
 
 
 class _Map:
@@ -453,9 +456,13 @@ class _Map:
         open_ = np.zeros((V, N, H, 2), bool)
         disagree = np.full((V, N, 2), np.inf)
         spent = cfg.alpha / 2**rounds
+        # the variance's floor: the solvers' squared, and the roundoff of E[x^2] - E[x]^2
+        # (4e-16 at x = 1: at t = 0, where every sample is x0, it is all there is)
+        second = float(np.nanmax(ref["x_var"] + ref["x_mean"] ** 2))
+        var_floor = self.floor**2 + VAR_ROUNDOFF * np.finfo(float).eps * second
         quantities = (
             (pairs.err_mean, pairs.err_mean_se, opa_mean, cfg.tolerance, self.floor),
-            (pairs.err_var, pairs.err_var_se, opa_var, cfg.var_tolerance, self.floor**2))
+            (pairs.err_var, pairs.err_var_se, opa_var, cfg.var_tolerance, var_floor))
         for h, n in sorted(enumerate(self.n_h), key=lambda item: item[1]):
             if n > T:  # a horizon past the point's outputs: not judged
                 continue
