@@ -85,9 +85,13 @@ def check_opa_work(system: System, times: np.ndarray, elements, max_elements: in
     periods = float(times[-1] - times[0]) / system.oscillator.forcing_period
     order = int(system.order)
     adaptive = isinstance(elements, str) and elements == "adaptive"
-    count = max_elements if adaptive else (1 if elements is None else
-                                           np.size(elements) - 1 if np.ndim(elements) else
-                                           int(elements))
+    try:  # elements are checked later, where they are used; here only counted
+        count = max_elements if adaptive else (1 if elements is None else
+                                               np.size(elements) - 1 if np.ndim(elements)
+                                               else int(elements))
+        count = max(int(count), 1)
+    except (TypeError, ValueError, OverflowError):
+        count = 1
     work = (order + 1) * max(count, 1) * periods
     drivers = [("periods", f"{periods:g}"), ("order", order)]
     if adaptive:

@@ -40,11 +40,22 @@ from opa.cli._flags import (
 
 
 def cmd_simulate(args) -> int:
+    from opa._lock import OutputLock
+
+    check_outputs(args)
+    if not args.out:
+        return _simulate(args)
+    # OUT stays locked from before the run until it is written (its checkpoint has its own)
+    with OutputLock(args.out, "output file", folder=False,
+                    log=lambda line: print(f"opa-mc: {line}", file=sys.stderr)):
+        return _simulate(args)
+
+
+def _simulate(args) -> int:
     from opa._dataset import write_netcdf
     from opa._elements import ElementBudgetWarning
     from opa.plots._diagrams import plot_run
 
-    check_outputs(args)
     if args.model == "opa":
         if args.elements != "adaptive":
             refuse_given(args, ["element_tolerance", "max_elements"],

@@ -204,16 +204,21 @@ def cmd_validate(args) -> int:
     from compare._report import (bullet, cause, findings, first_screen, frontier_lines,
                                  process_started, verdict_grid, wall_text, write_report)
 
+    from opa.engine import OutputLock
+
     start = process_started()  # the one clock of the run: every wall time below reads it
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
-    ds = run_validation(cfg, progress=not args.quiet, log=log, started=start)
     command = "opa-mc " + shlex.join(getattr(args, "argv", ["validate"]))
     timing: dict = {}
     # the figures side by side on the map's processes (its fork server is started then)
     figures = cfg.processes if cfg.scheduler is None and cfg.processes > 1 else 1
-    written = write_report(ds, cfg.outdir, plots=cfg.plots, command=command, started=start,
-                           timing=timing, workers=figures,
-                           source=os.path.join(cfg.outdir, "validate.nc"))
+    # OUTDIR stays locked until the last figure is written (run_validation takes it again)
+    with OutputLock(cfg.outdir, "output folder", folder=True,
+                    log=lambda line: print(line, file=sys.stderr)):
+        ds = run_validation(cfg, progress=not args.quiet, log=log, started=start)
+        written = write_report(ds, cfg.outdir, plots=cfg.plots, command=command,
+                               started=start, timing=timing, workers=figures,
+                               source=os.path.join(cfg.outdir, "validate.nc"))
     print("\n".join(first_screen(ds)))
     print()
     for h in range(ds.sizes["horizon"]):
