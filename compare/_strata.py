@@ -165,29 +165,34 @@ def replicate_allocation(per_replicate: int, probability) -> np.ndarray:
 def replicate_points(measure, strata: Strata, allocation, replicates: int, seed: int,
                      scale: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stratified randomised QMC in independent replicates: in replicate r, stratum j gets
-    ``scale * allocation[j]`` points, the first points of its own scrambled Sobol'
-    sequence (seeded by ``(seed, r, j)``) mapped through the law conditioned on the
-    stratum, each weighing ``P_j / (scale * allocation[j])``. Returns xi, the weights (each
-    replicate's sum to 1) and the replicate of each point, rows ordered by replicate, then
-    stratum. The points at ``2 scale`` hold those at ``scale`` (each sequence goes on), so
-    every replicate is an unbiased estimate, independent of the others, and a doubling
-    adds points only (:func:`grown_rows`)."""
-    from scipy.stats import qmc
+    ``scale * allocation[j]`` points, the first points of coordinate r of a scrambled
+    Sobol' sequence of ``replicates`` dimensions (one per stratum, seeded by ``(seed,
+    j)``; each coordinate scrambled on its own, so the replicates are independent),
+    mapped through the law conditioned on the stratum, each weighing
+    ``P_j / (scale * allocation[j])``. Returns xi, the weights (each replicate's sum to 1)
+    and the replicate of each point, rows ordered by replicate, then stratum. The points
+    at ``2 scale`` hold those at ``scale`` (each sequence goes on), so every replicate is
+    an unbiased estimate, independent of the others, and a doubling adds points only
+    (:func:`grown_rows`)."""
     import warnings
 
-    xi, weight, which = [], [], []
-    cuts = strata.cuts
-    for r in range(replicates):
-        for j, n in enumerate(np.asarray(allocation, int) * int(scale)):
-            stream = qmc.Sobol(1, scramble=True,
-                               seed=np.random.default_rng(np.random.SeedSequence([seed, r, j])))
-            with warnings.catch_warnings():  # n need not be a power of two
-                warnings.simplefilter("ignore", UserWarning)
-                u = stream.random(int(n))[:, 0]
-            xi.append(measure.restrict(float(cuts[j]), float(cuts[j + 1])).ppf(u))
-            weight.append(np.full(int(n), strata.probability[j] / n))
-            which.append(np.full(int(n), r))
-    return np.concatenate(xi), np.concatenate(weight), np.concatenate(which)
+    from scipy.stats import qmc
+
+    counts = np.asarray(allocation, int) * int(scale)
+    per_stratum = []
+    for j, n in enumerate(counts):
+        stream = qmc.Sobol(replicates, scramble=True,
+                           seed=np.random.default_rng(np.random.SeedSequence([seed, j])))
+        with warnings.catch_warnings():  # n need not be a power of two
+            warnings.simplefilter("ignore", UserWarning)
+            u = stream.random(int(n))  # (n, replicates)
+        xi = measure.restrict(float(strata.cuts[j]), float(strata.cuts[j + 1])).ppf(u.T)
+        per_stratum.append(np.asarray(xi, float).reshape(replicates, int(n)))
+    xi = np.concatenate(per_stratum, axis=1).ravel()  # replicate-major, then stratum
+    weight = np.tile(np.concatenate([np.full(int(n), p / n)
+                                     for p, n in zip(strata.probability, counts)]), replicates)
+    which = np.repeat(np.arange(replicates), int(counts.sum()))
+    return xi, weight, which
 
 
 def grown_rows(allocation, replicates: int, scale: int) -> np.ndarray:

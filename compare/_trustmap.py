@@ -111,6 +111,7 @@ class _Map:
         self.clock = PhaseClock()
         # (value, sigma, outputs) -> the last ensemble run there (this value only)
         self.ensembles: dict = {}
+        self.scans: dict = {}  # value -> its split scan (splits), read back once
         # what a point says of its runs (a point computed ahead of its value's task says
         # nothing: the value's task reads it back and says it, as in one process)
         self.point_log = log
@@ -543,9 +544,11 @@ class _Map:
                   "options": cfg.options,
                   "limits": [MAX_SPLITS, cfg.long_splits, MAX_CROSSINGS, MIN_SPLITS],
                   "needed_within": list(cfg.sigmas), "runs": ["own horizon", CHATTER_WINDOW]}
-        stored = self.parts.get(f"splits_{self._name(value)}", inputs,
-                                self._timed("split scans", compute))
-        return centre, splits_from_arrays(stored)
+        if value not in self.scans:  # read once per process: every round's design reads it
+            stored = self.parts.get(f"splits_{self._name(value)}", inputs,
+                                    self._timed("split scans", compute))
+            self.scans[value] = centre, splits_from_arrays(stored)
+        return self.scans[value]
 
     def boundary(self, value, grid: dict[float, Point], found=None):
         """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection.
