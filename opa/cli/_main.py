@@ -413,7 +413,8 @@ def _duration(text: str) -> float:
 WORK_FLAGS = {"samples": "--samples", "periods": "--periods", "order": "--order",
               "elements": "--elements", "values": "--sweep values", "transient": "--transient",
               "record": "--record", "sigmas": "--sigmas", "max_samples": "--max-samples",
-              "horizons": "--horizons", "states": "--extra-states"}
+              "horizons": "--horizons", "states": "--extra-states",
+              "transient + record": "--transient + --record"}
 
 
 def _one_line(err: BaseException) -> str:

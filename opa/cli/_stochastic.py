@@ -46,7 +46,10 @@ def register_stochastic(sub) -> None:
                         "1e-6) or shown chaos by then is classified from its last --record "
                         "periods (default 1000; most runs settle within 50 to 300)")
     g.add_argument("--record", type=positive_int, default=64, metavar="P",
-                   help="forcing periods examined for the period, at most P/2 (default 64)")
+                   help="the last P forcing periods of a run, after its transient, are "
+                        "examined for its period; periods up to P/2 are found (default 64, "
+                        "at least 4; it may exceed --transient: the run is transient + P "
+                        "long)")
     g.add_argument("--extra-states", type=whole_number, default=2, metavar="K",
                    help="other initial states from which the interval middles and the first "
                         "--coexist samples are classified too, to find coexisting attractors "

@@ -383,6 +383,13 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     values = np.asarray(values, dtype=float)
     if values.ndim != 1 or not len(values) or not np.isfinite(values).all():
         raise ValueError("values must be a non-empty 1-D array of finite numbers")
+    from opa._work import check_work
+
+    # at most: every sample and extra state of every value runs transient + record periods
+    check_work("this stochastic diagram",
+               len(values) * (max(samples, 1) + extra_states) * (transient + record),
+               [("values", len(values)), ("samples", samples),
+                ("transient + record", f"({transient} + {record})")])
     if not isinstance(emr, bool):
         raise ValueError(f"emr must be True or False, got {emr!r}")
     if emr:

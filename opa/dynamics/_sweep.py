@@ -463,6 +463,15 @@ def sweep(
     values = np.sort(values)
     if np.any(np.diff(values) == 0):
         raise ValueError(f"sweep values of {param} must be distinct, got {values.tolist()}")
+    from opa._work import check_work
+
+    # one run of transient + record periods per value; "mc" runs ``samples`` of them
+    runs = samples if model == "mc" and isinstance(samples, int) and samples > 0 else 1
+    drivers = [("values", len(values)), ("transient + record", f"({transient} + {record})")]
+    check_work("this bifurcation sweep",
+               len(values) * runs * (float(transient) + float(record))
+               if all(isinstance(v, (int, float)) for v in (transient, record)) else 0.0,
+               drivers + ([("samples", runs)] if runs > 1 else []))
     for name, value in (("period_tol", period_tol), ("graze_velocity", graze_velocity),
                         ("graze_gap", graze_gap)):
         if not (math.isfinite(value) and value > 0):

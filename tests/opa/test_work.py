@@ -63,11 +63,18 @@ def test_an_adaptive_opa_run_of_100000_periods_is_refused_at_once():
      ("--samples 100000", "--periods 100000")),
     (["validate", "--sweep", "omega=3.9:4.3:1000", "--outdir", "OUT"],
      ("--sweep values 1000", "--sigmas 8", "--max-samples 8192", "--horizons 50")),
+    (["stochastic", "--sweep", "c=0.0:1.0:100000", "--samples", "1024", "--transient",
+      "1000", "--out", "OUT.nc"],
+     ("--sweep values 100000", "--samples 1024", "--transient + --record (1000 + 64)")),
+    (["bifurcation", "mc", "--sweep", "c=0.0:1.0:100000", "--transient", "10000",
+      "--samples", "256", "--out", "OUT.nc"],
+     ("--sweep values 100000", "--transient + --record (10000 + 100)", "--samples 256")),
 ])
 def test_the_cli_refuses_at_once_naming_its_flags(argv, flags, tmp_path, capsys):
-    argv = [str(tmp_path / "v") if a == "OUT" else a for a in argv]
+    argv = [str(tmp_path / a.replace("OUT", "v")) if a.startswith("OUT") else a for a in argv]
     start = time.perf_counter()
     assert main(argv) == 2
+    assert not any(tmp_path.iterdir())  # refused before anything is written
     assert time.perf_counter() - start < 20
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "Traceback" not in err
