@@ -298,6 +298,15 @@ def check_outputs(args) -> None:
 
     check_combinations(args)
     check_output_file("--out", getattr(args, "out", None))
+    out = getattr(args, "out", None)
+    command = getattr(args, "command", "")
+    parts = command in ("stochastic", "bifurcation") or (
+        command == "simulate" and getattr(args, "model", None) == "mc")
+    if parts and out and os.path.lexists(f"{out}.parts") \
+            and not os.path.isdir(f"{out}.parts"):
+        raise CliError(f"--out {out}: its parts folder {out}.parts (where a long run keeps "
+                       f"what it finished, to resume) is a file; remove it or name another "
+                       f"--out")
     check_output_file("--plot", getattr(args, "plot", None), suffixes=FIGURE_SUFFIXES)
     if getattr(args, "outdir", None) is not None:
         check_output_dir("--outdir", args.outdir)

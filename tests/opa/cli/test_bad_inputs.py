@@ -829,3 +829,16 @@ def test_random_flag_combinations_exit_0_2_or_3_without_tracebacks(tmp_path, cap
 def test_random_flag_combinations_many(tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)
     _property_test(400)(tmp_path, capsys)
+
+
+@pytest.mark.parametrize("command", [["simulate", "mc", "--samples", "64", "--periods", "1"],
+                                     ["stochastic", "--sweep", "c=0.01:0.02:2", "--samples",
+                                      "8", "--transient", "10"],
+                                     ["bifurcation", "dmr", "--sweep", "c=0.01:0.02:2"]])
+def test_a_parts_path_that_is_a_file_names_out(command, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "r.nc.parts").write_text("not a folder")
+    status, out, err, seconds = run_cli(command + ["--out", "r.nc"], capsys)
+    assert status == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert "--out r.nc: its parts folder r.nc.parts" in err and "is a file" in err
+    assert not (tmp_path / "r.nc").exists()
