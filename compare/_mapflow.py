@@ -280,10 +280,9 @@ def run_map_tasks(job: _Map, bar) -> dict:
     first = flow.first()
     where = (f"the Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
              else f"{cfg.processes} local processes")
-    job.log(f"{len(first)} tasks ({len(cfg.values)} split scans, "
-             f"{len(cfg.values) * len(cfg.sigmas)} grid points"
-             f"{', the frontier' if cfg.frontier else ''}), then each value's "
-             f"bisections, on {where} ...")
+    job.log(f"{len(cfg.values)} split scans{', the frontier' if cfg.frontier else ''}, "
+            f"then each value's {len(cfg.sigmas)} grid points, then its bisections, on "
+            f"{where} ...")
     results = {}
     with job.clock("waiting for workers"):
         for key, result in run_flow(first, flow.follow, workers=cfg.processes,

@@ -139,8 +139,8 @@ def test_a_pool_of_processes_gives_the_same_map(one_process, tmp_path):
     lines = []
     pooled = run_validation(cfg, progress=False, log=lines.append)
     assert pooled.attrs["ran_on"] == "2 local processes"
-    assert any("8 tasks (2 split scans, 6 grid points), then each value's bisections, "
-               "on 2 local processes" in line for line in lines)
+    assert any("2 split scans, then each value's 3 grid points, then its bisections, on 2 "
+               "local processes" in line for line in lines)
     assert_same_map(one_process, pooled)
     # the work done is counted wherever it ran
     for name in ("true_runs_computed", "mc_runs_computed", "opa_runs_computed"):
