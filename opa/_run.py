@@ -54,23 +54,49 @@ def kernel_quadrature(quad):
 
 
 _ANNOUNCED = []
+#: set (to the numba cache it names) by the process that said it compiles, so that the
+#: workers it starts afterwards compile that cache in silence
+ANNOUNCED_ENV = "OPA_MC_COMPILING_ANNOUNCED"
+
+
+def _cold(dispatcher) -> bool:
+    """Whether ``dispatcher`` is neither compiled here nor in numba's on-disk cache."""
+    if dispatcher.signatures:
+        return False
+    try:  # numba's index of cached overloads, empty when the source changed
+        return not dispatcher._cache._cache_file._load_index()
+    except Exception:  # a numba without this layout: say nothing rather than guess
+        return False
+
+
+def announce_compilation() -> bool:
+    """Say "compiling kernels (first run only)..." on stderr if the kernels are not in
+    numba's on-disk cache, once for this process and the processes it starts afterwards
+    (a map's pool workers compile the same cache): a command calls it before starting
+    its workers. Returns whether it was said here."""
+    from opa import _kernel as K
+
+    cache = os.environ.get("NUMBA_CACHE_DIR", "")
+    if _ANNOUNCED or os.environ.get(ANNOUNCED_ENV) == cache or not _cold(K.integrate):
+        return False
+    _ANNOUNCED.append(True)
+    os.environ[ANNOUNCED_ENV] = cache
+    print("compiling kernels (first run only)...", file=sys.stderr, flush=True)
+    return True
 
 
 def prepare_kernels(dispatcher) -> None:
     """Before a kernel entry point that is neither compiled in this process nor in
-    numba's on-disk cache: print "compiling kernels (first run only)..." once per
-    process, to stderr, and compile the driver's callees on two cores
-    (:func:`compile_callees`): a first run sits for several seconds compiling."""
-    if _ANNOUNCED or dispatcher.signatures:
+    numba's on-disk cache: say so once (:func:`announce_compilation`: not again in the
+    workers of a process that said it), to stderr, and compile the driver's callees on
+    two cores (:func:`compile_callees`): a first run sits for several seconds compiling."""
+    if _ANNOUNCED or not _cold(dispatcher):
         return
-    try:  # numba's index of cached overloads, empty when the source changed
-        cached = bool(dispatcher._cache._cache_file._load_index())
-    except Exception:  # a numba without this layout: say nothing rather than guess
-        cached = True
-    if not cached:
-        _ANNOUNCED.append(True)
+    if os.environ.get(ANNOUNCED_ENV) != os.environ.get("NUMBA_CACHE_DIR", ""):
+        os.environ[ANNOUNCED_ENV] = os.environ.get("NUMBA_CACHE_DIR", "")
         print("compiling kernels (first run only)...", file=sys.stderr, flush=True)
-        compile_callees()
+    _ANNOUNCED.append(True)
+    compile_callees()
 
 
 def callee_signatures() -> dict[str, dict[str, tuple]]:

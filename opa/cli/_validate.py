@@ -194,6 +194,9 @@ def cmd_validate(args) -> int:
         workers=args.workers, frontier=False if args.no_frontier else None, **impulse,
     )
     _check_outdir(cfg.outdir)
+    from opa._run import announce_compilation
+
+    announce_compilation()  # here, once: the workers started below then compile in silence
     if cfg.processes > 1 and cfg.scheduler is None:
         # the workers' fork server imports the map's modules while this process does
         from compare._scaleout import map_preload

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+import pytest
 
 import opa
 from opa import _run
@@ -128,3 +129,39 @@ def test_importing_opa_lets_the_kernel_threads_sleep_unless_told_otherwise():
     out = subprocess.run([sys.executable, "-c", code], env=env | {"OMP_WAIT_POLICY": "ACTIVE"},
                          capture_output=True, text=True, check=True).stdout.strip()
     assert out == "ACTIVE"
+
+
+def test_a_command_says_it_compiles_once_for_the_workers_it_starts(tmp_path, monkeypatch):
+    """announce_compilation on a cold cache says so and marks the environment; a second
+    call, and a process started afterwards with the same cache (a pool worker), stay
+    silent; a process with another cache says it again. Nothing is compiled here."""
+    script = """
+        import os, subprocess, sys
+        from opa._run import announce_compilation
+        said = [announce_compilation(), announce_compilation()]
+        child = "from opa._run import announce_compilation; print(announce_compilation())"
+        same = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True)
+        other = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True,
+                               env={**os.environ, "NUMBA_CACHE_DIR": os.environ["OTHER"]})
+        print(said, same.stdout.strip(), other.stdout.strip(), same.stderr.count("compiling"),
+              other.stderr.count("compiling"))
+        """
+    monkeypatch.setenv("OTHER", str(tmp_path / "other"))
+    done = _python(script, tmp_path / "cache")
+    assert done.stdout.strip().splitlines()[-1] == "[True, False] False True 0 1"
+    assert done.stderr.count(MESSAGE) == 1
+
+
+@pytest.mark.slow
+def test_a_cold_map_on_two_processes_says_it_compiles_once(tmp_path):
+    """The first map on a cold numba cache, with 2 worker processes: one line, not one
+    per process (issue 44). About 3 minutes on 2 cores: every process compiles."""
+    done = subprocess.run(
+        [sys.executable, "-c", "import sys; from opa.cli._main import main; sys.exit(main())",
+         "validate", "--omega", "3.98", "--sigmas", "0.01", "--orders", "0,1",
+         "--horizons", "2", "--samples", "64", "--max-samples", "64", "--no-frontier",
+         "--no-plots", "--workers", "2", "--quiet", "--outdir", str(tmp_path / "map")],
+        env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}, cwd=REPO,
+        capture_output=True, text=True, timeout=1200)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count(MESSAGE) == 1, done.stderr
