@@ -892,9 +892,9 @@ def plot_map(ds, path, *, size=None):
             if (~a & ~bad & ~undecided).any():
                 ax.scatter(X[~a & ~bad & ~undecided], Y[~a & ~bad & ~undecided], marker="x",
                            color="k", s=26, label=f"{head} does not", zorder=4)
-            if (undecided & ~bad).any():
-                ax.scatter(X[undecided & ~bad], Y[undecided & ~bad], marker="s",
-                           facecolor="none", edgecolor="k", s=22, zorder=4,
+            if (undecided & ~bad).any():  # grey: between agrees (white) and does not
+                ax.scatter(X[undecided & ~bad], Y[undecided & ~bad], marker="o",
+                           facecolor="0.6", edgecolor="k", s=26, zorder=4,
                            label=f"{head} undecided (counts as does not)")
             if bad.any():
                 ax.scatter(X[bad], Y[bad], marker="$?$", color="k", s=40, zorder=4,
@@ -922,6 +922,8 @@ def plot_map(ds, path, *, size=None):
             kind = ds.split_kind.values[:, h]
             dist = np.abs(ds.split_value.values[:, h] - centre)
             shown = [k for k, name in enumerate(kinds) if name != "horizon"]
+            more = np.zeros(len(x), dtype=int)  # splits beyond the first of each kind
+            lowest = np.full(len(x), np.inf)
             for rank, k in enumerate(shown):
                 name = kinds[k]
                 crossing = name == "output crossing"
@@ -936,10 +938,13 @@ def plot_map(ds, path, *, size=None):
                                edgecolor="k", lw=0.5, zorder=6,
                                label=f"first {name} at this σ" if crossing
                                else f"first split ({name}) at this σ")
-                    if sel.sum() > 1:
-                        ax.annotate(f"+{int(sel.sum()) - 1}", (x[q] + at, first),
-                                    xytext=(3, 3), textcoords="offset points", fontsize=6,
-                                    zorder=6)
+                    more[q] += int(sel.sum()) - 1
+                    lowest[q] = min(lowest[q], first)
+            for q in np.flatnonzero(more):  # one count per column, right of its lanes
+                ax.annotate(f"+{int(more[q])}", (x[q] + 0.12 * span + 0.07 * span
+                                                 * (len(shown) - 1), lowest[q]),
+                            xytext=(4, -8), textcoords="offset points", fontsize=6,
+                            zorder=6)
             ax.set_ylim(-0.04 * smax, smax * 1.04)
             _xlim(ax, x)
             ax.set_title(f"{what}, H = {float(ds.horizon[h]):g} forcing periods", fontsize=9)

@@ -796,6 +796,34 @@ def test_trust_map_marks_an_undecided_verdict_apart(tiny, tmp_path, monkeypatch)
                             if "undecided" in col.get_label() for xy in col.get_offsets()}
 
 
+def test_trust_map_counts_further_splits_once_per_column(tiny, tmp_path, monkeypatch):
+    """The splits beyond the first of each kind are one "+n" per column (they crowded the
+    50-period rows as one count per kind), n their number within the largest sigma."""
+    from compare._report import plot_map
+
+    _, ds, _ = tiny
+    fig, = _drawn(monkeypatch, lambda: plot_map(ds, str(tmp_path / "m.png")))
+    values = ds[ds.attrs["parameter"]].values
+    smax = float(ds.sigma.max())
+    centre = float(ds.attrs[ds.attrs["uncertain"]])  # mu, not swept here
+    seen = 0
+    for h in range(ds.sizes["horizon"]):
+        ax = [a for a in fig.axes if a.get_title().startswith(
+            f"mean, H = {float(ds.horizon[h]):g} ")][0]
+        counts = [t for t in ax.texts if t.get_text().startswith("+")]
+        columns = [int(np.argmin(np.abs(values - t.xy[0]))) for t in counts]
+        assert len(columns) == len(set(columns)), h
+        kinds = ds.split_kind.attrs["flag_meanings"].split()
+        for t, q in zip(counts, columns):
+            kind = ds.split_kind.values[q, h]
+            near = np.abs(ds.split_value.values[q, h] - centre) <= smax
+            shown = (kind >= 0) & near & np.isin(kind, [k for k, n in enumerate(kinds)
+                                                        if n != "horizon"])
+            firsts = len(set(kind[shown].tolist()))
+            assert t.get_text() == f"+{int(shown.sum()) - firsts}", (h, q)
+            seen += 1
+    assert seen  # the tiny map has columns with more splits than kinds
+
 def test_single_value_map_has_sensible_limits(tiny, tmp_path, monkeypatch):
     """With one value of the swept parameter the x axis spans a few per cent around it and
     sigma* is still drawn (as a marker)."""
