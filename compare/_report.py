@@ -1097,7 +1097,8 @@ def plot_mean(ds, path, q=0, *, size=None):
         bottom = max(float(values.min()) if len(values) else top * 1e-6, top * 1e-8)
         ax2.fill_between(t[later], bottom / 10, np.maximum(2 * se[later], bottom / 10),
                          color="0.55", alpha=0.35, lw=0, label="within 2 MC SE (noise)")
-        ax2.semilogy(t[later], np.maximum(2 * se[later], bottom / 10), "k-", lw=1.6,
+        # dashed: the solid black line is the MC mean, in the same legend
+        ax2.semilogy(t[later], np.maximum(2 * se[later], bottom / 10), "k--", lw=1.4,
                      label="2 MC SE")
         ax2.set_ylim(bottom / 2, top * 2)
         ax.set_title(f"σ = {float(ds.sigma[s]):g}", fontsize=9)

@@ -309,6 +309,79 @@ def shared_styles(fig) -> list[tuple[str, str]]:
     return clashes
 
 
+def _colour(c):
+    """A colour as an RGBA tuple rounded to what an eye can tell, None if invisible."""
+    from matplotlib.colors import to_rgba
+
+    if c is None or (isinstance(c, str) and c.lower() == "none"):
+        return None
+    rgba = np.asarray(to_rgba(c) if isinstance(c, str) or np.ndim(c) == 1 else c[0], float)
+    return None if rgba[3] == 0 else tuple(np.round(rgba, 2))
+
+
+def _shape(path) -> tuple:
+    """A marker's outline, whatever its size."""
+    v = np.asarray(path.vertices, float)
+    v = v / max(float(np.abs(v).max()), 1e-12)
+    codes = () if path.codes is None else tuple(path.codes)
+    return tuple(np.round(v, 2).ravel()), codes
+
+
+def _dash(offset, dashes, width=1.0) -> tuple | None:
+    """A dash pattern at line width 1 (None: solid)."""
+    return None if dashes is None else tuple(np.round(np.asarray(dashes, float) / width, 2))
+
+
+def _glyph(handle) -> frozenset:
+    """What a legend handle draws, in parts a reader tells apart at a glance: its line
+    (colour, dash), its marker (outline, face, edge) and its fill (colour). Widths and
+    sizes are left out: a thicker line of one colour and dash reads as the same line."""
+    from matplotlib.collections import LineCollection, PathCollection
+    from matplotlib.lines import Line2D
+    from matplotlib.markers import MarkerStyle
+    from matplotlib.patches import Patch
+
+    parts = set()
+    if isinstance(handle, Line2D):
+        if handle.get_linestyle() not in ("None", "none", "", " ") and handle.get_linewidth():
+            parts.add(("line", _colour(handle.get_color()),
+                       _dash(*handle._unscaled_dash_pattern)))
+        if handle.get_marker() not in (None, "None", "none", "", " "):
+            style = MarkerStyle(handle.get_marker(), handle.get_fillstyle())
+            face = _colour(handle.get_markerfacecolor()) if style.is_filled() else None
+            parts.add(("marker", _shape(style.get_path().transformed(style.get_transform())),
+                       face, _colour(handle.get_markeredgecolor())))
+    elif isinstance(handle, PathCollection):
+        edge = (_colour(handle.get_edgecolor()) if len(handle.get_edgecolor())
+                and np.max(handle.get_linewidth()) > 0 else None)
+        face = _colour(handle.get_facecolor()) if len(handle.get_facecolor()) else None
+        parts.add(("marker", _shape(handle.get_paths()[0]), face, edge))
+    elif isinstance(handle, LineCollection):  # error bars: a line in the legend
+        offset, dashes = handle.get_linestyle()[0]  # scaled by the width, unlike a line's
+        width = float(np.atleast_1d(handle.get_linewidth())[0]) or 1.0
+        parts.add(("line", _colour(handle.get_color()), _dash(offset, dashes, width)))
+    elif isinstance(handle, Patch):
+        parts.add(("fill", _colour(handle.get_facecolor())))
+    return frozenset(parts)
+
+
+def shared_glyphs(fig) -> list[tuple[str, str]]:
+    """Pairs of entries of one legend whose glyphs a reader cannot tell apart: the same
+    glyph, or one entry's glyph a part of the other's (an open circle alone and a line
+    with open circles on it; a black line alone and a black line with squares). One glyph,
+    one meaning. An entry whose glyph the check cannot read is reported with None."""
+    clashes = []
+    for legend in _legends(fig):
+        entries = [(text.get_text(), _glyph(handle))
+                   for text, handle in zip(legend.get_texts(), legend.legend_handles)]
+        clashes += [(a, None) for a, ga in entries if not ga]
+        for i, (a, ga) in enumerate(entries):
+            for b, gb in entries[i + 1:]:
+                if a != b and ga and gb and (ga <= gb or gb <= ga):
+                    clashes.append((a, b))
+    return clashes
+
+
 def faint_bands(fig) -> list[str]:
     from matplotlib.collections import FillBetweenPolyCollection, PolyCollection
 
@@ -351,6 +424,7 @@ def time_axes_not_in_periods(fig) -> list[str]:
 def check_reads_at_a_glance(fig, name):
     assert legend_entries_without_artist(fig) == [], name
     assert shared_styles(fig) == [], name
+    assert shared_glyphs(fig) == [], name
     assert faint_bands(fig) == [], name
     assert log_axes_stretched_by_t0(fig) == [], name
     assert time_axes_not_in_periods(fig) == [], name
@@ -380,27 +454,57 @@ def test_the_checks_catch_each_defect():
     plt.close(fig2)
 
 
+def test_the_glyph_check_catches_one_glyph_with_two_meanings():
+    """Two entries of one legend clash when their glyphs are alike or one is a part of the
+    other, widths and sizes aside; a different shape, fill or dash tells them apart."""
+    fig, (ax, ax2) = plt.subplots(1, 2)
+    t = np.linspace(0, 10, 5)
+    ax.scatter(t, t, marker="o", facecolor="white", edgecolor="k", s=26, label="agrees")
+    ax.plot(t, t + 1, "k-", marker="o", mfc="white", ms=5, label="σ* (circles)")
+    ax.plot(t, t + 2, "k-", lw=2.2, label="MC mean")
+    ax.plot(t, t + 3, "k-", lw=1.0, label="2 MC SE")
+    ax.legend()
+    assert {frozenset(pair) for pair in shared_glyphs(fig)} == {
+        frozenset(pair) for pair in (("agrees", "σ* (circles)"), ("MC mean", "2 MC SE"),
+                                     ("MC mean", "σ* (circles)"), ("2 MC SE", "σ* (circles)"))}
+    ax2.scatter(t, t, marker="o", facecolor="white", edgecolor="k", label="agrees")
+    ax2.scatter(t, t, marker="o", facecolor="0.6", edgecolor="k", label="undecided")
+    ax2.scatter(t, t, marker="x", color="k", label="does not")
+    ax2.plot(t, t, "k-", marker="s", mfc="white", label="σ*")
+    ax2.plot(t, t, "k--", label="2 MC SE")
+    ax2.plot(t, t, color="tab:red", ls=(0, (5, 1, 1, 1)), label="tolerance")
+    ax2.plot(t, t, color="tab:red", ls=(0, (1, 1)), label="other")
+    ax2.vlines(t, t, t + 1, color="darkgreen", lw=1.6, label="MC mean ± 2 SE")
+    ax2.fill_between(t, t, t + 1, color="0.55", alpha=0.35, label="within 2 SE")
+    ax.get_legend().remove()
+    ax2.legend()
+    assert shared_glyphs(fig) == []
+    # error bars read as a line of their colour and dash, whatever their width
+    ax2.plot(t, t, color="darkgreen", lw=0.8, label="MC mean")
+    ax2.vlines(t, t, t + 1, color="tab:red", ls=(0, (1, 1)), lw=2.5, label="red bars")
+    ax2.legend()
+    assert {frozenset(pair) for pair in shared_glyphs(fig)} == {
+        frozenset(("MC mean ± 2 SE", "MC mean")), frozenset(("other", "red bars"))}
+    plt.close(fig)
+
+
 @pytest.mark.parametrize("name", F.FIGURES)
 def test_paper_figures_read_at_a_glance(drawn, name):
     _, figures = drawn
     check_reads_at_a_glance(figures[name].fig, name)
 
 
-@pytest.fixture(scope="module")
-def report_figures(tmp_path_factory):
-    """Every figure of the trust map's report, drawn from a tiny map's validate.nc, kept
-    open for inspection."""
+REPORT_FIGURES = ("trust_map.png", "error_vs_N.png", "mean_vs_mc.png", "variance.png",
+                  "phase.png", "frontier.png")
+
+
+def draw_report(ds, out) -> dict:
+    """Every figure of the trust map's report of ``ds``, drawn into ``out`` and kept open
+    for inspection, by file name."""
     from matplotlib.figure import Figure
 
-    from compare import load_config, run_validation
     from compare import _report as R
 
-    out = tmp_path_factory.mktemp("map")
-    cfg = load_config(None, outdir=str(out), values=(3.98, 4.035), sigmas=(0.01, 0.03),
-                      orders=(0, 1, 3), horizons=(4, 8), samples=64, max_samples=128,
-                      per_period=4)
-    run_validation(cfg, progress=False, log=lambda *a: None)
-    ds = xr.open_dataset(out / "validate.nc")
     kept = {}
     save = Figure.savefig
 
@@ -410,24 +514,108 @@ def report_figures(tmp_path_factory):
 
     Figure.savefig = keep
     try:
-        for name, draw in (("trust_map.png", R.plot_map),
-                           ("error_vs_N.png", R.plot_error_vs_order),
-                           ("mean_vs_mc.png", R.plot_mean),
-                           ("variance.png", R.plot_variance),
-                           ("phase.png", R.plot_phase),
-                           ("frontier.png", R._plot_frontier_of)):
+        for name, draw in zip(REPORT_FIGURES, (R.plot_map, R.plot_error_vs_order, R.plot_mean,
+                                               R.plot_variance, R.plot_phase,
+                                               R._plot_frontier_of)):
             draw(ds, str(out / name))
     finally:
         Figure.savefig = save
+    return kept
+
+
+@pytest.fixture(scope="module")
+def report_figures(tmp_path_factory):
+    """Every figure of the trust map's report, drawn from a tiny map's validate.nc, kept
+    open for inspection."""
+    from compare import load_config, run_validation
+
+    out = tmp_path_factory.mktemp("map")
+    cfg = load_config(None, outdir=str(out), values=(3.98, 4.035), sigmas=(0.01, 0.03),
+                      orders=(0, 1, 3), horizons=(4, 8), samples=64, max_samples=128,
+                      per_period=4)
+    run_validation(cfg, progress=False, log=lambda *a: None)
+    ds = xr.open_dataset(out / "validate.nc")
+    kept = draw_report(ds, out)
     yield ds, kept
     ds.close()
 
 
-@pytest.mark.parametrize("name", ["trust_map.png", "error_vs_N.png", "mean_vs_mc.png",
-                                  "variance.png", "phase.png", "frontier.png"])
+def with_every_entry(ds) -> xr.Dataset:
+    """The tiny map changed so that each report figure draws every kind of legend entry it
+    has: the three verdicts of the paper's OPA, a run that did not finish (the headline run
+    at the first grid point, stopped after output 3, as validate.nc records a stop), sigma*
+    resolved at the first value and below the smallest probe at the second, and a split of
+    every kind in every column."""
+    from compare import _report as R
+
+    ds = ds.load().copy(deep=True)
+    v, n = R.HEADLINE, -1
+    # verdicts (value, sigma): does not at (0, 1), agrees at (1, 0), undecided at (1, 1)
+    for (q, s), verdict in {(0, 1): -1, (1, 0): 1, (1, 1): 0}.items():
+        ds.verdict.values[q, s, v, n] = verdict
+        ds.agrees.values[q, s, v, n] = verdict == 1
+    names = ds.opa_status.attrs["flag_meanings"].split()
+    ds.opa_status.values[0, 0, v, n] = ds.opa_status.attrs["flag_values"][
+        names.index("step_limit")]
+    for name in ("opa_x_mean", "opa_x_var"):
+        ds[name].values[0, 0, v, n, 3:] = np.nan
+    for name in ("err_mean", "err_mean_rel", "err_var", "err_var_rel"):
+        ds[name].values[0, 0, v, n] = np.nan
+    ds.verdict.values[0, 0, v, n] = -1
+    ds.agrees.values[0, 0, v, n] = False
+    smax = float(ds.sigma.max())
+    ds.sigma_star.values[0] = 0.5 * smax
+    ds.sigma_star_upper.values[0] = 0.6 * smax
+    ds.sigma_star.values[1] = 0.0
+    ds.sigma_star_upper.values[1] = 0.5 * float(ds.sigma.min())
+    kinds = ds.split_kind.attrs["flag_meanings"].split()
+    for k in range(len(kinds)):
+        ds.split_kind.values[:, :, k] = ds.split_kind.attrs["flag_values"][k]
+        ds.split_value.values[:, :, k] = R.nominal(ds) + (k + 1) * smax / (len(kinds) + 1)
+    return ds
+
+
+@pytest.fixture(scope="module")
+def every_entry_figures(report_figures, tmp_path_factory):
+    """The report's figures of :func:`with_every_entry`'s map, kept open."""
+    ds = with_every_entry(report_figures[0])
+    yield ds, draw_report(ds, tmp_path_factory.mktemp("every_entry"))
+
+
+@pytest.mark.parametrize("name", REPORT_FIGURES)
 def test_report_figures_read_at_a_glance(report_figures, name):
     _, kept = report_figures
     check_reads_at_a_glance(kept[name], name)
+
+
+@pytest.mark.parametrize("name", REPORT_FIGURES)
+def test_report_figures_read_at_a_glance_with_every_entry(every_entry_figures, name):
+    """Every report figure, with every kind of legend entry it can draw present, gives
+    each entry a glyph of its own (and passes the other checks)."""
+    _, kept = every_entry_figures
+    check_reads_at_a_glance(kept[name], name)
+
+
+def test_every_entry_map_draws_every_entry(every_entry_figures):
+    """The map of the test above does draw each kind of entry (else its check is void)."""
+    ds, kept = every_entry_figures
+    head = str(ds.variant.values[0])
+    entries = {t.get_text() for legend in _legends(kept["trust_map.png"])
+               for t in legend.get_texts()}
+    kinds = [k.replace("_", " ") for k in ds.split_kind.attrs["flag_meanings"].split()]
+    wanted = {f"{head} agrees", f"{head} does not", f"{head} undecided (counts as does not)",
+              "run did not finish (NaN)", "σ probed",
+              *(f"σ* {name}" for name in ("mean/galerkin", "ensemble/galerkin",
+                                           "saltation/galerkin")),
+              *(f"below the smallest σ probed: σ* {name}"
+                for name in ("mean/galerkin", "ensemble/galerkin", "saltation/galerkin")),
+              "first output crossing at this σ",
+              *(f"first split ({k}) at this σ" for k in kinds
+                if k not in ("horizon", "output crossing"))}
+    assert wanted <= entries, wanted - entries
+    entries = {t.get_text() for legend in _legends(kept["error_vs_N.png"])
+               for t in legend.get_texts()}
+    assert "run did not finish (NaN)" in entries
 
 
 def test_trust_map_glyphs_have_one_meaning(report_figures):
