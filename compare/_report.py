@@ -739,16 +739,24 @@ def findings(ds: xr.Dataset) -> list[str]:
             if n0 >= 0.9 * some.sum():
                 text += ": N hardly changes the verdict"
             out.append(text + ".")
-    # before the first impact
+    # before the first impact: each sigma's window ends at OPA's first impact there (the
+    # window of pre_impact_err), inf where OPA does not impact in the record
     pre = ds.pre_impact_err.values[q, :, HEADLINE, :]  # sigma, N
-    first = ds.first_impact.values[q, 0, HEADLINE, -1]
-    n_pre = int(np.sum(_time(ds).values < first))
-    if n_pre > 1:
-        floor = np.array([_window_sem(ds, q, s, n_pre) for s in range(len(sig))])
-        ok = [f"{_e(pre[i, -1])} at σ = {_g(float(s))} (MC SE {_e(floor[i])})"
-              for i, s in enumerate(sig)]
-        out.append(f"Before OPA's first impact (t < {first:.2f} periods at "
-                   f"{par} = {_g(float(_vals(ds)[q]))}) the error of x_0 at N = {nmax} is "
+    first = ds.first_impact.values[q, :, HEADLINE, -1]  # sigma
+    t = _time(ds).values
+    n_pre = np.array([int(np.sum(t < f)) for f in first])
+    shown = np.flatnonzero(n_pre > 1)  # more than t = 0, where OPA and MC start as one
+    if len(shown):
+        ok = [f"{_e(pre[s, -1])} at σ = {_g(float(sig[s]))} (MC SE "
+              f"{_e(_window_sem(ds, q, s, n_pre[s]))})" for s in shown]
+        ends = sorted({f"{f:.2f}" for f in first[shown] if np.isfinite(f)}, key=float)
+        when = f"t < {'–'.join(dict.fromkeys(ends[:1] + ends[-1:]))} periods"  # or a range
+        if not np.isfinite(first[shown]).all():
+            whole = f"the {float(t[-1]):g} periods recorded"
+            when = (f"{when}, or {whole} where OPA does not impact," if ends
+                    else f"no impact in {whole}")
+        out.append(f"Before OPA's first impact ({when} at {par} = "
+                   f"{_g(float(_vals(ds)[q]))}) the error of x_0 at N = {nmax} is "
                    + "; ".join(ok[:: max(1, len(ok) // 4)]) + ".")
     # impact laws against each other, below sigma* of both
     e_mean = ds.err_mean.values[..., 0, -1, 0]
