@@ -1006,6 +1006,10 @@ def _pick_sigmas(ds, q=0, h=0):
 
 
 LINE_STYLES = ("-", "--", ":", "-.", (0, (5, 1, 1, 1)), (0, (1, 1)), (0, (3, 1, 1, 1, 1, 1)))
+#: colours of the variants in error_vs_N.png: neither red (the verdict's tolerance) nor
+#: black (the MC noise floor)
+VARIANT_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown",
+                   "tab:pink", "tab:olive", "tab:cyan")
 
 
 def plot_error_vs_order(ds, path, q=0, *, size=None):
@@ -1031,6 +1035,7 @@ def plot_error_vs_order(ds, path, q=0, *, size=None):
             for v, name in enumerate(ds.variant.values):
                 xs = N + 0.07 * (v - 2)
                 line, = ax.semilogy(xs, np.maximum(err[v], 1e-16),
+                                    color=VARIANT_COLOURS[v % len(VARIANT_COLOURS)],
                                     marker=VARIANT_MARKERS[v % len(VARIANT_MARKERS)],
                                     ls=LINE_STYLES[v % len(LINE_STYLES)], ms=5,
                                     mfc="none" if v % 2 else None, lw=0.8, label=str(name))

@@ -635,11 +635,20 @@ def test_trust_map_glyphs_have_one_meaning(report_figures):
 
 
 def test_error_vs_n_draws_the_tolerance(report_figures):
-    _, kept = report_figures
+    """The tolerance and the noise floor are drawn in every panel, each in a colour that no
+    variant's line has (one colour, one meaning)."""
+    from matplotlib.colors import to_rgba
+
+    ds, kept = report_figures
+    variants = {str(v) for v in ds.variant.values}
     for ax in kept["error_vs_N.png"].axes:
-        names = [line.get_label() for line in ax.get_lines()]
-        assert "the verdict's tolerance (mean)" in names
-        assert "MC noise floor (RMS SE)" in names
+        colours = {line.get_label(): to_rgba(line.get_color()) for line in ax.get_lines()}
+        assert "the verdict's tolerance (mean)" in colours
+        assert "MC noise floor (RMS SE)" in colours
+        used = {colours[v] for v in variants}
+        assert len(used) == len(variants)
+        assert colours["the verdict's tolerance (mean)"] not in used
+        assert colours["MC noise floor (RMS SE)"] not in used
 
 
 def test_frontier_has_a_legend_per_panel_and_one_style_per_method(report_figures):
