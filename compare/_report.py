@@ -764,9 +764,13 @@ def findings(ds: xr.Dataset) -> list[str]:
     ratio = e_ens / e_mean
     head = (f"Ensemble against mean impact law (N = {nmax}, {float(ds.horizon[0]):g} "
             f"periods): the ratio of their errors of x_0 ")
-    if np.isfinite(ratio).any():
-        out.append(head + f"ranges over {np.nanmin(ratio):.2g}…{np.nanmax(ratio):.2g} on the "
-                          f"grid (median {np.nanmedian(ratio):.2g}).")
+    lo, hi = (f"{np.nanmin(ratio):.2g}", f"{np.nanmax(ratio):.2g}") \
+        if np.isfinite(ratio).any() else ("", "")
+    if lo and lo == hi:  # one value to the digits shown: not a range
+        out.append(head + f"is {lo} wherever it is known on the grid.")
+    elif lo:
+        out.append(head + f"ranges over {lo}…{hi} on the grid (median "
+                          f"{np.nanmedian(ratio):.2g}).")
     else:
         out.append(head + "is known nowhere on the grid: a run of one of them stopped at "
                           "every point (see the runs that did not finish).")

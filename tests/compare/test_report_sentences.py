@@ -301,3 +301,11 @@ def test_orders_a_variant_did_not_run_are_not_counted(ds):
     (sentence,) = R.run_failures(ds)
     assert sentence.startswith(f"1 of {ds.sizes['omega'] * ds.sizes['sigma']} "
                                f"saltation/galerkin runs ")
+
+
+def test_the_impact_law_ratio_is_one_value_when_it_does_not_vary(ds):
+    """"ranges over 3.2…3.2" read as a range of one value: it says the value."""
+    ds.err_mean.values[..., 1, -1, 0] = 3.2 * ds.err_mean.values[..., 0, -1, 0]
+    said = [line for line in R.findings(ds) if line.startswith("Ensemble against mean")]
+    assert len(said) == 1 and "the ratio of their errors of x_0 is 3.2 wherever" in said[0]
+    assert "…" not in said[0]
