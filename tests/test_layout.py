@@ -36,6 +36,8 @@ THEMES = {
         "the trust map's parts on disk (compare._trustmap, opa._dataset.Store)",
     "tests/compare/test_hostile_inputs.py":
         "the hostile-input corpus of compare's entry points (compare._inputs)",
+    "tests/opa/dynamics/test_stochastic_hostile.py":
+        "the hostile-input corpus of opa-mc stochastic and stochastic_diagram",
 }
 
 #: source modules without a test module of their own -> the test modules that cover them
