@@ -90,8 +90,13 @@ class Settings:
     def __post_init__(self):
         for name in ("transient", "record", "check", "lyapunov_after", "lyapunov_periods"):
             value = getattr(self, name)
-            if isinstance(value, bool) or int(value) != value or value < 1:
+            try:  # None, a string, NaN or inf are refused here too, not by int()
+                whole = not isinstance(value, bool) and int(value) == value and value >= 1
+            except (TypeError, ValueError, OverflowError):
+                whole = False
+            if not whole:
                 raise ValueError(f"{name} must be a whole number >= 1, got {value!r}")
+            object.__setattr__(self, name, int(value))  # 50.0 is 50: a count of periods
         if self.record < 4:
             raise ValueError(f"record must be >= 4 periods, got {self.record}")
         for name in ("settle_tol", "period_tol", "chaos_threshold", "d0"):
