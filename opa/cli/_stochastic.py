@@ -4,7 +4,9 @@ probabilities along a control parameter, boundaries in xi, Monte Carlo beside th
 Wired into ``opa.cli._main.build_parser`` by ``register_stochastic(sub)``. User mistakes
 raise ``ValueError`` (reported by ``opa.cli._main.main`` as one line, exit 2), and so does
 a second run to the same ``--out`` while the first runs (the lock of ``OUT.parts``,
-:mod:`opa._lock`).
+:mod:`opa._lock`). The inputs are checked by ``opa.dynamics._stochastic.check_diagram``
+before the lock and any work; its refusals name the keywords, written here as the flags
+(``FLAGS``).
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
+
+import numpy as np
 
 from opa._lock import OutputLock
 from opa.cli._args import parse_sweep, positive_int, whole_number
@@ -71,20 +75,24 @@ def register_stochastic(sub) -> None:
     p.set_defaults(func=cmd_stochastic)
 
 
+#: each keyword of ``stochastic_diagram`` that the CLI sets, named by its flag in refusals
+#: (``DiagramInputError.message``, ``WorkBudgetError.message``)
+FLAGS = {"sigma": "--sigma", "uncertain": "--uncertain", "distribution": "--distribution",
+         "samples": "--samples", "seed": "--seed", "transient": "--transient",
+         "record": "--record", "extra_states": "--extra-states", "coexist": "--coexist",
+         "emr": "--emr", "emr_order": "--emr-order", "workers": "--workers",
+         "scheduler": "--scheduler", "parameter": "--sweep", "values": "--sweep values",
+         "transient + record": "--transient + --record", "parts": "--out's parts folder",
+         "oscillator": "the model"}
+
+
 def cmd_stochastic(args) -> int:
-    from opa.cli._flags import check_outputs, options_from, oscillator_from
-    from opa.dynamics._stochastic import stochastic_diagram
+    from opa._work import WorkBudgetError
+    from opa.cli._flags import check_outputs, given, options_from, oscillator_from, \
+        refuse_given
+    from opa.dynamics._stochastic import DiagramInputError, check_diagram
 
     check_outputs(args)  # refuses --keep-parts without --out too; --workers bound
-    if args.record < 4:
-        raise ValueError(f"--record must be at least 4 periods, got {args.record}")
-    if args.samples == 1:
-        raise ValueError("--samples must be 0 or at least 2, got 1")
-    if args.extra_states == 0 and args.coexist is not None:
-        raise ValueError("--coexist has no effect with --extra-states 0")
-    coexist = 64 if args.coexist is None else args.coexist
-    if args.emr_order is not None and not args.emr:
-        raise ValueError("--emr-order has no effect without --emr")
     swept = args.sweep.partition("=")[0].strip().lstrip("-")
     if swept == args.uncertain:
         raise ValueError(f"--sweep {args.sweep!r}: {swept} is the uncertain parameter "
@@ -93,7 +101,41 @@ def cmd_stochastic(args) -> int:
     name, values, _ = parse_sweep(
         args.sweep, names=tuple(n for n in PARAMETER_NAMES
                                 if n not in (args.uncertain, "x0", "v0")))
+    refuse_given(args, [name], f"has no effect: --sweep sets {name}")
+    if args.samples == 0:
+        refuse_given(args, ["seed"], "has no effect with --samples 0 (no Monte Carlo samples "
+                                     "are drawn)")
+    if args.scheduler is not None:
+        refuse_given(args, ["workers"], "has no effect with --scheduler (the control values "
+                                        "run there as tasks)")
+    if args.plot and len(values) > 2 and not (np.all(np.diff(values) > 0)
+                                              or np.all(np.diff(values) < 0)):
+        raise ValueError(f"--sweep {args.sweep!r}: the values are not in order, and --plot "
+                         f"joins them in the order given; sort them")
     osc = oscillator_from(args)
+    # the default --workers is 2: it shrinks to the values there are, to 1 with --scheduler
+    workers = (args.workers if given(args, "workers") else
+               1 if args.scheduler else min(args.workers, len(values)))
+    keywords = dict(sigma=args.sigma, uncertain=args.uncertain,
+                    distribution=args.distribution, samples=args.samples, seed=args.seed,
+                    options=options_from(args), transient=args.transient,
+                    record=args.record, extra_states=args.extra_states,
+                    coexist=args.coexist, emr=args.emr, emr_order=args.emr_order,
+                    workers=workers, scheduler=args.scheduler)
+    names = {**FLAGS, "values": f"--sweep {args.sweep!r}"}
+    try:
+        check_diagram(osc, name, values, **keywords)  # before the lock and any work
+        return _run(args, osc, name, values, keywords)
+    except DiagramInputError as err:
+        raise ValueError(err.message(names)) from None
+    except WorkBudgetError as err:
+        raise ValueError(err.message(FLAGS)) from None
+
+
+def _run(args, osc, name, values, keywords) -> int:
+    """The diagram of the checked inputs, written and summed up."""
+    from opa.dynamics._stochastic import stochastic_diagram
+
     start = time.perf_counter()
     log = None if args.quiet else (lambda line: print(f"opa-mc: {line}", file=sys.stderr))
     parts = f"{args.out}.parts" if args.out else None
@@ -102,14 +144,7 @@ def cmd_stochastic(args) -> int:
     with contextlib.ExitStack() as held:
         if parts is not None:
             held.enter_context(OutputLock(parts, "stochastic diagram", folder=True, log=log))
-        ds = stochastic_diagram(osc, name, values, sigma=args.sigma, uncertain=args.uncertain,
-                                distribution=args.distribution, samples=args.samples,
-                                seed=args.seed, options=options_from(args),
-                                transient=args.transient, record=args.record,
-                                extra_states=args.extra_states, coexist=coexist,
-                                emr=args.emr, emr_order=args.emr_order or 4,
-                                workers=args.workers, scheduler=args.scheduler,
-                                parts=parts, log=log)
+        ds = stochastic_diagram(osc, name, values, **keywords, parts=parts, log=log)
         elapsed = time.perf_counter() - start
         if args.out:
             from opa._dataset import remove_store, write_netcdf
@@ -141,7 +176,8 @@ def summary(ds) -> list[str]:
     for i, value in enumerate(ds[param].values):
         shares = [f"{k} {float(p):.3f}" for k, p in zip(ds.type.values, ds.probability[i].values)
                   if p > 0]
-        how = "sampled" if int(ds.method[i]) else "continuation"
+        how = ("continuation" if not int(ds.method[i]) else "sampled"
+               if ds.attrs["samples"] else "interval middles, no samples")
         agree = {1: "", 0: "; MC DISAGREES", -1: ""}[int(ds.agree[i])]
         both = float(ds.coexist_probability[i])
         shown = float(ds.mc_coexist[i])

@@ -35,12 +35,17 @@ probabilities are the Monte Carlo ones, and ``method`` says so (``note`` says wh
 
 from __future__ import annotations
 
+import contextlib
 import math
+import numbers
+import os
 from dataclasses import dataclass
+from string import Formatter
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from opa._model import UNCERTAIN_PARAMETERS as UNCERTAIN
 from opa._model import Oscillator, SolverOptions
 from opa._system import System
 from opa.dynamics._attractor import (
@@ -74,6 +79,22 @@ EMR_TRANSIENT, EMR_RECORD = 500, 100
 #: default: other initial states, and the samples classified from them
 EXTRA_STATES = 2
 COEXIST_SAMPLES = 64
+#: most other initial states (points on a circle of radius 1 around the origin): each
+#: classifies the interval middles and the checked samples again, and in Python (one
+#: loop per run and chunk), so 100000 of them ran for minutes at a tiny transient
+MAX_EXTRA_STATES = 1000
+#: the continuation in xi at one control value costs about as much as this many forcing
+#: periods of one system (the work estimate): section 3.1 at c = 0.04 takes 0.2 s with
+#: samples=0, extra_states=0, of which the grid's and the middles' runs take 0.02 s
+CONTINUATION_PERIODS = 20_000
+#: the boundaries' tolerance in xi: below 1e-15 double precision cannot locate them, above
+#: 1e-2 they would be coarser than the grid that seeds them
+XTOL_RANGE = (1e-15, 1e-2)
+#: samples p_bar + sigma xi that differ by less than this (relative to p_bar) over the
+#: whole support are one system in double precision; and sigma * xtol must stay above
+#: TINY (the boundaries are root-found to xtol * sigma in the uncertain parameter)
+RESOLUTION = 1e-12
+TINY = 1e-300
 
 
 @dataclass(frozen=True)
@@ -222,6 +243,9 @@ def compute_slice(task: SliceTask) -> dict:
             f"{k} ({n})" for k, n in sorted(unseen.items()) if n > 1)
     coexist_mass = sum(float(cdf(b) - cdf(a)) for (a, b, _, _), o in
                        zip(intervals, interval_other) if o)
+    if note and not task.samples:
+        note += ("; without samples the probabilities are the law mass of the types at "
+                 "the interval middles")
     points = np.full((len(mc), POINTS, 2), np.nan, dtype=np.float32)
     for j, a in enumerate(mc):
         kept = a.points[-POINTS:]
@@ -285,10 +309,335 @@ def stochastic_slice(oscillator: Oscillator, uncertain: str, sigma: float,
         coexist=int(coexist)))
 
 
-def _check(name: str, value, low: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
+class DiagramInputError(ValueError):
+    """An input of :func:`stochastic_diagram` refused before any work starts: one line
+    naming the keyword and its value.
+
+    The message is a template whose fields are keywords (``{sigma}``) and values
+    (``{0!r}``); :meth:`message` writes each keyword as ``names`` says (the CLI: its
+    flags, as ``opa._work.WorkBudgetError.message`` does), else as itself.
+
+    >>> str(DiagramInputError("{sigma} must be positive, got {0!r}", -1.0))
+    'sigma must be positive, got -1.0'
+    >>> DiagramInputError("{sigma} must be positive, got {0!r}", -1.0).message(
+    ...     {"sigma": "--sigma"})
+    '--sigma must be positive, got -1.0'
+    """
+
+    def __init__(self, template: str, *values):
+        self.template, self.values = template, values
+        super().__init__(self.message())
+
+    def message(self, names: dict[str, str] | None = None) -> str:
+        return Formatter().vformat(self.template, self.values, _Names(names or {}))
+
+
+class _Names(dict):
+    """A keyword without a name of its own is written as itself."""
+
+    def __missing__(self, key):
+        return key
+
+
+def _quoted(text) -> str:
+    """``text`` as literal text of a DiagramInputError's template."""
+    return str(text).replace("{", "{{").replace("}", "}}")
+
+
+def _named(keyword: str, err: Exception, *shown) -> DiagramInputError:
+    """A message from elsewhere (``err``) as a refusal naming ``keyword`` (and the value
+    ``shown``, where given)."""
+    text = " ".join(str(err).split())
+    if text.startswith(keyword + " "):  # it names the keyword already
+        return DiagramInputError("{" + keyword + "}" + _quoted(text[len(keyword):]))
+    return DiagramInputError("{" + keyword + "}" + (" {0!r}" if shown else "") + ": "
+                             + _quoted(text), *shown)
+
+
+def _whole(keyword: str, value, low: int, high: int | None = None, why: str = "") -> int:
+    """``value`` as an int: an integer (not a bool) in [low, high]."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
+            or value < low:
+        raise DiagramInputError("{" + keyword + f"}} must be an integer >= {low}, got "
+                                "{0!r}", value)
+    if high is not None and value > high:
+        raise DiagramInputError("{" + keyword + f"}} must be at most {high}{_quoted(why)}, "
+                                "got {0!r}", value)
     return int(value)
+
+
+@dataclass(frozen=True)
+class DiagramInputs:
+    """The inputs of :func:`stochastic_diagram` once checked (:func:`check_diagram`)."""
+
+    oscillator: Oscillator
+    parameter: str
+    values: np.ndarray
+    oscillators: tuple  # the oscillator at each value
+    sigma: float
+    uncertain: str
+    measure: "Measure"
+    system: System
+    samples: int
+    seed: int
+    options: SolverOptions
+    settings: Settings
+    xtol: float
+    extra_states: int
+    coexist: int  # the samples classified from the other states (at most ``samples``)
+    emr: bool
+    emr_order: int
+    workers: int
+
+
+def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
+                  distribution=None, samples=1024, seed=0, options=None, transient=1000,
+                  record=64, xtol=1e-10, extra_states=EXTRA_STATES, coexist=None,
+                  emr=False, emr_order=None, workers=1, scheduler=None, parts=None,
+                  log=None) -> DiagramInputs:
+    """The inputs of :func:`stochastic_diagram` (same keywords) checked before any work:
+    a :class:`DiagramInputError` (a ValueError) naming the first keyword that is wrong,
+    of the wrong type, out of range, or without effect in the combination; a
+    ``opa._work.WorkBudgetError`` for a diagram beyond the work budget. The CLI calls it
+    first, and names its flags (``DiagramInputError.message``)."""
+    from opa._measure import parse
+    from opa._model import PARAMETER_NAMES, check_span
+
+    given = oscillator
+    if isinstance(oscillator, System):
+        oscillator = oscillator.oscillator
+    if not isinstance(oscillator, Oscillator):
+        raise DiagramInputError("{oscillator} must be an opa.Oscillator or System, got {0}",
+                                type(oscillator).__name__)
+    if not (isinstance(uncertain, str) and uncertain in UNCERTAIN):
+        raise DiagramInputError("{uncertain} must be mu, a or c, got {0!r}", uncertain)
+    if isinstance(given, System) and (given.uncertain != uncertain or given.sigma != sigma):
+        raise DiagramInputError(
+            "{oscillator}: the System's uncertainty ({0}, sigma {1:g}) is not the diagram's "
+            "({uncertain} {2}, {sigma} {3!r}): pass its .oscillator, or the same", given.uncertain,
+            given.sigma, uncertain, sigma)
+    if not (isinstance(parameter, str) and parameter in PARAMETER_NAMES) \
+            or parameter in (uncertain, "x0", "v0"):
+        raise DiagramInputError("{parameter} must be a model parameter other than the "
+                                "uncertain one ({0}) and x0, v0, got {1!r}", uncertain,
+                                parameter)
+    values = _values(values)
+    if isinstance(sigma, (bool, np.bool_)) or not (
+            isinstance(sigma, numbers.Real) and math.isfinite(sigma) and sigma > 0):
+        raise DiagramInputError("{sigma} must be a positive number, got {0!r}", sigma)
+    sigma = float(sigma)
+    if isinstance(xtol, (bool, np.bool_)) or not (
+            isinstance(xtol, numbers.Real) and XTOL_RANGE[0] <= xtol <= XTOL_RANGE[1]):
+        raise DiagramInputError("{xtol} (the boundaries' tolerance in xi) must be a "
+                                "number in [{0:g}, {1:g}], got {2!r}", *XTOL_RANGE, xtol)
+    xtol = float(xtol)
+    try:
+        measure = parse(distribution)
+    except ValueError as err:
+        raise _named("distribution", err, distribution) from None
+    _check_spread(oscillator, uncertain, sigma, measure, xtol)
+    if isinstance(samples, (bool, np.bool_)) or not isinstance(samples, (int, np.integer)) \
+            or samples < 0 or samples == 1:
+        raise DiagramInputError("{samples} must be 0 or an integer >= 2, got {0!r}", samples)
+    samples = int(samples)
+    seed = _whole("seed", seed, 0)
+    if seed and not samples:
+        raise DiagramInputError("{seed} {0} has no effect with {samples} 0 (no Monte Carlo "
+                                "samples are drawn)", seed)
+    transient = _whole("transient", transient, 1)
+    if isinstance(record, (bool, np.bool_)) or not isinstance(record, (int, np.integer)) \
+            or record < 4:
+        raise DiagramInputError("{record} must be >= 4 periods (an integer: periods up to "
+                                "record / 2 are found), got {0!r}", record)
+    settings = Settings(transient=transient, record=int(record))
+    record = settings.record
+    extra_states = _whole("extra_states", extra_states, 0, MAX_EXTRA_STATES,
+                          " (other initial states on a circle of radius 1)")
+    if coexist is None:
+        coexist = min(COEXIST_SAMPLES, samples)
+    else:
+        coexist = _whole("coexist", coexist, 0)
+        if not extra_states:
+            raise DiagramInputError("{coexist} {0} has no effect with {extra_states} 0 (no "
+                                    "other initial states)", coexist)
+        if not samples:
+            raise DiagramInputError("{coexist} {0} has no effect with {samples} 0 (no "
+                                    "samples to classify again)", coexist)
+        if coexist > samples:
+            raise DiagramInputError("{coexist} {0} is more than the {samples} {1}: only "
+                                    "samples can be classified again", coexist, samples)
+    if not isinstance(emr, (bool, np.bool_)):
+        raise DiagramInputError("{emr} must be True or False, got {0!r}", emr)
+    emr = bool(emr)
+    if not emr and emr_order is not None:
+        raise DiagramInputError("{emr_order} {0!r} has no effect without {emr}", emr_order)
+    emr_order = 4 if emr_order is None else _whole("emr_order", emr_order, 1)
+    workers = _whole("workers", workers, 1)
+    if scheduler is not None:
+        if workers != 1:
+            raise DiagramInputError("{workers} {0} has no effect with {scheduler} (the "
+                                    "control values run there as tasks)", workers)
+        if not (isinstance(scheduler, str) and scheduler.strip()
+                or type(scheduler).__name__ == "Client"):
+            raise DiagramInputError("{scheduler} must be a Dask scheduler address such as "
+                                    "tcp://host:8786 or a distributed.Client, got {0!r}",
+                                    scheduler)
+    elif workers > 1 and len(values) == 1:
+        raise DiagramInputError("{workers} {0} has no effect with one control value (the "
+                                "values are shared out among the workers)", workers)
+    if options is None:
+        options = SolverOptions()
+    elif not isinstance(options, SolverOptions):
+        raise DiagramInputError("{options} must be an opa.SolverOptions or None, got {0!r}",
+                                options)
+    if parts is not None and not (isinstance(parts, (str, os.PathLike))
+                                  and os.fspath(parts).strip()):
+        raise DiagramInputError("{parts} must be a folder's path or None, got {0!r}", parts)
+    if log is not None and not callable(log):
+        raise DiagramInputError("{log} must be a callable taking one line, or None, got "
+                                "{0!r}", log)
+    system = System(oscillator, sigma=sigma, uncertain=uncertain, distribution=distribution)
+    if emr:
+        if measure.name != "semicircle":
+            raise DiagramInputError("{emr}: the EMR is the paper's OPA system, whose sweeps "
+                                    "use the semicircle law, not {0}", measure.name)
+        if np.any(np.diff(values) <= 0):
+            raise DiagramInputError("{values} must increase with {emr} (the EMR's sweep "
+                                    "goes up the control parameter)")
+        try:
+            system.replace(order=emr_order)
+        except ValueError as err:
+            raise _named("emr_order", err, emr_order) from None
+    _check_work(len(values), samples, extra_states, coexist, transient, record)
+    _check_memory(len(values), samples, transient, record, settings.check,
+                  min(workers, len(values)))
+    oscillators = []
+    for v in values:
+        try:
+            oscillators.append(oscillator.replace(**{parameter: float(v)}))
+        except ValueError as err:
+            raise _at_value(parameter, v, err) from None
+    for v, osc in _span_checked(parameter, values, oscillators):
+        try:
+            check_span(osc, osc.forcing_period)
+        except ValueError as err:
+            raise _at_value(parameter, v, err) from None
+        try:
+            check_span(osc, (transient + record) * osc.forcing_period)
+        except ValueError as err:
+            raise DiagramInputError("{transient} + {record} ({0} + {1}) periods at {2} = "
+                                    "{3:g}: " + _quoted(err), transient, record, parameter,
+                                    v) from None
+        if emr:
+            try:
+                check_span(osc, (EMR_TRANSIENT + EMR_RECORD) * osc.forcing_period)
+            except ValueError as err:
+                raise DiagramInputError("{emr} (its sweep runs {0} + {1} periods) at {2} = "
+                                        "{3:g}: " + _quoted(err), EMR_TRANSIENT, EMR_RECORD,
+                                        parameter, v) from None
+    return DiagramInputs(
+        oscillator=oscillator, parameter=parameter, values=values,
+        oscillators=tuple(oscillators), sigma=sigma, uncertain=uncertain, measure=measure,
+        system=system, samples=samples, seed=seed, options=options, settings=settings,
+        xtol=xtol, extra_states=extra_states, coexist=coexist, emr=emr, emr_order=emr_order,
+        workers=workers)
+
+
+def _at_value(parameter: str, value: float, err: Exception) -> DiagramInputError:
+    """A control value refused (by the model's checks, or the run's span)."""
+    return DiagramInputError("{values}: at {0} = {1:g}, " + _quoted(" ".join(str(err).split())),
+                             parameter, value)
+
+
+def _values(values) -> np.ndarray:
+    """The control values: a non-empty 1-D array of distinct finite real numbers."""
+    try:
+        array = np.asarray(values)
+    except (TypeError, ValueError):
+        array = np.asarray([None])
+    if array.dtype.kind not in "iuf" or array.ndim != 1 or not len(array) \
+            or not np.isfinite(array).all():
+        raise DiagramInputError("{values} must be a non-empty 1-D array of finite numbers, "
+                                "got {0}", _quoted(f"{values!r:.60}"))
+    array = array.astype(float)
+    if len(np.unique(array)) != len(array):
+        raise DiagramInputError("{values} must be distinct, got {0}",
+                                _quoted(f"{values!r:.60}"))
+    return array
+
+
+def _span_checked(parameter, values, oscillators):
+    """The (value, oscillator) pairs whose forcing and impulse periods differ: each for
+    a parameter they depend on, else the first."""
+    pairs = list(zip(values, oscillators))
+    return pairs if parameter in ("omega", "omega1", "f", "F0") else pairs[:1]
+
+
+def _check_spread(oscillator, uncertain: str, sigma: float, measure, xtol: float) -> None:
+    """Refuse a sigma whose samples ``p_bar + sigma xi`` leave the uncertain parameter's
+    range (negative, or beyond the floats) or that double precision cannot resolve."""
+    mean = float(getattr(oscillator, uncertain))
+    lowest, highest = mean + sigma * measure.lo, mean + sigma * measure.hi
+    if not (math.isfinite(lowest) and math.isfinite(highest)):
+        raise DiagramInputError("{sigma} {0:g} takes {1} = {2:g} + sigma xi beyond the "
+                                "floating-point range", sigma, uncertain, mean)
+    if lowest < 0.0 <= mean:
+        raise DiagramInputError(
+            "{sigma} {0:g} makes {1} = {2:g} + sigma xi negative for xi below {3:.3g} (the "
+            "law of xi reaches {4:g}); at most {5:.6g} keeps it >= 0", sigma, uncertain,
+            mean, -mean / sigma, measure.lo, mean / -measure.lo)
+    spread = sigma * (measure.hi - measure.lo)
+    if spread <= RESOLUTION * abs(mean) or sigma * xtol < TINY:
+        raise DiagramInputError(
+            "{sigma} {0:g} is below what double precision resolves around {1} = {2:g}: "
+            "the samples {1} + sigma xi (and the boundaries, to xtol {3:g} in xi) would "
+            "not differ", sigma, uncertain, mean, xtol)
+
+
+def _check_work(count, samples, extra_states, coexist, transient, record) -> None:
+    """Refuse (``opa._work.WorkBudgetError``) a diagram beyond the work budget: at each
+    value the grid, at least one interval's middle and the samples run from (x0, v0),
+    the middle and the checked samples from each other state, each at most transient +
+    record periods, and the continuation in xi (``CONTINUATION_PERIODS``)."""
+    from opa._work import check_work
+
+    others = extra_states * (1 + coexist)
+    periods = count * ((GRID + 3 + samples + others) * (transient + record)
+                       + CONTINUATION_PERIODS)
+    drivers = [("values", count)]
+    if samples and samples >= others:
+        drivers.append(("samples", samples))
+    elif others:
+        drivers.append(("extra_states", extra_states))
+    check_work("this stochastic diagram", periods,
+               drivers + [("transient + record", f"({transient} + {record})")])
+
+
+def _check_memory(count, samples, transient, record, check, processes) -> None:
+    """Refuse runs whose memory exceeds the budget: each run holds its stroboscopic
+    points (x, v over transient + record periods) and a chunk's kernel output and event
+    log (``settle_batch``; twice: its twin); the largest batch is the samples (or the
+    grid) of a value, one per process at a time. The dataset holds every sample's
+    points."""
+    from opa._memory import check_memory
+
+    chunk = max(check, record)
+    per_run = 16 * (transient + record) + 2 * (24 * (16 * chunk + 64) + 16 * (chunk + 1)) \
+        + 1024
+    batch = max(samples, GRID + 2)
+    try:
+        check_memory("the batch", processes * batch * per_run,
+                     f"{processes} x {batch} runs x {per_run} bytes")
+    except ValueError as err:
+        at_once = " in each of {workers} {2}" if processes > 1 else ""
+        raise DiagramInputError("{samples} {0} runs at once" + at_once + ", each of "
+                                "{transient} + {record} ({1}) periods: " + _quoted(err),
+                                samples, f"{transient} + {record}", processes) from None
+    try:
+        check_memory("the dataset", count * max(samples, 1) * (POINTS * 8 + 96))
+    except ValueError as err:
+        raise DiagramInputError("{values} ({0}) x {samples} {1}: " + _quoted(err), count,
+                                samples) from None
 
 
 def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, *,
@@ -296,8 +645,8 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                        samples: int = 1024, seed: int = 0,
                        options: SolverOptions | None = None, transient: int = 1000,
                        record: int = 64, xtol: float = 1e-10,
-                       extra_states: int = EXTRA_STATES, coexist: int = COEXIST_SAMPLES,
-                       emr: bool = False, emr_order: int = 4, workers: int = 1,
+                       extra_states: int = EXTRA_STATES, coexist: int | None = None,
+                       emr: bool = False, emr_order: int | None = None, workers: int = 1,
                        scheduler=None, parts: str | None = None, log=None):
     """Attractor types and their probabilities along ``parameter`` (module docstring).
 
@@ -311,12 +660,23 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     transient, record : the longest run before a type is decided from its last
         ``record`` periods (a run stops as soon as it has settled, ``settle``).
     xtol : tolerance of the located boundaries in xi.
-    extra_states, coexist : other initial states (``initial_states``), and how many of
-        the samples are classified from them too (the interval middles always are).
-    emr, emr_order : also sweep the EMR (the OPA system of order ``emr_order`` at the
-        same sigma, semicircle law only: the paper's diagrams) over the values, 500
-        transient and 100 recorded periods from the paper's start, for the figure.
-    workers : processes; the control values are shared out among them.
+    extra_states, coexist : other initial states (``initial_states``; at most
+        ``MAX_EXTRA_STATES``), and how many of the samples are classified from them too
+        (the interval middles always are; default 64, or all the samples if fewer; at
+        most ``samples``, and only with samples and other states).
+    emr, emr_order : also sweep the EMR (the OPA system of order ``emr_order``, default 4,
+        at the same sigma, semicircle law only: the paper's diagrams) over the increasing
+        values, 500 transient and 100 recorded periods from the paper's start, for the
+        figure.
+    workers : processes; the control values are shared out among them (1 with a
+        ``scheduler``, and with one value).
+
+    Every input is checked before any work (:func:`check_diagram`): a ValueError names the
+    keyword that is wrong, of the wrong type, out of range or without effect in the
+    combination (``seed`` without samples, ``emr_order`` without ``emr``), or a sigma
+    that makes the uncertain parameter negative for some xi or that double precision
+    cannot resolve; a diagram beyond the work budget (``opa._work``) or the memory budget
+    is refused naming the inputs its cost grows with.
     scheduler : a Dask scheduler address or ``distributed.Client``: the control values
         (and the EMR sweep) run there as tasks instead, each with one numba thread; the
         result is the same to the bit.
@@ -343,6 +703,8 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     share of the checked samples whose type depends on the start); over (``parameter``,
     ``sample``) each sample's ``mc_xi``, ``mc_type``, ``mc_lyapunov``, ``mc_periods``,
     ``mc_settled`` and its Poincaré points ``mc_x, mc_v`` (``point``: at most 16).
+    Without samples, a value where continuation cannot follow has the law mass of the
+    types at the interval middles as its probabilities (``method_note`` says so).
 
     Examples
     --------
@@ -355,64 +717,37 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     [0.5, 0.5]
     """
     from opa._dataset import Store, package_version
-    from opa._measure import parse
 
-    if isinstance(oscillator, System):
-        oscillator = oscillator.oscillator
-    if not isinstance(oscillator, Oscillator):
-        raise ValueError(f"oscillator must be an opa.Oscillator or System, got "
-                         f"{type(oscillator).__name__}")
-    if uncertain not in ("mu", "a", "c"):
-        raise ValueError(f"uncertain must be mu, a or c, got {uncertain!r}")
-    if parameter == uncertain or not hasattr(oscillator, parameter) or parameter in (
-            "x0", "v0"):
-        raise ValueError(f"parameter must be a model parameter other than the uncertain "
-                         f"one ({uncertain}) and x0, v0, got {parameter!r}")
-    if isinstance(sigma, bool) or not (isinstance(sigma, (int, float)) and sigma > 0
-                                       and math.isfinite(sigma)):
-        raise ValueError(f"sigma must be a positive number, got {sigma!r}")
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) \
-            or samples < 0 or samples == 1:
-        raise ValueError(f"samples must be 0 or an integer >= 2, got {samples!r}")
-    extra_states = _check("extra_states", extra_states, 0)
-    coexist = _check("coexist", coexist, 0)
-    workers = _check("workers", workers, 1)
-    if not (isinstance(xtol, (int, float)) and math.isfinite(xtol) and xtol > 0):
-        raise ValueError(f"xtol must be a finite number > 0, got {xtol!r}")
-    settings = Settings(transient=transient, record=record)
-    values = np.asarray(values, dtype=float)
-    if values.ndim != 1 or not len(values) or not np.isfinite(values).all():
-        raise ValueError("values must be a non-empty 1-D array of finite numbers")
-    from opa._work import check_work
+    checked = check_diagram(
+        oscillator, parameter, values, sigma=sigma, uncertain=uncertain,
+        distribution=distribution, samples=samples, seed=seed, options=options,
+        transient=transient, record=record, xtol=xtol, extra_states=extra_states,
+        coexist=coexist, emr=emr, emr_order=emr_order, workers=workers, scheduler=scheduler,
+        parts=parts, log=log)
+    values, sigma, samples = checked.values, checked.sigma, checked.samples
+    options, settings, measure = checked.options, checked.settings, checked.measure
+    system, emr, emr_order, workers = (checked.system, checked.emr, checked.emr_order,
+                                       checked.workers)
+    tasks = [SliceTask(value=float(v), oscillator=osc, uncertain=uncertain, sigma=sigma,
+                       distribution=measure.name, samples=samples, seed=checked.seed + i,
+                       options=options, settings=settings, xtol=checked.xtol,
+                       extra_states=checked.extra_states, coexist=checked.coexist)
+             for i, (v, osc) in enumerate(zip(values, checked.oscillators))]
+    with contextlib.ExitStack() as held:
+        # the scheduler answers before the parts folder is made: a refusal leaves nothing
+        client = None
+        if scheduler is not None:
+            client, own = _connect(scheduler)
+            if own:
+                held.callback(client.close)
+        try:  # the lock of the parts folder is held until the diagram is assembled
+            store = (None if parts is None else
+                     Store(parts, "stochastic diagram", log=log, lock=True))
+        except (ValueError, OSError) as err:
+            raise _named("parts", err, os.fspath(parts)) from None
+        if store is not None:
+            held.callback(store.close)
 
-    # at most: every sample and extra state of every value runs transient + record periods
-    check_work("this stochastic diagram",
-               len(values) * (max(samples, 1) + extra_states) * (transient + record),
-               [("values", len(values)), ("samples", samples),
-                ("transient + record", f"({transient} + {record})")])
-    if not isinstance(emr, bool):
-        raise ValueError(f"emr must be True or False, got {emr!r}")
-    if emr:
-        emr_order = _check("emr_order", emr_order, 1)
-        if parse(distribution).name != "semicircle":
-            raise ValueError("emr: the EMR is the paper's OPA system, whose sweeps use the "
-                             f"semicircle law, not {parse(distribution).name}")
-        if np.any(np.diff(values) <= 0):
-            raise ValueError("emr: the values must increase")
-    options = options or SolverOptions()
-    measure = parse(distribution)
-    system = System(oscillator, sigma=float(sigma), uncertain=uncertain,
-                    distribution=distribution)
-    system.check_samples()
-    tasks = [SliceTask(value=float(v), oscillator=oscillator.replace(**{parameter: float(v)}),
-                       uncertain=uncertain, sigma=float(sigma), distribution=measure.name,
-                       samples=int(samples), seed=seed + i, options=options,
-                       settings=settings, xtol=float(xtol), extra_states=extra_states,
-                       coexist=min(coexist, int(samples)))
-             for i, v in enumerate(values)]
-    store = (None if parts is None else
-             Store(parts, "stochastic diagram", log=log, lock=True))
-    try:  # the lock of the parts folder is held until the diagram is assembled
         def inputs(task):
             return {"task": repr(task), "version": package_version()}
 
@@ -436,13 +771,14 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
             results[i] = piece
             _log(log, i, len(tasks), parameter, piece, reused=False)
 
-        if scheduler is not None and todo:
-            _run_slices_dask(tasks, todo, finish, scheduler)
+        if client is not None and todo:
+            _run_slices_dask(tasks, todo, finish, client)
         else:
             _run_slices(tasks, todo, finish, workers)
         slices = [results[i] for i in range(len(tasks))]
-        ds = _dataset(slices, parameter, values, system, options, measure, settings, seed,
-                      samples, xtol, extra_states, coexist)
+        ds = _dataset(slices, parameter, values, system, options, measure, settings,
+                      checked.seed, samples, checked.xtol, checked.extra_states,
+                      checked.coexist)
         if emr:
             from opa.dynamics._sweep import sweep
 
@@ -451,16 +787,13 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                     f"values of {parameter}")
             opa = sweep("opa", parameter, values, system.replace(order=emr_order),
                         transient=EMR_TRANSIENT, record=EMR_RECORD, options=options,
-                        workers=workers, scheduler=scheduler, progress=False, locate=False)
+                        workers=workers, scheduler=client, progress=False, locate=False)
             ds["emr_x"] = ((parameter, "emr_point"), opa.section_x.values, {
                 "long_name": f"stroboscopic x_0 of the EMR (OPA N = {emr_order}) after "
                 f"{EMR_TRANSIENT} periods, {EMR_RECORD} recorded", "units": "1"})
             ds.attrs.update(emr_order=int(emr_order), emr_transient=EMR_TRANSIENT,
                             emr_record=EMR_RECORD)
         return ds
-    finally:
-        if store is not None:
-            store.close()
 
 
 def _run_slices(tasks, todo, finish, workers) -> None:
@@ -500,24 +833,32 @@ def _single_threaded_slice(task: SliceTask) -> dict:
     return compute_slice(task)
 
 
-def _run_slices_dask(tasks, todo, finish, scheduler) -> None:
-    """Compute the control values ``todo`` as tasks on a Dask cluster."""
-    from distributed import as_completed, Client
-
-    own = not isinstance(scheduler, Client)
+def _connect(scheduler):
+    """(a distributed.Client, whether it is ours to close) for ``scheduler``, an address
+    or a Client; an address that does not answer as a Dask scheduler within 5 s is
+    refused naming it."""
     try:
-        client = Client(scheduler, timeout=5) if own else scheduler
+        from distributed import Client
+    except ImportError:
+        raise DiagramInputError("{scheduler} needs the 'distributed' package") from None
+    if isinstance(scheduler, Client):
+        return scheduler, False
+    try:
+        return Client(scheduler, timeout=5), True
     except (OSError, TimeoutError) as err:
-        raise ValueError(f"scheduler {scheduler!r} did not answer as a Dask scheduler "
-                         f"within 5 s ({type(err).__name__})") from None
-    try:
-        futures = {client.submit(_single_threaded_slice, tasks[i], pure=False): i
-                   for i in todo}
-        for future in as_completed(futures):
-            finish(futures[future], future.result())
-    finally:
-        if own:
-            client.close()
+        raise DiagramInputError("{scheduler} {0!r} did not answer as a Dask scheduler within "
+                                "5 s ({1})", scheduler, type(err).__name__) from None
+    except (ValueError, TypeError) as err:  # distributed's word on the address
+        raise _named("scheduler", err, scheduler) from None
+
+
+def _run_slices_dask(tasks, todo, finish, client) -> None:
+    """Compute the control values ``todo`` as tasks on a Dask cluster (``client``)."""
+    from distributed import as_completed
+
+    futures = {client.submit(_single_threaded_slice, tasks[i], pure=False): i for i in todo}
+    for future in as_completed(futures):
+        finish(futures[future], future.result())
 
 
 def _log(log, i, count, parameter, piece, *, reused) -> None:
@@ -526,14 +867,18 @@ def _log(log, i, count, parameter, piece, *, reused) -> None:
     shown = ", ".join(f"{k} {p:.3f}" for k, p in sorted(_probabilities(piece).items(),
                                                          key=lambda kp: type_order(kp[0]))
                       if p >= 0.005) or "(every type below 0.005)"
-    how = "sampling" if int(piece["method"]) else "continuation"
+    how = ("continuation" if not int(piece["method"]) else "sampling"
+           if len(np.atleast_1d(piece["mc_type"])) else "interval middles, no samples")
     log(f"{i + 1}/{count} {parameter} = {float(piece['value']):g}: {shown} ({how}; "
         f"{float(piece['cpu_seconds']):.1f} s CPU{', read back' if reused else ''})")
 
 
 def _probabilities(piece) -> dict:
-    """type -> probability of one slice: continuation, or Monte Carlo when sampled."""
-    if int(piece["method"]) or not len(piece["prob_type"]):
+    """type -> probability of one slice: continuation, or Monte Carlo when sampled; with
+    no samples to fall back on, the law mass of the intervals' types (the types at their
+    middles, whatever they are: the intervals cover the support, so these sum to 1)."""
+    if int(piece["method"]) and len(np.atleast_1d(piece["mc_type"])) \
+            or not len(piece["prob_type"]):
         return _shares(piece)
     return dict(zip((str(k) for k in piece["prob_type"]), map(float, piece["prob_value"])))
 
@@ -668,5 +1013,6 @@ def type_order(kind: str):
     return (1, NON_PERIODIC.index(kind) if kind in NON_PERIODIC else 99, 0, kind)
 
 
-__all__ = ["AGREEMENT_SE", "SliceTask", "attractors", "classify", "compute_slice",
+__all__ = ["AGREEMENT_SE", "DiagramInputError", "DiagramInputs", "MAX_EXTRA_STATES",
+           "SliceTask", "attractors", "check_diagram", "classify", "compute_slice",
            "stochastic_diagram", "stochastic_slice", "type_order"]

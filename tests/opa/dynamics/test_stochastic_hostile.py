@@ -341,7 +341,7 @@ def test_a_read_only_folder_is_refused(tmp_path, monkeypatch):
 def test_a_scheduler_that_does_not_answer_is_refused_naming_it(tmp_path, monkeypatch):
     """The existing check (5 s): refused, named, nothing written."""
     monkeypatch.chdir(tmp_path)
-    status, err, seconds = run_cli(argv("--scheduler tcp://127.0.0.1:1 --out s.nc"))
+    status, err, seconds = run_cli(argv("---workers --scheduler tcp://127.0.0.1:1 --out s.nc"))
     assert cli_flaw(status, err, "tcp://127.0.0.1:1", min(seconds, 1), []) is None
     assert not os.listdir(tmp_path)
 
