@@ -581,7 +581,11 @@ def _check_spread(oscillator, uncertain: str, sigma: float, measure, xtol: float
     if not (math.isfinite(lowest) and math.isfinite(highest)):
         raise DiagramInputError("{sigma} {0:g} takes {1} = {2:g} + sigma xi beyond the "
                                 "floating-point range", sigma, uncertain, mean)
-    if lowest < 0.0 <= mean:
+    if lowest < 0.0 == mean:
+        raise DiagramInputError("{sigma} {0:g} makes {1} = 0 + sigma xi negative for every xi "
+                                "below 0: no sigma keeps it >= 0 (make {1} positive)", sigma,
+                                uncertain)
+    if lowest < 0.0 < mean:
         raise DiagramInputError(
             "{sigma} {0:g} makes {1} = {2:g} + sigma xi negative for xi below {3:.3g} (the "
             "law of xi reaches {4:g}); at most {5:.6g} keeps it >= 0", sigma, uncertain,

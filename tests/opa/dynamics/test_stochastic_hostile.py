@@ -41,7 +41,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from opa import SolverOptions, preset
+from opa import SolverOptions, System, preset
 from opa.cli._main import build_parser, main
 from opa.dynamics._stochastic import stochastic_diagram
 
@@ -174,6 +174,8 @@ BAD_CLI = [
     ("held", "--uncertain eta", "--uncertain"),
     ("unnamed culprit", "--uncertain a --sigma 2", ("--sigma", "a")),
     ("unnamed culprit", "--uncertain c --sigma 1 --sweep mu=0.8", ("--sigma", "c")),
+    ("unnamed culprit", "--uncertain c --c 0 --sweep mu=0.8", ("--sigma", "c = 0")),
+    ("held", "--preset 9.9", "--preset"),
     # --distribution
     ("unnamed culprit", "--distribution foo", ("--distribution", "foo")),
     ("unnamed culprit", "--distribution=", "--distribution"),
@@ -259,6 +261,8 @@ BAD_CLI = [
     ("held", "--sweep c=nan", "--sweep"),
     ("held", "--sweep c=inf", "--sweep"),
     ("held", "--sweep c=0.04,0.04", "--sweep"),
+    ("held", "--sweep c=0.04,", "--sweep"),
+    ("wrongly accepted", "--sweep c=1:1.0000000000000002:5", ("--sweep", "distinct")),
     ("held", "--sweep c=0.01:0.1:0", "--sweep"),
     ("held", "--sweep c=0.01:0.1:1000000", "--sweep"),
     ("held", "--sweep c=0.0:1.0:100000 --samples 1024", "--sweep values"),  # the budget
@@ -386,6 +390,8 @@ def dataset_flaws(ds: xr.Dataset) -> list[str]:
 # (kind before the fixes, the flags after BASE)
 GOOD_CLI = [
     ("held", ""),
+    ("held", "--sweep f=0,1"),  # no harmonic forcing at f = 0
+    ("held", "--mu -0.2 --sigma 0.1"),  # a negative mean may spread
     ("silent NaN", "--sweep c=0.01"),  # chaotic: no periodic attractor, no samples
     ("silent NaN", "--extra-states 1000 --transient 4 --record 4"),  # none settles
     ("held", "--sweep c=0.01,0.04 --samples 4 --extra-states 1 --coexist 2"),
@@ -447,6 +453,8 @@ BAD_API = [
     ("traceback", dict(args=(SECTION_31, "replace", [0.04])), "parameter"),
     ("traceback", dict(args=(SECTION_31, "forcing_period", [0.04])), "parameter"),
     ("held", dict(args=(SECTION_31, "x0", [0.04])), "parameter"),
+    ("wrongly accepted", dict(args=(System(SECTION_31, sigma=0.05), "c", [0.04])),
+     ("oscillator", "sigma")),
     ("held", dict(args=(SECTION_31, "mu", [0.8])), "parameter"),
     ("held", dict(args=(SECTION_31, "", [0.8])), "parameter"),
     ("held", dict(args=(SECTION_31, "c", [])), "values"),
