@@ -25,7 +25,10 @@ Each case's first field says what it found before the fixes of issue 45 ("held":
 passed already): ``traceback`` (an internal error or an exception other than
 ValueError), ``wrongly accepted``, ``unnamed culprit``, ``silent NaN`` (or a dataset whose
 probabilities are not a distribution), ``other`` (a hint at a flag this command does not
-have, a refusal only after the work was done).
+have, a refusal only after the work was done, a parts folder left by a refusal). Before
+the fixes 115 of the 278 cases were not clean: CLI 58 of 155 (1 traceback, 16 wrongly
+accepted, 35 unnamed culprits, 5 silent NaN or empty probabilities, 1 other), API 57 of
+123 (20 tracebacks, 19 wrongly accepted, 12 unnamed culprits, 1 silent NaN, 5 other).
 """
 
 from __future__ import annotations
@@ -390,8 +393,8 @@ def dataset_flaws(ds: xr.Dataset) -> list[str]:
 # (kind before the fixes, the flags after BASE)
 GOOD_CLI = [
     ("held", ""),
-    ("held", "--sweep f=0,1"),  # no harmonic forcing at f = 0
-    ("held", "--mu -0.2 --sigma 0.1"),  # a negative mean may spread
+    ("silent NaN", "--sweep f=0,1"),  # no harmonic forcing at f = 0
+    ("silent NaN", "--mu -0.2 --sigma 0.1"),  # a negative mean may spread
     ("silent NaN", "--sweep c=0.01"),  # chaotic: no periodic attractor, no samples
     ("silent NaN", "--extra-states 1000 --transient 4 --record 4"),  # none settles
     ("held", "--sweep c=0.01,0.04 --samples 4 --extra-states 1 --coexist 2"),
@@ -484,7 +487,7 @@ BAD_API = [
     ("wrongly accepted", dict(sigma=1e-17), "sigma"),
     ("other", dict(sigma=5.0), ("sigma", "mu")),
     ("other", dict(sigma=1e305, distribution="normal-trunc:9000"), "sigma"),
-    ("wrongly accepted", dict(args=(SECTION_31.replace(c=-1e308), "mu", [0.8]), uncertain="c",
+    ("traceback", dict(args=(SECTION_31.replace(c=-1e308), "mu", [0.8]), uncertain="c",
                               sigma=1.7e308), "sigma"),  # c_bar + sigma xi overflows
     ("held", dict(uncertain=None), "uncertain"),
     ("held", dict(uncertain="MU"), "uncertain"),
@@ -545,8 +548,7 @@ BAD_API = [
     ("unnamed culprit", dict(emr=True, emr_order=10**6), "emr_order"),
     ("wrongly accepted", dict(emr=False, emr_order=6), ("emr_order", "emr")),
     ("held", dict(emr=True, distribution="uniform"), "emr"),
-    ("unnamed culprit", dict(args=(SECTION_31, "c", [0.05, 0.04]), emr=True), ("values",
-                                                                               "emr")),
+    ("held", dict(args=(SECTION_31, "c", [0.05, 0.04]), emr=True), ("values", "emr")),
     ("held", dict(workers=True), "workers"),
     ("held", dict(workers=2.0), "workers"),
     ("held", dict(workers=0), "workers"),
@@ -560,7 +562,7 @@ BAD_API = [
     ("unnamed culprit", dict(scheduler="nonsense"), "scheduler"),
     ("traceback", dict(parts=3), "parts"),
     ("unnamed culprit", dict(parts=""), "parts"),
-    ("unnamed culprit", dict(parts="/proc/x.parts"), "parts"),
+    ("held", dict(parts="/proc/x.parts"), "parts"),
     ("traceback", dict(log="x"), "log"),
     ("traceback", dict(log=3), "log"),
     ("wrongly accepted", dict(options={}), "options"),
