@@ -29,6 +29,7 @@ THEMES = {
     "tests/opa/test_hard_dynamics.py": "failures and time bounds across kernel, runs, orbits",
     "tests/opa/dynamics/test_pool.py": "the sweep's worker processes die with their owner",
     "tests/opa/cli/test_bad_inputs.py": "the hostile-user corpus of every subcommand",
+    "tests/compare/test_report_sentences.py": "the validate report's sentences (compare._report)",
     "tests/opa/cli/test_commands.py": "the happy path of every subcommand",
     "tests/mc/test_coef_sem.py": "standard errors of the Monte Carlo coefficients",
     "tests/mc/test_dask.py": "the Dask backend of simulate_mc",
