@@ -39,7 +39,8 @@ from mc._checkpoint import Checkpoint, stats_arrays
 from mc._control import check_control, controlled
 from mc._sampling import check_sampler, sample_xi
 from opa.engine import (
-    IMPULSE_FIELDS, as_system, chebyshev_u, check_device, check_instance, check_memory, digest,
+    IMPULSE_FIELDS, as_system, chebyshev_u, check_device, check_scheduler_address,
+    check_instance, check_memory, digest,
     orthonormal, require_gpu, add_true_system_work, true_system_work,
     Oscillator, output_times, package_version, provenance_attrs, run_batch, SimulationError,
     SolverOptions, System, time_coord,
@@ -696,24 +697,6 @@ class _Chunks:
             if j != current and futures[j].done():
                 self.save(j, _result(futures[j], self.bounds[j], watchdog))
                 unsaved.discard(j)
-
-
-def check_scheduler_address(address: str) -> str:
-    """``address`` if it reads as a Dask scheduler's (``tcp://host:port``, ``tls://``,
-    ``ws://``, ``wss://`` or ``ucx://`` with a port, ``inproc://...``, or ``host:port``),
-    else one line naming it; nothing is contacted.
-
-    >>> check_scheduler_address("tcp://10.0.0.5:8786")
-    'tcp://10.0.0.5:8786'
-    """
-    import re
-
-    text = address.strip() if isinstance(address, str) else ""
-    if re.fullmatch(r"inproc://\S+", text) or re.fullmatch(
-            r"(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9a-fA-F:.]+\]|[\w.-]+):\d{1,5}", text):
-        return text
-    raise ValueError(f"scheduler must be a Dask scheduler address such as tcp://host:8786 "
-                     f"(a host and a port), got {address!r:.60}")
 
 
 def connect_scheduler(scheduler, connect_timeout: float):

@@ -72,6 +72,24 @@ def _finite(name: str, value) -> float:
     return value
 
 
+def check_scheduler_address(address: str) -> str:
+    """``address`` if it reads as a Dask scheduler's (``tcp://host:port``, ``tls://``,
+    ``ws://``, ``wss://`` or ``ucx://`` with a port, ``inproc://...``, or ``host:port``),
+    else one line naming it; nothing is contacted.
+
+    >>> check_scheduler_address("tcp://10.0.0.5:8786")
+    'tcp://10.0.0.5:8786'
+    """
+    import re
+
+    text = address.strip() if isinstance(address, str) else ""
+    if re.fullmatch(r"inproc://\S+", text) or re.fullmatch(
+            r"(?:(?:tcp|tls|ws|wss|ucx)://)?(?:\[[0-9a-fA-F:.]+\]|[\w.-]+):\d{1,5}", text):
+        return text
+    raise ValueError(f"scheduler must be a Dask scheduler address such as tcp://host:8786 "
+                     f"(a host and a port), got {address!r:.60}")
+
+
 def check_order(order, maximum: int = MAX_ORDER) -> int:
     """The truncation order N as an int, refusing bools, non-integers, N < 0 and
     N > ``maximum``."""

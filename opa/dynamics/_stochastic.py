@@ -847,6 +847,12 @@ def _connect(scheduler):
         raise DiagramInputError("{scheduler} needs the 'distributed' package") from None
     if isinstance(scheduler, Client):
         return scheduler, False
+    from opa._model import check_scheduler_address
+
+    try:  # before Client(): a Client of an address that is none stays the default client
+        check_scheduler_address(scheduler)
+    except ValueError as err:
+        raise _named("scheduler", err, scheduler) from None
     try:
         return Client(scheduler, timeout=5), True
     except (OSError, TimeoutError) as err:

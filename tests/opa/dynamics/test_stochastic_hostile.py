@@ -37,7 +37,6 @@ import contextlib
 import inspect
 import os
 import re
-import signal
 import time
 
 import numpy as np
@@ -47,6 +46,7 @@ import xarray as xr
 from opa import SolverOptions, System, preset
 from opa.cli._main import build_parser, main
 from opa.dynamics._stochastic import stochastic_diagram
+from tests.opa.cli.test_bad_inputs import Timeout, time_bound
 
 TIME_LIMIT = 30  # seconds: a refusal comes before any long computing
 QUICK = 5  # seconds a refused case may take (numba's first compile aside)
@@ -58,22 +58,6 @@ BASE = {"--preset": "3.1", "--F0": "0", "--sweep": "c=0.04", "--samples": "0",
 API_BASE = dict(sigma=0.03, samples=0, extra_states=0, transient=200, record=16)
 
 
-class Timeout(BaseException):  # not an Exception: the CLI's catch-all must not take it
-    pass
-
-
-@contextlib.contextmanager
-def time_bound(seconds: int):
-    def handler(signum, frame):
-        raise Timeout(f"still running after {seconds} s")
-
-    old = signal.signal(signal.SIGALRM, handler)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, old)
 
 
 def argv(case: str) -> list[str]:
