@@ -470,7 +470,9 @@ def simulate_elements(system, *, options, times, elements, tolerance, max_elemen
                                      {"long_name": "elements after each refinement step",
                                       **one})
         ds["refinement_share"] = ("refinement", np.array([h[1] for h in history]),
-                                  {"long_name": "largest element variance share", **one})
+                                  {"long_name": "largest element variance share (inf: an "
+                                   "element's OPA system failed; NaN: an element's "
+                                   "variance is not finite)", **one})
         ds["refinement_mean_change"] = (
             "refinement", np.array([h[2] for h in history]),
             {"long_name": "RMS change of the assembled E[x] from the step before "
