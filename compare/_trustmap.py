@@ -128,15 +128,16 @@ class _Map:
         return name if sigma is None else f"{name}_sigma{sigma:.6g}"
 
     # -- one point ---------------------------------------------------------------------
-    def _ensemble(self, value, sigma, samples, times, previous=None) -> dict:
-        """The true sampled systems of the point's stratified design (:meth:`_design`) at
+    def _ensemble(self, value, sigma, samples, times, design, previous=None) -> dict:
+        """The true sampled systems of the point's stratified design (:meth:`_design`:
+        ``design`` = its strata and points per stratum in each replicate) at
         ``samples`` points in ``REPLICATES`` replicates: x (M, T) with replicate r in rows
         r M/R .. (r+1) M/R - 1, xi (M,), weights (M,), impacts (M,), rhs and wall seconds.
         The points at 2M hold those at M (each stratum's Sobol' sequence goes on), so
         given the ensemble at M/2 (``previous``) only the new half is run; the result is
         the same to the bit."""
         with self.clock("Monte Carlo runs"):
-            return self._run_ensemble(value, sigma, samples, times, previous)
+            return self._run_ensemble(value, sigma, samples, times, design, previous)
 
     def _design(self, value, sigma, times) -> tuple[Strata, np.ndarray]:
         """The point's strata and points per stratum in each replicate at the first round.
@@ -162,12 +163,12 @@ class _Map:
                               max_strata=max(1, per_replicate // 2))
         return strata, replicate_allocation(per_replicate, strata.probability)
 
-    def _run_ensemble(self, value, sigma, samples, times, previous) -> dict:
+    def _run_ensemble(self, value, sigma, samples, times, design, previous) -> dict:
         cfg = self.cfg
         start = time.perf_counter()
         system = cfg.system_at(value, sigma=sigma, order=0)
         self.mc_runs += 1
-        strata, allocation = self._design(value, sigma, times)
+        strata, allocation = design
         scale = samples // cfg.samples
         xi, weights, _ = replicate_points(self.measure, strata, allocation, REPLICATES,
                                           cfg.seed, scale)
@@ -206,7 +207,7 @@ class _Map:
             previous = state.get("paths")
             if previous is not None and len(previous["xi"]) != samples // 2:
                 previous = None
-            ens = self._ensemble(value, sigma, samples, times, previous)
+            ens = self._ensemble(value, sigma, samples, times, (strata, allocation), previous)
             state["paths"] = ens
             pairs = pair_point(ens["x"], ens["xi"], controls, self.measure, probabilities,
                                shape, weights=ens["weights"])

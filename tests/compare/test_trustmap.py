@@ -876,11 +876,12 @@ def test_a_doubled_ensemble_equals_one_run_whole(tmp_path, distribution):
     cfg = load_config(None, outdir=str(tmp_path), distribution=distribution, **TINY)
     m = trustmap._Map(cfg, progress=False, log=lambda *a: None)
     times = time_grid(3.98, max(cfg.horizons), cfg.per_period)
-    half = m._ensemble(3.98, 0.03, 64, times)
-    grown = m._ensemble(3.98, 0.03, 128, times, previous=half)
-    whole = m._ensemble(3.98, 0.03, 128, times)
+    design = m._design(3.98, 0.03, times)
+    half = m._ensemble(3.98, 0.03, 64, times, design)
+    grown = m._ensemble(3.98, 0.03, 128, times, design, previous=half)
+    whole = m._ensemble(3.98, 0.03, 128, times, design)
     assert m.true_runs == 64 + 64 + 128  # the doubling ran only its new half
-    for name in ("x", "xi", "impacts"):
+    for name in ("x", "xi", "weights", "impacts"):
         np.testing.assert_array_equal(grown[name], whole[name])
     assert grown["rhs"] == whole["rhs"]
 
