@@ -11,32 +11,41 @@ forcing periods:
   true impact system), on the same edges;
 * single-element OPA for N = 0..8, single-element collocation, and plain Monte Carlo and
   scrambled Sobol at increasing M (seeds other than the reference's);
-* control variates (:func:`compare.verify`): M true systems paired with the adaptive
-  ME-OPA of ``order_budget`` elements (saltation law) as the control, at the same M;
+* control variates (:func:`mc.cv_estimates`, as ``simulate_mc(control=...)``): the
+  Sobol ladder's M true systems paired with the adaptive ME-OPA of ``order_budget``
+  elements (saltation law) as the control.
 
 each with its RMS error of the mean x_0 (and of the standard deviation) over the window,
 its right-hand-side evaluations (for OPA also times the Q nodes each one evaluates) and
 its wall time. Slopes are fitted to log error against log K. The errors are meaningful
 down to the reference's own standard error, which is stored beside them.
+
+The MC and Sobol ladders are nested: each is one ensemble of the largest M, run rung by
+rung, each rung's points a prefix of the next's (every replicate's Sobol' sequence goes
+on), and the control-variate rows reuse the Sobol ladder's true systems. A rung's points
+are those of a separate run of that size (``sample_xi``), so a rung's estimate is the
+one a separate ensemble would give; its cost (right-hand sides, seconds) is that of all
+the true systems it holds. The runs of the study are listed by :func:`study_runs`.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
+from functools import cached_property, partial
 
 import numpy as np
 import xarray as xr
 
-from mc import simulate_mc
+from mc import cv_estimates, sample_xi, simulate_mc
 from opa.engine import (
     collocation, ElementBudgetWarning, Oscillator, parse, preset, provenance_attrs,
-    quadrature_order, simulate_opa, SimulationError, SolverOptions, System, time_grid,
-    uniform_edges, write_netcdf,
+    quadrature_order, run_measure, simulate_opa, SimulationError, SolverOptions, surrogate,
+    surrogate_moments, System, time_grid, true_runs, uniform_edges, write_netcdf,
 )
 from compare._verify import verify
 
@@ -76,9 +85,9 @@ class ConvergenceConfig:
     pulse_width: float = 0.1
     impulse_at_zero: bool = True
 
-    @property
+    @cached_property
     def system(self) -> System:
-        """The :class:`opa.System` of the study (N = ``order``)."""
+        """The :class:`opa.System` of the study (N = ``order``), built once."""
         return System(self.oscillator, sigma=self.sigma, uncertain=self.uncertain,
                       distribution=self.distribution, allow_negative=self.allow_negative,
                       order=self.order, impulse=self.impulse, pulse_width=self.pulse_width,
@@ -117,78 +126,31 @@ def _rms(a) -> float:
     return float(np.sqrt(np.mean(np.square(a))))
 
 
-#: what a row that is not computed yet reads as while the study finds its runs
-PENDING = {"error": math.nan, "sd_error": math.nan, "rhs": 0, "elements": 0,
-            "seconds": 0.0}
+@dataclass(frozen=True)
+class StudyRun:
+    """One run of the study: ``name`` (its part's name, file-name safe), ``spec`` (a
+    JSON-able dict of everything it depends on) and ``compute()``, which does it and
+    returns a dict of arrays, numbers and strings (a partial of a module function, so a
+    run pickles and can be sent to a worker as it is)."""
+
+    name: str
+    spec: dict
+    compute: Callable[[], dict]
 
 
-def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
-                    memo=None, workers: int = 1, scheduler=None) -> xr.Dataset:
-    """Run the study; returns its dataset (also written to OUTDIR/convergence.nc unless
-    ``write`` is false).
+@dataclass(frozen=True)
+class _Setting:
+    """What every run of one study shares: the law of xi, the System, the outputs."""
 
-    Every run of the study (the reference, each row) is one call
-    ``memo(name, spec, compute)``: ``spec`` is a JSON-able dict of everything the run
-    depends on, ``compute()`` does the run and returns a dict of arrays, numbers and
-    strings, and ``memo`` returns that dict or the one an identical earlier call returned
-    (the trust map keeps them in its parts, :class:`opa._dataset.Store`). Without
-    ``memo`` every run is done. The dataset's ``wall_seconds`` is the sum of the runs' wall
-    times (for reused runs, the time they took when they were done).
-
-    With ``workers`` > 1 or a Dask ``scheduler`` (and no ``memo``), the runs are tasks
-    (:func:`compare._scaleout.run_tasks`): after the reference, the study is walked
-    without computing to find the runs it needs, those run side by side, and so on until
-    every run is known (the adaptive collocation rows need the adaptive runs' edges);
-    then the study is assembled from them. The rows are the same as in one process.
-    """
-    if (workers > 1 or scheduler is not None) and memo is None:
-        return _run_parallel(cfg, log=log, write=write, workers=workers,
-                             scheduler=scheduler)
-    return _study(cfg, log=log, write=write, memo=memo)
+    measure: object
+    base: System
+    times: np.ndarray
+    settings: dict
 
 
-def _run_parallel(cfg, *, log, write, workers, scheduler) -> xr.Dataset:
-    import cloudpickle
-
-    from compare._scaleout import run_tasks
-
-    known: dict = {}
-
-    def dry(name, spec, compute):
-        if name in known:
-            return known[name]
-        if name == "reference":  # every row's error depends on it: computed here, first
-            known[name] = compute()
-            return known[name]
-        pending.append((name, compute))
-        return PENDING
-
-    while True:
-        pending: list = []
-        _study(cfg, log=lambda *a: None, write=False, memo=dry)
-        if not pending:
-            break
-        log(f"{len(pending)} runs of the study as tasks ...")
-        tasks = [(name, _call, (cloudpickle.dumps(compute),)) for name, compute in pending]
-        for name, result in run_tasks(tasks, workers=workers, scheduler=scheduler):
-            known[name] = result
-    return _study(cfg, log=log, write=write, memo=lambda name, spec, compute: known[name])
-
-
-def _call(blob: bytes):
-    """A run of the study sent to a worker (cloudpickle carries its closure)."""
-    import cloudpickle
-
-    return cloudpickle.loads(blob)()
-
-
-def _study(cfg: ConvergenceConfig, *, log, write: bool, memo) -> xr.Dataset:
-    """The study itself (:func:`run_convergence`)."""
-    osc, opts = cfg.oscillator, cfg.options
+def _setting(cfg: ConvergenceConfig) -> _Setting:
     measure = parse(cfg.distribution)
-    base = cfg.system.replace(distribution=measure)
-    times = time_grid(osc.omega, cfg.periods, cfg.per_period)
-    common = dict(times=times, options=opts)
+    osc, opts = cfg.oscillator, cfg.options
     # what every run depends on; the errors also depend on the reference (samples, seed)
     settings = {"oscillator": osc.as_dict(), "options": asdict(opts), "sigma": cfg.sigma,
                 "uncertain": cfg.uncertain, "distribution": cfg.distribution,
@@ -202,189 +164,383 @@ def _study(cfg: ConvergenceConfig, *, log, write: bool, memo) -> xr.Dataset:
                                          "order": int(cfg.order), "certificate": 2}
     if (cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero) != ("dirac", 0.1, True):
         settings["impulse"] = [cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero]
+    return _Setting(measure, cfg.system.replace(distribution=measure),
+                    time_grid(osc.omega, cfg.periods, cfg.per_period), settings)
 
-    def run(name, spec, compute):
-        spec = {**settings, "run": name, **spec}
-        return compute() if memo is None else memo(name, spec, compute)
 
-    controls = []  # the control run, computed once when a row needs it
+def _run(setting: _Setting, name: str, spec: dict, compute, *args) -> StudyRun:
+    return StudyRun(name, {**setting.settings, "run": name, **spec}, partial(compute, *args))
 
-    def control_run():
-        if not controls:
-            t = time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", ElementBudgetWarning)
-                controls.append(simulate_opa(
-                    base.replace(order=cfg.order, impact_law="saltation"),
-                    elements="adaptive", tolerance=1e-14, max_elements=cfg.order_budget,
-                    **common))
-            controls.append(time.perf_counter() - t)
-        return controls
 
-    def reference():
-        t0 = time.perf_counter()
-        if cfg.reference_method == "control":
-            try:
-                control, control_seconds = control_run()
-                t0 -= control_seconds
-                cv = verify(control, samples=cfg.reference, max_samples=cfg.reference,
-                            sequential=False, seed=cfg.seed)
-            except (SimulationError, ValueError) as err:  # no control: plain Sobol
-                log(f"  the control run cannot serve ({err}): the reference is "
+# -- the runs ------------------------------------------------------------------------------
+def _control(cfg: ConvergenceConfig) -> tuple[xr.Dataset, float]:
+    """The control: adaptive ME-OPA of ``order_budget`` elements (saltation law), and
+    its wall time."""
+    setting = _setting(cfg)
+    t = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ElementBudgetWarning)
+        control = simulate_opa(
+            setting.base.replace(order=cfg.order, impact_law="saltation"),
+            elements="adaptive", tolerance=1e-14, max_elements=cfg.order_budget,
+            times=setting.times, options=cfg.options)
+    return control, time.perf_counter() - t
+
+
+def _reference(cfg: ConvergenceConfig) -> dict:
+    """The reference: the control-variate estimate of ``reference`` true systems on the
+    control (:func:`compare.verify`, stratified), or ``reference`` Sobol samples; a
+    control that cannot serve leaves ``PLAIN_REFERENCE`` Sobol samples (``note`` says
+    why)."""
+    t0 = time.perf_counter()
+    if cfg.reference_method == "control":
+        try:
+            control, control_seconds = _control(cfg)
+            t0 -= control_seconds
+            cv = verify(control, samples=cfg.reference, max_samples=cfg.reference,
+                        sequential=False, seed=cfg.seed)
+        except (SimulationError, ValueError) as err:  # no control: plain Sobol
+            note = (f"  the control run cannot serve ({err}): the reference is "
                     f"{PLAIN_REFERENCE} Sobol samples")
-                return plain(PLAIN_REFERENCE, t0)
-            return {"x_mean": cv.cv_x_mean.values, "x_var": cv.cv_x_var.values,
-                    "x_sem": cv.cv_x_mean_sem.values,
-                    "rhs": int(control.attrs["rhs_evaluations"])
-                    + int(cv.attrs["verify_rhs_evaluations"]),
-                    "seconds": time.perf_counter() - t0,
-                    "text": reference_text(cfg.reference, "control", cfg.order_budget)}
-        return plain(cfg.reference, t0)
-
-    def plain(samples, t0):
-        ref = simulate_mc(base.replace(order=0), samples=samples, sampler="sobol",
-                          seed=cfg.seed, progress=False, **common)
-        return {"x_mean": ref.x_mean.values, "x_var": ref.x_var.values,
-                "x_sem": ref.x_sem.values, "rhs": int(ref.attrs["rhs_evaluations"]),
+            return {**_plain_reference(cfg, PLAIN_REFERENCE, t0), "note": note}
+        return {"x_mean": cv.cv_x_mean.values, "x_var": cv.cv_x_var.values,
+                "x_sem": cv.cv_x_mean_sem.values,
+                "rhs": int(control.attrs["rhs_evaluations"])
+                + int(cv.attrs["verify_rhs_evaluations"]),
                 "seconds": time.perf_counter() - t0,
-                "text": reference_text(samples, "sobol", cfg.order_budget),
-                "samples": int(samples)}
+                "text": reference_text(cfg.reference, "control", cfg.order_budget)}
+    return _plain_reference(cfg, cfg.reference, t0)
 
+
+def _plain_reference(cfg: ConvergenceConfig, samples: int, t0: float) -> dict:
+    setting = _setting(cfg)
+    ref = simulate_mc(setting.base.replace(order=0), samples=samples, sampler="sobol",
+                      seed=cfg.seed, progress=False, times=setting.times,
+                      options=cfg.options)
+    return {"x_mean": ref.x_mean.values, "x_var": ref.x_var.values,
+            "x_sem": ref.x_sem.values, "rhs": int(ref.attrs["rhs_evaluations"]),
+            "seconds": time.perf_counter() - t0,
+            "text": reference_text(samples, "sobol", cfg.order_budget),
+            "samples": int(samples)}
+
+
+def _errors(ref: dict, mean, var) -> tuple[float, float]:
+    """RMS errors of the mean and of the standard deviation against the reference."""
+    return (_rms(mean - ref["x_mean"]),
+            _rms(np.sqrt(np.maximum(var, 0.0)) - np.sqrt(ref["x_var"])))
+
+
+def _opa(cfg: ConvergenceConfig, ref: dict, law: str, order: int, kw: dict) -> dict:
+    """One OPA row: ``simulate_opa`` with ``kw`` (elements, budget); a diverged OPA
+    system gives ``failure`` instead of an error."""
+    setting = _setting(cfg)
+    t = time.perf_counter()
+    try:
+        with warnings.catch_warnings():  # the budget is the study's variable
+            warnings.simplefilter("ignore", ElementBudgetWarning)
+            ds = simulate_opa(setting.base.replace(order=order, impact_law=law),
+                              times=setting.times, options=cfg.options, **kw)
+    except SimulationError as err:  # a diverged OPA system: no error to report
+        return {"failure": str(err), "seconds": time.perf_counter() - t}
+    sec = time.perf_counter() - t
+    e, s = _errors(ref, ds.x_mean.values, ds.x_var.values)
+    out = {"error": e, "sd_error": s, "rhs": int(ds.attrs["rhs_evaluations"]),
+           "elements": int(ds.attrs["elements"]), "seconds": sec}
+    if "element_edges" in ds:
+        out["edges"] = ds.element_edges.values
+    return out
+
+
+def _collocation(cfg: ConvergenceConfig, ref: dict, edges, nodes: int) -> dict:
+    """One collocation row: ``nodes`` Gauss nodes on each element cut at ``edges``."""
+    setting = _setting(cfg)
+    t = time.perf_counter()
+    mean, var, rhs = collocation(setting.base, cfg.options, setting.measure,
+                                 np.asarray(edges, float), nodes, times=setting.times)
+    sec = time.perf_counter() - t
+    e, s = _errors(ref, mean, var)
+    return {"error": e, "sd_error": s, "rhs": int(rhs), "seconds": sec}
+
+
+def ladder_sizes(cfg: ConvergenceConfig) -> list[int]:
+    """The rungs of the MC and Sobol ladders (ascending)."""
+    return sorted({int(m) for m in cfg.mc_samples})
+
+
+def ladder_replicates(cfg: ConvergenceConfig) -> int:
+    """The Sobol ladder's independent scramblings: 16 when every rung is a multiple of 16
+    and >= 64 (``simulate_mc``'s default at each rung), else 1."""
+    return 16 if all(m % 16 == 0 and m >= 64 for m in ladder_sizes(cfg)) else 1
+
+
+def ladder_rows(sizes, replicates: int) -> list[np.ndarray]:
+    """The rows of the largest ensemble that each rung holds: with R replicates of P =
+    max / R points each (replicate r in rows r P .. (r + 1) P - 1), rung M holds the first
+    M / R points of every replicate, which is ``sample_xi``'s set of M points (each
+    replicate's Sobol' sequence goes on from M to 2M); with one replicate, the first M.
+
+    >>> [r.tolist() for r in ladder_rows([2, 4], 2)]
+    [[0, 2], [0, 1, 2, 3]]
+    """
+    most = max(sizes)
+    per = most // replicates
+    return [np.concatenate([np.arange(r * per, r * per + m // replicates)
+                            for r in range(replicates)]) for m in sizes]
+
+
+def _ladder_paths(cfg: ConvergenceConfig, sampler: str, replicates: int):
+    """The largest ensemble of the ladder, run rung by rung (each rung only its new
+    rows): x (M, T), xi (M,), and per rung the rows, the right-hand sides and the wall
+    seconds of every true system it holds."""
+    setting = _setting(cfg)
+    sizes = ladder_sizes(cfg)
+    xi, _ = sample_xi(sampler, sizes[-1], cfg.seed + 1, replicates=replicates,
+                      distribution=setting.measure)
+    rows = ladder_rows(sizes, replicates)
+    x = np.empty((len(xi), len(setting.times)))
+    system = setting.base.replace(order=0)
+    rhs, seconds, done = [], [], np.zeros(0, np.int64)
+    total_rhs, total_seconds = 0, 0.0
+    for held in rows:
+        new = np.setdiff1d(held, done)
+        t = time.perf_counter()
+        paths, n_rhs = true_runs(system, cfg.options, xi[new], setting.times,
+                                 what=f"{sampler} ladder sample")
+        x[new] = paths[:, :, 0]
+        total_rhs += n_rhs
+        total_seconds += time.perf_counter() - t
+        rhs.append(total_rhs)
+        seconds.append(total_seconds)
+        done = held
+    return x, xi, rows, np.array(rhs, np.int64), np.array(seconds)
+
+
+def _mc_ladder(cfg: ConvergenceConfig, ref: dict) -> dict:
+    """Plain Monte Carlo at every rung, the rungs nested prefixes of one ensemble of
+    independent points (``sample_xi("random")``: the first M of the largest are the
+    M points of a run of M): the mean and the sample variance (Bessel's M / (M - 1))."""
+    x, _, rows, rhs, seconds = _ladder_paths(cfg, "random", 1)
+    err = np.array([_errors(ref, x[r].mean(axis=0), x[r].var(axis=0, ddof=1))
+                    for r in rows])
+    return {"sizes": np.array([len(r) for r in rows]), "error": err[:, 0],
+            "sd_error": err[:, 1], "rhs": rhs, "seconds": seconds}
+
+
+def _sobol_ladder(cfg: ConvergenceConfig, ref: dict) -> dict:
+    """Scrambled Sobol' and control variates at every rung, over one ensemble whose
+    rungs are nested (:func:`ladder_rows`). Sobol': the mean, and the variance about it
+    plus the replicates' variance of the mean (as ``simulate_mc``). Control variates
+    (:func:`mc.cv_estimates`, as ``simulate_mc(control=...)``): the same true systems
+    paired with the surrogate of the adaptive ME-OPA of ``order_budget`` elements
+    (saltation law), at the rungs that are powers of two >= 8; each pays for its
+    control run."""
+    R = ladder_replicates(cfg)
+    x, xi, rows, rhs, seconds = _ladder_paths(cfg, "sobol", R)
+    out = {"sizes": np.array([len(r) for r in rows]), "rhs": rhs, "seconds": seconds}
+    err = []
+    for r in rows:
+        xs = x[r].reshape(R, -1, x.shape[1])
+        means = xs.mean(axis=1)
+        sem2 = means.var(axis=0, ddof=1) / R if R > 1 else 0.0
+        err.append(_errors(ref, xs.mean(axis=(0, 1)), xs.var(axis=(0, 1)) + sem2))
+    out["error"], out["sd_error"] = np.array(err).T
+    cv = [k for k, r in enumerate(rows) if len(r) >= 8 and not len(r) & (len(r) - 1)]
+    out["cv_rung"] = np.array(cv, np.int64)
+    if not cv:
+        return out
+    control, control_seconds = _control(cfg)
+    t = time.perf_counter()
+    x_hat = surrogate(control, xi, measure=run_measure(control))[0]
+    moments = surrogate_moments(control)
+    surrogate_seconds = time.perf_counter() - t
+    err = []
+    for k in cv:
+        xs = x[rows[k]].reshape(R, -1, x.shape[1])
+        hs = x_hat[rows[k]].reshape(R, -1, x.shape[1])
+        with warnings.catch_warnings():  # one replicate: no standard error (NaN)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            est = cv_estimates(xs.mean(axis=1), (xs**2).mean(axis=1), moments["x_mean"],
+                               moments["x_second"], hs.mean(axis=1), (hs**2).mean(axis=1))
+        err.append(_errors(ref, est["mean"], est["var"]))
+    out["cv_error"], out["cv_sd_error"] = np.array(err).T
+    out["cv_rhs"] = int(control.attrs["rhs_evaluations"]) + rhs[cv]
+    out["cv_seconds"] = control_seconds + surrogate_seconds + seconds[cv]
+    out["total_seconds"] = control_seconds + surrogate_seconds + seconds[-1]
+    return out
+
+
+# -- the list of runs ----------------------------------------------------------------------
+def _opa_specs(cfg: ConvergenceConfig) -> list[tuple]:
+    """(method, law, size, order, simulate_opa keywords) of every OPA row, in row order."""
+    specs = []
+    adaptive = dict(elements="adaptive", tolerance=1e-14)
+    for law in STUDY_LAWS:
+        specs += [("ME-OPA uniform", law, int(k), cfg.order, dict(elements=int(k)))
+                  for k in cfg.uniform]
+        specs += [("ME-OPA adaptive", law, None, cfg.order, {**adaptive,
+                                                             "max_elements": int(b)})
+                  for b in cfg.budgets]
+        for n in cfg.orders:
+            specs.append(("ME-OPA adaptive, N", law, None, n,
+                          {**adaptive, "max_elements": cfg.order_budget}))
+            specs.append(("OPA (one element), N", law, 1, n, dict(elements=1)))
+    return specs
+
+
+def _opa_name(method: str, law: str, order: int, kw: dict) -> str:
+    return _slug(f"{method}-{law}-N{order}-K{kw.get('max_elements', kw.get('elements'))}")
+
+
+def _collocation_specs(cfg: ConvergenceConfig, known: dict) -> list[tuple]:
+    """(method, edges, nodes) of every collocation row whose edges are known, in row
+    order: the adaptive rows take the edges the adaptive ME-OPA (saltation law) of the
+    same budget chose, once that run is ``known``."""
+    measure = parse(cfg.distribution)
+    specs = [("ME-collocation uniform", uniform_edges(measure, int(k)), cfg.nodes)
+             for k in cfg.uniform]
+    for b in cfg.budgets:
+        run = known.get(_opa_name("ME-OPA adaptive", "saltation", cfg.order,
+                                  {"max_elements": int(b)}))
+        if run is not None and "edges" in run:
+            specs.append(("ME-collocation adaptive", np.asarray(run["edges"], float),
+                          cfg.nodes))
+    whole = np.array([measure.lo, measure.hi])
+    specs += [("collocation (one element), Q", whole, int(q)) for q in cfg.single_nodes]
+    return specs
+
+
+def _collocation_name(method: str, edges, nodes: int) -> str:
+    return _slug(f"{method}-K{len(edges) - 1}-Q{nodes}")
+
+
+def _ladder_names(cfg: ConvergenceConfig) -> tuple[str, str]:
+    most = ladder_sizes(cfg)[-1]
+    return (_slug(f"MC ladder-M{most}"),
+            _slug(f"QMC (Sobol) and CV-K{cfg.order_budget} ladder-M{most}"))
+
+
+def study_runs(cfg: ConvergenceConfig, known: dict) -> list[StudyRun]:
+    """Every run of the study that can be named given the runs ``known`` (name -> result):
+    the reference alone until it is known (every row's error depends on it); then every
+    OPA row, the collocation rows (the adaptive ones once the adaptive ME-OPA run whose
+    edges they take is known), and the two nested ladders. The study is complete when
+    every run listed is known; the list is the same whoever computes the runs."""
+    setting = _setting(cfg)
+    runs = [_run(setting, "reference", {}, _reference, cfg)]
+    if "reference" not in known:
+        return runs
+    ref = {name: np.asarray(known["reference"][name]) for name in ("x_mean", "x_var")}
+    for method, law, _, order, kw in _opa_specs(cfg):
+        runs.append(_run(setting, _opa_name(method, law, order, kw),
+                         {"method": method, "law": law, "order": order, **kw},
+                         _opa, cfg, ref, law, order, kw))
+    for method, edges, nodes in _collocation_specs(cfg, known):
+        runs.append(_run(setting, _collocation_name(method, edges, nodes),
+                         {"method": method, "edges": edges.tolist(), "nodes": int(nodes)},
+                         _collocation, cfg, ref, edges, int(nodes)))
+    mc, sobol = _ladder_names(cfg)
+    ladder = {"samples": ladder_sizes(cfg), "ladder_seed": cfg.seed + 1, "nested": 1}
+    runs.append(_run(setting, mc, {**ladder, "sampler": "random"}, _mc_ladder, cfg, ref))
+    runs.append(_run(setting, sobol, {**ladder, "sampler": "sobol",
+                                      "replicates": ladder_replicates(cfg),
+                                      "control": {"budget": int(cfg.order_budget),
+                                                  "order": int(cfg.order)}},
+                     _sobol_ladder, cfg, ref))
+    unique = {run.name: run for run in runs}  # two budgets may stop at the same edges
+    return list(unique.values())
+
+
+def pending_runs(cfg: ConvergenceConfig, known: dict) -> list[StudyRun]:
+    """The runs of :func:`study_runs` not yet ``known``."""
+    return [run for run in study_runs(cfg, known) if run.name not in known]
+
+
+def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
+                    memo=None, workers: int = 1, scheduler=None) -> xr.Dataset:
+    """Run the study; returns its dataset (also written to OUTDIR/convergence.nc unless
+    ``write`` is false).
+
+    The runs are those :func:`study_runs` lists, computed stage by stage (the reference;
+    then the rows and ladders; then the adaptive collocation rows, which take the adaptive
+    runs' edges) until every run listed is known, and the dataset is assembled from them
+    (:func:`assemble_study`). With ``memo``, each run is ``memo(name, spec, compute)``,
+    which returns ``compute()`` or the result an identical earlier call returned (the
+    trust map keeps them in its parts, :class:`opa._dataset.Store`). The dataset's
+    ``wall_seconds`` is the sum of the runs' wall times (for reused runs, the time they
+    took when they were done).
+
+    With ``workers`` > 1 or a Dask ``scheduler`` (and no ``memo``), each stage's runs are
+    tasks side by side (:func:`compare._scaleout.run_tasks`); the rows are the same as in
+    one process.
+    """
+    pooled = (workers > 1 or scheduler is not None) and memo is None
     log(f"reference: {reference_text(cfg.reference, cfg.reference_method, cfg.order_budget)}"
         f" ...")
-    ref = run("reference", {}, reference)
-    m_ref, sd_ref = ref["x_mean"], np.sqrt(ref["x_var"])
-    floor = _rms(ref["x_sem"])
-    seconds = [ref["seconds"]]
+    known: dict = {}
+    while todo := pending_runs(cfg, known):
+        if pooled and todo[0].name != "reference":
+            from compare._scaleout import run_tasks
 
-    def errors(mean, var):
-        return _rms(mean - m_ref), _rms(np.sqrt(np.maximum(var, 0.0)) - sd_ref)
+            log(f"{len(todo)} runs of the study as tasks ...")
+            tasks = [(run.name, run.compute, ()) for run in todo]
+            known.update(run_tasks(tasks, workers=workers, scheduler=scheduler))
+            continue
+        for run in todo:
+            known[run.name] = run.compute() if memo is None else memo(run.name, run.spec,
+                                                                      run.compute)
+    ds = assemble_study(cfg, known, log=log)
+    if write:
+        write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
+    return ds
 
-    rows = []  # (method, law, size_name, size, N, err, sd_err, rhs, node_rhs, seconds)
 
-    def opa_row(method, law, size, order, **kw):
-        def compute():
-            t = time.perf_counter()
-            try:
-                with warnings.catch_warnings():  # the budget is the study's variable
-                    warnings.simplefilter("ignore", ElementBudgetWarning)
-                    ds = simulate_opa(base.replace(order=order, impact_law=law), **common,
-                                      **kw)
-            except SimulationError as err:  # a diverged OPA system: no error to report
-                return {"failure": str(err), "seconds": time.perf_counter() - t}
-            sec = time.perf_counter() - t
-            e, s = errors(ds.x_mean.values, ds.x_var.values)
-            out = {"error": e, "sd_error": s, "rhs": int(ds.attrs["rhs_evaluations"]),
-                   "elements": int(ds.attrs["elements"]), "seconds": sec}
-            if "element_edges" in ds:
-                out["edges"] = ds.element_edges.values
-            return out
-
-        name = f"{method}-{law}-N{order}-K{kw.get('max_elements', kw.get('elements'))}"
-        result = run(_slug(name), {"method": method, "law": law, "order": order, **kw},
-                     compute)
-        seconds.append(result["seconds"])
+# -- the dataset ---------------------------------------------------------------------------
+def _rows(cfg: ConvergenceConfig, known: dict, log) -> tuple[list, list[str]]:
+    """(method, law, size, N, error, sd error, rhs, node rhs, seconds) of every row, in
+    the study's order, and the OPA runs that failed (left out)."""
+    rows, failures = [], []
+    for method, law, size, order, kw in _opa_specs(cfg):
+        result = known[_opa_name(method, law, order, kw)]
         if "failure" in result:
             log(f"  {method} ({law}), N = {order}, {kw}: {result['failure']}")
             failures.append(f"{method} ({law} law), N = {order}, "
                             f"{kw.get('max_elements', kw.get('elements'))}: "
                             f"{result['failure']}")
-            return None
-        rhs = result["rhs"]
-        q = 1 if order == 0 else quadrature_order(order)
-        rows.append((method, law, size if size is not None else result["elements"],
-                     order, result["error"], result["sd_error"], rhs, rhs * q,
-                     result["seconds"]))
-        return result
-
-    adaptive = {}  # budget -> the saltation law's adaptive edges
-    failures: list[str] = []
-    for law in STUDY_LAWS:
-        log(f"multi-element OPA ({law} law) ...")
-        for k in cfg.uniform:
-            opa_row("ME-OPA uniform", law, k, cfg.order, elements=int(k))
-        for b in cfg.budgets:
-            result = opa_row("ME-OPA adaptive", law, None, cfg.order, elements="adaptive",
-                             tolerance=1e-14, max_elements=int(b))
-            if law == "saltation" and result is not None and "edges" in result:
-                adaptive[int(b)] = result["edges"]
-        for n in cfg.orders:
-            opa_row("ME-OPA adaptive, N", law, None, n, elements="adaptive", tolerance=1e-14,
-                    max_elements=cfg.order_budget)
-            opa_row("OPA (one element), N", law, 1, n, elements=1)
-
-    def collocation_row(method, edges, nodes):
-        def compute():
-            t = time.perf_counter()
-            mean, var, rhs = collocation(base, opts, measure, edges, nodes, times=times)
-            sec = time.perf_counter() - t
-            e, s = errors(mean, var)
-            return {"error": e, "sd_error": s, "rhs": int(rhs), "seconds": sec}
-
-        result = run(_slug(f"{method}-K{len(edges) - 1}-Q{nodes}"),
-                     {"method": method, "edges": np.asarray(edges, float).tolist(),
-                      "nodes": int(nodes)}, compute)
-        seconds.append(result["seconds"])
-        rows.append((method, "true system", len(edges) - 1, int(nodes), result["error"],
-                     result["sd_error"], result["rhs"], result["rhs"], result["seconds"]))
-
-    log("collocation ...")
-    for method, sizes in (("ME-collocation uniform", cfg.uniform),
-                          ("ME-collocation adaptive", cfg.budgets)):
-        for k in sizes:
-            if method.endswith("uniform"):
-                edges = uniform_edges(measure, int(k))
-            elif int(k) in adaptive:  # the edges adaptive ME-OPA (saltation) chose
-                edges = adaptive[int(k)]
-            else:
-                continue
-            collocation_row(method, edges, cfg.nodes)
-    for q in cfg.single_nodes:
-        collocation_row("collocation (one element), Q", np.array([measure.lo, measure.hi]),
-                        int(q))
-    log("Monte Carlo and Sobol ladders ...")
-    for sampler, name in (("random", "MC"), ("sobol", "QMC (Sobol)")):
-        for m in cfg.mc_samples:
-            def compute(sampler=sampler, m=m):
-                t = time.perf_counter()
-                ds = simulate_mc(base.replace(order=0), samples=int(m), sampler=sampler,
-                                 seed=cfg.seed + 1, progress=False, **common)
-                e, s = errors(ds.x_mean.values, ds.x_var.values)
-                return {"error": e, "sd_error": s, "rhs": int(ds.attrs["rhs_evaluations"]),
-                        "seconds": time.perf_counter() - t}
-
-            result = run(_slug(f"{name}-M{int(m)}"),
-                         {"sampler": sampler, "samples": int(m), "ladder_seed": cfg.seed + 1},
-                         compute)
-            seconds.append(result["seconds"])
-            rows.append((name, "true system", int(m), 0, result["error"], result["sd_error"],
-                         result["rhs"], result["rhs"], result["seconds"]))
-    log("control variates on the adaptive ME-OPA (saltation law) ...")
-    for m in cfg.mc_samples:
-        if m < 8 or m & (m - 1):  # the certificate draws powers of two
             continue
-
-        def compute(m=m):
-            control, control_seconds = control_run()
-            t = time.perf_counter() - control_seconds  # each row pays for its control
-            cv = verify(control, samples=int(m), max_samples=int(m), sequential=False,
-                        seed=cfg.seed + 1)
-            e, s = errors(cv.cv_x_mean.values, cv.cv_x_var.values)
-            # the true systems run: more than m where the certificate's first round grew
-            # to give each of its strata a group (compare.verify)
-            return {"error": e, "sd_error": s, "seconds": time.perf_counter() - t,
-                    "rhs": int(control.attrs["rhs_evaluations"])
-                    + int(cv.attrs["verify_rhs_evaluations"]),
-                    "samples": int(cv.attrs["verify_samples"])}
-
-        result = run(_slug(f"CV-K{cfg.order_budget}-M{int(m)}"),
-                     {"method": "control variate", "samples": int(m),
-                      "budget": int(cfg.order_budget), "order": int(cfg.order),
-                      "ladder_seed": cfg.seed + 1, "certificate": 2}, compute)
-        seconds.append(result["seconds"])
+        rhs = int(result["rhs"])
+        q = 1 if order == 0 else quadrature_order(order)
+        rows.append((method, law, size if size is not None else int(result["elements"]),
+                     order, float(result["error"]), float(result["sd_error"]), rhs, rhs * q,
+                     float(result["seconds"])))
+    # the row order of the collocation: uniform, adaptive, one element (as listed)
+    for method, edges, nodes in _collocation_specs(cfg, known):
+        result = known[_collocation_name(method, edges, nodes)]
+        rows.append((method, "true system", len(edges) - 1, int(nodes),
+                     float(result["error"]), float(result["sd_error"]), int(result["rhs"]),
+                     int(result["rhs"]), float(result["seconds"])))
+    mc, sobol = (known[name] for name in _ladder_names(cfg))
+    for name, ladder in (("MC", mc), ("QMC (Sobol)", sobol)):
+        for k, m in enumerate(ladder["sizes"]):
+            rows.append((name, "true system", int(m), 0, float(ladder["error"][k]),
+                         float(ladder["sd_error"][k]), int(ladder["rhs"][k]),
+                         int(ladder["rhs"][k]), float(ladder["seconds"][k])))
+    for j, k in enumerate(np.asarray(sobol["cv_rung"], np.int64)):
+        rhs = int(sobol["cv_rhs"][j])
         rows.append((f"control variate (ME-OPA K={cfg.order_budget})", "true system",
-                     int(result.get("samples", m)), 0, result["error"], result["sd_error"],
-                     result["rhs"], result["rhs"], result["seconds"]))
+                     int(sobol["sizes"][k]), 0, float(sobol["cv_error"][j]),
+                     float(sobol["cv_sd_error"][j]), rhs, rhs, float(sobol["cv_seconds"][j])))
+    return rows, failures
+
+
+def assemble_study(cfg: ConvergenceConfig, known: dict, *, log=print) -> xr.Dataset:
+    """The study's dataset from its runs ``known`` (every run :func:`study_runs` lists)."""
+    ref = known["reference"]
+    if "note" in ref:
+        log(str(ref["note"]))
+    log("multi-element OPA, collocation, the Monte Carlo and Sobol ladders and control "
+        "variates on the adaptive ME-OPA (saltation law) ...")
+    rows, failures = _rows(cfg, known, log)
+    setting = _setting(cfg)
     cols = list(zip(*rows))
     one = {"units": "1"}
     ds = xr.Dataset(
@@ -410,22 +566,27 @@ def _study(cfg: ConvergenceConfig, *, log, write: bool, memo) -> xr.Dataset:
             "seconds": ("run", np.array(cols[8]), {"long_name": "wall time", "units": "s"}),
         },
         coords={"run": ("run", np.arange(len(rows)), {"long_name": "run index", **one})},
-        attrs=provenance_attrs("convergence", base, opts, seed=cfg.seed, sampler="sobol"),
+        attrs=provenance_attrs("convergence", setting.base, cfg.options, seed=cfg.seed,
+                               sampler="sobol"),
     )
     ds.attrs.update(
         periods=float(cfg.periods), per_period=int(cfg.per_period),
-        distribution=measure.name,
+        distribution=setting.measure.name,
         reference_samples=int(ref.get("samples", cfg.reference)),
         reference_method="sobol" if "samples" in ref else cfg.reference_method,
         reference_text=str(ref.get("text", reference_text(cfg.reference, cfg.reference_method,
                                                           cfg.order_budget))),
-        reference_sem=floor, reference_seconds=ref["seconds"],
+        reference_sem=_rms(ref["x_sem"]), reference_seconds=float(ref["seconds"]),
         reference_rhs_evaluations=int(ref["rhs"]),
-        wall_seconds=float(sum(seconds)), failures=len(failures),
+        # every run once (a ladder's rungs share its runs)
+        wall_seconds=float(sum(float(r.get("total_seconds", np.max(r["seconds"])))
+                               for r in known.values())),
+        failures=len(failures),
         failure_text=" | ".join(failures) if failures else "none",
+        ladders=("nested: each rung of the MC and Sobol ladders is a prefix of the "
+                 "largest rung's ensemble; the control-variate rows pair the Sobol "
+                 "ladder's true systems with the control"),
     )
-    if write:
-        write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
     return ds
 
 
@@ -538,5 +699,6 @@ def write_report(ds, outdir, *, draw, command="opa-mc converge") -> list[str]:
     return [md, png]
 
 
-__all__ = ["PENDING", "ConvergenceConfig", "cheapest_reaching", "run_convergence", "slope",
+__all__ = ["ConvergenceConfig", "StudyRun", "assemble_study", "ladder_rows", "pending_runs",
+           "study_runs", "cheapest_reaching", "run_convergence", "slope",
            "summary_lines", "table", "write_report"]

@@ -34,24 +34,9 @@ import xarray as xr
 
 from compare._config import ValidateConfig
 from compare._mapdata import STREAMED_DIM
-from compare._convergence import PENDING, run_convergence
 from compare._trustmap import SLICES, _Map, clear_slices, frontier, frontier_part, \
-    frontier_study
+    frontier_runs
 from opa.engine import OutputLock, Store, true_system_work, write_netcdf
-
-#: frontier runs that share one computation run as one task: the control-variate rows
-#: each use the same adaptive ME-OPA control run, done once per task
-SHARED_RUNS = ("CV-",)
-
-
-class _Found(Exception):
-    """Every run a frontier task was given is done: the rest of the study's walk is not
-    needed."""
-
-
-class _NoReference(Exception):
-    """The study's walk needs the reference before it can name any other run."""
-
 
 def task_config(cfg: ValidateConfig) -> ValidateConfig:
     """The configuration a task runs with: in one process, no nested pool or cluster."""
@@ -121,28 +106,12 @@ def value_task(cfg: ValidateConfig, value: float, found: list, spill: bool = Tru
     return _task(cfg, "other", work)
 
 
-def frontier_runs_task(cfg: ValidateConfig, runs: tuple[str, ...], known: dict) -> dict:
-    """The frontier's ``runs``, each kept as a part, given the runs ``known`` before
-    them (the reference, and the edges the adaptive collocation rows take): the study
-    is walked up to the last of them (:func:`compare._convergence.run_convergence` with
-    a ``memo``) and only those are computed."""
+def frontier_run_task(cfg: ValidateConfig, run) -> dict:
+    """One run of the frontier (a :class:`compare._convergence.StudyRun` that
+    :func:`compare._trustmap.frontier_runs` listed), kept as a part; its result is
+    ``{name: result}``."""
     def work(job):
-        out = {}
-
-        def memo(run, spec, compute):
-            if run not in runs:
-                return known.get(run, PENDING)
-            out[run] = job.parts.get(frontier_part(run), spec, compute)
-            if len(out) == len(runs):
-                raise _Found
-            return out[run]
-
-        try:
-            run_convergence(frontier_study(cfg), log=lambda *a: None, write=False, memo=memo)
-        except _Found:
-            return out
-        raise RuntimeError(f"the frontier's study did not reach the runs "
-                           f"{sorted(set(runs) - set(out))}")
+        return {run.name: job.parts.get(frontier_part(run.name), run.spec, run.compute)}
 
     return _task(cfg, "frontier", work)
 
@@ -151,10 +120,10 @@ class FrontierRuns:
     """The frontier's runs as tasks: which are known (read back from the parts, or
     returned by a task), which are running, and the study assembled once all are known.
 
-    The study is walked here without computing (a ``memo`` that returns what is known
-    and :data:`compare._convergence.PENDING` for the rest) to find the runs it needs:
-    first the reference alone (every row's error depends on it), then every run it makes
-    ready, then those that need their edges."""
+    The runs are those :func:`compare._trustmap.frontier_runs` lists given the runs
+    known: first the reference alone (every row's error depends on it), then every run
+    of the rows and ladders, then the adaptive collocation rows, which need the edges of
+    the adaptive runs."""
 
     def __init__(self, cfg: ValidateConfig, parts: Store):
         self.cfg = cfg
@@ -163,43 +132,32 @@ class FrontierRuns:
         self.tried: set[str] = set()  # looked for in the parts
         self.running: set[str] = set()
 
-    def _needed(self) -> list[str]:
-        needed = []
-
-        def memo(run, spec, compute):
-            if run in self.known:
-                return self.known[run]
-            if run not in self.tried:  # a part an earlier run left
-                self.tried.add(run)
-                found = self.parts.load(frontier_part(run), spec)
-                if found is not None:
-                    self.known[run] = found
-                    return found
-            needed.append(run)
-            if run == "reference":
-                raise _NoReference
-            return PENDING
-
-        try:
-            run_convergence(frontier_study(self.cfg), log=lambda *a: None, write=False,
-                            memo=memo)
-        except _NoReference:
-            pass
-        return needed
+    def _needed(self) -> list:
+        """The runs listed and not known, after reading back the parts an earlier run
+        left (which may name more runs: the reference, an adaptive run's edges)."""
+        while True:
+            needed, found = [], False
+            for run in frontier_runs(self.cfg, self.known):
+                if run.name in self.known:
+                    continue
+                if run.name not in self.tried:
+                    self.tried.add(run.name)
+                    part = self.parts.load(frontier_part(run.name), run.spec)
+                    if part is not None:
+                        self.known[run.name], found = part, True
+                        continue
+                needed.append(run)
+            if not found:
+                return needed
 
     def ready(self) -> list[tuple]:
         """The tasks of the runs needed and not yet running."""
-        fresh = [run for run in self._needed() if run not in self.running]
-        shared = [run for run in fresh if run.startswith(SHARED_RUNS)]
-        groups = [(run,) for run in fresh if run not in shared]
-        if shared:
-            groups.append(tuple(shared))
-        known = dict(self.known)
         tasks = []
-        for runs in groups:
-            self.running.update(runs)
-            tasks.append((("frontier", runs[0]), frontier_runs_task,
-                          (task_config(self.cfg), runs, known)))
+        for run in self._needed():
+            if run.name not in self.running:
+                self.running.add(run.name)
+                tasks.append((("frontier", run.name), frontier_run_task,
+                              (task_config(self.cfg), run)))
         return tasks
 
     def done(self, runs: dict) -> list[tuple]:
@@ -214,7 +172,7 @@ class FrontierRuns:
 
     def dataset(self) -> xr.Dataset:
         """The frontier assembled from the known runs (:func:`compare._trustmap.frontier`)."""
-        return frontier(self.cfg, memo=lambda run, spec, compute: self.known[run])
+        return frontier(self.cfg, known=self.known)
 
 
 class MapFlow:
@@ -375,6 +333,6 @@ def open_map(path: str) -> xr.Dataset:
     return ds
 
 
-__all__ = ["FrontierRuns", "MapFlow", "SHARED_RUNS", "bisect_task", "frontier_runs_task",
+__all__ = ["FrontierRuns", "MapFlow", "bisect_task", "frontier_run_task",
            "point_task", "run_map_tasks", "run_validation", "splits_task", "task_config",
            "value_task"]

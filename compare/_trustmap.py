@@ -813,22 +813,42 @@ def frontier_part(run: str) -> str:
     return f"frontier_{run}"
 
 
-def frontier(cfg: ValidateConfig, parts: Store | None = None, memo=None) -> xr.Dataset:
+def frontier_runs(cfg: ValidateConfig, known: dict):
+    """The frontier's runs (:func:`compare._convergence.study_runs` of
+    :func:`frontier_study`) that can be named given the runs ``known``: the reference
+    alone until it is known, then every row's and ladder's run, and the adaptive
+    collocation rows once the adaptive runs whose edges they take are known."""
+    from compare._convergence import study_runs
+
+    return study_runs(frontier_study(cfg), known)
+
+
+def frontier(cfg: ValidateConfig, parts: Store | None = None,
+             known: dict | None = None) -> xr.Dataset:
     """Cost against accuracy at the first swept value, the largest sigma and the first
     horizon, under the map's law of xi: the paper's OPA (N = 0..Nmax), adaptive multi-element
     OPA (mean and
     saltation laws, element budgets 8..64), multi-element collocation, single-element
-    collocation, MC, scrambled Sobol and control variates, against the control-variate
-    estimate of ``FRONTIER_REFERENCE`` true systems on the adaptive ME-OPA of 64 elements
-    (:func:`compare._convergence.run_convergence`). Variables are prefixed ``frontier_``.
-    With ``parts``, every run of the study is kept there (``frontier_<run>_<key>.npz``);
-    ``memo`` (:func:`compare._convergence.run_convergence`'s) instead gives the runs."""
-    from compare._convergence import run_convergence
+    collocation, MC, scrambled Sobol and control variates (nested ladders), against the
+    control-variate estimate of ``FRONTIER_REFERENCE`` true systems on the adaptive ME-OPA
+    of 64 elements (:func:`compare._convergence.run_convergence`). Variables are prefixed
+    ``frontier_``. With ``parts``, every run of the study is kept there
+    (``frontier_<run>_<key>.npz``); ``known`` (name -> result of every run
+    :func:`frontier_runs` lists) instead gives the runs."""
+    from compare._convergence import assemble_study, run_convergence
 
-    if parts is not None:
-        def memo(run, spec, compute):
-            return parts.get(frontier_part(run), spec, compute)
-    ds = run_convergence(frontier_study(cfg), log=lambda *a: None, write=False, memo=memo)
+    def quiet(*args):
+        return None
+
+    study = frontier_study(cfg)
+    if known is not None:
+        ds = assemble_study(study, known, log=quiet)
+    else:
+        memo = None
+        if parts is not None:
+            def memo(run, spec, compute):
+                return parts.get(frontier_part(run), spec, compute)
+        ds = run_convergence(study, log=quiet, write=False, memo=memo)
     out = ds.rename({name: f"frontier_{name}" for name in ds.data_vars} | {"run": "frontier_run"})
     out.attrs = {"frontier_" + k: v for k, v in ds.attrs.items()
                  if k in ("sigma", "periods", "reference_samples", "reference_sem",
@@ -1020,4 +1040,4 @@ def _attrs(cfg: ValidateConfig) -> dict:
     return attrs
 
 
-__all__ = ["frontier", "frontier_part", "frontier_study"]
+__all__ = ["frontier", "frontier_part", "frontier_runs", "frontier_study"]

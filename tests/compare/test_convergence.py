@@ -51,11 +51,17 @@ def test_rows_match_direct_runs(study):
                                      "OPA (one element), N", "collocation (one element), Q"}
 
 
-def test_control_variate_rows_match_a_direct_certificate(study):
-    """The control-variate rows are compare.verify of the adaptive ME-OPA control at the
-    same M and seed: their error against the reference is that certificate's."""
-    from compare import verify
+def _rms_errors(ref, mean, var):
+    return (float(np.sqrt(np.mean((mean - ref.x_mean.values) ** 2))),
+            float(np.sqrt(np.mean((np.sqrt(np.maximum(var, 0)) - np.sqrt(ref.x_var.values))
+                                  ** 2))))
 
+
+def test_ladder_rows_match_separate_ensembles(study):
+    """The nested ladders: each rung of MC, Sobol' and control variates equals a separate
+    simulate_mc run of that size at the ladder's seed (random; scrambled Sobol' with 16
+    replicates; Sobol' with the adaptive ME-OPA control, simulate_mc(control=...)), its
+    right-hand sides those of that run (plus the control's for the control variates)."""
     cfg, ds, _ = study
     times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
     ref = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=cfg.reference,
@@ -66,14 +72,54 @@ def test_control_variate_rows_match_a_direct_certificate(study):
                                elements="adaptive", tolerance=1e-14,
                                max_elements=cfg.order_budget, impact_law="saltation",
                                times=times, options=cfg.options)
-    rows = np.flatnonzero(ds.method.values == f"control variate (ME-OPA K={cfg.order_budget})")
-    assert list(ds["size"].values[rows]) == list(cfg.mc_samples)
-    for i in rows:
-        cv = verify(control, samples=int(ds["size"].values[i]),
-                    max_samples=int(ds["size"].values[i]), sequential=False,
-                    seed=cfg.seed + 1)
-        err = float(np.sqrt(np.mean((cv.cv_x_mean.values - ref.x_mean.values) ** 2)))
-        assert ds.error.values[i] == pytest.approx(err, rel=1e-12)
+    cv_name = f"control variate (ME-OPA K={cfg.order_budget})"
+    for method, sampler, cv in (("MC", "random", False), ("QMC (Sobol)", "sobol", False),
+                                (cv_name, "sobol", True)):
+        rows = np.flatnonzero(ds.method.values == method)
+        assert list(ds["size"].values[rows]) == list(cfg.mc_samples), method
+        for i in rows:
+            alone = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=int(ds["size"][i]),
+                                sampler=sampler, seed=cfg.seed + 1, order=0, times=times,
+                                options=cfg.options, progress=False,
+                                control=control if cv else None)
+            names = ("cv_x_mean", "cv_x_var") if cv else ("x_mean", "x_var")
+            err, sd = _rms_errors(ref, alone[names[0]].values, alone[names[1]].values)
+            assert ds.error.values[i] == pytest.approx(err, rel=1e-9), method
+            assert ds.sd_error.values[i] == pytest.approx(sd, rel=1e-9), method
+            rhs = alone.attrs["rhs_evaluations"] + (control.attrs["rhs_evaluations"]
+                                                    if cv else 0)
+            assert ds.rhs_evaluations.values[i] == rhs, method
+
+
+def test_the_run_list_is_what_the_study_runs(study, monkeypatch):
+    """study_runs lists exactly the runs the study performs (each once), and the two
+    ladders run max(mc_samples) true systems each: the true systems the kernel is asked
+    for, counted here, are the reference's, the collocation rows' and the ladders'."""
+    import compare._convergence as C
+
+    cfg, ds, _ = study
+    performed, true_systems = [], {}
+    real_runs = C.true_runs
+
+    def counted(system, options, xi, times, *, what, **kw):
+        true_systems[what] = true_systems.get(what, 0) + len(xi)
+        return real_runs(system, options, xi, times, what=what, **kw)
+
+    def memo(name, spec, compute):
+        performed.append(name)
+        results[name] = compute()
+        return results[name]
+
+    results = {}
+    monkeypatch.setattr(C, "true_runs", counted)
+    again = run_convergence(cfg, log=lambda *a: None, write=False, memo=memo)
+    listed = [run.name for run in C.study_runs(cfg, results)]
+    assert sorted(performed) == sorted(listed) and len(set(performed)) == len(performed)
+    assert sum(name.startswith("ME-collocation-adaptive") for name in listed) == len(
+        cfg.budgets)  # named once the adaptive runs' edges were known
+    most = max(cfg.mc_samples)
+    assert true_systems == {"random ladder sample": most, "sobol ladder sample": most}
+    np.testing.assert_array_equal(again.error.values, ds.error.values)
 
 
 def test_a_control_variate_reference_agrees_with_plain_sobol(tmp_path):
@@ -140,7 +186,7 @@ def test_round_trip_and_report(study):
     with xr.open_dataset(out / "convergence.nc") as back:
         np.testing.assert_array_equal(back.error.values, ds.error.values)
         assert list(back.method.values) == list(ds.method.values)
-    from compare._report import plot_frontier
+    from compare._mapfigures import plot_frontier
 
     written = write_report(ds, str(out), draw=plot_frontier, command="opa-mc converge (test)")
     assert all((out / p.split("/")[-1]).exists() for p in written)

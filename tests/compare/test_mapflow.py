@@ -4,7 +4,7 @@ which each one makes ready, and that the map they give is the one-process map.""
 import pytest
 
 from compare._config import load_config
-from compare._mapflow import SHARED_RUNS, FrontierRuns, MapFlow, run_validation
+from compare._mapflow import FrontierRuns, MapFlow, run_validation
 from opa.engine import Store
 from tests.compare.test_scaleout import assert_same_map
 
@@ -60,28 +60,29 @@ def test_the_frontier_asks_for_its_reference_alone_first(tmp_path):
     cfg = load_config(None, outdir=str(tmp_path), **WITH_FRONTIER)
     runs = FrontierRuns(cfg, _store(tmp_path))
     (key, _, args), = runs.ready()
-    assert key == ("frontier", "reference") and args[1] == ("reference",)
+    assert key == ("frontier", "reference") and args[1].name == "reference"
     assert runs.ready() == []  # running: not asked for twice
     assert not runs.complete
 
 
 def test_the_frontier_rows_come_once_the_reference_is_known(tmp_path):
-    """After the reference, every row that needs no other run is ready at once; the
-    control-variate rows share one task (their control run)."""
+    """After the reference, every row that needs no other run is ready at once, one
+    task each; the nested ladders are two runs (MC; Sobol' with the control variates
+    on its true systems)."""
     cfg = load_config(None, outdir=str(tmp_path), **WITH_FRONTIER)
     runs = FrontierRuns(cfg, _store(tmp_path))
     runs.ready()
     tasks = runs.done({"reference": {"x_mean": 0.0, "x_var": 1.0, "x_sem": 0.0,
                                      "seconds": 0.0, "rhs": 0}})
-    groups = [args[1] for _, _, args in tasks]
-    shared = [g for g in groups if g[0].startswith(SHARED_RUNS)]
-    assert len(shared) == 1 and len(shared[0]) > 1
-    assert all(len(g) == 1 for g in groups if g not in shared)
-    names = [name for g in groups for name in g]
+    names = [args[1].name for _, _, args in tasks]
+    assert [key for key, _, _ in tasks] == [("frontier", name) for name in names]
     assert len(names) == len(set(names)) and "reference" not in names
     assert any(name.startswith("ME-OPA-adaptive") for name in names)
+    ladders = [name for name in names if "ladder" in name]
+    assert ladders == ["MC-ladder-M8192", "QMC-Sobol-and-CV-K64-ladder-M8192"]
     # the collocation rows on the adaptive runs' edges wait for those runs
     assert not any(name.startswith("ME-collocation-adaptive") for name in names)
+    assert runs.ready() == []  # running: not asked for twice
 
 
 @pytest.fixture(scope="module")
