@@ -119,6 +119,9 @@ class ValidateConfig:
         return len(self.values) * (1 + len(self.sigmas)) + bool(self.frontier)
 
     def __post_init__(self):
+        # what the configuration builds once: the law of xi, and each System it is asked
+        # for (system_at), kept here (not fields: equality and replace() ignore them)
+        object.__setattr__(self, "_built", {})
         self._check_law()
         for name in ("samples", "max_samples", "per_period", "seed", "long_splits",
                      "workers"):
@@ -313,20 +316,37 @@ class ValidateConfig:
         return [f"{law}/{trunc}" for law, trunc in VARIANTS
                 if (law, trunc) not in self.single_variants]
 
+    def _once(self, key, build):
+        """``build()``, built once per configuration and ``key``."""
+        built = self._built
+        if key not in built:
+            built[key] = build()
+        return built[key]
+
     def measure(self) -> Measure:
-        return parse_law(self.distribution)
+        """The law of xi (one object: its recurrences are cached)."""
+        return self._once("measure", lambda: parse_law(self.distribution))
 
     def oscillator_at(self, value: float) -> Oscillator:
-        return self.oscillator.replace(**{self.parameter: float(value)})
+        value = float(value)
+        return self._once(("oscillator", value),
+                          lambda: self.oscillator.replace(**{self.parameter: value}))
 
     def system_at(self, value: float, **fields) -> System:
         """The :class:`opa.System` at one swept value (samples below zero allowed: the map
         crosses them on purpose), with ``fields`` (sigma, order, ...) and the law of xi
-        (None for the semicircle, so that the default map runs as it always did)."""
-        return System(self.oscillator_at(value), uncertain=self.uncertain, allow_negative=True,
-                      impulse=self.impulse, pulse_width=self.pulse_width,
-                      impulse_at_zero=self.impulse_at_zero,
-                      distribution=None if self.semicircle else self.distribution, **fields)
+        (None for the semicircle, so that the default map runs as it always did). Each is
+        built once per configuration and kept (a System is frozen)."""
+        value = float(value)
+        base = self._once(("system", value), lambda: System(
+            self.oscillator_at(value), uncertain=self.uncertain, allow_negative=True,
+            impulse=self.impulse, pulse_width=self.pulse_width,
+            impulse_at_zero=self.impulse_at_zero,
+            distribution=None if self.semicircle else self.distribution))
+        if not fields:
+            return base
+        return self._once(("system", value, tuple(sorted(fields.items()))),
+                          lambda: base.replace(**fields))
 
 
 # Largest ensemble the map may double up to (2^20 samples, hours per point).
