@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
@@ -388,6 +389,38 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         moments or system attributes, or moments that do not follow from its coefficients
         (:func:`check_reported`); a keyword out of its range (NaN included).
     """
+    samples, max_samples, tolerance, var_tolerance, alpha = _check_arguments(
+        run, samples, max_samples, tolerance, var_tolerance, alpha, seed, sequential, options)
+    system, options = system_of(run, options)
+    measure = run_measure(run)
+    _check_certifiable(run, system, measure)
+    times = run.time.values
+    rule = _Rule(tolerance, var_tolerance, alpha, sequential,
+                 floor=10 * (options.rtol + options.atol),
+                 period=2 * math.pi / system.oscillator.omega)
+
+    # the strata: the elements cut at the changes of the impact sequence
+    split_xi, complete = split_values(system, options, measure, float(times[-1]))
+    edges = run.element_edges.values
+    strata = build_strata(measure, edges, split_xi, complete=complete,
+                          max_strata=max(len(edges) - 1, (samples - 1) // (1 + GROUP)))
+    least = least_samples(len(strata), GROUP)
+    if least > samples and log is not None:
+        log(f"verify: {strata.describe()}: the first round grows to {least} true systems "
+            f"(the cuts and a group of {GROUP} in every stratum)")
+    M = max(samples, least)
+    max_samples = max(max_samples, M)
+    check_memory("verification paths", max_samples * len(times) * 8 * 5,
+                 f"max_samples {max_samples} x {len(times)} outputs x 5 arrays")
+    draws = _Draws(run, system, options, measure, strata, np.random.default_rng(seed))
+    outcome = _rounds(draws, rule, M, max_samples, log)
+    return _certificate(run, outcome, strata, rule, seed, log)
+
+
+def _check_arguments(run, samples, max_samples, tolerance, var_tolerance, alpha, seed,
+                     sequential, options) -> tuple:
+    """``verify``'s keywords checked, and the run checked to be an OPA dataset that ran to
+    its end: (samples, max_samples, tolerance, var_tolerance, alpha)."""
     check_dataset(run, "the run", "an OPA run")
     check_opa_layout(run, "the run")
     require_time(run, "the run")
@@ -405,17 +438,22 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     if "failure" in run.attrs:
         raise ValueError(f"the run did not complete ({run.attrs['failure']}): nothing to "
                          f"verify")
-    system, options = system_of(run, options)
-    measure = run_measure(run)
-    times = run.time.values
+    return samples, max_samples, tolerance, var_tolerance, alpha
+
+
+def _check_certifiable(run: xr.Dataset, system: System, measure) -> None:
+    """Refuse a run whose true systems are not those of its attributes (it was continued
+    from another state), whose numbers are not finite, or whose reported moments do not
+    follow from its coefficients (:func:`check_reported`)."""
     # at t = 0 every sample is at x0 (x' may have jumped by an impulse at t = 0, by the
     # same amount for every sample): x_0 = x0 and no higher coefficient
     start = np.zeros(run.sizes["order"])
     start[0] = system.oscillator.x0
     first_x = run.element_x_coef.values[:, :, 0]
     first_v = run.element_v_coef.values[:, 1:, 0]
-    if times[0] == 0.0 and not (np.allclose(first_x, start, rtol=0.0, atol=1e-12)
-                                and np.allclose(first_v, 0.0, rtol=0.0, atol=1e-12)):
+    if run.time.values[0] == 0.0 and not (
+            np.allclose(first_x, start, rtol=0.0, atol=1e-12)
+            and np.allclose(first_v, 0.0, rtol=0.0, atol=1e-12)):
         raise ValueError("the run does not start from the x0, v0 of its attributes (an "
                          "OPA run continued with initial=...): the true systems it "
                          "describes are not known, so it cannot be verified")
@@ -427,34 +465,54 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                              f"of {bad.size} (a run that stopped, or an edited file): "
                              f"nothing to certify")
     check_reported(run, measure)
-    edges = run.element_edges.values
-    moments = surrogate_moments(run)
-    floor = 10 * (options.rtol + options.atol)
-    T = 2 * math.pi / system.oscillator.omega
 
-    # the strata: the elements cut at the changes of the impact sequence
-    split_xi, complete = split_values(system, options, measure, float(times[-1]))
-    strata = build_strata(measure, edges, split_xi, complete=complete,
-                          max_strata=max(len(edges) - 1, (samples - 1) // (1 + GROUP)))
-    least = least_samples(len(strata), GROUP)
-    if least > samples and log is not None:
-        log(f"verify: {strata.describe()}: the first round grows to {least} true systems "
-            f"(the cuts and a group of {GROUP} in every stratum)")
-    M = max(samples, least)
-    max_samples = max(max_samples, M)
-    check_memory("verification paths", max_samples * len(times) * 8 * 5,
-                 f"max_samples {max_samples} x {len(times)} outputs x 5 arrays")
-    rng = np.random.default_rng(seed)
-    cut_paths, rhs = true_runs(system, options, strata.cuts, times, what="stratum cut")
-    indicator = stratum_indicator(run.element_x_coef.values, edges, measure, strata,
-                                  cut_paths[:, :, 0])
-    P = strata.probability
 
-    def draw(total, indicator):
+@dataclass(frozen=True)
+class _Rule:
+    """How a round's estimates become verdicts: the tolerances of the mean and of the
+    variance, the error rate ``alpha`` (spent ``alpha / 2^r`` in round r when
+    ``sequential``), the absolute ``floor`` of the tolerance (from the solver's) and the
+    forcing ``period`` that first disagreements are counted in."""
+
+    tolerance: float
+    var_tolerance: float
+    alpha: float
+    sequential: bool
+    floor: float
+    period: float
+
+
+@dataclass
+class _Draws:
+    """The true systems of a certificate: those at the strata's cuts, and batches of
+    jittered groups inside the strata (:meth:`batch`), with the surrogate at the same
+    points; ``rhs`` counts their right-hand-side evaluations."""
+
+    run: xr.Dataset
+    system: System
+    options: SolverOptions
+    measure: object
+    strata: object
+    rng: np.random.Generator
+    rhs: int = 0
+
+    def at_cuts(self) -> np.ndarray:
+        """The true systems at the strata's cuts, (S + 1, T)."""
+        paths, rhs = true_runs(self.system, self.options, self.strata.cuts,
+                               self.run.time.values, what="stratum cut")
+        self.rhs += rhs
+        return paths[:, :, 0]
+
+    def batch(self, total: int, indicator: np.ndarray) -> tuple:
         """A batch of ``total`` true runs in jittered groups, allocated by the indicator:
         stratum j's n_j groups cut it into n_j slices (:func:`compare._strata.slices`),
         with GROUP independent points of the law in each (the last total % GROUP points
-        join the first group of the stratum with the most groups)."""
+        join the first group of the stratum with the most groups).
+
+        Returns (true values per group, surrogate values per group, each slice's
+        probability, each group's stratum)."""
+        measure, strata = self.measure, self.strata
+        P = strata.probability
         groups = group_allocation(total // GROUP, P, indicator)
         size = [np.full(n, GROUP) for n in groups]
         size[int(np.argmax(groups))][0] += total % GROUP
@@ -462,7 +520,7 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         for j, (n, m) in enumerate(zip(groups, size)):
             bounds, p = slices(measure, strata.cuts[j], strata.cuts[j + 1], int(n))
             lo = np.asarray(measure.cdf(bounds[:-1]), dtype=float)
-            u = np.repeat(lo, m) + rng.random(m.sum()) * np.repeat(p, m)
+            u = np.repeat(lo, m) + self.rng.random(m.sum()) * np.repeat(p, m)
             xi.append(np.clip(measure.ppf_full(u), np.repeat(bounds[:-1], m),
                               np.repeat(bounds[1:], m)))
             weight.append(p)
@@ -470,24 +528,55 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         # each slice's probability under the law, the strata's summing to theirs
         ends = np.asarray(measure.cdf(strata.cuts[[0, -1]]), dtype=float).ravel()
         weight = np.concatenate(weight) / (ends[1] - ends[0])
-        paths, n_rhs = true_runs(system, options, xi, times, what="verification sample")
-        x_hat = surrogate(run, xi, measure=measure)[0]
+        paths, rhs = true_runs(self.system, self.options, xi, self.run.time.values,
+                               what="verification sample")
+        self.rhs += rhs
+        x_hat = surrogate(self.run, xi, measure=measure)[0]
         cut = np.cumsum(np.concatenate(size))[:-1]
         return (np.split(paths[:, :, 0], cut), np.split(x_hat, cut), weight,
-                np.repeat(np.arange(len(P)), groups)), n_rhs
+                np.repeat(np.arange(len(P)), groups))
 
-    def observed(batches):
-        """Each stratum's spread of x - x_hat seen so far (RMS over time of the standard
-        deviation over its points): a later round allocates by it too, so a stratum
-        whose inside is rougher than its ends gets its share (the allocation is fixed
-        before the batch is drawn, so every batch stays a stratified sample)."""
-        out = np.zeros(len(P))
-        for j in range(len(P)):
-            d = [x - h for b in batches for x, h, k in zip(b[0], b[1], b[3]) if k == j]
-            d = np.concatenate(d)
-            out[j] = np.sqrt(np.mean(np.var(d, axis=0, ddof=1))) if len(d) > 1 else 0.0
-        return np.where(np.isfinite(out), out, 0.0)
 
+def _observed(batches: list, strata: int) -> np.ndarray:
+    """Each stratum's spread of x - x_hat seen so far (RMS over time of the standard
+    deviation over its points): a later round allocates by it too, so a stratum whose
+    inside is rougher than its ends gets its share (the allocation is fixed before the
+    batch is drawn, so every batch stays a stratified sample)."""
+    out = np.zeros(strata)
+    for j in range(strata):
+        d = [x - h for b in batches for x, h, k in zip(b[0], b[1], b[3]) if k == j]
+        d = np.concatenate(d)
+        out[j] = np.sqrt(np.mean(np.var(d, axis=0, ddof=1))) if len(d) > 1 else 0.0
+    return np.where(np.isfinite(out), out, 0.0)
+
+
+@dataclass
+class _Outcome:
+    """The last round of a certificate: its estimates (:func:`stratified_estimates`), the
+    errors of the run's mean and variance, the verdicts of the mean and the variance and
+    where each first disagrees (forcing periods), why no verdict could be read
+    (``broken``), the true systems drawn, the rounds, and the right-hand-side
+    evaluations of every true system drawn."""
+
+    est: dict
+    err_mean: np.ndarray
+    err_var: np.ndarray
+    verdicts: list
+    firsts: list
+    broken: str
+    drawn: int
+    rounds: int
+    rhs: int
+
+
+def _rounds(draws: _Draws, rule: _Rule, M: int, max_samples: int, log) -> _Outcome:
+    """The sequential procedure: the cuts, a pilot where the first round has room for
+    one, then rounds of M true systems in all, M doubling while undecided (up to
+    ``max_samples``, one round unless ``rule.sequential``)."""
+    strata, run = draws.strata, draws.run
+    P = strata.probability
+    indicator = stratum_indicator(run.element_x_coef.values, run.element_edges.values,
+                                  draws.measure, strata, draws.at_cuts())
     drawn, rounds, batches = len(strata.cuts), 0, []
     pilot = GROUP * len(P)
     if M - drawn >= 4 * pilot:
@@ -496,17 +585,15 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         # misfit at a stratum's ends cannot see a rough inside, such as a chatter zone),
         # and is left out of the estimate (a batch of one slice per stratum would bring
         # its few degrees of freedom to every standard error)
-        seen, n_rhs = draw(pilot, indicator)
-        rhs += n_rhs
+        seen = draws.batch(pilot, indicator)
         drawn += pilot
-        indicator = np.maximum(indicator, observed([seen]))
+        indicator = np.maximum(indicator, _observed([seen], len(P)))
+    moments = surrogate_moments(run)
     while True:
         rounds += 1
-        batch, n_rhs = draw(M - drawn, indicator if not batches else
-                            np.maximum(indicator, observed(batches)))
-        rhs += n_rhs
+        batches.append(draws.batch(M - drawn, indicator if not batches else
+                                   np.maximum(indicator, _observed(batches, len(P)))))
         drawn = M
-        batches.append(batch)
         # the rounds' batches are independent stratified estimates, weighted by their
         # groups (fixed weights: the sum stays unbiased, its variance the weighted sum)
         weight = np.concatenate([np.full(len(b[2]), len(b[2])) for b in batches])
@@ -516,30 +603,9 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
             moments["x_mean"], moments["x_second"])
         err_mean, err_var = -est["d"], run.x_var.values - est["var"]
         # the band of this round: alpha / 2^r of the rate (one round: all of it)
-        spent = alpha / 2**rounds if sequential else alpha
-        width_mean = band_multiplier(spent, len(times), est["mean_dof"]) * est["d_se"]
-        width_var = band_multiplier(spent, len(times), est["var_dof"]) * est["var_se"]
-        var_low = np.maximum(est["var"] - width_var, 0.0)
-        var_high = np.maximum(est["var"] + width_var, 0.0)  # a CV estimate may be < 0
-        # the degrees of freedom must be enough wherever the band matters: where it is
-        # wider than a tenth of what the tolerance allows (elsewhere the band, already
-        # widened by the t quantile of its few degrees of freedom, is a small part of
-        # the allowance), over the outputs the verdict reads: all of them for "agrees",
-        # those up to the first certain excess for "disagrees"
-        mean = bounded_verdict(err_mean, width_mean, np.sqrt(var_low), np.sqrt(var_high),
-                               tol=tolerance, floor=floor)
-        var = bounded_verdict(err_var, width_var, var_low, var_high, tol=var_tolerance,
-                              floor=floor)
-        verdicts, firsts, short = [], [], False
-        for (verdict, above, _), width, dof, allowance in (
-                (mean, width_mean, est["mean_dof"], tolerance * np.sqrt(var_low)),
-                (var, width_var, est["var_dof"], var_tolerance * var_low)):
-            reads = slice(None) if verdict == "agrees" else slice(0, above + 1)
-            weak = (width > 0.1 * (allowance + floor)) & (dof < MIN_DOF)
-            if verdict != "undecided" and weak[reads].any():
-                verdict, short = "undecided", True
-            verdicts.append(verdict)
-            firsts.append(times[above] / T if verdict == "disagrees" else math.inf)
+        spent = rule.alpha / 2**rounds if rule.sequential else rule.alpha
+        verdicts, firsts, short = _judge(est, err_mean, err_var, spent, rule,
+                                         run.time.values)
         broken = _non_finite_estimate(est, err_mean, err_var)
         if broken:  # no verdict is read off NaN; more points cannot mend those drawn
             verdicts, firsts = ["undecided", "undecided"], [math.inf, math.inf]
@@ -550,20 +616,58 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
                 f"{float(np.sqrt(np.mean(est['d_se']**2))):.2g}: mean {verdicts[0]}, "
                 f"variance {verdicts[1]}"
                 + (f" (fewer than {MIN_DOF} degrees of freedom)" if short else "")
-                + (" (doubling)" if not decided and sequential and M < max_samples
+                + (" (doubling)" if not decided and rule.sequential and M < max_samples
                    else ""))
         # an incomplete split scan certifies nothing: more points cannot change that
-        if decided or not sequential or M >= max_samples or not strata.complete or broken:
-            break
+        if decided or not rule.sequential or M >= max_samples or not strata.complete \
+                or broken:
+            return _Outcome(est, err_mean, err_var, verdicts, firsts, broken, drawn, rounds,
+                            draws.rhs)
         M *= 2
 
+
+def _judge(est: dict, err_mean: np.ndarray, err_var: np.ndarray, spent: float, rule: _Rule,
+           times: np.ndarray) -> tuple[list, list, bool]:
+    """A round's verdicts on the mean and the variance (:func:`bounded_verdict` in a band
+    of rate ``spent``), where each first disagrees (forcing periods; inf: nowhere), and
+    whether a verdict was withheld for too few degrees of freedom."""
+    width_mean = band_multiplier(spent, len(times), est["mean_dof"]) * est["d_se"]
+    width_var = band_multiplier(spent, len(times), est["var_dof"]) * est["var_se"]
+    var_low = np.maximum(est["var"] - width_var, 0.0)
+    var_high = np.maximum(est["var"] + width_var, 0.0)  # a CV estimate may be < 0
+    # the degrees of freedom must be enough wherever the band matters: where it is
+    # wider than a tenth of what the tolerance allows (elsewhere the band, already
+    # widened by the t quantile of its few degrees of freedom, is a small part of
+    # the allowance), over the outputs the verdict reads: all of them for "agrees",
+    # those up to the first certain excess for "disagrees"
+    mean = bounded_verdict(err_mean, width_mean, np.sqrt(var_low), np.sqrt(var_high),
+                           tol=rule.tolerance, floor=rule.floor)
+    var = bounded_verdict(err_var, width_var, var_low, var_high, tol=rule.var_tolerance,
+                          floor=rule.floor)
+    verdicts, firsts, short = [], [], False
+    for (verdict, above, _), width, dof, allowance in (
+            (mean, width_mean, est["mean_dof"], rule.tolerance * np.sqrt(var_low)),
+            (var, width_var, est["var_dof"], rule.var_tolerance * var_low)):
+        reads = slice(None) if verdict == "agrees" else slice(0, above + 1)
+        weak = (width > 0.1 * (allowance + rule.floor)) & (dof < MIN_DOF)
+        if verdict != "undecided" and weak[reads].any():
+            verdict, short = "undecided", True
+        verdicts.append(verdict)
+        firsts.append(times[above] / rule.period if verdict == "disagrees" else math.inf)
+    return verdicts, firsts, short
+
+
+def _certificate(run: xr.Dataset, outcome: _Outcome, strata, rule: _Rule, seed: int,
+                 log) -> xr.Dataset:
+    """The run with the certificate's variables and attributes (:func:`verify`)."""
+    est = outcome.est
     one = {"units": "1"}
     out = run.copy()
-    out["verify_err_mean"] = ("time", err_mean, {
+    out["verify_err_mean"] = ("time", outcome.err_mean, {
         "long_name": "paired estimate of the error of E[x]: E[x_hat] - E[x]", **one})
     out["verify_err_mean_sem"] = ("time", est["d_se"], {
         "long_name": "standard error of verify_err_mean", **one})
-    out["verify_err_var"] = ("time", err_var, {
+    out["verify_err_var"] = ("time", outcome.err_var, {
         "long_name": "paired estimate of the error of Var[x]: Var[x_hat] - Var[x]", **one})
     out["verify_err_var_sem"] = ("time", est["var_se"], {
         "long_name": "standard error of verify_err_var", **one})
@@ -580,6 +684,7 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         out[f"cv_x_{name}_dof"] = ("time", np.asarray(est[f"{name}_dof"], dtype=float), {
             "long_name": f"Welch-Satterthwaite degrees of freedom of cv_x_{name}_sem over "
             f"the strata: Student's t intervals", **one})
+    verdicts, firsts, broken = outcome.verdicts, outcome.firsts, outcome.broken
     because = ""
     if not strata.complete:
         # a change of the impact sequence the scan did not reach may sit inside a stratum,
@@ -602,17 +707,19 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
         verdict=verdict, verdict_mean=verdict_mean, verdict_var=verdict_var,
         first_disagreement_mean=float(firsts[0]),
         first_disagreement_var=float(firsts[1]),
-        verify_samples=int(drawn), verify_replicates=0, verify_strata=int(len(strata)),
+        verify_samples=int(outcome.drawn), verify_replicates=0,
+        verify_strata=int(len(strata)),
         verify_splits=int(strata.splits), verify_splits_complete=int(strata.complete),
         verify_sampling=(f"stratified: {strata.describe()}; the true systems at the "
                          f"{len(strata.cuts)} cuts, then jittered groups of {GROUP} random "
                          f"points, one group per stratum and the rest half in proportion "
                          f"to P_j times the misfit at the stratum's ends, half to P_j"),
-        verify_rounds=int(rounds), verify_seed=int(seed), verify_tolerance=float(tolerance),
-        verify_var_tolerance=float(var_tolerance), verify_alpha=float(alpha),
+        verify_rounds=int(outcome.rounds), verify_seed=int(seed),
+        verify_tolerance=float(rule.tolerance),
+        verify_var_tolerance=float(rule.var_tolerance), verify_alpha=float(rule.alpha),
         verify_min_dof=int(MIN_DOF), verify_undecided_because=because or "none",
         variance_reduction=est["variance_reduction"],
-        verify_rhs_evaluations=int(rhs),
+        verify_rhs_evaluations=int(outcome.rhs),
     )
     return out
 
