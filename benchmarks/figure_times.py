@@ -18,7 +18,9 @@ def figure_times(source: str, outdir: str) -> list[tuple[str, float]]:
     """(figure, CPU seconds) for every figure of the map in ``source``."""
     import xarray as xr
 
-    from compare._report import REPORT_FIGURES, _plot_frontier_of, _pyplot, frontier_dataset
+    from compare._mapfigures import _plot_frontier_of, _pyplot
+    from compare._mapread import frontier_dataset
+    from compare._report import REPORT_FIGURES
 
     _pyplot()
     with xr.open_dataset(source) as ds:

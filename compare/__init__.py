@@ -5,8 +5,8 @@
 _HOMES = {
     "ValidateConfig": "compare._config", "load_config": "compare._config",
     "compare_runs": "compare._metrics", "error_metrics": "compare._metrics",
-    "boundary_table": "compare._report", "findings": "compare._report",
-    "verdict_grid": "compare._report", "write_report": "compare._report",
+    "boundary_table": "compare._tables", "findings": "compare._findings",
+    "verdict_grid": "compare._tables", "write_report": "compare._report",
     "count_distribution": "compare._mapdata", "run_validation": "compare._mapflow",
     "verify": "compare._verify",
     # the paper's figures: matplotlib only when they are asked for

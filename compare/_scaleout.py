@@ -29,13 +29,10 @@ from collections.abc import Callable, Iterator
 from opa.engine import usable_cores
 
 
-#: seconds to wait for a Dask scheduler to answer
-CONNECT_TIMEOUT = 5.0
-
 #: what the map's worker processes import once, in the fork server they come from: its
 #: tasks, and the report's figures, drawn on processes of the same server
 #: (:func:`compare._report.draw_figures`)
-MAP_PRELOAD = ("compare._mapflow", "compare._report")
+MAP_PRELOAD = ("compare._mapflow", "compare._report", "compare._mapfigures")
 #: what the figures' processes import besides (0.6 s each on the 2-core machine, paid once
 #: in the server instead)
 FIGURE_PRELOAD = ("matplotlib.pyplot",)
@@ -201,10 +198,10 @@ def _order(key) -> str:
 def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
     from distributed import as_completed
 
-    from mc import connect_scheduler
+    from opa.engine import connect_scheduler
 
-    # an endpoint that is not a Dask scheduler is refused within CONNECT_TIMEOUT
-    client, own = connect_scheduler(scheduler, CONNECT_TIMEOUT)
+    # an endpoint that is not a Dask scheduler is refused within the connection timeout
+    client, own = connect_scheduler(scheduler)
     keys: dict = {}
 
     def submit(batch, priority):
@@ -233,5 +230,5 @@ def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
             client.close()
 
 
-__all__ = ["CONNECT_TIMEOUT", "FIGURE_PRELOAD", "MAP_PRELOAD", "auto_workers", "dask_threads",
+__all__ = ["FIGURE_PRELOAD", "MAP_PRELOAD", "auto_workers", "dask_threads",
            "map_preload", "run_flow", "run_tasks", "share_cores"]

@@ -9,6 +9,9 @@ per core; it is meant to tell minutes from days, not to time a run.
 The budget is ``DEFAULT_BUDGET_HOURS`` unless ``$OPA_MC_WORK_BUDGET`` (``"30m"``,
 ``"12h"``, ``"2d"``, or a number of hours) or the CLI's ``--work-budget`` sets another;
 ``"inf"`` turns the check off.
+
+A job's time as measured starts where its process started (:func:`process_started`), so
+that the wall time a command reports includes its imports.
 """
 
 from __future__ import annotations
@@ -135,6 +138,23 @@ def check_work(what: str, periods: float, drivers: list[tuple[str, object]]) -> 
     return seconds
 
 
+def process_started() -> float:
+    """The ``time.perf_counter()`` reading at which this process started (Linux: from
+    /proc; elsewhere: now), so that a command's wall time includes its imports."""
+    import time
+
+    now = time.perf_counter()
+    try:
+        with open("/proc/self/stat") as fh:
+            ticks = int(fh.read().rsplit(")", 1)[1].split()[19])
+        with open("/proc/uptime") as fh:
+            uptime = float(fh.read().split()[0])
+        age = uptime - ticks / os.sysconf("SC_CLK_TCK")
+        return now - age if 0 <= age < 1e6 else now
+    except (OSError, ValueError, IndexError):
+        return now
+
+
 __all__ = ["DEFAULT_BUDGET_HOURS", "PERIODS_PER_SECOND", "WORK_BUDGET_ENV", "WorkBudgetError",
            "budget", "check_work", "estimate_seconds", "format_duration", "parse_duration",
-           "work_budget"]
+           "process_started", "work_budget"]

@@ -204,8 +204,10 @@ def cmd_validate(args) -> int:
 
         start_fork_server(map_preload(cfg.plots))
     from compare._mapflow import run_validation
-    from compare._report import (bullet, cause, findings, first_screen, frontier_lines,
-                                 process_started, verdict_grid, wall_text, write_report)
+    from compare._findings import bullet, cause, findings, first_screen, frontier_lines
+    from compare._report import wall_text, write_report
+    from compare._tables import verdict_grid
+    from opa._work import process_started
 
     from opa.engine import OutputLock
 
@@ -313,7 +315,7 @@ def cmd_converge(args) -> int:
                             **kw)
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     ds = run_convergence(cfg, log=log, workers=args.workers, scheduler=args.scheduler)
-    from compare._report import plot_frontier
+    from compare._mapfigures import plot_frontier
 
     command = "opa-mc " + shlex.join(getattr(args, "argv", ["converge"]))
     written = write_report(ds, args.outdir, draw=plot_frontier, command=command)

@@ -1,5 +1,6 @@
 """Tests for ``compare._figures`` (the paper's Figs. 2-11; the drawing blocks of
-``opa.plots._diagrams`` are tested in ``tests/opa/plots/test_diagrams.py``).
+``opa.plots._diagrams`` are tested in ``tests/opa/plots/test_diagrams.py``) and for the
+trust map report's figures (``compare._mapfigures``).
 
 Every figure is drawn once at tiny sizes (a few sweep values, 20 + 10 periods, 16 Monte
 Carlo samples) and then inspected: the paper's panel count, the Monte Carlo mean line and
@@ -503,7 +504,7 @@ def draw_report(ds, out) -> dict:
     for inspection, by file name."""
     from matplotlib.figure import Figure
 
-    from compare import _report as R
+    from compare import _mapfigures as M
 
     kept = {}
     save = Figure.savefig
@@ -514,9 +515,9 @@ def draw_report(ds, out) -> dict:
 
     Figure.savefig = keep
     try:
-        for name, draw in zip(REPORT_FIGURES, (R.plot_map, R.plot_error_vs_order, R.plot_mean,
-                                               R.plot_variance, R.plot_phase,
-                                               R._plot_frontier_of)):
+        for name, draw in zip(REPORT_FIGURES, (M.plot_map, M.plot_error_vs_order, M.plot_mean,
+                                               M.plot_variance, M.plot_phase,
+                                               M._plot_frontier_of)):
             draw(ds, str(out / name))
     finally:
         Figure.savefig = save
@@ -546,7 +547,7 @@ def with_every_entry(ds) -> xr.Dataset:
     at the first grid point, stopped after output 3, as validate.nc records a stop), sigma*
     resolved at the first value and below the smallest probe at the second, and a split of
     every kind in every column."""
-    from compare import _report as R
+    from compare import _mapread as R
 
     ds = ds.load().copy(deep=True)
     v, n = R.HEADLINE, -1
@@ -621,15 +622,15 @@ def test_every_entry_map_draws_every_entry(every_entry_figures):
 def test_trust_map_glyphs_have_one_meaning(report_figures):
     """Verdicts, sigma* markers and split markers never share a glyph; sigma* below the
     smallest probe has its own arrow; the swept parameter is named by its symbol."""
-    from compare import _report as R
+    from compare import _mapfigures as M
 
     _, kept = report_figures
     fig = kept["trust_map.png"]
     verdicts = {"o", "x"}
-    stars = {mark for _, _, mark in R.STAR_STYLES}
-    splits = set(R.KIND_MARKERS.values())
+    stars = {mark for _, _, mark in M.STAR_STYLES}
+    splits = set(M.KIND_MARKERS.values())
     assert not (verdicts & stars) and not (verdicts & splits) and not (stars & splits)
-    assert R.BELOW_MARKER not in stars | splits | verdicts
+    assert M.BELOW_MARKER not in stars | splits | verdicts
     assert all(ax.get_xlabel() in ("", "ω") for ax in fig.axes[:4])
     assert "\n" not in fig._suptitle.get_text()
 

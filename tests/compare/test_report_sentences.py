@@ -1,4 +1,4 @@
-"""The validate report's sentences of their own (``compare._report``): the error before
+"""The validate report's sentences of their own (``compare._findings``): the error before
 OPA's first impact (``findings``) and the runs that did not finish (``run_failures``).
 
 Each test takes the smallest trust map (validate.nc read back) and sets by hand what a
@@ -18,9 +18,10 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from compare import _report as R
+from compare import _findings as R
+from compare._mapread import HEADLINE
 
-HEAD = R.HEADLINE
+HEAD = HEADLINE
 BEFORE = "Before OPA's first impact"
 #: a cell of the pre-impact sentence: error, sigma, MC SE
 CELL = re.compile(r"(\S+) at σ = (\S+) \(MC SE (\S+)\)")

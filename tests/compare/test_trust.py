@@ -171,7 +171,7 @@ def _map(kinds, values, times, *, star=(0.0215, 0.0219), disagree=9.75, complete
 
 
 def test_the_cause_at_4_09_is_an_impact_crossing_the_output_where_opa_fails():
-    from compare._report import cause
+    from compare._findings import cause
 
     ds = _map(["output crossing", "output crossing"], [0.8019001, 0.8346],
               [9.75, 7.0])
@@ -188,7 +188,7 @@ def test_the_cause_at_4_09_is_an_impact_crossing_the_output_where_opa_fails():
 
 
 def test_a_grazing_at_the_boundary_is_continuous_with_a_square_root():
-    from compare._report import cause
+    from compare._findings import cause
 
     ds = _map(["grazing"], [0.777563], [5.57], star=(0.0225, 0.0231))
     ds["split_left"][:] = 5
@@ -198,7 +198,8 @@ def test_a_grazing_at_the_boundary_is_continuous_with_a_square_root():
 
 
 def test_a_reached_split_limit_is_said_and_the_counts_marked_incomplete():
-    from compare._report import boundary_table, cause, count_table
+    from compare._findings import cause
+    from compare._tables import boundary_table, count_table
 
     ds = _map([], [], [], complete=0.0042, unknown=0.3)
     text = cause(ds, 0, 0)
@@ -213,7 +214,7 @@ def test_a_horizon_split_in_the_grid_is_named_even_below_sigma_star():
     """omega = 4.035 (10 periods): sigma* < 0.000625, yet the count table at sigma = 0.005
     shows an extra impact: a "horizon" split (an impact sliding across the end) at
     sigma >= 0.0045. The cause must name it, not say every sample makes the same impacts."""
-    from compare._report import cause
+    from compare._findings import cause
 
     ds = _map(["horizon"], [0.7955337], [10.0], star=(0.0, 0.000625), disagree=7.38)
     ds["split_right"][:] = 5

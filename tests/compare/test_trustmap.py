@@ -746,7 +746,7 @@ def test_figures_read_at_any_size(tiny, tmp_path, monkeypatch, name, scale):
 def test_trust_map_draws_both_verdicts_and_every_sigma_star(tiny, tmp_path, monkeypatch):
     """The map has a mean and a variance panel per horizon; each draws sigma* of every impact
     law as a visible (not white) line, and its colour bar marks the tolerance at 0."""
-    from compare._report import plot_map
+    from compare._mapfigures import plot_map
 
     _, ds, _ = tiny
     fig, = _drawn(monkeypatch, lambda: plot_map(ds, str(tmp_path / "m.png")))
@@ -772,7 +772,8 @@ def test_trust_map_marks_an_undecided_verdict_apart(tiny, tmp_path, monkeypatch)
     """Every undecided verdict at N = Nmax gets its own glyph at its grid point, in its
     panel only (one made undecided here besides those of the tiny map's capped ensembles);
     the certain ones keep theirs."""
-    from compare._report import HEADLINE, plot_map
+    from compare._mapfigures import plot_map
+    from compare._mapread import HEADLINE
 
     _, ds, _ = tiny
     ds = ds.copy(deep=True)
@@ -799,7 +800,7 @@ def test_trust_map_marks_an_undecided_verdict_apart(tiny, tmp_path, monkeypatch)
 def test_trust_map_counts_further_splits_once_per_column(tiny, tmp_path, monkeypatch):
     """The splits beyond the first of each kind are one "+n" per column (they crowded the
     50-period rows as one count per kind), n their number within the largest sigma."""
-    from compare._report import plot_map
+    from compare._mapfigures import plot_map
 
     _, ds, _ = tiny
     fig, = _drawn(monkeypatch, lambda: plot_map(ds, str(tmp_path / "m.png")))
@@ -827,7 +828,7 @@ def test_trust_map_counts_further_splits_once_per_column(tiny, tmp_path, monkeyp
 def test_single_value_map_has_sensible_limits(tiny, tmp_path, monkeypatch):
     """With one value of the swept parameter the x axis spans a few per cent around it and
     sigma* is still drawn (as a marker)."""
-    from compare._report import plot_map
+    from compare._mapfigures import plot_map
 
     _, ds, _ = tiny
     one = ds.isel(omega=[0])
@@ -845,7 +846,7 @@ def test_runs_that_stop_carry_their_reason(tmp_path):
     """At sigma = 5 the paper's OPA runs escape: the map keeps going, opa_status names the
     kernel's reason exactly where the OPA curves turn NaN, the same reason a single
     simulate_opa run gives, and the first screen counts the runs by that reason."""
-    from compare._report import first_screen
+    from compare._findings import first_screen
 
     cfg = load_config(None, outdir=str(tmp_path), values=(3.98,), sigmas=(5.0,), orders=(2,),
                       horizons=(4,), samples=64, max_samples=64, per_period=4, plots=False,
