@@ -174,13 +174,7 @@ def simulate_opa(
     (5, 11)
     """
     options = check_instance("options", options, SolverOptions, SolverOptions())
-    adaptive = isinstance(elements, str) and elements == "adaptive"
-    for name, value in (("tolerance", tolerance), ("max_elements", max_elements)):
-        if value is not None and not adaptive:
-            raise ValueError(f"{name} = {value!r} applies with elements='adaptive' only (the "
-                             f"refinement of adaptive elements), got elements={elements!r:.40}")
-    tolerance = 1e-6 if tolerance is None else tolerance
-    max_elements = 64 if max_elements is None else max_elements
+    tolerance, max_elements = _refinement(elements, tolerance, max_elements)
     if elements is not None and not isinstance(system, System) \
             and fields.get("impact_law") is None:
         fields["impact_law"] = "saltation"  # the law whose elements converge
@@ -203,6 +197,28 @@ def simulate_opa(
     rec = run(system.kernel_inputs(options), system.initial_state(initial), times,
               rtol=options.rtol, atol=options.atol, label=f"OPA (N={order}) trajectory",
               partial=partial)
+    return _single_element(system, options, times, rec)
+
+
+def _refinement(elements, tolerance, max_elements) -> tuple[float, int]:
+    """The adaptive refinement's ``tolerance`` and ``max_elements`` with their defaults
+    (1e-6, 64); either given without ``elements="adaptive"`` is refused (it would have no
+    effect)."""
+    adaptive = isinstance(elements, str) and elements == "adaptive"
+    for name, value in (("tolerance", tolerance), ("max_elements", max_elements)):
+        if value is not None and not adaptive:
+            raise ValueError(f"{name} = {value!r} applies with elements='adaptive' only (the "
+                             f"refinement of adaptive elements), got elements={elements!r:.40}")
+    return (1e-6 if tolerance is None else tolerance,
+            64 if max_elements is None else max_elements)
+
+
+def _single_element(system: System, options: SolverOptions, times: np.ndarray,
+                    rec) -> xr.Dataset:
+    """The ``opa`` dataset of the paper's single-element OPA from its kernel record: the
+    coefficients, the moments they give, the one element's layout and the impacts of the
+    mean coordinate."""
+    oscillator, order = system.oscillator, system.order
     xc = rec.states[:, : order + 1].T
     vc = rec.states[:, order + 1 :].T
     layout, layout_coords = element_layout(
