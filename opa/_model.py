@@ -318,7 +318,9 @@ del _name
 class Uncertainty:
     """The uncertain parameter ``p = p_bar + sigma * xi``, xi semicircle on [-1, 1].
 
-    ``allow_negative`` permits ``p_bar - sigma < 0`` (e.g. negative damping samples).
+    ``allow_negative`` permits ``p_bar - sigma < 0`` (e.g. negative damping samples); the
+    samples are checked against it where the law of xi is known
+    (``opa.System.check_samples``, over xi's support).
     """
 
     sigma: float = 0.0
@@ -332,15 +334,6 @@ class Uncertainty:
         object.__setattr__(self, "sigma", sigma)
         _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS)
         check_flag("allow_negative", self.allow_negative)
-
-    def check(self, oscillator: Oscillator) -> None:
-        """Refuse ``p_bar - sigma < 0`` unless allowed."""
-        mean = getattr(oscillator, self.parameter)
-        if not self.allow_negative and mean - self.sigma < 0.0 <= mean:
-            raise ValueError(
-                f"sigma = {self.sigma} makes {self.parameter} = {mean} - sigma negative for some "
-                f"samples; pass allow_negative=True (--allow-negative) if that is intended"
-            )
 
 
 def _denominator(value: float) -> int:

@@ -627,11 +627,6 @@ def periodic_orbit(system: ImpactSystem, guess=None, *, periods: int | None = No
     return orbit
 
 
-def floquet_multipliers(system: ImpactSystem, guess=None, **kwargs) -> np.ndarray:
-    """The Floquet multipliers of the periodic orbit found by ``periodic_orbit``."""
-    return periodic_orbit(system, guess, **kwargs).multipliers
-
-
 # --------------------------------------------------------------------------- Lyapunov
 @dataclass(frozen=True, eq=False)
 class LyapunovEstimate:
@@ -826,7 +821,6 @@ __all__ = [
     "shoot",
     "default_tolerance",
     "periodic_orbit",
-    "floquet_multipliers",
     "lyapunov_exponent",
     "transverse_lyapunov_exponent",
     "lyapunov_benettin",

@@ -19,6 +19,7 @@ import pytest
 from opa import (
     Oscillator,
     SolverOptions,
+    System,
     Uncertainty,
     preset,
     simulate_dmr,
@@ -209,11 +210,13 @@ def test_uncertain_parameter_may_be_mu_a_or_c(parameter):
 
 
 def test_sigma_that_makes_samples_negative_needs_consent():
+    """The bound production uses (System.check_samples, called by simulate_opa and
+    simulate_mc): p_bar + sigma * (lowest xi of the law) < 0 is refused unless allowed."""
     osc = Oscillator(mu=0.8)
     with pytest.raises(ValueError, match=r"sigma = 0\.9.*mu = 0\.8"):
-        Uncertainty(0.9).check(osc)
-    Uncertainty(0.9, allow_negative=True).check(osc)
-    Uncertainty(0.8).check(osc)  # mu_bar - sigma = 0 is allowed
+        simulate_opa(osc, sigma=0.9, order=1, periods=1)
+    System(osc, sigma=0.9, allow_negative=True).check_samples()
+    System(osc, sigma=0.8).check_samples()  # mu_bar - sigma = 0 is allowed
     with pytest.raises(ValueError, match=r"sigma = 0\.9.*c = 0\.05"):
         simulate_opa(osc, sigma=0.9, uncertain="c", order=1, periods=1)
 
