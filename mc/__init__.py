@@ -2,7 +2,8 @@
 
 from mc._checkpoint import remove_checkpoint
 from mc._control import cv_estimates
-from mc._ensemble import DaskError, check_scheduler_address, connect_scheduler, simulate_mc
+from mc._ensemble import simulate_mc
+from opa.engine import DaskError, check_scheduler_address, connect_scheduler
 from mc._source import sweep_source
 from mc._sampling import SAMPLERS, sample_xi, semicircle_cdf, semicircle_ppf
 

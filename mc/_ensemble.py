@@ -24,13 +24,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
-import sys
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 import xarray as xr
@@ -39,8 +35,8 @@ from mc._checkpoint import Checkpoint, stats_arrays
 from mc._control import check_control, controlled
 from mc._sampling import check_sampler, sample_xi
 from opa.engine import (
-    IMPULSE_FIELDS, as_system, chebyshev_u, check_device, check_scheduler_address,
-    check_instance, check_memory, digest,
+    Execution, IMPULSE_FIELDS, as_system, chebyshev_u, check_instance, take_execution,
+    check_memory, digest,
     orthonormal, require_gpu, add_true_system_work, true_system_work,
     Oscillator, output_times, package_version, provenance_attrs, run_batch, SimulationError,
     SolverOptions, System, time_coord,
@@ -51,24 +47,12 @@ from opa.engine import (
 MC_FIELDS = ("sigma", "uncertain", "distribution", "allow_negative", "order",
              *IMPULSE_FIELDS)
 
-if TYPE_CHECKING:
-    from distributed import Client
-
 CHUNK_BYTES = 32 * 2**20
 GPU_CHUNK, GPU_CHUNK_BYTES = 2**18, 2**30  # device="cuda": samples a launch, paths' bytes
-MAX_TIMEOUT = 86400.0  # a day: longer Dask timeouts are mistakes, not waits
 # Memory a sample takes outside the paths: xi, its weight, replicate index and impact
 # count and the sample coordinate (8 bytes each), the sampler's uniforms (up to 16 for a
 # Sobol' set rounded up to a power of two) and the quantile function's temporaries.
 SAMPLE_BYTES = 96
-# Seconds between checks that a Dask cluster still has workers.
-_POLL = 0.5
-
-
-class DaskError(SimulationError):
-    """The Dask cluster failed the run: its workers all died, it never had any, or the
-    scheduler went away. (A SimulationError, so the CLI reports it as a failed run.)"""
-
 
 def _weighted_sum(w: np.ndarray, x: np.ndarray) -> np.ndarray:
     """sum_m w[m] x[m, :] for x of shape (M, T), in a fixed order of summation.
@@ -235,15 +219,8 @@ def simulate_mc(
     options: SolverOptions | None = None,
     times: np.ndarray | None = None,
     keep_paths: bool = False,
-    chunk_size: int | None = None,
-    scheduler: str | Client | None = None,
-    progress: bool | None = None,
-    checkpoint: str | os.PathLike | None = None,
-    connect_timeout: float = 5.0,
-    worker_timeout: float | None = 60.0,
-    log: Callable[[str], object] | None = None,
     control: xr.Dataset | None = None,
-    device: str = "cpu",
+    execution: Execution | None = None,
     **fields,
 ) -> xr.Dataset:
     """Monte Carlo ensemble of the sampled impact system, eq. (1), p = p_bar + sigma xi.
@@ -266,34 +243,30 @@ def simulate_mc(
         each with its standard error (``x_coef_sem``, formed like ``x_sem``).
     keep_paths : also return every sample path (memory O(M T)); otherwise only the
         streamed statistics are kept (memory O(R N T)).
-    chunk_size : samples per task (default: about 32 MiB of paths per chunk).
-    scheduler : address of a Dask distributed scheduler (``tcp://host:port``) or a
-        ``distributed.Client``; chunks then run as tasks there. Default: local threads.
-        The result is bit-identical to the local one.
-    progress : show a progress bar (default: when stderr is a terminal).
-    checkpoint : directory where each finished chunk is written as it finishes, with a
-        manifest of everything that determines the result. A rerun with the same
-        directory and the same inputs loads the finished chunks instead of computing
-        them (the progress bar counts them as done) and returns the bit-identical
-        result; a directory of another run is refused. Damaged chunk files are reported
-        through ``log``, renamed ``*.bad`` and computed again. Remove the directory with
-        ``mc.remove_checkpoint`` once the result is saved.
-    connect_timeout : seconds to wait for the Dask scheduler to answer.
-    worker_timeout : seconds a Dask cluster may have no worker at all (all died, or none
-        ever started) before the run fails with :class:`DaskError`; None waits forever.
-    log : callable taking one line, for damaged checkpoint files and resume notes;
-        default: ``warnings.warn`` for damage and silence otherwise.
     control : an OPA run of the same system (:func:`opa.simulate_opa`, any K, any law) as
         a control variate (:mod:`mc._control`): adds ``cv_x_mean``, ``cv_x_var`` with
         their standard errors and the attribute ``variance_reduction``. Needs ``sobol``
         with R >= 2 replicates; the output times default to the run's.
-    device : "cpu" (default) or "cuda": the samples' trajectories on a CUDA GPU, one
+    execution : how the chunks run (:class:`opa.Execution`; default: in this process):
+        ``chunk_size`` samples per chunk (default about 32 MiB of paths); ``scheduler``,
+        a Dask cluster where the chunks run as tasks (the result is bit-identical to the
+        local one); ``device="cuda"``, the samples' trajectories on a CUDA GPU, one
         thread per sample, each running the CPU kernel's own driver compiled for the GPU
-        (:mod:`opa._gpu`, the ``gpu`` extra numba-cuda); each chunk's paths are copied
-        back and reduced here as on the CPU. Chunks default to up to 2^18 samples (about
-        1 GiB of paths). Its results are not the CPU's to the bit (states within 9.3e-9
-        of them at rtol 1e-10 over 20 periods in ``benchmarks/bench_gpu.py``'s run on an
-        H100, with the same impact counts); not with ``scheduler``.
+        (:mod:`opa._gpu`, the ``gpu`` extra numba-cuda), chunks of up to 2^18 samples
+        (about 1 GiB of paths) whose paths are reduced here as on the CPU (its results
+        are not the CPU's to the bit: states within 9.3e-9 of them at rtol 1e-10 over 20
+        periods in ``benchmarks/bench_gpu.py``'s run on an H100, with the same impact
+        counts); ``checkpoint``, a directory where each finished chunk is written as it
+        finishes, with a manifest of everything that determines the result: a rerun with
+        the same directory and inputs loads the finished chunks (the progress bar counts
+        them as done) and returns the bit-identical result, a directory of another run is
+        refused, damaged chunk files are reported through ``log``, renamed ``*.bad`` and
+        computed again (remove the directory with ``mc.remove_checkpoint`` once the
+        result is saved); ``progress``; ``log`` (damaged checkpoint files and resume
+        notes; default: ``warnings.warn`` for damage and silence otherwise);
+        ``connect_timeout`` and ``worker_timeout`` (:class:`opa.Execution`). ``workers``
+        is not used: one ensemble runs in this process, numba's threads sharing the
+        cores. The keywords of these fields are still taken on their own, as before.
 
     Returns
     -------
@@ -330,13 +303,13 @@ def simulate_mc(
         The Dask cluster lost all its workers (or never had any) for ``worker_timeout``
         seconds, a chunk killed the workers that ran it, or the scheduler went away.
     """
+    run = take_execution(execution, fields, "simulate_mc")
     options = check_instance("options", options, SolverOptions, SolverOptions())
     system = as_system(system, options, allowed=MC_FIELDS, where="simulate_mc", **fields)
+    device, checkpoint, log = run.device, run.checkpoint, run.log
     oscillator, order, uncertain = system.oscillator, system.order, system.uncertain
-    for name, flag in (("keep_paths", keep_paths), ("progress", progress)):
-        if flag not in (True, False, None) or isinstance(flag, str) or \
-                (name == "keep_paths" and flag is None):
-            raise ValueError(f"{name} must be True or False, got {flag!r}")
+    if keep_paths not in (True, False) or isinstance(keep_paths, str):
+        raise ValueError(f"keep_paths must be True or False, got {keep_paths!r}")
     check_sampler(sampler, samples, seed)
     samples = int(samples)
     if samples < 2 and sampler != "gauss":
@@ -344,17 +317,8 @@ def simulate_mc(
                          f"{samples}")
     check_memory("sampling", samples * SAMPLE_BYTES,
                  f"samples {samples} x {SAMPLE_BYTES} bytes")
-    _check_dask_timeouts(connect_timeout, worker_timeout)
-    if check_device(device) == "cuda":
-        if scheduler is not None:
-            raise ValueError('device="cuda" runs in this process: not with scheduler')
+    if device == "cuda":
         require_gpu()
-    if checkpoint is not None and not isinstance(checkpoint, (str, os.PathLike)):
-        raise ValueError(f"checkpoint must be a directory path, got {checkpoint!r:.60}")
-    if scheduler is not None and not isinstance(scheduler, str):
-        connect_scheduler(scheduler, connect_timeout)  # only checks that it is a Client
-    elif scheduler is not None:
-        check_scheduler_address(scheduler)
     system.check_samples()
     if control is not None:
         times = check_control(control, system, times)
@@ -374,7 +338,7 @@ def simulate_mc(
                samples * float(times[-1] - times[0]) / oscillator.forcing_period,
                [("samples", samples),
                 ("periods", f"{(times[-1] - times[0]) / oscillator.forcing_period:g}")])
-    size = min(_chunk_size(T, chunk_size, device), samples)
+    size = min(_chunk_size(T, run.chunk_size, device), samples)
     if keep_paths:
         check_memory("keep_paths", samples * T * 2 * 8,
                      f"samples {samples} x {T} outputs x 2 states")
@@ -398,9 +362,7 @@ def simulate_mc(
     args = (times, system, options, int(order), keep_paths, recurrence)
 
     # connect before the checkpoint is made: a wrong address leaves nothing behind
-    client, own = ((None, False) if scheduler is None
-                   else connect_scheduler(scheduler, connect_timeout))
-    try:
+    with run.client() as client:
         check = _chunk_check(T, order, replicates, keep_paths)
         store, finished = None, set()
         if checkpoint is not None:
@@ -413,12 +375,7 @@ def simulate_mc(
                     f"{len(bounds)} chunks already finished")
         runner = _Chunks(y0, xi, w, rep, replicates, bounds, args, store, finished, check,
                          device)
-        if progress is None:
-            progress = sys.stderr.isatty()
-        if client is None:
-            results = runner.local(progress)
-        else:
-            results = runner.dask(client, progress, worker_timeout)
+        results = runner.local(run) if client is None else runner.dask(client, run)
         total = None
         n_impacts = np.empty(len(xi), dtype=np.int64)
         paths = np.empty((len(xi), T, 2)) if keep_paths else None
@@ -438,31 +395,12 @@ def simulate_mc(
                 total = stats if total is None else total.merge(stats)
         finally:
             results.close()  # a Dask run cancels the tasks left now, not at collection
-    finally:
-        if own:
-            client.close()
     ds = _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,
                   replicates, "semicircle" if measure is None else measure.name)
     if control is not None:
         ds = controlled(ds, total.x_rep, total.x2_rep, total.rep_weight, xi, replicates,
                         control)
     return ds
-
-
-def _check_dask_timeouts(connect_timeout, worker_timeout) -> None:
-    for name, value, optional in (("connect_timeout", connect_timeout, False),
-                                  ("worker_timeout", worker_timeout, True)):
-        if value is None and optional:
-            continue
-        try:
-            good = (not isinstance(value, (bool, str, bytes)) and math.isfinite(float(value))
-                    and 0 < float(value) <= MAX_TIMEOUT)
-        except (TypeError, ValueError, OverflowError):
-            good = False
-        if not good:
-            allowed = (f"a number of seconds in (0, {MAX_TIMEOUT:g}]"
-                       + (" or None" if optional else ""))
-            raise ValueError(f"{name} must be {allowed}, got {value!r}")
 
 
 def _manifest(system, options, sampler, samples, seed, replicates, times, measure,
@@ -613,7 +551,7 @@ class _Chunks:
     def done_samples(self) -> int:
         return sum(hi - lo for i, (lo, hi) in enumerate(self.bounds) if i in self.finished)
 
-    def local(self, progress: bool):
+    def local(self, run: Execution):
         """The chunks in order, pipelined: one thread integrates the next chunk (the
         kernel's parallel batch, or the GPU's launch) while this one reduces the last, so
         the serial reduction no longer idles the kernel's threads. Every integration runs
@@ -624,11 +562,10 @@ class _Chunks:
         from concurrent.futures import ThreadPoolExecutor
 
         import numba
-        from tqdm.auto import tqdm
 
         todo = [i for i in range(len(self.bounds)) if i not in self.finished]
-        with tqdm(total=len(self.xi), initial=self.done_samples(), unit="sample",
-                  disable=not progress, desc="Monte Carlo") as bar, \
+        with run.bar(len(self.xi), initial=self.done_samples(), unit="sample",
+                     desc="Monte Carlo") as bar, \
                 ThreadPoolExecutor(1, thread_name_prefix="opa-mc-chunks",
                                    initializer=numba.set_num_threads,
                                    initargs=(numba.get_num_threads(),)) as ahead:
@@ -650,23 +587,22 @@ class _Chunks:
                 for future in pending.values():
                     future.cancel()
 
-    def dask(self, client, progress: bool, worker_timeout: float | None):
+    def dask(self, client, run: Execution):
         """Chunks as Dask tasks on ``client``. Results are merged (and released) in
         submission order, so the result is the local one; with a checkpoint each result
         is saved as soon as it arrives, whatever its order."""
         from distributed import wait
-        from tqdm.auto import tqdm
 
         futures = {}
-        watchdog = _Watchdog(client, worker_timeout,
-                             lambda: sum(f is not None for f in futures.values()))
+        watchdog = run.watchdog(client, lambda: sum(f is not None for f in futures.values()),
+                                 "chunks")
         try:
             for i in range(len(self.bounds)):
                 if i not in self.finished:
                     futures[i] = client.submit(run_chunk, *self.task(i), True, pure=False)
             unsaved = set(futures) if self.store is not None else set()
-            with tqdm(total=len(self.bounds), initial=len(self.finished), unit="chunk",
-                      disable=not progress, desc="Monte Carlo (dask)") as bar:
+            with run.bar(len(self.bounds), initial=len(self.finished), unit="chunk",
+                         desc="Monte Carlo (dask)") as bar:
                 for i, bound in enumerate(self.bounds):
                     if i in self.finished:
                         yield bound, self.loaded(i)
@@ -679,7 +615,7 @@ class _Chunks:
                             wait(watched, timeout=watchdog.poll, return_when="FIRST_COMPLETED")
                         except TimeoutError:
                             watchdog.check()
-                    result = _result(current, bound, watchdog)
+                    result = watchdog.result(current, _samples(bound))
                     if i in unsaved:
                         unsaved.discard(i)
                         self.save(i, result)
@@ -695,115 +631,13 @@ class _Chunks:
         """Save every result that has arrived, but chunk ``current``'s (its caller's)."""
         for j in sorted(unsaved):
             if j != current and futures[j].done():
-                self.save(j, _result(futures[j], self.bounds[j], watchdog))
+                self.save(j, watchdog.result(futures[j], _samples(self.bounds[j])))
                 unsaved.discard(j)
 
 
-def connect_scheduler(scheduler, connect_timeout: float):
-    """(client, whether we own it) for an address or a distributed.Client; a Client is
-    returned as it is, so this also checks the type of ``scheduler``."""
-    try:
-        from distributed import Client
-    except ImportError:
-        raise ValueError("scheduler needs the 'distributed' package") from None
-    if isinstance(scheduler, Client):
-        return scheduler, False
-    if not isinstance(scheduler, str):
-        raise ValueError(f"scheduler must be an address such as 'tcp://host:8786' or a "
-                         f"distributed.Client, got {scheduler!r:.60}")
-    silent = f"scheduler {scheduler!r} did not answer within {connect_timeout:g} s " \
-             f"(connect_timeout); check the address and that the scheduler is running"
-    _probe(scheduler, connect_timeout, silent)
-    try:
-        return Client(scheduler, timeout=connect_timeout), True
-    except (OSError, TimeoutError):
-        raise ValueError(silent) from None
-    except (ValueError, TypeError) as err:
-        raise ValueError(f"scheduler {scheduler!r} is not a Dask scheduler address "
-                         f"({err})") from None
-    except (Exception, MemoryError) as err:  # noqa: BLE001 -- it answered, but not as Dask
-        raise ValueError(f"scheduler {scheduler!r} did not answer as a Dask scheduler "
-                         f"({type(err).__name__})") from None
-
-
-def _probe(address: str, timeout: float, silent: str) -> None:
-    """A Dask scheduler speaks first on a new TCP connection: refuse an endpoint that
-    accepts the connection and then says nothing within ``timeout`` (distributed's own
-    connect would wait for it much longer). Only plain ``tcp://`` addresses are probed."""
-    import socket
-    from urllib.parse import urlsplit
-
-    if not address.startswith("tcp://"):
-        return
-    try:
-        parts = urlsplit(address)
-        host, port = parts.hostname, parts.port
-    except ValueError:
-        return  # distributed names what is wrong with the address
-    if host is None or port is None:
-        return
-    try:
-        with socket.create_connection((host, port), timeout=timeout) as probe:
-            probe.settimeout(timeout)
-            first = probe.recv(1)
-    except OSError:
-        raise ValueError(silent) from None
-    if not first:
-        raise ValueError(silent)
-
-
-def _result(future, bound, watchdog):
-    """A finished task's result; cluster failures become DaskError.
-
-    A finished task's result can still be lost with its worker (the scheduler then
-    computes it again), so the wait is watched like the wait for the task itself.
-    """
-    from concurrent.futures import CancelledError
-
-    from distributed import KilledWorker
-
-    lo, hi = bound
-    while True:
-        try:
-            return future.result(timeout=watchdog.poll)
-        except TimeoutError:
-            watchdog.check()
-        except KilledWorker as err:
-            first = str(err).splitlines()[0] if str(err) else "KilledWorker"
-            raise DaskError(f"Dask workers died running samples {lo}..{hi - 1}: "
-                            f"{first}") from None
-        except CancelledError:
-            raise DaskError(f"the Dask scheduler dropped the task of samples {lo}..{hi - 1} "
-                            f"(it restarted or went away)") from None
-
-
-class _Watchdog:
-    """Fails the run when the cluster has had no worker for ``timeout`` seconds; waits
-    last ``poll`` seconds between checks."""
-
-    def __init__(self, client, timeout: float | None, unfinished: Callable[[], int]):
-        self.client = client
-        self.timeout = timeout
-        self.unfinished = unfinished
-        self.poll = _POLL if timeout is None else min(_POLL, timeout / 4)
-        self.empty_since = None  # when the cluster was first seen without workers
-
-    def check(self) -> None:
-        if self.timeout is None:
-            return
-        try:
-            workers = len(self.client.nthreads())
-        except (OSError, TimeoutError) as err:
-            raise DaskError(f"lost the Dask scheduler ({err})") from None
-        now = time.monotonic()
-        if workers:
-            self.empty_since = None
-        elif self.empty_since is None:
-            self.empty_since = now
-        elif now - self.empty_since > self.timeout:
-            raise DaskError(f"the Dask cluster has had no workers for {self.timeout:g} s "
-                            f"(all died or none started) with {self.unfinished()} chunks "
-                            f"unfinished; start workers or raise worker_timeout")
+def _samples(bound) -> str:
+    """What a chunk's task is, for a failure's message."""
+    return f"samples {bound[0]}..{bound[1] - 1}"
 
 
 def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,

@@ -18,6 +18,7 @@ from opa import dynamics as _dynamics  # noqa: E402
 from opa.dynamics import *  # noqa: F403 -- exactly opa.dynamics.__all__ (sweep: see _shims)
 from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, triple_product
 from opa._dataset import write_netcdf
+from opa._execution import Execution
 from opa._model import Oscillator, SolverOptions, Uncertainty, preset, time_grid
 from opa._run import SimulationError
 from opa._shims import reproduce, sweep
@@ -35,6 +36,7 @@ def __getattr__(name: str):
 
 
 __all__ = [
+    "Execution",
     "Oscillator",
     "System",
     "SolverOptions",

@@ -839,36 +839,29 @@ def _single_threaded_slice(task: SliceTask) -> dict:
 
 def _connect(scheduler):
     """(a distributed.Client, whether it is ours to close) for ``scheduler``, an address
-    or a Client; an address that does not answer as a Dask scheduler within 5 s is
-    refused naming it."""
-    try:
-        from distributed import Client
-    except ImportError:
-        raise DiagramInputError("{scheduler} needs the 'distributed' package") from None
-    if isinstance(scheduler, Client):
-        return scheduler, False
-    from opa._model import check_scheduler_address
+    or a Client, by the one connection rule (:func:`opa._execution.connect_scheduler`: the
+    address is checked before anything is contacted, and must answer as a Dask scheduler
+    within its timeout); a refusal names the keyword."""
+    from opa._execution import connect_scheduler
 
-    try:  # before Client(): a Client of an address that is none stays the default client
-        check_scheduler_address(scheduler)
-    except ValueError as err:
-        raise _named("scheduler", err, scheduler) from None
     try:
-        return Client(scheduler, timeout=5), True
-    except (OSError, TimeoutError) as err:
-        raise DiagramInputError("{scheduler} {0!r} did not answer as a Dask scheduler within "
-                                "5 s ({1})", scheduler, type(err).__name__) from None
-    except (ValueError, TypeError) as err:  # distributed's word on the address
+        return connect_scheduler(scheduler)
+    except ValueError as err:
         raise _named("scheduler", err, scheduler) from None
 
 
 def _run_slices_dask(tasks, todo, finish, client) -> None:
     """Compute the control values ``todo`` as tasks on a Dask cluster (``client``)."""
-    from distributed import as_completed
+    from opa._execution import Execution
 
     futures = {client.submit(_single_threaded_slice, tasks[i], pure=False): i for i in todo}
-    for future in as_completed(futures):
-        finish(futures[future], future.result())
+    watchdog = Execution().watchdog(client, lambda: len(futures), "control values")
+    try:
+        for future in watchdog.finished(list(futures)):
+            i = futures.pop(future)
+            finish(i, watchdog.result(future, f"the control value {tasks[i].value:g}"))
+    finally:
+        client.cancel(list(futures))
 
 
 def _log(log, i, count, parameter, piece, *, reused) -> None:

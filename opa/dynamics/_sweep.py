@@ -715,18 +715,20 @@ def start_fork_server(preload: tuple[str, ...] = ()) -> None:
 
 
 def _run_dask(tasks, finish, scheduler) -> None:
-    from distributed import Client, as_completed
+    """The points as tasks on a Dask cluster, each with one numba thread, connected and
+    watched as every batch of opa-mc is (:class:`opa._execution.Execution`)."""
+    from opa._execution import Execution
 
-    own = not isinstance(scheduler, Client)
-    client = Client(scheduler) if own else scheduler
-    try:
+    with Execution(scheduler=scheduler).client() as client:
         single = [PointTask(**{**_task_fields(t), "single_thread": True}) for t in tasks]
-        futures = [client.submit(compute_point, t, pure=False) for t in single]
-        for fut in as_completed(futures):
-            finish(fut.result())
-    finally:
-        if own:
-            client.close()
+        futures = {client.submit(compute_point, t, pure=False): t for t in single}
+        watchdog = Execution().watchdog(client, lambda: len(futures), "points")
+        try:
+            for fut in watchdog.finished(list(futures)):
+                task = futures.pop(fut)
+                finish(watchdog.result(fut, f"point {task.index} (value {task.value:g})"))
+        finally:
+            client.cancel(list(futures))
 
 
 def _task_fields(task: PointTask) -> dict:
@@ -735,8 +737,10 @@ def _task_fields(task: PointTask) -> dict:
 
 def _run_continuation(ordered, done, finish, scheduler) -> None:
     """Sequential sweep, each value from the final state of the previous one."""
+    from opa._execution import Execution
+
     initial = None
-    client = None
+    client, own, watchdog = None, False, None
     try:
         for task in ordered:
             if task.index in done:
@@ -748,15 +752,17 @@ def _run_continuation(ordered, done, finish, scheduler) -> None:
                 result = compute_point(task)
             else:
                 if client is None:
-                    from distributed import Client
+                    from opa._execution import connect_scheduler
 
-                    client = scheduler if isinstance(scheduler, Client) else Client(scheduler)
-                result = client.submit(compute_point, task, pure=False).result()
+                    client, own = connect_scheduler(scheduler)
+                    watchdog = Execution().watchdog(client, lambda: 1, "points")
+                future = client.submit(compute_point, task, pure=False)
+                result = watchdog.result(future, f"point {task.index} (value {task.value:g})")
             finish(result)
             final = np.asarray(result["final"], dtype=float)
             initial = final if np.all(np.isfinite(final)) else None
     finally:
-        if client is not None and client is not scheduler:
+        if client is not None and own:
             client.close()
 
 

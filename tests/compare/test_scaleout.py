@@ -179,7 +179,7 @@ def test_a_silent_endpoint_is_refused_within_the_connect_timeout(tmp_path):
     import socket
     import time
 
-    from compare._scaleout import CONNECT_TIMEOUT
+    from opa._execution import CONNECT_TIMEOUT
 
     with socket.socket() as server:
         server.bind(("127.0.0.1", 0))
