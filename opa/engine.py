@@ -29,6 +29,14 @@ from opa._elements import (
     true_runs,
     uniform_edges,
 )
+from opa._execution import (
+    DaskError,
+    Execution,
+    Watchdog,
+    as_execution,
+    connect_scheduler,
+    take_execution,
+)
 from opa._gpu import check_device
 from opa._gpu import require as require_gpu
 from opa._lock import OutputLock
@@ -70,6 +78,8 @@ from opa.dynamics._sweep import local_executor, locate_setup, pool_shared, summa
     sweep_times
 
 __all__ = [
+    "DaskError", "Execution", "Watchdog", "as_execution", "connect_scheduler",
+    "take_execution",
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
