@@ -18,7 +18,12 @@ import time
 import numpy as np
 
 from opa import SolverOptions, preset
-from opa.dynamics._continuation import BIFURCATION_KINDS, continue_orbits, locate_period_doubling
+from opa.dynamics._continuation import (
+    BIFURCATION_KINDS,
+    ContinuationOptions,
+    continue_orbits,
+    locate_period_doubling,
+)
 from opa.dynamics._orbits import (
     ImpactSystem,
     lyapunov_benettin,
@@ -98,7 +103,7 @@ def impulses():
         t = time.time()
         down = continue_orbits(system, "c", 0.1, 0.06, depth=0)
         up = continue_orbits(system, "c", 0.1, 0.02, seed=0.05, depth=2 if tol > 1e-10 else 1,
-                             max_multiplier=100)
+                             continuation=ContinuationOptions(max_multiplier=100))
         print(f"  rtol = atol = {tol:g} ({time.time() - t:.1f} s)")
         print("   from c = 0.1 downwards:")
         _print(down)
@@ -107,7 +112,8 @@ def impulses():
     print("  pulse impulses (width 0.1), rtol 1e-10:")
     system = ImpactSystem(preset("3.1"), impulse="pulse",
                           options=SolverOptions(rtol=1e-10, atol=1e-10))
-    _print(continue_orbits(system, "c", 0.1, 0.02, seed=0.05, depth=1, max_multiplier=100))
+    _print(continue_orbits(system, "c", 0.1, 0.02, seed=0.05, depth=1,
+                           continuation=ContinuationOptions(max_multiplier=100)))
 
 
 def sigma():

@@ -66,6 +66,7 @@ def cmd_stability(args) -> int:
     from opa.dynamics._continuation import (  # noqa: E402 -- the paths are checked first, cheaply
         BIFURCATION_KINDS,
         Branch,
+        ContinuationOptions,
         branch_dataset,
         continue_orbits,
     )
@@ -86,8 +87,9 @@ def cmd_stability(args) -> int:
     if args.sweep:
         name, lo, hi, count = parse_branch_sweep(args.sweep)
         ds = continue_orbits(system, name, lo, hi, seed=args.seed_value, periods=periods,
-                             t0=args.t0, transient=args.transient, depth=args.depth,
-                             step=1.0 / count, max_step=1.0 / count, max_points=args.max_points,
+                             t0=args.t0, depth=args.depth, continuation=ContinuationOptions(
+                                 step=1.0 / count, max_step=1.0 / count,
+                                 max_points=args.max_points, transient=args.transient),
                              progress=not args.quiet)
         if not args.quiet:
             print(f"opa-mc stability: {ds.sizes['branch_id']} branch(es), {ds.sizes['point']} "

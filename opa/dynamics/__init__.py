@@ -8,6 +8,7 @@ imports ``mc`` or ``compare``.
 """
 
 from opa.dynamics._continuation import (
+    ContinuationOptions,
     Located,
     branch_dataset,
     continue_orbits,
@@ -34,6 +35,7 @@ from opa.dynamics._stochastic import stochastic_diagram
 from opa.dynamics._sweep import summary_lines, sweep
 
 __all__ = [
+    "ContinuationOptions",
     "ImpactSystem",
     "Located",
     "Motion",

@@ -571,22 +571,77 @@ def _interpolate(kind, branch, ia, ib):
 
 
 # --------------------------------------------------------------------------- branches
+def _check_positive(name: str, value) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not (
+            math.isfinite(value) and value > 0):
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class ContinuationOptions:
+    """The numerical settings of pseudo-arclength continuation, as
+    :class:`opa.SolverOptions` are those of the integrator (``continue_orbits``,
+    ``locate_bifurcations``).
+
+    Attributes
+    ----------
+    step, max_step : first and largest arclength step, in units of the interval length
+        (the state counts with its own scale); a step grows by 1.5 after an easy
+        correction, up to ``max_step``.
+    max_points : the most orbits on one branch.
+    max_multiplier : a branch is abandoned once a Floquet multiplier exceeds this in
+        modulus (far from an attractor, where nothing a diagram shows can happen).
+    switch_amplitude : distance along the -1 eigenvector from a period-doubling orbit to
+        the first orbit of the doubled branch.
+    tol : Newton tolerance of the shooting (None: ``default_tolerance(system)``).
+    transient : forcing periods integrated from a seed before its periodic orbit is
+        sought.
+
+    Examples
+    --------
+    >>> ContinuationOptions(step=0.01, max_points=100).max_step
+    0.05
+    >>> ContinuationOptions(step=0.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: step must be a finite number > 0, got 0.0
+    """
+
+    step: float = 0.02
+    max_step: float = 0.05
+    max_points: int = 500
+    max_multiplier: float = 1e3
+    switch_amplitude: float = 1e-3
+    tol: float | None = None
+    transient: int = 300
+
+    def __post_init__(self):
+        _check_steps(self.step, self.max_step, self.max_points)
+        for name in ("max_multiplier", "switch_amplitude") + (("tol",) if self.tol is not None
+                                                              else ()):
+            _check_positive(name, getattr(self, name))
+        check_count("transient", self.transient, 0)
+
+
+#: ``locate_bifurcations``' continuation: steps of 0.02 that do not grow, at most 300
+#: orbits on a branch, a branch abandoned beyond |mu| = 10 (no attractor is near)
+LOCATE_CONTINUATION = ContinuationOptions(max_step=0.02, max_points=300, max_multiplier=10.0)
+
+
 def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: float, *,
                     seed: float | None = None, guess=None, periods: int | None = None,
-                    t0: float = 0.0, transient: int = 300, depth: int = 1,
-                    step: float = 0.02, max_step: float = 0.05, max_points: int = 500,
-                    tol: float | None = None, xtol: float = 1e-10,
-                    switch_amplitude: float = 1e-3, max_multiplier: float = 1e3,
+                    t0: float = 0.0, depth: int = 1,
+                    continuation: ContinuationOptions | None = None, xtol: float = 1e-10,
                     progress: bool = False) -> xr.Dataset:
     """Branches of periodic orbits from ``start`` to ``stop`` with their bifurcations.
 
     The orbit at ``seed`` (default ``start``; ``periodic_orbit`` with ``guess``,
-    ``periods``, ``transient``) is continued to both ends of the interval by
-    pseudo-arclength continuation, stable and unstable parts alike. Every period
-    doubling is located to ``xtol`` in the parameter and, up to ``depth`` levels (where
-    one side of it is stable), the doubled branch (period 2k) is started from it and
-    followed to the end of the interval. Folds, grazings and impulse-impact points are
-    located along the branch (a fold where a doubled branch meets its parent is that
+    ``periods`` and the ``transient`` of ``continuation``) is continued to both ends of
+    the interval by pseudo-arclength continuation, stable and unstable parts alike. Every
+    period doubling is located to ``xtol`` in the parameter and, up to ``depth`` levels
+    (where one side of it is stable), the doubled branch (period 2k) is started from it
+    and followed to the end of the interval. Folds, grazings and impulse-impact points
+    are located along the branch (a fold where a doubled branch meets its parent is that
     parent's doubling); Neimark-Sacker points are interpolated. A branch ends at the
     interval's end, at ``max_points``, where a multiplier exceeds ``max_multiplier``,
     or where the map stops being smooth: an impact meeting an impulse time (marked
@@ -597,10 +652,13 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
     ----------
     system : the DMR or OPA system (its value of ``parameter`` is ignored).
     parameter : a model parameter name or ``sigma``.
-    step, max_step : first and largest arclength step, in units of the interval length
-        (the state counts with its own scale).
-    tol : Newton tolerance (default ``default_tolerance(system)``).
-    switch_amplitude : distance along the -1 eigenvector of the first doubled orbit.
+    seed, guess, periods : where the first orbit is sought (``periodic_orbit``).
+    t0 : the section time.
+    depth : levels of period-doubled branches followed.
+    continuation : the continuation's steps, limits and Newton tolerance
+        (:class:`ContinuationOptions`; default ``ContinuationOptions()``).
+    xtol : tolerance of the located parameter values.
+    progress : print a line per branch.
 
     Returns
     -------
@@ -621,145 +679,214 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
     if start == stop:
         raise ValueError(f"start and stop must differ, got {start}")
     depth = check_count("depth", depth, 0)
-    _check_steps(step, max_step, max_points)
+    continuation = _check_continuation(continuation, ContinuationOptions())
     t0 = check_time("t0", t0, system.forcing_period)
     bounds = (min(start, stop), max(start, stop))
-    tol = default_tolerance(system) if tol is None else tol
+    tol = default_tolerance(system) if continuation.tol is None else continuation.tol
     seed = start if seed is None else float(seed)
     if not bounds[0] <= seed <= bounds[1]:
         raise ValueError(f"seed must lie between start and stop, got {seed}")
     sys0 = system.with_parameter(parameter, seed)
-    orbit = periodic_orbit(sys0, guess, periods=periods, t0=t0, transient=transient, tol=tol)
-    branches, bifurcations = _trace(
-        system, parameter, bounds, sys0, orbit, ends=(stop, start), depth=depth, step=step,
-        max_step=max_step, max_points=max_points, tol=tol, xtol=xtol,
-        switch_amplitude=switch_amplitude, max_multiplier=max_multiplier, progress=progress)
-    return branch_dataset(system, parameter, branches, bifurcations, t0=t0,
+    orbit = periodic_orbit(sys0, guess, periods=periods, t0=t0,
+                           transient=continuation.transient, tol=tol)
+    tracer = _Tracer(system, parameter, bounds, depth=depth, continuation=continuation,
+                     tol=tol, xtol=xtol, progress=progress)
+    tracer.trace(sys0, orbit, ends=(stop, start))
+    return branch_dataset(system, parameter, tracer.branches, tracer.bifurcations, t0=t0,
                           settings=dict(start=start, stop=stop, seed=seed, depth=depth,
                                         xtol=xtol, tol=tol))
 
 
-def _trace(system: ImpactSystem, parameter: str, bounds: tuple, sys0: ImpactSystem,
-           orbit: PeriodicOrbit, *, ends: tuple, depth: int, step: float, max_step: float,
-           max_points: int, tol: float, xtol: float, switch_amplitude: float,
-           max_multiplier: float, progress: bool = False) -> tuple[list, list]:
-    """The branches through ``orbit`` (at ``sys0``) over ``bounds`` and their bifurcations.
+def _check_continuation(continuation, default: ContinuationOptions) -> ContinuationOptions:
+    if continuation is None:
+        return default
+    if not isinstance(continuation, ContinuationOptions):
+        raise ValueError(f"continuation must be ContinuationOptions or None, got "
+                         f"{continuation!r:.60}")
+    return continuation
 
-    The work of ``continue_orbits`` once its first orbit is found: follow it to each of
-    ``ends`` in turn (the ends of ``bounds``), locate every event between consecutive
-    orbits, switch onto doubled branches up to ``depth`` and across impulse-impact
-    borders. Returns the lists of ``Branch`` and ``Bifurcation``.
+
+class _Tracer:
+    """The branches through a first orbit over ``bounds`` and their bifurcations.
+
+    The work of ``continue_orbits`` once its first orbit is found (:meth:`trace`): follow
+    it to each end in turn, locate every event between consecutive orbits, switch onto
+    doubled branches up to ``depth`` and across impulse-impact borders. The lists of
+    ``Branch`` and ``Bifurcation`` grow in ``branches`` and ``bifurcations``; a branch
+    waits in ``queue`` as (system, orbit, end, tangent, parent branch, doubling level).
     """
-    seed = sys0.parameter(parameter)
-    branches: list[Branch] = []
-    bifurcations: list[Bifurcation] = []
-    queue = [(sys0, orbit, end, None, -1, 0) for end in ends if end != seed]
-    crossings, max_crossings = 0, 20
 
-    def room() -> bool:
-        """Whether one more branch may be queued (MAX_BRANCHES bounds the loop below)."""
-        if len(branches) + len(queue) < MAX_BRANCHES:
+    MAX_CROSSINGS = 20  # branches started across impulse-impact borders, per trace
+
+    def __init__(self, system: ImpactSystem, parameter: str, bounds: tuple, *, depth: int,
+                 continuation: ContinuationOptions, tol: float, xtol: float,
+                 progress: bool = False):
+        self.system, self.parameter, self.bounds = system, parameter, bounds
+        self.depth, self.continuation = depth, continuation
+        self.tol, self.xtol, self.progress = tol, xtol, progress
+        self.branches: list[Branch] = []
+        self.bifurcations: list[Bifurcation] = []
+        self.queue: list[tuple] = []
+        self.crossings = 0
+
+    def trace(self, sys0: ImpactSystem, orbit: PeriodicOrbit, ends: tuple) -> None:
+        """Follow ``orbit`` (at ``sys0``) to each of ``ends``, and every branch it leads
+        to; the branches and bifurcations found are added to those found before."""
+        seed = sys0.parameter(self.parameter)
+        self.queue = [(sys0, orbit, end, None, -1, 0) for end in ends if end != seed]
+        self.crossings = 0
+        while self.queue:
+            sys_b, orb, target, tangent, parent, level = self.queue.pop(0)
+            b_id, branch, events = self._follow(sys_b, orb, target, tangent, parent)
+            for kind, ia, ib in events:
+                if kind == "period-doubling":
+                    bif = self._period_doubling(branch, b_id, ia, ib, level)
+                else:
+                    bif = self._event(kind, branch, b_id, ia, ib)
+                    if bif is None:
+                        continue
+                    if bif.kind == "impulse-impact":
+                        self._cross(bif, branch, b_id, target, level)
+                self.bifurcations.append(bif)
+
+    def _room(self) -> bool:
+        """Whether one more branch may be queued (MAX_BRANCHES bounds the trace)."""
+        if len(self.branches) + len(self.queue) < MAX_BRANCHES:
             return True
         note = f"; no further branches (MAX_BRANCHES = {MAX_BRANCHES} reached)"
-        if not branches[-1].end.endswith(note):
-            branches[-1].end += note
+        if not self.branches[-1].end.endswith(note):
+            self.branches[-1].end += note
         return False
 
-    while queue:
-        sys_b, orb, target, tangent, parent, level = queue.pop(0)
-        branch, events = follow(sys_b, parameter, orb, target, step=step, max_step=max_step,
-                                max_points=max_points, tol=tol, bounds=bounds,
-                                initial_tangent=tangent, max_multiplier=max_multiplier)
+    def _follow(self, sys_b, orbit, target, tangent, parent) -> tuple[int, Branch, list]:
+        """One branch followed to ``target`` (``follow``) and recorded: (its index, the
+        branch, its raw events)."""
+        c = self.continuation
+        branch, events = follow(sys_b, self.parameter, orbit, target, step=c.step,
+                                max_step=c.max_step, max_points=c.max_points, tol=self.tol,
+                                bounds=self.bounds, initial_tangent=tangent,
+                                max_multiplier=c.max_multiplier)
         branch.parent = parent
-        b_id = len(branches)
-        branches.append(branch)
-        if progress:
+        b_id = len(self.branches)
+        self.branches.append(branch)
+        if self.progress:
             print(f"  branch {b_id}: period {branch.periods}, {len(branch.orbits)} points, "
-                  f"{parameter} in [{min(branch.values):.6g}, {max(branch.values):.6g}]; "
-                  f"{branch.end}")
-        for kind, ia, ib in events:
-            oa, ob = branch.orbits[ia], branch.orbits[ib]
-            if kind == "period-doubling":
-                a = (branch.values[ia], oa)
-                b = (branch.values[ib], ob)
-                try:
-                    o_pd = locate_period_doubling(system, parameter, a, b, xtol=xtol, tol=tol)
+                  f"{self.parameter} in [{min(branch.values):.6g}, "
+                  f"{max(branch.values):.6g}]; {branch.end}")
+        return b_id, branch, events
+
+    def _period_doubling(self, branch: Branch, b_id: int, ia: int, ib: int,
+                         level: int) -> Bifurcation:
+        """The doubling between orbits ``ia``, ``ib`` located (or interpolated, if it
+        cannot be), and the doubled branch queued from it when it changes an attractor
+        and ``level`` is below ``depth``."""
+        parameter, oa, ob = self.parameter, branch.orbits[ia], branch.orbits[ib]
+        a, b = (branch.values[ia], oa), (branch.values[ib], ob)
+        try:
+            o_pd = locate_period_doubling(self.system, parameter, a, b, xtol=self.xtol,
+                                          tol=self.tol)
+            located = True
+            value = o_pd.system.parameter(parameter)
+        except (ConvergenceError, SimulationError, ValueError):
+            o_pd, located, value = None, False, 0.5 * (a[0] + b[0])
+        bif = Bifurcation("period-doubling", value, b_id, located, o_pd,
+                          attracting=oa.stable or ob.stable, between=(ia, ib))
+        if o_pd is None:
+            return bif
+        bif.x, bif.v = float(o_pd.state[0]), float(o_pd.state[o_pd.system.order + 1])
+        if level < self.depth and bif.attracting:
+            doubled = (_doubled_seed(o_pd, parameter, self.continuation.switch_amplitude,
+                                     self.tol) if self._room() else None)
+            if doubled is not None:
+                sys2, o2, ahead = doubled
+                bif.child = len(self.branches) + len(self.queue)
+                end = self.bounds[1] if ahead else self.bounds[0]
+                self.queue.append((sys2, o2, end, None, b_id, level + 1))
+        return bif
+
+    def _event(self, kind: str, branch: Branch, b_id: int, ia: int,
+               ib: int) -> Bifurcation | None:
+        """Any other event between orbits ``ia``, ``ib`` (``ia == ib``: the branch's
+        end) as a bifurcation, located where it can be; None where it is none (an end
+        for no reason of the map, a branch of one orbit, a collapse onto an orbit that
+        is not the parent's doubling)."""
+        oa, ob = branch.orbits[ia], branch.orbits[ib]
+        if kind == "end":
+            kind = _end_kind(branch, ob)
+            if kind is None:
+                return None
+        if ia == ib and len(branch.orbits) < 2 and kind != "collapse":
+            return None  # ends at its first orbit: nothing to place the end by
+        value, o, located = self._locate(kind, branch, ia, ib)
+        if kind in ("fold", "collapse"):  # the parent's doubling (a doubled branch)?
+            d = (max(abs(value - branch.values[ia]), abs(value - branch.values[ib]))
+                 if kind == "fold" else abs(value - branch.values[max(ib - 1, 0)]))
+            o_pd = _collapsed(self.system, self.parameter, ob, value, d, xtol=self.xtol,
+                              tol=self.tol)
+            if o_pd is None and kind == "collapse":
+                return None
+            if o_pd is not None:
+                kind, o, located = "period-doubling", o_pd, True
+                value = o_pd.system.parameter(self.parameter)
+        return Bifurcation(kind, value, b_id, located, o if located else None,
+                           x=float(o.state[0]), v=float(o.state[o.system.order + 1]),
+                           attracting=oa.stable or ob.stable, between=(ia, ib))
+
+    def _locate(self, kind: str, branch: Branch, ia: int, ib: int) -> tuple:
+        """(value, orbit, located) of a fold (root-found), a grazing or the end of a
+        branch (extrapolated, ``locate_edge``); where that fails or does not apply, the
+        interpolated value and the orbit ``ia``."""
+        system, parameter, tol, xtol = self.system, self.parameter, self.tol, self.xtol
+        oa, ob = branch.orbits[ia], branch.orbits[ib]
+        located, o = False, oa
+        value = branch.values[ib] if kind == "collapse" else _interpolate(kind, branch, ia, ib)
+        try:
+            if kind == "fold":
+                o = locate_fold(system, parameter, (branch.values[ia], oa),
+                                (branch.values[ib], ob),
+                                scale=self.bounds[1] - self.bounds[0], tol=tol)
+                located, value = True, o.system.parameter(parameter)
+            elif kind == "grazing" and ia != ib:
+                # approach from the side without the grazing impact (smooth)
+                i, j = (ia - 1, ia) if oa.impacts < ob.impacts else (ib + 1, ib)
+                if 0 <= i < len(branch.orbits):
+                    value, o = locate_edge(
+                        system, parameter, (branch.values[i], branch.orbits[i]),
+                        (branch.values[j], branch.orbits[j]), _gap, xtol=xtol, tol=tol)
                     located = True
-                    value = o_pd.system.parameter(parameter)
-                except (ConvergenceError, SimulationError, ValueError):
-                    o_pd, located, value = None, False, 0.5 * (a[0] + b[0])
-                bif = Bifurcation("period-doubling", value, b_id, located, o_pd,
-                                  attracting=oa.stable or ob.stable, between=(ia, ib))
-                if o_pd is not None:
-                    bif.x, bif.v = float(o_pd.state[0]), float(o_pd.state[o_pd.system.order + 1])
-                    if level < depth and bif.attracting:
-                        doubled = (_doubled_seed(o_pd, parameter, switch_amplitude, tol)
-                                   if room() else None)
-                        if doubled is not None:
-                            sys2, o2, ahead = doubled
-                            bif.child = len(branches) + len(queue)
-                            end = bounds[1] if ahead else bounds[0]
-                            queue.append((sys2, o2, end, None, b_id, level + 1))
-                bifurcations.append(bif)
-            else:
-                if kind == "end":
-                    if ob.impulse_separation < NEAR:
-                        kind = "impulse-impact"
-                        branch.end += "; an impact meets an impulse time (map discontinuous)"
-                    elif ob.min_impact_velocity < NEAR or ob.min_gap < NEAR:
-                        kind = "grazing"
-                        branch.end += "; grazing"
-                    else:
-                        continue
-                if ia == ib and len(branch.orbits) < 2 and kind != "collapse":
-                    continue  # ends at its first orbit: nothing to place the end by
-                located, o = False, oa
-                value = branch.values[ib] if kind == "collapse" else _interpolate(
-                    kind, branch, ia, ib)
-                try:
-                    if kind == "fold":
-                        o = locate_fold(system, parameter, (branch.values[ia], oa),
-                                        (branch.values[ib], ob),
-                                        scale=bounds[1] - bounds[0], tol=tol)
-                        located, value = True, o.system.parameter(parameter)
-                    elif kind == "grazing" and ia != ib:
-                        # approach from the side without the grazing impact (smooth)
-                        i, j = (ia - 1, ia) if oa.impacts < ob.impacts else (ib + 1, ib)
-                        if 0 <= i < len(branch.orbits):
-                            value, o = locate_edge(
-                                system, parameter, (branch.values[i], branch.orbits[i]),
-                                (branch.values[j], branch.orbits[j]), _gap, xtol=xtol,
-                                tol=tol)
-                            located = True
-                    elif kind != "collapse" and ia == ib and len(branch.orbits) > 1:
-                        measure = (_separation if kind == "impulse-impact" else _graze_measure)
-                        value, o = locate_edge(
-                            system, parameter, (branch.values[-2], branch.orbits[-2]),
-                            (branch.values[-1], branch.orbits[-1]), measure, xtol=xtol, tol=tol)
-                        located = True
-                except (ConvergenceError, SimulationError, ValueError):
-                    located, o = False, oa
-                if kind in ("fold", "collapse"):  # the parent's doubling (a doubled branch)?
-                    d = (max(abs(value - branch.values[ia]), abs(value - branch.values[ib]))
-                         if kind == "fold" else abs(value - branch.values[max(ib - 1, 0)]))
-                    o_pd = _collapsed(system, parameter, ob, value, d, xtol=xtol, tol=tol)
-                    if o_pd is None and kind == "collapse":
-                        continue
-                    if o_pd is not None:
-                        kind, o, located = "period-doubling", o_pd, True
-                        value = o_pd.system.parameter(parameter)
-                bif = Bifurcation(kind, value, b_id, located, o if located else None,
-                                  x=float(o.state[0]), v=float(o.state[o.system.order + 1]),
-                                  attracting=oa.stable or ob.stable, between=(ia, ib))
-                if kind == "impulse-impact" and crossings < max_crossings and room():
-                    # the orbit may go on beyond the discontinuity with the events swapped
-                    across = _cross_impulse(system, parameter, branch, value, bounds, tol)
-                    if across is not None:
-                        crossings += 1
-                        bif.child = len(branches) + len(queue)
-                        queue.append((across[0], across[1], target, None, b_id, level))
-                bifurcations.append(bif)
-    return branches, bifurcations
+            elif kind != "collapse" and ia == ib and len(branch.orbits) > 1:
+                measure = (_separation if kind == "impulse-impact" else _graze_measure)
+                value, o = locate_edge(
+                    system, parameter, (branch.values[-2], branch.orbits[-2]),
+                    (branch.values[-1], branch.orbits[-1]), measure, xtol=xtol, tol=tol)
+                located = True
+        except (ConvergenceError, SimulationError, ValueError):
+            located, o = False, oa
+        return value, o, located
+
+    def _cross(self, bif: Bifurcation, branch: Branch, b_id: int, target: float,
+               level: int) -> None:
+        """Queue the branch beyond an impulse-impact border, if the orbit goes on there
+        with the events swapped (at most MAX_CROSSINGS times per trace)."""
+        if self.crossings < self.MAX_CROSSINGS and self._room():
+            across = _cross_impulse(self.system, self.parameter, branch, bif.value,
+                                    self.bounds, self.tol)
+            if across is not None:
+                self.crossings += 1
+                bif.child = len(self.branches) + len(self.queue)
+                self.queue.append((across[0], across[1], target, None, b_id, level))
+
+
+def _end_kind(branch: Branch, last: PeriodicOrbit) -> str | None:
+    """Why a branch ended at ``last``, as a bifurcation kind (its ``end`` told so), or
+    None where the map gives no reason (the corrector failed, a non-smooth turn)."""
+    if last.impulse_separation < NEAR:
+        branch.end += "; an impact meets an impulse time (map discontinuous)"
+        return "impulse-impact"
+    if last.min_impact_velocity < NEAR or last.min_gap < NEAR:
+        branch.end += "; grazing"
+        return "grazing"
+    return None
 
 
 def _cross_impulse(system, parameter, branch, border, bounds, tol):
@@ -1116,10 +1243,9 @@ def check_locatable(system: ImpactSystem, parameter: str, lo: float, hi: float) 
 
 def locate_bifurcations(oscillator: Oscillator | ImpactSystem, parameter: str, lo: float,
                         hi: float, *, options: SolverOptions | None = None, seeds=9,
-                        depth: int = 2, step: float = 0.02, max_points: int = 300,
-                        max_multiplier: float = 10.0, transient: int = 300,
-                        tol: float | None = None, xtol: float = 1e-10,
-                        unstable: bool = False, progress: bool = False) -> list[Located]:
+                        depth: int = 2, continuation: ContinuationOptions | None = None,
+                        xtol: float = 1e-10, unstable: bool = False,
+                        progress: bool = False) -> list[Located]:
     """Bifurcations of the periodic attractors in ``lo <= parameter <= hi``, located.
 
     At each seed value the attractor is found (``periodic_orbit``); a stable orbit not
@@ -1147,19 +1273,20 @@ def locate_bifurcations(oscillator: Oscillator | ImpactSystem, parameter: str, l
         points)``, where ``points`` (p, 2) are the p stroboscopic (x_0, v_0) points of
         the period-p motion observed there: a seed whose points lie on a branch already
         followed is skipped without any integration. A value seeds the orbit reached
-        after ``transient`` periods from x0, v0; a state, the orbit reached from it.
-        Unstable and non-periodic seeds are skipped, and so are orbits on a branch
-        already followed.
+        after ``continuation.transient`` periods from x0, v0; a state, the orbit reached
+        from it. Unstable and non-periodic seeds are skipped, and so are orbits on a
+        branch already followed.
     depth : levels of period-doubled branches followed (2: periods k, 2k, 4k, so three
         doublings located).
-    step : arclength step of the continuation (scaled by the interval length).
-    max_points : largest number of orbits on one branch.
-    max_multiplier : a branch is abandoned once a multiplier exceeds this in modulus
-        (far from an attractor, where nothing a diagram shows can happen).
-    tol, xtol : Newton tolerance (default ``default_tolerance``) and the tolerance of
-        the located parameter values.
+    continuation : the continuation's steps, limits, Newton tolerance and transient
+        (:class:`ContinuationOptions`; default ``LOCATE_CONTINUATION``: arclength steps
+        of 0.02 that do not grow, at most 300 orbits on a branch, a branch abandoned once
+        a multiplier exceeds 10 in modulus, far from an attractor, where nothing a
+        diagram shows can happen).
+    xtol : the tolerance of the located parameter values.
     unstable : also report bifurcations between two unstable orbits (default: only those
         next to a stable orbit, which change an attractor).
+    progress : print a line per seed and per branch.
 
     Returns
     -------
@@ -1176,14 +1303,41 @@ def locate_bifurcations(oscillator: Oscillator | ImpactSystem, parameter: str, l
     >>> [(p.kind, round(p.value, 7), p.period) for p in pts]
     [('period-doubling', 0.0891223, 1)]
     """
+    system = _impact_system(oscillator, options)
+    lo, hi = _check_interval(lo, hi)
+    depth = check_count("depth", depth, 0)
+    continuation = _check_continuation(continuation, LOCATE_CONTINUATION)
+    _check_positive("xtol", xtol)
+    check_locatable(system, parameter, lo, hi)
+    tol = default_tolerance(system) if continuation.tol is None else continuation.tol
+    branches: list[Branch] = []
+    found: list[Located] = []
+    for seed in _seed_items(seeds, lo, hi):
+        start = _attractor_to_follow(system, parameter, seed, branches, continuation.transient,
+                                     tol, progress)
+        if start is None:
+            continue
+        tracer = _Tracer(system, parameter, (lo, hi), depth=depth, continuation=continuation,
+                         tol=tol, xtol=xtol, progress=progress)
+        tracer.trace(*start, ends=(lo, hi))
+        branches += tracer.branches
+        found += [_located(bif, tracer.branches[bif.branch], parameter)
+                  for bif in tracer.bifurcations if bif.attracting or unstable]
+    return _distinct(found, hi - lo)
+
+
+def _impact_system(oscillator, options: SolverOptions | None) -> ImpactSystem:
+    """The ImpactSystem of ``locate_bifurcations``' first argument."""
     if isinstance(oscillator, ImpactSystem):
         if options is not None:
             raise ValueError("options belong to the ImpactSystem: give them there")
-        system = oscillator
-    elif isinstance(oscillator, System):
-        system = ImpactSystem.of(oscillator, options=options)
-    else:
-        system = ImpactSystem(oscillator, options=options or SolverOptions())
+        return oscillator
+    if isinstance(oscillator, System):
+        return ImpactSystem.of(oscillator, options=options)
+    return ImpactSystem(oscillator, options=options or SolverOptions())
+
+
+def _check_interval(lo, hi) -> tuple[float, float]:
     for name, value in (("lo", lo), ("hi", hi)):
         if isinstance(value, bool) or not isinstance(value, (int, float, np.number)) or not (
                 math.isfinite(value)):
@@ -1191,62 +1345,59 @@ def locate_bifurcations(oscillator: Oscillator | ImpactSystem, parameter: str, l
     lo, hi = float(lo), float(hi)
     if not lo < hi:
         raise ValueError(f"lo must be < hi, got lo = {lo:g}, hi = {hi:g}")
-    depth = check_count("depth", depth, 0)
-    _check_steps(step, step, max_points)
-    for name, value in (("max_multiplier", max_multiplier), ("xtol", xtol)):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
-    check_locatable(system, parameter, lo, hi)
-    tol = default_tolerance(system) if tol is None else tol
-    branches: list[Branch] = []
-    found: list[Located] = []
-    n = system.order + 1
-    for value, state, time_, points in _seed_items(seeds, lo, hi):
-        if points is not None and _known(points, value, branches):
-            continue  # the motion seen there is on a branch already followed
-        sys_v = system.with_parameter(parameter, value)
-        try:
-            orbit = _seed_orbit(sys_v, state, time_, transient, tol)
-        except (ConvergenceError, SimulationError, ValueError) as err:
-            if progress:
-                print(f"  seed {parameter} = {value:.6g}: no periodic orbit ({err})")
-            continue
-        if not orbit.stable or _known(orbit.points[:, [0, n]], value, branches):
-            if progress:
-                why = "unstable" if not orbit.stable else "on a branch already followed"
-                print(f"  seed {parameter} = {value:.6g}: {orbit.label} orbit {why}")
-            continue
+    return lo, hi
+
+
+def _attractor_to_follow(system: ImpactSystem, parameter: str, seed: tuple, branches: list,
+                         transient: int, tol: float, progress: bool) -> tuple | None:
+    """(system, orbit) of the attractor at a seed (``_seed_items``), or None where there is
+    none to follow: its points or its orbit on one of ``branches`` already, no periodic
+    orbit, or an unstable one."""
+    value, state, time_, points = seed
+    if points is not None and _known(points, value, branches):
+        return None  # the motion seen there is on a branch already followed
+    sys_v = system.with_parameter(parameter, value)
+    try:
+        orbit = _seed_orbit(sys_v, state, time_, transient, tol)
+    except (ConvergenceError, SimulationError, ValueError) as err:
         if progress:
-            print(f"  seed {parameter} = {value:.6g}: {orbit.label} orbit, following it")
-        new, bifs = _trace(system, parameter, (lo, hi), sys_v, orbit, ends=(lo, hi),
-                           depth=depth, step=step, max_step=step, max_points=max_points,
-                           tol=tol, xtol=xtol, switch_amplitude=1e-3,
-                           max_multiplier=max_multiplier, progress=progress)
-        branches += new
-        for bif in bifs:
-            if not (bif.attracting or unstable):
-                continue
-            branch = new[bif.branch]
-            o = bif.orbit or branch.orbits[bif.between[0]]
-            found.append(Located(bif.kind, float(bif.value), o.periods,
-                                 _critical(bif.kind, o), bool(bif.located),
-                                 _note(bif, branch, parameter), x=bif.x, v=bif.v))
-    found.sort(key=lambda p: p.value)
+            print(f"  seed {parameter} = {value:.6g}: no periodic orbit ({err})")
+        return None
+    n = system.order + 1
+    if not orbit.stable or _known(orbit.points[:, [0, n]], value, branches):
+        if progress:
+            why = "unstable" if not orbit.stable else "on a branch already followed"
+            print(f"  seed {parameter} = {value:.6g}: {orbit.label} orbit {why}")
+        return None
+    if progress:
+        print(f"  seed {parameter} = {value:.6g}: {orbit.label} orbit, following it")
+    return sys_v, orbit
+
+
+def _located(bif: Bifurcation, branch: Branch, parameter: str) -> Located:
+    o = bif.orbit or branch.orbits[bif.between[0]]
+    return Located(bif.kind, float(bif.value), o.periods, _critical(bif.kind, o),
+                   bool(bif.located), _note(bif, branch, parameter), x=bif.x, v=bif.v)
+
+
+def _distinct(found: list, length: float) -> list[Located]:
+    """The points by increasing value, each once (the same point may be reached from two
+    seeds: same kind and period within 1e-6 of the interval's ``length``)."""
+    found = sorted(found, key=lambda p: p.value)
     out: list[Located] = []
-    for p in found:  # the same point reached from two seeds
+    for p in found:
         if not any(q.kind == p.kind and q.period == p.period
-                   and abs(q.value - p.value) <= 1e-6 * (hi - lo) for q in out):
+                   and abs(q.value - p.value) <= 1e-6 * length for q in out):
             out.append(p)
     return out
-
-
-
 
 
 __all__ = [
     "Bifurcation",
     "Branch",
     "BIFURCATION_KINDS",
+    "ContinuationOptions",
+    "LOCATE_CONTINUATION",
     "Located",
     "check_locatable",
     "follow",

@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
-from opa import _kernel as K
-from opa.dynamics._continuation import continue_orbits
+from opa import _kernel as kernel
+from opa.dynamics._continuation import ContinuationOptions, continue_orbits
 from opa.dynamics._sections import impulse_times, stroboscopic_mask
 from opa._run import SimulationError
 from tests.conftest import kernel_inputs, rule
@@ -77,7 +77,7 @@ def run_dmr_kernel(osc: Oscillator, times, options: SolverOptions | None = None)
     inputs = kernel_inputs(osc, options or SolverOptions())
     p, cfg = inputs.p, inputs.cfg
     out, log = np.empty((len(times), 2)), np.empty((64, 3))
-    status, _, _, n_steps, _ = K.run_one(
+    status, _, _, n_steps, _ = kernel.run_one(
         np.array([osc.x0, osc.v0]), np.asarray(times, dtype=float), p, cfg,
         *rule(inputs), 1e-10, 1e-10, out, log)
     return status, n_steps, out
@@ -100,39 +100,40 @@ def finishes_or_fails_cleanly(run):
 
 
 def test_status_codes_are_distinct_and_say_where_and_why():
-    codes = [K.OK, K.MAX_STEPS, K.STEP_COLLAPSE, K.DIVERGED, K.ESCAPED, K.BAD_TIME, K.SKIPPED]
+    codes = [kernel.OK, kernel.MAX_STEPS, kernel.STEP_COLLAPSE, kernel.DIVERGED, kernel.ESCAPED,
+             kernel.BAD_TIME, kernel.SKIPPED]
     assert len(set(codes)) == len(codes)
-    assert set(K.STATUS_MESSAGES) == set(codes)
-    assert "escaped" in K.STATUS_MESSAGES[K.ESCAPED]
-    assert "non-finite" in K.STATUS_MESSAGES[K.DIVERGED]
-    assert "not finite" in K.STATUS_MESSAGES[K.BAD_TIME]
+    assert set(kernel.STATUS_MESSAGES) == set(codes)
+    assert "escaped" in kernel.STATUS_MESSAGES[kernel.ESCAPED]
+    assert "non-finite" in kernel.STATUS_MESSAGES[kernel.DIVERGED]
+    assert "not finite" in kernel.STATUS_MESSAGES[kernel.BAD_TIME]
 
 
 def test_state_check_catches_nan_that_max_would_drop():
     bound = 10.0
-    assert K.state_status(np.array([1.0, -2.0]), 2, bound) == K.OK
-    assert K.state_status(np.array([1.0, np.nan]), 2, bound) == K.DIVERGED
-    assert K.state_status(np.array([np.nan, 1.0]), 2, bound) == K.DIVERGED
-    assert K.state_status(np.array([-np.inf, 1.0]), 2, bound) == K.DIVERGED
-    assert K.state_status(np.array([1.0, -10.0]), 2, bound) == K.ESCAPED
-    assert K.state_status(np.array([11.0, np.nan]), 2, bound) == K.DIVERGED
+    assert kernel.state_status(np.array([1.0, -2.0]), 2, bound) == kernel.OK
+    assert kernel.state_status(np.array([1.0, np.nan]), 2, bound) == kernel.DIVERGED
+    assert kernel.state_status(np.array([np.nan, 1.0]), 2, bound) == kernel.DIVERGED
+    assert kernel.state_status(np.array([-np.inf, 1.0]), 2, bound) == kernel.DIVERGED
+    assert kernel.state_status(np.array([1.0, -10.0]), 2, bound) == kernel.ESCAPED
+    assert kernel.state_status(np.array([11.0, np.nan]), 2, bound) == kernel.DIVERGED
     # the variational check: the state escapes; the tangent may be large but finite
     z = np.array([1.0, 2.0, 1e200, -1e200])
-    assert K.state_status(z, 2, bound) == K.OK
+    assert kernel.state_status(z, 2, bound) == kernel.OK
     z[3] = np.nan
-    assert K.state_status(z, 2, bound) == K.DIVERGED
-    assert K.state_status(np.array([1.0, 20.0, 0.0, 0.0]), 2, bound) == K.ESCAPED
+    assert kernel.state_status(z, 2, bound) == kernel.DIVERGED
+    assert kernel.state_status(np.array([1.0, 20.0, 0.0, 0.0]), 2, bound) == kernel.ESCAPED
 
 
-@pytest.mark.parametrize("method", [K.METHOD_DP5, K.METHOD_DOP853])
+@pytest.mark.parametrize("method", [kernel.METHOD_DP5, kernel.METHOD_DOP853])
 @pytest.mark.parametrize("bad", [np.nan, np.inf])
 def test_error_norm_rejects_a_non_finite_trial_step(bad, method):
     y = np.array([0.5, -0.5])
-    stages = np.zeros((K.K_ROWS, 2))
+    stages = np.zeros((kernel.K_ROWS, 2))
     y_new = np.array([0.5, bad])
-    assert K.error_norm(method, y, y_new, stages, 0.1, 1e-10, 1e-10) == np.inf
-    stages[K.last_stage(method), 0] = bad
-    assert K.error_norm(method, y, y, stages, 0.1, 1e-10, 1e-10) == np.inf
+    assert kernel.error_norm(method, y, y_new, stages, 0.1, 1e-10, 1e-10) == np.inf
+    stages[kernel.last_stage(method), 0] = bad
+    assert kernel.error_norm(method, y, y, stages, 0.1, 1e-10, 1e-10) == np.inf
 
 
 def test_escape_bound_follows_the_documented_formula():
@@ -142,9 +143,9 @@ def test_escape_bound_follows_the_documented_formula():
     force = 2.0 + 10.0 * 1.5
     a = osc.a
     expected = 1e3 * (1.0 + 1.5 + 0.3 + force * (1.0 + 1.0 / 2.8 + 1.0 / 2.8**2 + 1.0 / a))
-    assert K.escape_bound(y0, p) == pytest.approx(expected, rel=1e-14)
-    p[K.P_A] = 0.0  # no restoring force, no scale: nothing escapes
-    assert K.escape_bound(y0, p) == np.inf
+    assert kernel.escape_bound(y0, p) == pytest.approx(expected, rel=1e-14)
+    p[kernel.P_A] = 0.0  # no restoring force, no scale: nothing escapes
+    assert kernel.escape_bound(y0, p) == np.inf
 
 
 def test_a_weak_spring_is_not_an_escape():
@@ -173,7 +174,7 @@ def test_paper_cases_stay_far_inside_the_escape_bound(section):
     """The bound never fires on the paper's cases: they stay 100 times below it."""
     osc = preset(section)
     p = kernel_inputs(osc, SolverOptions()).p
-    bound = K.escape_bound(np.array([osc.x0, osc.v0]), p)
+    bound = kernel.escape_bound(np.array([osc.x0, osc.v0]), p)
     ds = simulate_dmr(osc, periods=100, per_period=16)
     assert 100.0 * max(np.abs(ds.x).max(), np.abs(ds.v).max()) < bound
 
@@ -214,7 +215,7 @@ def test_huge_impulse_on_section_3_1_fails_cleanly():
         got = finishes_or_fails_cleanly(lambda: simulate_dmr(osc, periods=5))
     assert isinstance(got, SimulationError)  # v jumps to 1e12: mu v^3 cannot be resolved
     status, _, out = run_dmr_kernel(osc, np.linspace(0.0, 5 * osc.forcing_period, 6))
-    assert status in (K.DIVERGED, K.STEP_COLLAPSE, K.ESCAPED)
+    assert status in (kernel.DIVERGED, kernel.STEP_COLLAPSE, kernel.ESCAPED)
     assert np.isnan(out[-1]).all()
 
 
@@ -243,7 +244,7 @@ def test_runaway_with_negative_cubic_stiffness_escapes_quickly():
     times = np.linspace(0.0, 50 * osc.forcing_period, 51)
     with within(QUICK):
         status, n_steps, out = run_dmr_kernel(osc, times)
-    assert status == K.ESCAPED
+    assert status == kernel.ESCAPED
     assert n_steps < 3e7  # well under SolverOptions().max_steps = 5e7
     assert np.isnan(out[-1]).all()
     # through the Python layer the runaway guard (1e6 steps over 50 periods) ends it first
@@ -329,16 +330,16 @@ def test_kernels_refuse_non_finite_times_at_once():
     for bad in (np.nan, np.inf):
         with within(QUICK):
             status, _, out = run_dmr_kernel(osc, np.array([0.0, 1.0, bad]))
-        assert status == K.BAD_TIME and np.isnan(out).all()
+        assert status == kernel.BAD_TIME and np.isnan(out).all()
     system = ImpactSystem(osc)
     p, cfg, (nodes, weights, U) = system._packed.p, system._packed.cfg, rule(system._packed)
     for times in (np.array([0.0, np.nan]), np.array([np.nan, 1.0]), np.array([0.0, np.inf])):
         z = np.array([-1.0, 0.0])
-        out, stats, log = np.empty((2, 2)), np.empty((1, K.N_STATS)), np.empty((4, 3))
+        out, stats, log = np.empty((2, 2)), np.empty((1, kernel.N_STATS)), np.empty((4, 3))
         with within(QUICK):
-            status = K.integrate(z, 0, times, False, False, p, cfg, nodes, weights, U,
-                                 1e-10, 1e-10, out, stats, np.empty(0), log)[0]
-        assert status == K.BAD_TIME
+            status = kernel.integrate(z, 0, times, False, False, p, cfg, nodes, weights, U,
+                                      1e-10, 1e-10, out, stats, np.empty(0), log)[0]
+        assert status == kernel.BAD_TIME
 
 
 @pytest.mark.parametrize("t0", [math.nan, math.inf, -math.inf, 1e300])
@@ -376,7 +377,9 @@ def test_continuation_refuses_steps_that_would_never_end():
     for kwargs in (dict(step=0.0), dict(step=math.nan), dict(max_step=-1.0),
                    dict(max_points=0), dict(depth=math.inf)):
         with within(QUICK), pytest.raises(ValueError):
-            continue_orbits(system, "c", 0.1, 0.08, **kwargs)
+            depth = kwargs.pop("depth", 1)  # the rest: the continuation's record
+            continue_orbits(system, "c", 0.1, 0.08, depth=depth,
+                            continuation=ContinuationOptions(**kwargs))
 
 
 def test_section_helpers_refuse_non_finite_bounds():

@@ -13,12 +13,16 @@ located at rtol 1e-9 and 1e-11; the doubled branch against a long brute-force si
 
 from __future__ import annotations
 
+import math
+import re
+
 import numpy as np
 import pytest
 
 from opa import SolverOptions, preset, simulate_dmr, sweep
 from opa.dynamics._continuation import (
     BIFURCATION_KINDS,
+    ContinuationOptions,
     Located,
     continue_orbits,
     locate_bifurcations,
@@ -258,6 +262,33 @@ def test_bad_requests_are_refused():
     ds = sweep("dmr", "omega", [2.7, 2.9], osc, transient=5, record=4, workers=1)
     assert ds.attrs["bifurcation_method"].startswith("not located: the forcing's common")
     assert ds.sizes["bifurcation"] == 0
+
+
+@pytest.mark.parametrize("field, value, rule", [
+    ("step", 0.0, "a finite number > 0"), ("max_step", math.nan, "a finite number > 0"),
+    ("max_points", 0, "an integer >= 1"), ("max_multiplier", -1.0, "a finite number > 0"),
+    ("switch_amplitude", math.inf, "a finite number > 0"), ("tol", 0.0, "a finite number > 0"),
+    ("transient", 2.5, "an integer >= 0")])
+def test_continuation_options_name_the_field_and_the_value(field, value, rule):
+    with pytest.raises(ValueError, match=re.escape(f"{field} must be {rule}, got {value!r}")):
+        ContinuationOptions(**{field: value})
+
+
+def test_the_continuation_options_reach_the_branch():
+    """A branch from c = 0.095 towards 0.085 needs about 50 steps of 0.02 (in units of the
+    interval): ``max_points`` = 5 stops it at 5 orbits and says so; steps twice as long
+    need fewer orbits to the same end; a record that is not one is refused."""
+    system = ImpactSystem(preset("3.1", F0=0.0))
+    capped = continue_orbits(system, "c", 0.095, 0.085, depth=0,
+                             continuation=ContinuationOptions(max_points=5))
+    assert capped.sizes["point"] == 5 and "max_points (5) reached" in capped.branch_end
+    short, long_ = (continue_orbits(system, "c", 0.095, 0.085, depth=0,
+                                    continuation=ContinuationOptions(step=s, max_step=s))
+                    for s in (0.05, 0.1))
+    assert short.c.values[-1] == long_.c.values[-1] == 0.085
+    assert long_.sizes["point"] < short.sizes["point"]
+    with pytest.raises(ValueError, match="continuation must be ContinuationOptions"):
+        continue_orbits(system, "c", 0.095, 0.085, continuation={"max_points": 5})
 
 
 # --------------------------------------------------------------------------- branches

@@ -13,14 +13,15 @@ import xarray as xr  # noqa: E402
 
 from opa import preset  # noqa: E402
 from opa._dataset import write_netcdf  # noqa: E402
-from opa.dynamics._continuation import continue_orbits  # noqa: E402
+from opa.dynamics._continuation import ContinuationOptions, continue_orbits  # noqa: E402
 from opa.dynamics._orbits import ImpactSystem  # noqa: E402
 from opa.plots import plot_branches  # noqa: E402
 
 
 def test_dataset_netcdf_and_plot(tmp_path):
     system = ImpactSystem(preset("3.1", F0=0.0))
-    ds = continue_orbits(system, "c", 0.095, 0.085, depth=1, max_points=30)
+    ds = continue_orbits(system, "c", 0.095, 0.085, depth=1,
+                         continuation=ContinuationOptions(max_points=30))
     for name in ("section_x", "section_v", "multiplier_real", "multiplier_imag", "stable",
                  "bifurcation_kind", "bifurcation_c", "state", "period", "impacts"):
         assert name in ds
