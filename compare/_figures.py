@@ -63,6 +63,7 @@ from opa.plots import (  # noqa: E402
     diagram,
     draw_marks,
     history,
+    PoincareMarks,
     plot_bifurcation,
     portrait,
     section_bars,
@@ -783,8 +784,8 @@ def _deterministic_panel(ctx, ax, osc, marker, tag, head):
     dmr = ctx.run("dmr", osc)
     emr0 = ctx.run("opa", osc, sigma=0.0)
     m_dmr, m_emr0 = ctx.motion(dmr), ctx.motion(emr0)
-    portrait(ax, dmr, last=last, lw=1.3, marker=marker)
-    portrait(ax, emr0, last=last, ls="--", marker=None, label=f"EMR_0 (N = {ctx.order})",
+    portrait(ax, dmr, last=last, lw=1.3, points=PoincareMarks(marker))
+    portrait(ax, emr0, last=last, ls="--", points=None, label=f"EMR_0 (N = {ctx.order})",
              zorder=3)
     ax.set_title(f"({tag}) {head}\nDMR: {_label_text(m_dmr)}; EMR_0: {_label_text(m_emr0)}",
                  fontsize=9)
@@ -855,15 +856,15 @@ def _emr_mc_figure(ctx, name, cases, shape, set_name, paper_notes, grazing=False
         emr = ctx.run("opa", osc, sigma=sigma)
         mc = ctx.mc(osc, sigma)
         m_emr, m_mc = ctx.motion(emr), ctx.motion(mc)
-        portrait(ax, emr, last=s.last, color=COLORS["EMR"], lw=2.6, alpha=0.45, marker="s",
-                 ms=6,
-                 label=f"EMR (OPA, N = {ctx.order})", marker_label="EMR at t = k 2π/ω")
+        portrait(ax, emr, last=s.last, color=COLORS["EMR"], lw=2.6, alpha=0.45,
+                 points=PoincareMarks("s", size=6, label="EMR at t = k 2π/ω"),
+                 label=f"EMR (OPA, N = {ctx.order})")
         section_bars(ax, emr, last=s.last, scale=1.0, spread="std", color="lightsteelblue",
                      label="EMR ± 1 std (OPA variance)", lw=0.8, zorder=1)
-        portrait(ax, mc, last=s.last, color=COLORS["MC mean"], lw=1.0, marker="D",
-                 ms=3.5, marker_color=COLORS["MC mean"],
-                 label=f"MC mean ({s.mc_samples} Sobol)",
-                 marker_label="MC mean at t = k 2π/ω", zorder=4)
+        portrait(ax, mc, last=s.last, color=COLORS["MC mean"], lw=1.0,
+                 points=PoincareMarks("D", color=COLORS["MC mean"], size=3.5,
+                                      label="MC mean at t = k 2π/ω"),
+                 label=f"MC mean ({s.mc_samples} Sobol)", zorder=4)
         section_bars(ax, mc, last=s.last, scale=1.0, spread="std", color="yellowgreen",
                      label="MC ± 1 std (ensemble spread)", lw=1.0, zorder=2)
         section_bars(ax, mc, last=s.last, scale=2.0, spread="sem", color="darkgreen",
@@ -947,9 +948,9 @@ def fig11(ctx):
         records.append(record)
         emr0 = ctx.run("opa", osc, sigma=0.0, record=record)
         dmr = ctx.run("dmr", osc, record=record)
-        portrait(ax, dmr, last=last, lw=1.3, marker=None)
-        portrait(ax, emr0, last=last, ls="--", marker="s", label=f"EMR_0 (N = {ctx.order})",
-                 zorder=3)
+        portrait(ax, dmr, last=last, lw=1.3, points=None)
+        portrait(ax, emr0, last=last, ls="--", points=PoincareMarks("s"),
+                 label=f"EMR_0 (N = {ctx.order})", zorder=3)
         m, m_dmr = ctx.motion(emr0), ctx.motion(dmr)
         ax.set_title(f"({tag}) c = 0.0356, F0 = {F0:g}, n = {n}\nEMR_0: {_label_text(m)}",
                      fontsize=9)

@@ -4,6 +4,7 @@
 from opa.plots._branches import plot_branches
 from opa.plots._diagrams import (
     COLORS,
+    PoincareMarks,
     SECTION_LABELS,
     describe_marks,
     diagram,
@@ -20,6 +21,6 @@ from opa.plots._diagrams import (
 __all__ = [
     "plot_bifurcation", "plot_branches", "plot_run",
     # the drawing blocks of the paper's figures (``compare._figures``)
-    "COLORS", "SECTION_LABELS", "describe_marks", "diagram", "draw_marks", "history",
-    "located_marks", "portrait", "section_bars", "window",
+    "COLORS", "PoincareMarks", "SECTION_LABELS", "describe_marks", "diagram", "draw_marks",
+    "history", "located_marks", "portrait", "section_bars", "window",
 ]

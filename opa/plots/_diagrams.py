@@ -12,6 +12,7 @@ labels of a sweep are never turned into lines.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import matplotlib
 import matplotlib.ticker
@@ -405,21 +406,54 @@ def strobe_window(ds: xr.Dataset, last: int) -> np.ndarray:
     return stroboscopic_mask(t, T, start=t[-1] - last * T * (1 + 1e-9))
 
 
+@dataclass(frozen=True)
+class PoincareMarks:
+    """How a phase portrait marks its Poincaré points (the states at t = k 2π/ω).
+
+    Attributes
+    ----------
+    marker : a matplotlib marker ("*", "s", "D", ...).
+    color : their face colour (edged in black).
+    label : their legend entry (None: none).
+    size : marker size in points (None: 7 for "*", 4 for the others).
+
+    Examples
+    --------
+    >>> PoincareMarks("s", size=6).color
+    'tab:red'
+    """
+
+    marker: str = "*"
+    color: str = SECTION_COLOR
+    label: str | None = "Poincaré points t = k 2π/ω"
+    size: float | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.marker, str) or not self.marker:
+            raise ValueError(f"marker must be a matplotlib marker such as '*', got "
+                             f"{self.marker!r}")
+        if self.size is not None and (
+                isinstance(self.size, bool) or not isinstance(self.size, (int, float))
+                or not (math.isfinite(self.size) and self.size > 0)):
+            raise ValueError(f"size must be a finite number > 0 or None, got {self.size!r}")
+
+
 def portrait(ax, ds: xr.Dataset, *, last: int = 30, color: str | None = None,
-             label: str | None = None, ls: str = "-", lw: float = 0.8,
-             marker: str | None = "*", marker_color: str = SECTION_COLOR,
-             marker_label: str | None = "Poincaré points t = k 2π/ω", ms: float | None = None,
-             alpha: float = 1.0, zorder: float = 2) -> None:
-    """Phase portrait of the last ``last`` periods with its Poincaré points (if marker)."""
+             label: str | None = None, ls: str = "-", lw: float = 0.8, alpha: float = 1.0,
+             zorder: float = 2, points: PoincareMarks | None = PoincareMarks()) -> None:
+    """Phase portrait of the last ``last`` periods: the line (``color``, default the
+    run's colour in ``COLORS``; ``label``, default its name; ``ls``, ``lw``, ``alpha``,
+    ``zorder``) with its Poincaré points marked as ``points`` says (None: not marked;
+    drawn 3 above the line), and the wall."""
     x, v, name = mean_state(ds)
     keep = window(ds, last)
     ax.plot(x[keep], v[keep], ls, color=color or COLORS[name], lw=lw, label=label or name,
             alpha=alpha, zorder=zorder)
-    if marker:
+    if points is not None:
         s = strobe_window(ds, last)
-        ax.plot(x[s], v[s], marker, ls="none", color=marker_color,
-                ms=ms or (7 if marker == "*" else 4), mec="black", mew=0.4, label=marker_label,
-                zorder=zorder + 3)
+        ax.plot(x[s], v[s], points.marker, ls="none", color=points.color,
+                ms=points.size or (7 if points.marker == "*" else 4), mec="black", mew=0.4,
+                label=points.label, zorder=zorder + 3)
     ax.axvline(ds.attrs["delta"], color="gray", lw=1.2)
     ax.set_xlabel("x")
     ax.set_ylabel("dx/dt")

@@ -12,6 +12,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+import pytest  # noqa: E402
 import xarray as xr  # noqa: E402
 
 import opa.plots._diagrams as P  # noqa: E402
@@ -142,3 +143,41 @@ def test_plot_run_draws_every_kind_of_run(tmp_path):
         path = tmp_path / f"{name.replace(' ', '_')}.png"
         P.plot_run(ds, str(path))
         assert path.stat().st_size > 10_000
+
+
+def test_a_portrait_marks_its_poincare_points_as_asked():
+    """The marks are the run's states at t = k 2π/ω (found here from the time grid, not by
+    the module's masks), drawn with the record's marker, colour, size and label 3 above
+    the line; the default star is 7 points; ``points=None`` draws the line and the wall
+    only; a record with no marker or a size <= 0 is refused by name."""
+    from opa import simulate_dmr
+
+    osc = preset("3.1", F0=0.0, c=0.05)
+    ds = simulate_dmr(osc, periods=40, per_period=8)
+    T = 2 * np.pi / osc.omega
+    k = ds.time.values / T
+    strobe = (np.abs(k - np.round(k)) < 1e-9) & (ds.time.values >= ds.time.values[-1] - 10 * T
+                                                  * (1 + 1e-9))
+    fig, ax = plt.subplots()
+    try:
+        P.portrait(ax, ds, last=10, zorder=2,
+                   points=P.PoincareMarks("D", color="tab:green", label="marks", size=3.5))
+        line, marks = ax.lines[0], ax.lines[1]
+        np.testing.assert_array_equal(marks.get_xdata(), ds.x.values[strobe])
+        np.testing.assert_array_equal(marks.get_ydata(), ds.v.values[strobe])
+        assert (marks.get_marker(), marks.get_color(), marks.get_markersize(),
+                marks.get_label(), marks.get_zorder()) == ("D", "tab:green", 3.5, "marks", 5)
+        assert line.get_label() == "DMR" and marks.get_linestyle() == "None"
+        ax.clear()
+        P.portrait(ax, ds, last=10)
+        assert ax.lines[1].get_marker() == "*" and ax.lines[1].get_markersize() == 7
+        ax.clear()
+        P.portrait(ax, ds, last=10, points=None)
+        assert len(ax.lines) == 2  # the line and the wall
+        assert ax.lines[1].get_xdata()[0] == osc.delta
+    finally:
+        plt.close(fig)
+    with pytest.raises(ValueError, match="marker must be a matplotlib marker.*got ''"):
+        P.PoincareMarks("")
+    with pytest.raises(ValueError, match="size must be a finite number > 0 or None, got 0"):
+        P.PoincareMarks(size=0)
