@@ -14,7 +14,7 @@ that share nothing but the parts folder (:class:`opa._dataset.Store`):
   done gets the bisections of its sigma*, one task per horizon (:func:`bisect_task`: the
   horizons' bisections are independent); once these are done, its value task
   (:func:`value_task`) reads them back and assembles its datasets
-  (:meth:`compare._trustmap._Map.value_work`); the frontier's runs once its reference
+  (:func:`compare._trustmap.value_work`); the frontier's runs once its reference
   is known (:class:`FrontierRuns`), and those that need the edges of earlier runs once
   these are known.
 
@@ -34,8 +34,10 @@ import xarray as xr
 
 from compare._config import ValidateConfig
 from compare._mapdata import STREAMED_DIM
-from compare._trustmap import SLICES, _Map, clear_slices, frontier, frontier_part, \
-    frontier_runs
+from compare._ledger import Ledger, Work
+from compare._trustmap import (SLICES, _Map, boundary_at, clear_slices, details_part,
+                               evaluate_point, frontier, frontier_part, frontier_runs,
+                               grid_points, value_part, value_splits)
 from opa.engine import OutputLock, Store, true_system_work, write_netcdf
 
 def task_config(cfg: ValidateConfig) -> ValidateConfig:
@@ -43,77 +45,80 @@ def task_config(cfg: ValidateConfig) -> ValidateConfig:
     return replace(cfg, workers=1, scheduler=None)
 
 
-def _task(cfg: ValidateConfig, phase: str, work, *, quiet_points: bool = False) -> dict:
-    """``work(job)`` on a fresh :class:`compare._trustmap._Map` with its time charged to
-    ``phase``: its result, what it computed (``work``: counts, phases, the true systems
-    integrated in this thread) and its log lines. ``quiet_points``: the points' own
-    lines are left to the value task that reads them back."""
+def _task(cfg: ValidateConfig, phase: str, job, *, quiet_points: bool = False) -> dict:
+    """``job(work)`` in a fresh :class:`compare._ledger.Work` with its time charged to
+    ``phase``: its result, its ledger (counts, phases, the true systems integrated in
+    this thread) and its log lines. ``quiet_points``: the points' own lines are left to
+    the value task that reads them back."""
     lines: list[str] = []
-    job = _Map(cfg, progress=False, log=lines.append)
+    work = Work(cfg.outdir, log=lines.append)
     if quiet_points:
-        job.point_log = lambda line: None
+        work.point_log = lambda line: None
     before = true_system_work()
-    with job.clock(phase):
-        result = work(job)
+    with work.clock(phase):
+        result = job(work)
     after = true_system_work()
     return {"result": result, "log": lines,
-            "work": job.work((after[0] - before[0], after[1] - before[1]))}
+            "ledger": work.ledger((after[0] - before[0], after[1] - before[1]))}
 
 
 def splits_task(cfg: ValidateConfig, value: float) -> dict:
-    """The split scan at one swept value, kept as a part (:meth:`_Map.splits`)."""
-    def work(job):
-        job.splits(value)
+    """The split scan at one swept value, kept as a part
+    (:func:`compare._trustmap.value_splits`)."""
+    def job(work):
+        value_splits(cfg, work, value)
 
-    return _task(cfg, "other", work)
+    return _task(cfg, "other", job)
 
 
 def point_task(cfg: ValidateConfig, value: float, sigma: float) -> dict:
     """One grid point's OPA runs and Monte Carlo rounds, kept as parts
-    (:meth:`_Map.evaluate`)."""
-    def work(job):
-        job.evaluate(value, sigma)
+    (:func:`compare._trustmap.evaluate_point`)."""
+    def job(work):
+        evaluate_point(cfg, value, sigma, work=work)
 
-    return _task(cfg, "other", work, quiet_points=True)
+    return _task(cfg, "other", job, quiet_points=True)
 
 
 def bisect_task(cfg: ValidateConfig, value: float, h: int) -> dict:
-    """The bisections of horizon ``h`` at one value (:meth:`_Map.boundary_at`), after
-    the :func:`point_task` of its grid, which it reads back."""
-    def work(job):
-        job.point_log = lambda line: None  # the value task says what the grid's say
-        grid = job.grid(value)
-        job.point_log = job.log
-        return job.boundary_at(value, grid, h)
+    """The bisections of horizon ``h`` at one value
+    (:func:`compare._trustmap.boundary_at`), after the :func:`point_task` of its grid,
+    which it reads back."""
+    def job(work):
+        work.point_log = lambda line: None  # the value task says what the grid's say
+        grid = grid_points(cfg, work, value)
+        work.point_log = work.log
+        return boundary_at(cfg, work, value, grid, h)
 
-    return _task(cfg, "other", work)
+    return _task(cfg, "other", job)
 
 
 def value_task(cfg: ValidateConfig, value: float, found: list, spill: bool = True) -> dict:
-    """:meth:`_Map.value_part` as a task, after :func:`splits_task`, the
+    """:func:`compare._trustmap.value_part` as a task, after :func:`splits_task`, the
     :func:`point_task` of its grid and the :func:`bisect_task` of every horizon
     (``found``, in horizon order): it reads those back and assembles the value's slice
-    of the map, its bulk written to OUTDIR with ``spill`` (:meth:`_Map.value_part`;
-    else the slice is returned whole, for a machine that cannot read OUTDIR's disk). At
-    the first value it also computes the phase portraits, kept as a part
-    (:meth:`_Map.details`), which the map would otherwise compute after the flow."""
-    def work(job):
-        result = job.value_part(value, found, spill=spill)
+    of the map, its bulk written to OUTDIR with ``spill`` (else the slice is returned
+    whole, for a machine that cannot read OUTDIR's disk). At the first value it also
+    computes the phase portraits, kept as a part
+    (:func:`compare._trustmap.details_part`), which the map would otherwise compute
+    after the flow."""
+    def job(work):
+        result = value_part(cfg, work, value, found, spill=spill)
         if value == cfg.values[0]:
-            job.details(result["phase_sigma"])
+            details_part(cfg, work, result["phase_sigma"])
         return result
 
-    return _task(cfg, "other", work)
+    return _task(cfg, "other", job)
 
 
 def frontier_run_task(cfg: ValidateConfig, run) -> dict:
     """One run of the frontier (a :class:`compare._convergence.StudyRun` that
     :func:`compare._trustmap.frontier_runs` listed), kept as a part; its result is
     ``{name: result}``."""
-    def work(job):
-        return {run.name: job.parts.get(frontier_part(run.name), run.spec, run.compute)}
+    def job(work):
+        return {run.name: work.parts.get(frontier_part(run.name), run.spec, run.compute)}
 
-    return _task(cfg, "frontier", work)
+    return _task(cfg, "frontier", job)
 
 
 class FrontierRuns:
@@ -225,41 +230,29 @@ class MapFlow:
         return []
 
 
-def run_map_tasks(job: _Map, bar) -> dict:
-    """The map of ``job`` (a :class:`compare._trustmap._Map`) as a flow of small tasks
-    (:class:`MapFlow`, run by :func:`compare._scaleout.run_flow`) on ``cfg.workers``
-    local processes or the Dask cluster ``cfg.scheduler``: what each did (counts, phase
-    seconds summed over the workers, log lines) is added to ``job``; this process's wait
-    is the phase "waiting for workers". Returns the values' results and the frontier."""
+def run_map_tasks(cfg: ValidateConfig, work: Work, bar) -> tuple[dict, Ledger]:
+    """The map as a flow of small tasks (:class:`MapFlow`, run by
+    :func:`compare._scaleout.run_flow`) on ``cfg.workers`` local processes or the Dask
+    cluster ``cfg.scheduler``; ``work``: this process's (its parts, its log, its clock:
+    its wait is the phase "waiting for workers"). Returns the values' results and the
+    frontier, and the sum of the ledgers the tasks returned (counts, phase seconds
+    summed over the workers)."""
     from compare._scaleout import map_preload, run_flow
 
-    cfg = job.cfg
-    flow = MapFlow(cfg, job.parts)
+    flow = MapFlow(cfg, work.parts)
     first = flow.first()
     where = (f"the Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
              else f"{cfg.processes} local processes")
-    job.log(f"{len(cfg.values)} split scans{', the frontier' if cfg.frontier else ''}, "
-            f"then each value's {len(cfg.sigmas)} grid points, then its bisections, on "
-            f"{where} ...")
-    results = {}
-    with job.clock("waiting for workers"):
+    work.log(f"{len(cfg.values)} split scans{', the frontier' if cfg.frontier else ''}, "
+             f"then each value's {len(cfg.sigmas)} grid points, then its bisections, on "
+             f"{where} ...")
+    results, ledgers = {}, []
+    with work.clock("waiting for workers"):
         for key, result in run_flow(first, flow.follow, workers=cfg.processes,
                                     scheduler=cfg.scheduler, preload=map_preload(cfg.plots)):
-            for line in result.pop("log"):
-                job.log(line)
-            work = result.pop("work")
-            job.mc_runs += work["mc_runs"]
-            job.true_runs += work["true_runs"]
-            job.true_periods += work["true_periods"]
-            job.opa_runs += work["opa_runs"]
-            job.system_runs += work["system_runs"]
-            job.system_time += work["system_time"]
-            job.parts.computed += work["parts_computed"]
-            job.parts.set_aside += work["parts_set_aside"]
-            for name, wall, cpu, calls in work["phases"]:
-                job.clock.wall[name] = job.clock.wall.get(name, 0.0) + wall
-                job.clock.cpu[name] = job.clock.cpu.get(name, 0.0) + cpu
-                job.clock.calls[name] = job.clock.calls.get(name, 0) + calls
+            for line in result["log"]:
+                work.log(line)
+            ledgers.append(result["ledger"])
             if key[0] == "point":
                 bar.update(1)
             elif key[0] == "value":
@@ -267,9 +260,9 @@ def run_map_tasks(job: _Map, bar) -> dict:
     if flow.frontier is not None:
         if not flow.frontier.complete:
             raise RuntimeError("the frontier's runs did not all finish")
-        with job.clock("frontier"):
+        with work.clock("frontier"):
             results["frontier"] = flow.frontier.dataset()
-    return results
+    return results, sum(ledgers, Ledger())
 
 
 def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,

@@ -5,7 +5,7 @@ section 3.2 range), each point runs
 
 * a Monte Carlo ensemble of the true sampled impact system (scrambled Sobol, randomised-QMC
   standard errors of the mean and the variance), with more samples only while a verdict
-  is undecided (:meth:`_Map._judge`: three-valued, as :func:`compare.verify`'s);
+  is undecided (:func:`judge`: three-valued, as :func:`compare.verify`'s);
 * the OPA equivalent system for every N and every variant (impact law x truncation),
   all compared with that one ensemble; under a law of xi other than the semicircle
   (``distribution``) the single element runs in that law's orthonormal basis and the
@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
@@ -67,8 +68,8 @@ from compare._config import ELEMENT_TOLERANCE, ValidateConfig, noise_floor
 from compare._mapdata import (NOT_FORMED, HorizonSplits, Point, combine_slices, point_dataset,
                               splits_from_arrays, splits_to_arrays, value_dataset, value_slice)
 from compare._mapdata import spill as spill_slice
+from compare._ledger import Ledger, Work
 from compare._pairs import REPLICATES, Control, Pairs, pair_point
-from compare._phases import PhaseClock
 from compare._strata import (CONTINUOUS_KINDS, Strata, build_strata, grown_rows,
                              replicate_allocation, replicate_points)
 from compare._trust import (band_multiplier, bisect_boundary, bound_excess, excess,
@@ -89,88 +90,56 @@ RULE = ("bounded: Bonferroni t band, alpha / 2^round; replicates stratified at t
         "variance floor with roundoff")
 
 
-class _Map:
-    """The computation for one configuration (one object so that caches are shared)."""
+def _name(cfg: ValidateConfig, value, sigma=None) -> str:
+    name = f"{cfg.parameter}{value:g}"
+    return name if sigma is None else f"{name}_sigma{sigma:.6g}"
 
-    def __init__(self, cfg: ValidateConfig, *, progress: bool, log):
-        self.cfg = cfg
-        self.log = log
-        self.progress = progress
-        self.parts = Store(os.path.join(cfg.outdir, "parts"), "trust map", log=log)
-        self.floor = noise_floor(cfg.options)
-        self.n_h = [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
-        self.mc_runs = 0
-        self.true_runs = 0
-        self.true_periods = 0.0  # forcing periods integrated by those runs
-        self.opa_runs = 0
-        # every true impact system integrated (Monte Carlo, split scans, frontier, ...) by
-        # the tasks run elsewhere; this process's own are read off the kernel's counter
-        self.system_runs, self.system_time = 0, 0.0
-        self.bar = None
-        self.measure = cfg.measure()  # one object: its recurrences are cached
-        self.clock = PhaseClock()
-        # (value, sigma, outputs) -> the last ensemble run there (this value only)
-        self.ensembles: dict = {}
-        self.scans: dict = {}  # value -> its split scan (splits), read back once
-        # what a point says of its runs (a point computed ahead of its value's task says
-        # nothing: the value's task reads it back and says it, as in one process)
-        self.point_log = log
 
-    def _timed(self, phase: str, compute):
-        """``compute`` with its time charged to ``phase`` (:class:`compare._phases.PhaseClock`)."""
-        def timed():
-            with self.clock(phase):
-                return compute()
-        return timed
+def _outputs(cfg: ValidateConfig) -> list[int]:
+    """The outputs up to each horizon (in ``cfg.horizons`` order), the first included."""
+    return [int(round(h * cfg.per_period)) + 1 for h in cfg.horizons]
 
-    def _name(self, value, sigma=None) -> str:
-        name = f"{self.cfg.parameter}{value:g}"
-        return name if sigma is None else f"{name}_sigma{sigma:.6g}"
 
-    # -- one point ---------------------------------------------------------------------
-    def _ensemble(self, value, sigma, samples, times, design, previous=None) -> dict:
-        """The true sampled systems of the point's stratified design (:meth:`_design`:
-        ``design`` = its strata and points per stratum in each replicate) at
-        ``samples`` points in ``REPLICATES`` replicates: x (M, T) with replicate r in rows
-        r M/R .. (r+1) M/R - 1, xi (M,), weights (M,), impacts (M,), rhs and wall seconds.
-        The points at 2M hold those at M (each stratum's Sobol' sequence goes on), so
-        given the ensemble at M/2 (``previous``) only the new half is run; the result is
-        the same to the bit."""
-        with self.clock("Monte Carlo runs"):
-            return self._run_ensemble(value, sigma, samples, times, design, previous)
+# -- one point -----------------------------------------------------------------------------
+def design(cfg: ValidateConfig, work: Work, value, sigma, times) -> tuple[Strata, np.ndarray]:
+    """The point's strata and points per stratum in each replicate at the first round.
 
-    def _design(self, value, sigma, times) -> tuple[Strata, np.ndarray]:
-        """The point's strata and points per stratum in each replicate at the first round.
+    The law of xi is cut at the changes of the impact sequence up to the point's last
+    output that the value's split scan located within sigma (continuous kinds left
+    out; cascades are zones, merged until at most half the first round's points per
+    replicate, :func:`compare._strata.build_strata`), so a rare region that makes
+    other impacts has points of its own in every replicate and every replicate is an
+    estimate of the same quantity (the failure of plain replicates the certificate
+    suite measured). ``complete``: the scan listed every such change within sigma."""
+    measure = cfg.measure()
+    centre, scans = value_splits(cfg, work, value)
+    end = float(times[-1]) / cfg.oscillator_at(value).forcing_period
+    reach = [scan for scan in scans if scan.horizon <= end + 1e-9]
+    lo, hi = measure.lo, measure.hi
+    cuts = sorted({(sp.value - centre) / sigma for scan in reach for sp in scan.splits
+                   if sp.kind not in CONTINUOUS_KINDS})
+    cuts = np.array([c for c in cuts if lo < c < hi])
+    complete = all(scan.complete_within >= sigma for scan in reach)
+    per_replicate = cfg.samples // REPLICATES
+    strata = build_strata(measure, [lo, hi], cuts, complete=complete,
+                          max_strata=max(1, per_replicate // 2))
+    return strata, replicate_allocation(per_replicate, strata.probability)
 
-        The law of xi is cut at the changes of the impact sequence up to the point's last
-        output that the value's split scan located within sigma (continuous kinds left
-        out; cascades are zones, merged until at most half the first round's points per
-        replicate, :func:`compare._strata.build_strata`), so a rare region that makes
-        other impacts has points of its own in every replicate and every replicate is an
-        estimate of the same quantity (the failure of plain replicates the certificate
-        suite measured). ``complete``: the scan listed every such change within sigma."""
-        cfg = self.cfg
-        centre, scans = self.splits(value)
-        end = float(times[-1]) / cfg.oscillator_at(value).forcing_period
-        reach = [scan for scan in scans if scan.horizon <= end + 1e-9]
-        lo, hi = self.measure.lo, self.measure.hi
-        cuts = sorted({(sp.value - centre) / sigma for scan in reach for sp in scan.splits
-                       if sp.kind not in CONTINUOUS_KINDS})
-        cuts = np.array([c for c in cuts if lo < c < hi])
-        complete = all(scan.complete_within >= sigma for scan in reach)
-        per_replicate = cfg.samples // REPLICATES
-        strata = build_strata(self.measure, [lo, hi], cuts, complete=complete,
-                              max_strata=max(1, per_replicate // 2))
-        return strata, replicate_allocation(per_replicate, strata.probability)
 
-    def _run_ensemble(self, value, sigma, samples, times, design, previous) -> dict:
-        cfg = self.cfg
+def ensemble(cfg: ValidateConfig, work: Work, value, sigma, samples, times, design,
+             previous=None) -> dict:
+    """The true sampled systems of the point's stratified design (:func:`design`:
+    ``design`` = its strata and points per stratum in each replicate) at ``samples``
+    points in ``REPLICATES`` replicates: x (M, T) with replicate r in rows r M/R .. (r+1)
+    M/R - 1, xi (M,), weights (M,), impacts (M,), rhs and wall seconds. The points at 2M
+    hold those at M (each stratum's Sobol' sequence goes on), so given the ensemble at
+    M/2 (``previous``) only the new half is run; the result is the same to the bit."""
+    with work.clock("Monte Carlo runs"):
         start = time.perf_counter()
         system = cfg.system_at(value, sigma=sigma, order=0)
-        self.mc_runs += 1
         strata, allocation = design
         scale = samples // cfg.samples
-        xi, weights, _ = replicate_points(self.measure, strata, allocation, REPLICATES,
+        xi, weights, _ = replicate_points(cfg.measure(), strata, allocation, REPLICATES,
                                           cfg.seed, scale)
         if previous is None:
             old = np.zeros(0, dtype=np.int64)
@@ -179,8 +148,8 @@ class _Map:
         new = np.setdiff1d(np.arange(len(xi)), old)
         paths, rhs, impacts = true_runs(system, cfg.options, xi[new], times,
                                         what="Monte Carlo sample", impacts=True)
-        self.true_runs += len(new)
-        self.true_periods += len(new) * float(times[-1]) / system.oscillator.forcing_period
+        work.count(mc_runs=1, true_runs=len(new), true_periods=len(new) * float(times[-1])
+                   / system.oscillator.forcing_period)
         x = np.empty((len(xi), len(times)))
         count = np.empty(len(xi), dtype=np.int64)
         x[new], count[new] = paths[:, :, 0], impacts
@@ -191,568 +160,614 @@ class _Map:
                 "rhs": (previous["rhs"] if previous is not None else 0) + rhs,
                 "seconds": time.perf_counter() - start}
 
-    def _round(self, value, sigma, samples, times, opa_inputs, controls, probabilities,
-               opa_mean, opa_var, first, state: dict, rounds: int) -> dict:
-        """One round of the point's Monte Carlo: the ensemble of ``samples`` true systems,
-        paired with every OPA run (:func:`compare._pairs.pair_point`) and judged
-        (:meth:`_judge`, round ``rounds`` of the point's doubling). The part keeps the
-        verdicts (undecided ones are what the next round's decision needs) and the
-        reference curves, not the paths: ``state["paths"]`` holds the last ensemble run at
-        the point in this process, which the next round extends."""
-        cfg = self.cfg
-        T = cfg.oscillator_at(value).forcing_period
-        shape = opa_mean.shape[:2]
 
-        def compute():
-            previous = state.get("paths")
-            if previous is not None and len(previous["xi"]) != samples // 2:
-                previous = None
-            ens = self._ensemble(value, sigma, samples, times, (strata, allocation), previous)
-            state["paths"] = ens
-            pairs = pair_point(ens["x"], ens["xi"], controls, self.measure, probabilities,
-                               shape, weights=ens["weights"])
-            judged = self._judge(pairs, opa_mean, opa_var, first, times / T, rounds,
-                                 complete)
-            ref = pairs.reference
-            return {**judged, "x_mean": ref["x_mean"], "x_var": ref["x_var"],
-                    "x_sem": ref["x_sem"], "x_var_sem": ref["x_var_sem"],
-                    "control": np.array(ref["control"] or (-1, -1), np.int64),
-                    "reduction": pairs.reduction,
-                    "impacts": np.array([ens["impacts"].min(), ens["impacts"].max()]),
-                    "strata": ens["strata"], "rhs": ens["rhs"], "seconds": ens["seconds"]}
+@dataclass(frozen=True)
+class PointOpa:
+    """What the OPA runs at one point give its Monte Carlo rounds: the parts' inputs
+    (a round's part depends on them), the controls and their elements' probabilities
+    per (variant, N) (:func:`compare._pairs.pair_point`), the moments (variant, N,
+    output) and the first impacts (variant, N) in forcing periods."""
 
-        strata, allocation = self._design(value, sigma, times)
-        _, scans = self.splits(value)
-        # per horizon: whether its split list is complete within sigma (else nothing over
-        # it is certified: a change the scan did not reach may hide inside a stratum)
-        complete = np.array([scan.complete_within >= sigma for scan in scans])
-        inputs = {"system": cfg.system_at(value, sigma=sigma, order=0), "samples": samples,
-                  "sampler": "stratified sobol", "seed": cfg.seed, "replicates": REPLICATES,
-                  "design": [strata.cuts.tolist(), allocation.tolist(), complete.tolist()],
-                  "times": times, "options": cfg.options, "opa": opa_inputs,
-                  "criterion": [cfg.tolerance, cfg.var_tolerance, cfg.alpha, self.floor,
-                                list(cfg.horizons), RULE, rounds],
-                  "estimator": "every run against the best control-variate reference"}
-        return self.parts.get(f"mc_{self._name(value, sigma)}_M{samples}", inputs,
-                              self._timed("pairs and verdicts", compute))
+    inputs: list
+    controls: dict
+    probabilities: dict
+    mean: np.ndarray
+    var: np.ndarray
+    first: np.ndarray
 
-    def _opa(self, osc, value, sigma, order, times) -> dict:
-        """Every single-element variant of OPA at one N: x_mean, x_var (variant, output),
-        first_impact (variant,) in time units, and the wall time. Under the semicircle the
-        paper's system (:func:`opa.opa_variants`); under another law one element over
-        the whole support, in that law's orthonormal basis (:func:`element_variants`)."""
-        cfg = self.cfg
 
-        def compute():
-            start = time.perf_counter()
-            system = cfg.system_at(value, sigma=sigma, order=order)
-            if cfg.semicircle:
-                mean, var, first, status, coef = opa_variants(
-                    system, list(cfg.single_variants), times, cfg.options, coefficients=True)
-            else:
-                whole = np.array([self.measure.lo, self.measure.hi])
-                run = element_variants(system, cfg.options, self.measure,
-                                       [law for law, _ in cfg.single_variants],
-                                       [whole] * len(cfg.single_variants), times)
-                mean, var, first = run["x_mean"], run["x_var"], run["first_impact"]
-                status, coef = run["status"], np.concatenate(run["x_coef"])
-            self.opa_runs += 1
-            return {"x_mean": mean, "x_var": var, "first_impact": first,
-                    "status": np.asarray(status, np.int64), "x_coef": coef,
-                    "seconds": time.perf_counter() - start}
+def mc_round(cfg: ValidateConfig, work: Work, value, sigma, samples, times, opa: PointOpa,
+             state: dict, rounds: int) -> dict:
+    """One round of the point's Monte Carlo: the ensemble of ``samples`` true systems,
+    paired with every OPA run (:func:`compare._pairs.pair_point`) and judged
+    (:func:`judge`, round ``rounds`` of the point's doubling). The part keeps the
+    verdicts (undecided ones are what the next round's decision needs) and the
+    reference curves, not the paths: ``state["paths"]`` holds the last ensemble run at
+    the point in this task, which the next round extends."""
+    T = cfg.oscillator_at(value).forcing_period
+    shape = opa.mean.shape[:2]
 
-        return self.parts.get(f"opa_{self._name(value, sigma)}_N{order}",
-                              self._opa_inputs(value, sigma, order, times),
-                              self._timed("OPA runs", compute))
-
-    def _opa_inputs(self, value, sigma, order, times) -> dict:
-        cfg = self.cfg
-        return {"system": cfg.system_at(value, sigma=sigma, order=order),
-                "variants": cfg.single_variants, "times": times, "options": cfg.options,
-                "stores": "coefficients"}
-
-    def _elements(self, value, sigma, order, times) -> dict:
-        """The multi-element variants at one N (one per law of ``cfg.element_laws``):
-        x_mean, x_var (law, output), first_impact (law,), elements (law,) and the wall
-        time. Adaptive edges are chosen per law (:func:`opa._elements.adaptive_edges`).
-        As in ``simulate_opa`` with elements, an element whose OPA system cannot be
-        completed is computed by collocation of the true systems (counted in
-        ``collocated``); where even that fails the variant is NaN throughout and
-        ``failure`` says why."""
-        cfg = self.cfg
-
-        def compute():
-            start = time.perf_counter()
-            system = cfg.system_at(value, sigma=sigma, order=order)
-            L = len(cfg.element_laws)
-            mean, var = np.full((L, len(times)), np.nan), np.full((L, len(times)), np.nan)
-            first, count = np.full(L, np.nan), np.zeros(L, np.int64)
-            collocated = np.zeros(L, np.int64)
-            failures, coefficients = [], {}
-            for ell, law in enumerate(cfg.element_laws):
-                try:
-                    if cfg.elements == "adaptive":
-                        runs, _ = adaptive_edges(system.replace(impact_law=law), cfg.options,
-                                                 self.measure, times=times,
-                                                 tolerance=ELEMENT_TOLERANCE,
-                                                 max_elements=cfg.budget)
-                        edges = np.array([r.a for r in runs] + [runs[-1].b])
-                    else:
-                        edges = uniform_edges(self.measure, int(cfg.elements))
-                    run = element_variants(system, cfg.options, self.measure, [law], [edges],
-                                           times, fallback=True)
-                except SimulationError as err:  # even the true systems' collocation failed
-                    failures.append(f"{law}: {err}")
-                    continue
-                mean[ell], var[ell] = run["x_mean"][0], run["x_var"][0]
-                first[ell], count[ell] = run["first_impact"][0], run["elements"][0]
-                collocated[ell] = run["collocated"][0]
-                coefficients[f"x_coef_{ell}"] = run["x_coef"][0]
-                coefficients[f"edges_{ell}"] = np.asarray(edges, float)
-            self.opa_runs += 1
-            return {"x_mean": mean, "x_var": var, "first_impact": first, "elements": count,
-                    "collocated": collocated, "failure": " | ".join(failures),
-                    "seconds": time.perf_counter() - start, **coefficients}
-
-        return self.parts.get(f"elements_{self._name(value, sigma)}_N{order}",
-                              self._elements_inputs(value, sigma, order, times),
-                              self._timed("multi-element OPA runs", compute))
-
-    def _elements_inputs(self, value, sigma, order, times) -> dict:
-        cfg = self.cfg
-        return {"system": cfg.system_at(value, sigma=sigma, order=order),
-                "laws": cfg.element_laws, "elements": cfg.elements,
-                "budget": cfg.budget if cfg.elements == "adaptive" else None,
-                "tolerance": ELEMENT_TOLERANCE, "fallback": "collocation", "times": times,
-                "options": cfg.options, "stores": "coefficients"}
-
-    def evaluate(self, value: float, sigma: float, orders=None, focus=None,
-                 horizon: int | None = None) -> Point:
-        """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts.
-
-        The multi-element variants run at N = Nmax only (NaN at the other N). With
-        ``horizon`` (an index into ``cfg.horizons``) everything runs up to that horizon
-        only, and the verdicts of the longer horizons are not formed (a bisection probe
-        of that horizon's sigma*). The point's wall time is that of its runs (OPA, and
-        every Monte Carlo ensemble it took), as stored in the parts: a reused point
-        reports what it cost."""
-        cfg = self.cfg
-        osc = cfg.oscillator_at(value)
-        end = max(cfg.horizons) if horizon is None else cfg.horizons[horizon]
-        times = time_grid(osc.omega, end, cfg.per_period)
-        evaluated = np.array([n <= len(times) for n in self.n_h])
-        orders = cfg.orders if orders is None else orders
-        S, V, N = len(cfg.single_variants), len(cfg.variants), len(orders)
-        opa_mean = np.full((V, N, len(times)), np.nan)
-        opa_var = np.full((V, N, len(times)), np.nan)
-        first = np.full((V, N), np.nan)
-        elements = np.zeros(V, np.int64)
-        elements[:S] = 1
-        collocated = np.zeros(V, np.int64)
-        status = np.full((V, N), -1, np.int64)
-        T = osc.forcing_period
-        seconds = 0.0
-        failure = ""
-        controls, probabilities = {}, {}
-        whole = np.array([self.measure.lo, self.measure.hi])
-        for k, order in enumerate(orders):  # the variants of one N run in parallel
-            run = self._opa(osc, value, sigma, order, times)
-            opa_mean[:S, k], opa_var[:S, k] = run["x_mean"], run["x_var"]
-            first[:S, k] = run["first_impact"] / T
-            status[:S, k] = run["status"]
-            seconds += run["seconds"]
-            for v in range(S):
-                controls[v, k] = Control(run["x_coef"][v][None], whole, cfg.semicircle)
-                probabilities[v, k] = np.ones(1)
-            if cfg.element_laws and order == cfg.nmax:
-                run = self._elements(value, sigma, order, times)
-                opa_mean[S:, k], opa_var[S:, k] = run["x_mean"], run["x_var"]
-                first[S:, k] = run["first_impact"] / T
-                elements[S:] = run["elements"]
-                collocated[S:] = run["collocated"]
-                status[S:, k] = np.where(run["elements"] > 0, 0, -1)
-                failure = str(run["failure"])
-                seconds += run["seconds"]
-                for ell in range(len(cfg.element_laws)):
-                    if f"x_coef_{ell}" in run:
-                        cuts = run[f"edges_{ell}"]
-                        controls[S + ell, k] = Control(run[f"x_coef_{ell}"], cuts)
-                        probabilities[S + ell, k] = np.array([
-                            self.measure.restrict(a, b).probability()
-                            for a, b in zip(cuts[:-1], cuts[1:])])
-                if failure:
-                    self.point_log(f"{self._name(value, sigma)}, N = {order}: multi-element "
-                             f"variant not run ({failure})")
-        opa_inputs = [self._opa_inputs(value, sigma, order, times) for order in orders]
-        if cfg.element_laws and cfg.nmax in orders:
-            opa_inputs.append(self._elements_inputs(value, sigma, cfg.nmax, times))
-        # the last ensemble this process ran at the point, which a next round extends
-        state = self.ensembles.setdefault((value, sigma, len(times)), {})
-        samples, mc_seconds, rounds = cfg.samples, 0.0, 1
-        while True:
-            judged = self._round(value, sigma, samples, times, opa_inputs, controls,
-                                 probabilities, opa_mean, opa_var, first, state, rounds)
-            mc_seconds += float(judged["seconds"])
-            if samples * 2 > cfg.max_samples or not self._undecided(judged, focus):
-                break
-            samples *= 2
-            rounds += 1
-        control = tuple(int(i) for i in judged["control"])
-        mc = {name: judged[name] for name in ("x_mean", "x_var", "x_sem", "x_var_sem")}
-        mc.update(impacts=tuple(int(i) for i in judged["impacts"]),
-                  seconds=mc_seconds, rhs=int(judged["rhs"]),
-                  control=None if control[0] < 0 else control)
-        verdict = np.where(evaluated[:, None], judged["verdict"], NOT_FORMED).astype(np.int8)
-        point = Point(sigma, samples, mc, opa_mean, opa_var, first, judged["errors"],
-                      judged["pre"], judged["disagree"], verdict == 1,
-                      reduction=judged["reduction"], verdict=verdict,
-                      evaluated=evaluated)
-        point.seconds = seconds + mc_seconds
-        point.elements = elements
-        point.collocated = collocated
-        point.failure = failure
-        point.status = status
-        return point
-
-    def _undecided(self, judged: dict, focus=None) -> bool:
-        """Whether a verdict at N = Nmax (the order sigma* reads) is undecided: any of
-        them, or with ``focus`` = (variant, horizon, criterion) that one, which a
-        bisection probe decides. A verdict at a lower N does not double the samples (it
-        may stay undecided, and counts as not agreeing), nor does one over a horizon whose
-        split list is incomplete within sigma (more samples cannot certify it)."""
-        open_ = judged["open"]
-        if focus is None:
-            return bool(open_[:, -1].any())
-        v, h, c = focus
-        return bool(open_[v, -1, h, c])
-
-    def _judge(self, pairs: Pairs, opa_mean, opa_var, first, periods, rounds: int,
-               complete) -> dict:
-        """The verdicts at one point from the paired estimates (:mod:`compare._pairs`), as
-        :func:`compare.verify` forms its own (:func:`compare._trust.bounded_verdict`).
-
-        Round ``rounds`` of the point's doubling spends ``alpha / 2^rounds`` of the error
-        rate: per horizon H (its n outputs) a Bonferroni band of Student's t intervals
-        (R - 1 degrees of freedom, R replicates) holds for the reference's E[x] and Var[x]
-        at all n outputs at once, so each verdict (variant, N, H, criterion) is wrong with
-        probability <= alpha over all the rounds. Inside the band the running RMS error is
-        bounded above and below: 1 (agrees) when the upper bound is within the tolerance at
-        every output up to H, -1 (disagrees) when the lower bound exceeds it somewhere, 0
-        (undecided) otherwise. An OPA run that stopped (NaN) disagrees from where it
-        stopped. Over a horizon h whose split list is incomplete within sigma
-        (``complete[h]`` False) nothing else is certified: a change of the impact sequence
-        the scan did not reach may hide inside a stratum, where no standard error sees it;
-        such a verdict is undecided and not ``open`` (more samples cannot decide it).
-        Returns verdict (variant, N, horizon, criterion), open (the same shape: undecided
-        on the bounds, which more samples may decide), errors (variant, N,
-        horizon, criterion, 3), disagree (variant, N, criterion): the first time, in
-        periods, at which the estimated running RMS error exceeds the tolerance, over the
-        longest horizon the point reaches (inf: never), and pre (variant, N): the RMS error
-        of the mean before OPA's first impact."""
-        cfg = self.cfg
-        V, N, T = opa_mean.shape
-        H = len(cfg.horizons)
+    def compute():
+        previous = state.get("paths")
+        if previous is not None and len(previous["xi"]) != samples // 2:
+            previous = None
+        ens = ensemble(cfg, work, value, sigma, samples, times, (strata, allocation),
+                       previous)
+        state["paths"] = ens
+        pairs = pair_point(ens["x"], ens["xi"], opa.controls, cfg.measure(),
+                           opa.probabilities, shape, weights=ens["weights"])
+        judged = judge(cfg, pairs, opa, times / T, rounds, complete)
         ref = pairs.reference
-        errors = np.full((V, N, H, 2, 3), np.nan)
-        verdict = np.zeros((V, N, H, 2), np.int8)
-        open_ = np.zeros((V, N, H, 2), bool)
-        disagree = np.full((V, N, 2), np.inf)
-        spent = cfg.alpha / 2**rounds
-        # the variance's floor: the solvers' squared, and the roundoff of E[x^2] - E[x]^2
-        # (4e-16 at x = 1: at t = 0, where every sample is x0, it is all there is)
-        second = float(np.nanmax(ref["x_var"] + ref["x_mean"] ** 2))
-        var_floor = self.floor**2 + VAR_ROUNDOFF * np.finfo(float).eps * second
-        quantities = (
-            (pairs.err_mean, pairs.err_mean_se, opa_mean, cfg.tolerance, self.floor),
-            (pairs.err_var, pairs.err_var_se, opa_var, cfg.var_tolerance, var_floor))
-        for h, n in sorted(enumerate(self.n_h), key=lambda item: item[1]):
-            if n > T:  # a horizon past the point's outputs: not judged
+        return {**judged, "x_mean": ref["x_mean"], "x_var": ref["x_var"],
+                "x_sem": ref["x_sem"], "x_var_sem": ref["x_var_sem"],
+                "control": np.array(ref["control"] or (-1, -1), np.int64),
+                "reduction": pairs.reduction,
+                "impacts": np.array([ens["impacts"].min(), ens["impacts"].max()]),
+                "strata": ens["strata"], "rhs": ens["rhs"], "seconds": ens["seconds"]}
+
+    strata, allocation = design(cfg, work, value, sigma, times)
+    _, scans = value_splits(cfg, work, value)
+    # per horizon: whether its split list is complete within sigma (else nothing over
+    # it is certified: a change the scan did not reach may hide inside a stratum)
+    complete = np.array([scan.complete_within >= sigma for scan in scans])
+    inputs = {"system": cfg.system_at(value, sigma=sigma, order=0), "samples": samples,
+              "sampler": "stratified sobol", "seed": cfg.seed, "replicates": REPLICATES,
+              "design": [strata.cuts.tolist(), allocation.tolist(), complete.tolist()],
+              "times": times, "options": cfg.options, "opa": opa.inputs,
+              "criterion": [cfg.tolerance, cfg.var_tolerance, cfg.alpha,
+                            noise_floor(cfg.options), list(cfg.horizons), RULE, rounds],
+              "estimator": "every run against the best control-variate reference"}
+    return work.parts.get(f"mc_{_name(cfg, value, sigma)}_M{samples}", inputs,
+                          work.timed("pairs and verdicts", compute))
+
+
+def opa_part(cfg: ValidateConfig, work: Work, value, sigma, order, times) -> dict:
+    """Every single-element variant of OPA at one N: x_mean, x_var (variant, output),
+    first_impact (variant,) in time units, and the wall time. Under the semicircle the
+    paper's system (:func:`opa.opa_variants`); under another law one element over
+    the whole support, in that law's orthonormal basis (:func:`element_variants`)."""
+    def compute():
+        start = time.perf_counter()
+        system = cfg.system_at(value, sigma=sigma, order=order)
+        if cfg.semicircle:
+            mean, var, first, status, coef = opa_variants(
+                system, list(cfg.single_variants), times, cfg.options, coefficients=True)
+        else:
+            measure = cfg.measure()
+            whole = np.array([measure.lo, measure.hi])
+            run = element_variants(system, cfg.options, measure,
+                                   [law for law, _ in cfg.single_variants],
+                                   [whole] * len(cfg.single_variants), times)
+            mean, var, first = run["x_mean"], run["x_var"], run["first_impact"]
+            status, coef = run["status"], np.concatenate(run["x_coef"])
+        work.count(opa_runs=1)
+        return {"x_mean": mean, "x_var": var, "first_impact": first,
+                "status": np.asarray(status, np.int64), "x_coef": coef,
+                "seconds": time.perf_counter() - start}
+
+    return work.parts.get(f"opa_{_name(cfg, value, sigma)}_N{order}",
+                          opa_inputs(cfg, value, sigma, order, times),
+                          work.timed("OPA runs", compute))
+
+
+def opa_inputs(cfg: ValidateConfig, value, sigma, order, times) -> dict:
+    """What :func:`opa_part` depends on."""
+    return {"system": cfg.system_at(value, sigma=sigma, order=order),
+            "variants": cfg.single_variants, "times": times, "options": cfg.options,
+            "stores": "coefficients"}
+
+
+def _element_law(cfg: ValidateConfig, system, law, times) -> tuple[dict, np.ndarray]:
+    """One multi-element variant: its run (:func:`element_variants`, the collocation
+    fallback on) and its edges, adaptive (:func:`opa._elements.adaptive_edges`) or
+    uniform."""
+    measure = cfg.measure()
+    if cfg.elements == "adaptive":
+        runs, _ = adaptive_edges(system.replace(impact_law=law), cfg.options, measure,
+                                 times=times, tolerance=ELEMENT_TOLERANCE,
+                                 max_elements=cfg.budget)
+        edges = np.array([r.a for r in runs] + [runs[-1].b])
+    else:
+        edges = uniform_edges(measure, int(cfg.elements))
+    run = element_variants(system, cfg.options, measure, [law], [edges], times,
+                           fallback=True)
+    return run, edges
+
+
+def elements_part(cfg: ValidateConfig, work: Work, value, sigma, order, times) -> dict:
+    """The multi-element variants at one N (one per law of ``cfg.element_laws``):
+    x_mean, x_var (law, output), first_impact (law,), elements (law,) and the wall
+    time. Adaptive edges are chosen per law (:func:`opa._elements.adaptive_edges`).
+    As in ``simulate_opa`` with elements, an element whose OPA system cannot be
+    completed is computed by collocation of the true systems (counted in
+    ``collocated``); where even that fails the variant is NaN throughout and
+    ``failure`` says why."""
+    def compute():
+        start = time.perf_counter()
+        system = cfg.system_at(value, sigma=sigma, order=order)
+        L = len(cfg.element_laws)
+        mean, var = np.full((L, len(times)), np.nan), np.full((L, len(times)), np.nan)
+        first, count = np.full(L, np.nan), np.zeros(L, np.int64)
+        collocated = np.zeros(L, np.int64)
+        failures, coefficients = [], {}
+        for ell, law in enumerate(cfg.element_laws):
+            try:
+                run, edges = _element_law(cfg, system, law, times)
+            except SimulationError as err:  # even the true systems' collocation failed
+                failures.append(f"{law}: {err}")
                 continue
-            c_band = float(band_multiplier(spent, n, REPLICATES - 1))
-            var, var_band = ref["x_var"][:n], c_band * ref["x_var_sem"][:n]
-            var_low, var_high = np.maximum(var - var_band, 0), np.maximum(var + var_band, 0)
-            scales = ((np.sqrt(var_low), np.sqrt(var_high)), (var_low, var_high))
-            for c, (err, sem, opa, tol, floor) in enumerate(quantities):
-                upper, lower = bound_excess(err[..., :n], c_band * sem[..., :n], *scales[c],
-                                            tol=tol, floor=floor)
-                stopped = ~np.isfinite(opa[..., :n])  # the OPA run stopped: over from there
-                lower = np.where(stopped, np.inf, lower)
-                upper = np.where(stopped, np.inf, upper)
-                known = np.logical_and.accumulate(np.isfinite(lower) | stopped, axis=-1)
-                bounded = np.where((known & (lower > 0)).any(-1), -1,
-                                   np.where((upper <= 0).all(-1), 1, 0))
-                if complete[h]:
-                    verdict[:, :, h, c], open_[:, :, h, c] = bounded, bounded == 0
-                else:
-                    verdict[:, :, h, c] = np.where(stopped.any(-1), -1, 0)
-                scale = np.sqrt(np.maximum(ref["x_var"], 0)) if c == 0 else ref["x_var"]
-                # not <= 0 rather than > 0: a run that stopped (NaN) is over from there
-                over = ~(excess(err[..., :n], scale[:n], sem[..., :n], tol=tol,
-                                floor=floor) <= 0)
-                disagree[:, :, c] = np.where(over.any(-1), periods[np.argmax(over, axis=-1)],
-                                             np.inf)
-                errors[:, :, h, c] = window_errors_all(err, scale, sem, n)
-        with np.errstate(invalid="ignore"):
-            before = periods[None, None, :] < first[:, :, None]
-            square = np.where(before, pairs.err_mean**2, 0.0)
-            count = before.sum(-1)
-            pre = np.where(count > 0, np.sqrt(square.sum(-1) / np.maximum(count, 1)), np.nan)
-        return {"verdict": verdict, "open": open_, "errors": errors, "disagree": disagree,
-                "pre": pre}
+            mean[ell], var[ell] = run["x_mean"][0], run["x_var"][0]
+            first[ell], count[ell] = run["first_impact"][0], run["elements"][0]
+            collocated[ell] = run["collocated"][0]
+            coefficients[f"x_coef_{ell}"] = run["x_coef"][0]
+            coefficients[f"edges_{ell}"] = np.asarray(edges, float)
+        work.count(opa_runs=1)
+        return {"x_mean": mean, "x_var": var, "first_impact": first, "elements": count,
+                "collocated": collocated, "failure": " | ".join(failures),
+                "seconds": time.perf_counter() - start, **coefficients}
 
-    # -- one value of the swept parameter ------------------------------------------------
-    def splits(self, value: float) -> tuple[float, list[HorizonSplits]]:
-        """The centre of the ensembles and, per horizon (in ``cfg.horizons`` order), the
-        splits of the sampled systems' event sequences over the largest ensemble."""
-        cfg = self.cfg
-        osc = cfg.oscillator_at(value)
-        centre = getattr(osc, cfg.uncertain)
+    return work.parts.get(f"elements_{_name(cfg, value, sigma)}_N{order}",
+                          elements_inputs(cfg, value, sigma, order, times),
+                          work.timed("multi-element OPA runs", compute))
 
-        def compute():
-            smax = max(cfg.sigmas)
-            T = osc.forcing_period
-            found, runs, longest = {}, {}, None
-            # the longest horizon first; a shorter one reuses its runs (they hold the events
-            # up to the shorter horizon) and bisects with runs to its own horizon, and the
-            # chatter window past it (a burst at the horizon is told from both sides, as
-            # in the longer runs)
-            for h in sorted(cfg.horizons, reverse=True):
-                cache = {**runs, "t_end": (h + (CHATTER_WINDOW if runs else 0.0)) * T}
-                found[h] = scan_splits(
-                    cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax,
-                    centre + smax, h * T,
-                    tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache,
-                    outputs=time_grid(osc.omega, h, cfg.per_period),
-                    needed_within=cfg.sigmas,
-                    max_splits=MAX_SPLITS if h == min(cfg.horizons) else cfg.long_splits)
-                runs, longest = cache, longest or cache
-            cache = longest
-            seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache,
-                                                        centre)
-            scans = []
-            for h in cfg.horizons:
-                speed, when = seq_centre.slowest_impact(h * T)
-                scan = found[h]
-                scans.append(HorizonSplits(
-                    h, sorted(scan.splits + scan.crossings, key=lambda sp: sp.value),
-                    scan.truncated, speed, when / T, seq_centre.count(h * T),
-                    scan.complete_within, scan.crossings_within))
-            return splits_to_arrays(scans)
 
-        inputs = {"system": cfg.system_at(value), "uncertain": cfg.uncertain,
-                  "sigmas": [min(cfg.sigmas), max(cfg.sigmas)], "horizons": cfg.horizons,
-                  "tol": cfg.split_resolution, "per_period": cfg.per_period,
-                  "options": cfg.options,
-                  "limits": [MAX_SPLITS, cfg.long_splits, MAX_CROSSINGS, MIN_SPLITS],
-                  "needed_within": list(cfg.sigmas), "runs": ["own horizon", CHATTER_WINDOW]}
-        if value not in self.scans:  # read once per process: every round's design reads it
-            stored = self.parts.get(f"splits_{self._name(value)}", inputs,
-                                    self._timed("split scans", compute))
-            self.scans[value] = centre, splits_from_arrays(stored)
-        return self.scans[value]
+def elements_inputs(cfg: ValidateConfig, value, sigma, order, times) -> dict:
+    """What :func:`elements_part` depends on."""
+    return {"system": cfg.system_at(value, sigma=sigma, order=order),
+            "laws": cfg.element_laws, "elements": cfg.elements,
+            "budget": cfg.budget if cfg.elements == "adaptive" else None,
+            "tolerance": ELEMENT_TOLERANCE, "fallback": "collocation", "times": times,
+            "options": cfg.options, "stores": "coefficients"}
 
-    def boundary(self, value, grid: dict[float, Point], found=None):
-        """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection.
 
-        A bisection of horizon h's sigma* starts from the grid's verdicts and probes with
-        runs up to h only (``evaluate(..., horizon=h)``); the probes of one horizon serve
-        all its bisections, and the horizons are independent of each other
-        (:meth:`boundary_at`; ``found``: their results, computed elsewhere, in
-        ``cfg.horizons`` order). Returns the brackets, the steps, and every sigma
-        evaluated with its verdicts (variant, horizon, criterion) at N = Nmax (1 agrees, 0
-        undecided, -1 disagrees, ``NOT_FORMED``)."""
-        cfg = self.cfg
-        k = -1  # N = Nmax; the probes run that order only
-        V, H, C = len(cfg.variants), len(cfg.horizons), 2
-        star = np.full((V, H, C, 2), np.nan)
-        steps = np.zeros((V, H, C), dtype=np.int64)
-        verdicts = {s: point.verdict[:, k].astype(np.int8) for s, point in grid.items()}
-        for h in range(H):
-            star[:, h], steps[:, h], rows = (self.boundary_at(value, grid, h)
-                                             if found is None else found[h])
-            for s, row_h in rows.items():
-                row = verdicts.setdefault(s, np.full((V, H, C), NOT_FORMED, np.int8))
-                row[:, h] = row_h
-        return star, steps, verdicts
+def point_opa(cfg: ValidateConfig, work: Work, value, sigma, orders, times) -> tuple:
+    """The OPA runs at one point, every N of ``orders`` (the multi-element variants at
+    N = Nmax only, NaN at the other N): a :class:`PointOpa`, and the point's
+    ``elements``, ``collocated``, ``status`` (variant, N; -1: not run), ``failure`` and
+    wall ``seconds`` (a dict)."""
+    T = cfg.oscillator_at(value).forcing_period
+    measure = cfg.measure()
+    S, V, N = len(cfg.single_variants), len(cfg.variants), len(orders)
+    mean, var = np.full((V, N, len(times)), np.nan), np.full((V, N, len(times)), np.nan)
+    first = np.full((V, N), np.nan)
+    info = {"elements": np.zeros(V, np.int64), "collocated": np.zeros(V, np.int64),
+            "status": np.full((V, N), -1, np.int64), "failure": "", "seconds": 0.0}
+    info["elements"][:S] = 1
+    controls, probabilities = {}, {}
+    whole = np.array([measure.lo, measure.hi])
+    for k, order in enumerate(orders):  # the variants of one N run in parallel
+        run = opa_part(cfg, work, value, sigma, order, times)
+        mean[:S, k], var[:S, k] = run["x_mean"], run["x_var"]
+        first[:S, k] = run["first_impact"] / T
+        info["status"][:S, k] = run["status"]
+        info["seconds"] += run["seconds"]
+        for v in range(S):
+            controls[v, k] = Control(run["x_coef"][v][None], whole, cfg.semicircle)
+            probabilities[v, k] = np.ones(1)
+        if not (cfg.element_laws and order == cfg.nmax):
+            continue
+        run = elements_part(cfg, work, value, sigma, order, times)
+        mean[S:, k], var[S:, k] = run["x_mean"], run["x_var"]
+        first[S:, k] = run["first_impact"] / T
+        info["elements"][S:], info["collocated"][S:] = run["elements"], run["collocated"]
+        info["status"][S:, k] = np.where(run["elements"] > 0, 0, -1)
+        info["failure"] = str(run["failure"])
+        info["seconds"] += run["seconds"]
+        for ell in range(len(cfg.element_laws)):
+            if f"x_coef_{ell}" in run:
+                cuts = run[f"edges_{ell}"]
+                controls[S + ell, k] = Control(run[f"x_coef_{ell}"], cuts)
+                probabilities[S + ell, k] = np.array([
+                    measure.restrict(a, b).probability() for a, b in zip(cuts[:-1], cuts[1:])])
+        if info["failure"]:
+            work.point_log(f"{_name(cfg, value, sigma)}, N = {order}: multi-element "
+                           f"variant not run ({info['failure']})")
+    inputs = [opa_inputs(cfg, value, sigma, order, times) for order in orders]
+    if cfg.element_laws and cfg.nmax in orders:
+        inputs.append(elements_inputs(cfg, value, sigma, cfg.nmax, times))
+    return PointOpa(inputs, controls, probabilities, mean, var, first), info
 
-    def boundary_at(self, value, grid: dict[float, Point], h: int):
-        """The bisections of horizon ``h`` (an index into ``cfg.horizons``) at one value
-        (:meth:`boundary`): the brackets (variant, criterion, 2), the steps (variant,
-        criterion), and the verdicts (variant, criterion) at N = Nmax of every sigma
-        probed that is not on the grid."""
-        cfg = self.cfg
-        k = -1
-        V, C = len(cfg.variants), 2
-        star = np.full((V, C, 2), np.nan)
-        steps = np.zeros((V, C), dtype=np.int64)
-        probes: dict[float, Point] = dict(grid)
-        for v in range(V):
-            for c in range(C):
-                def agrees(s, v=v, c=c):
-                    s = float(np.round(s, 12))
-                    known = probes.get(s)
-                    # a probe another bisection made may leave this verdict
-                    # undecided: its rounds go on (the ones done are read back)
-                    if known is None or (known.verdict[v, -1, h, c] == 0
-                                         and known.samples * 2 <= cfg.max_samples):
-                        probes[s] = self.evaluate(value, s, orders=(cfg.nmax,),
-                                                  focus=(v, h, c), horizon=h)
-                        self._tick()
-                    return bool(probes[s].agrees[v, k, h, c])
 
-                known = sorted(probes)
-                for s in known:  # the probes of other bisections, decided for this one
-                    if s not in grid:
-                        agrees(s)
-                failing = [s for s in known if not probes[s].agrees[v, k, h, c]]
-                if not failing:
-                    star[v, c] = (known[-1], np.nan)  # agrees at every sigma tried
-                    continue
-                hi = failing[0]
-                lo = max([s for s in known if s < hi], default=0.0)
-                with self.clock("bisection"):
-                    lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
-                # the probes are stored under sigma rounded to 12 digits
-                star[v, c] = (np.round(lo, 12), np.round(hi, 12))
-                steps[v, c] = n
-        rows = {s: point.verdict[:, k, h] for s, point in probes.items() if s not in grid}
-        return star, steps, rows
+def evaluate_point(cfg: ValidateConfig, value: float, sigma: float, *,
+                   work: Work | None = None, orders=None, focus=None,
+                   horizon: int | None = None) -> Point:
+    """OPA (``orders``, default all) and Monte Carlo at one point, with verdicts.
 
-    def _tick(self):
-        """One more bisection probe: counted beside the bar (its total stays the grid's
-        points, which are known up front; the probes are found as the bisection goes)."""
-        self.probes_run = getattr(self, "probes_run", 0) + 1
-        if self.bar is not None:
-            self.bar.set_postfix(probes=self.probes_run)
+    The multi-element variants run at N = Nmax only (NaN at the other N). With
+    ``horizon`` (an index into ``cfg.horizons``) everything runs up to that horizon
+    only, and the verdicts of the longer horizons are not formed (a bisection probe
+    of that horizon's sigma*). The Monte Carlo doubles while a verdict at N = Nmax is
+    undecided (``focus`` = (variant, horizon, criterion): that one only), up to
+    ``cfg.max_samples``. The point's wall time is that of its runs (OPA, and every Monte
+    Carlo ensemble it took), as stored in the parts: a reused point reports what it
+    cost. ``work``: the task's :class:`compare._ledger.Work` (its parts, counts and
+    caches), default a fresh one on ``cfg.outdir``."""
+    work = Work(cfg.outdir) if work is None else work
+    osc = cfg.oscillator_at(value)
+    end = max(cfg.horizons) if horizon is None else cfg.horizons[horizon]
+    times = time_grid(osc.omega, end, cfg.per_period)
+    evaluated = np.array([n <= len(times) for n in _outputs(cfg)])
+    orders = cfg.orders if orders is None else orders
+    opa, info = point_opa(cfg, work, value, sigma, orders, times)
+    # the last ensemble this task ran at the point, which a next round extends
+    state = work.ensembles.setdefault((value, sigma, len(times)), {})
+    samples, mc_seconds, rounds = cfg.samples, 0.0, 1
+    while True:
+        judged = mc_round(cfg, work, value, sigma, samples, times, opa, state, rounds)
+        mc_seconds += float(judged["seconds"])
+        if samples * 2 > cfg.max_samples or not _undecided(judged, focus):
+            break
+        samples *= 2
+        rounds += 1
+    control = tuple(int(i) for i in judged["control"])
+    mc = {name: judged[name] for name in ("x_mean", "x_var", "x_sem", "x_var_sem")}
+    mc.update(impacts=tuple(int(i) for i in judged["impacts"]),
+              seconds=mc_seconds, rhs=int(judged["rhs"]),
+              control=None if control[0] < 0 else control)
+    verdict = np.where(evaluated[:, None], judged["verdict"], NOT_FORMED).astype(np.int8)
+    return Point(sigma, samples, mc, opa.mean, opa.var, opa.first, judged["errors"],
+                 judged["pre"], judged["disagree"], verdict == 1,
+                 seconds=info["seconds"] + mc_seconds, elements=info["elements"],
+                 collocated=info["collocated"], failure=info["failure"],
+                 status=info["status"], reduction=judged["reduction"], verdict=verdict,
+                 evaluated=evaluated)
+
+
+def _undecided(judged: dict, focus=None) -> bool:
+    """Whether a verdict at N = Nmax (the order sigma* reads) is undecided: any of
+    them, or with ``focus`` = (variant, horizon, criterion) that one, which a
+    bisection probe decides. A verdict at a lower N does not double the samples (it
+    may stay undecided, and counts as not agreeing), nor does one over a horizon whose
+    split list is incomplete within sigma (more samples cannot certify it)."""
+    open_ = judged["open"]
+    if focus is None:
+        return bool(open_[:, -1].any())
+    v, h, c = focus
+    return bool(open_[v, -1, h, c])
+
+
+def judge(cfg: ValidateConfig, pairs: Pairs, opa: PointOpa, periods, rounds: int,
+          complete) -> dict:
+    """The verdicts at one point from the paired estimates (:mod:`compare._pairs`), as
+    :func:`compare.verify` forms its own (:func:`compare._trust.bounded_verdict`).
+
+    Round ``rounds`` of the point's doubling spends ``alpha / 2^rounds`` of the error
+    rate: per horizon H (its n outputs) a Bonferroni band of Student's t intervals
+    (R - 1 degrees of freedom, R replicates) holds for the reference's E[x] and Var[x]
+    at all n outputs at once, so each verdict (variant, N, H, criterion) is wrong with
+    probability <= alpha over all the rounds. Inside the band the running RMS error is
+    bounded above and below: 1 (agrees) when the upper bound is within the tolerance at
+    every output up to H, -1 (disagrees) when the lower bound exceeds it somewhere, 0
+    (undecided) otherwise. An OPA run that stopped (NaN) disagrees from where it
+    stopped. Over a horizon h whose split list is incomplete within sigma
+    (``complete[h]`` False) nothing else is certified: a change of the impact sequence
+    the scan did not reach may hide inside a stratum, where no standard error sees it;
+    such a verdict is undecided and not ``open`` (more samples cannot decide it).
+    Returns verdict (variant, N, horizon, criterion), open (the same shape: undecided
+    on the bounds, which more samples may decide), errors (variant, N,
+    horizon, criterion, 3), disagree (variant, N, criterion): the first time, in
+    periods, at which the estimated running RMS error exceeds the tolerance, over the
+    longest horizon the point reaches (inf: never), and pre (variant, N): the RMS error
+    of the mean before OPA's first impact."""
+    V, N, T = opa.mean.shape
+    H = len(cfg.horizons)
+    ref = pairs.reference
+    errors = np.full((V, N, H, 2, 3), np.nan)
+    verdict = np.zeros((V, N, H, 2), np.int8)
+    open_ = np.zeros((V, N, H, 2), bool)
+    disagree = np.full((V, N, 2), np.inf)
+    spent = cfg.alpha / 2**rounds
+    floor = noise_floor(cfg.options)
+    # the variance's floor: the solvers' squared, and the roundoff of E[x^2] - E[x]^2
+    # (4e-16 at x = 1: at t = 0, where every sample is x0, it is all there is)
+    second = float(np.nanmax(ref["x_var"] + ref["x_mean"] ** 2))
+    var_floor = floor**2 + VAR_ROUNDOFF * np.finfo(float).eps * second
+    quantities = (
+        (pairs.err_mean, pairs.err_mean_se, opa.mean, cfg.tolerance, floor),
+        (pairs.err_var, pairs.err_var_se, opa.var, cfg.var_tolerance, var_floor))
+    for h, n in sorted(enumerate(_outputs(cfg)), key=lambda item: item[1]):
+        if n > T:  # a horizon past the point's outputs: not judged
+            continue
+        c_band = float(band_multiplier(spent, n, REPLICATES - 1))
+        var, var_band = ref["x_var"][:n], c_band * ref["x_var_sem"][:n]
+        var_low, var_high = np.maximum(var - var_band, 0), np.maximum(var + var_band, 0)
+        scales = ((np.sqrt(var_low), np.sqrt(var_high)), (var_low, var_high))
+        for c, (err, sem, values, tol, c_floor) in enumerate(quantities):
+            upper, lower = bound_excess(err[..., :n], c_band * sem[..., :n], *scales[c],
+                                        tol=tol, floor=c_floor)
+            stopped = ~np.isfinite(values[..., :n])  # the OPA run stopped: over from there
+            lower = np.where(stopped, np.inf, lower)
+            upper = np.where(stopped, np.inf, upper)
+            known = np.logical_and.accumulate(np.isfinite(lower) | stopped, axis=-1)
+            bounded = np.where((known & (lower > 0)).any(-1), -1,
+                               np.where((upper <= 0).all(-1), 1, 0))
+            if complete[h]:
+                verdict[:, :, h, c], open_[:, :, h, c] = bounded, bounded == 0
+            else:
+                verdict[:, :, h, c] = np.where(stopped.any(-1), -1, 0)
+            scale = np.sqrt(np.maximum(ref["x_var"], 0)) if c == 0 else ref["x_var"]
+            # not <= 0 rather than > 0: a run that stopped (NaN) is over from there
+            over = ~(excess(err[..., :n], scale[:n], sem[..., :n], tol=tol,
+                            floor=c_floor) <= 0)
+            disagree[:, :, c] = np.where(over.any(-1), periods[np.argmax(over, axis=-1)],
+                                         np.inf)
+            errors[:, :, h, c] = window_errors_all(err, scale, sem, n)
+    with np.errstate(invalid="ignore"):
+        before = periods[None, None, :] < opa.first[:, :, None]
+        square = np.where(before, pairs.err_mean**2, 0.0)
+        count = before.sum(-1)
+        pre = np.where(count > 0, np.sqrt(square.sum(-1) / np.maximum(count, 1)), np.nan)
+    return {"verdict": verdict, "open": open_, "errors": errors, "disagree": disagree,
+            "pre": pre}
+
+
+# -- one value of the swept parameter ------------------------------------------------------
+def _scan_value(cfg: ValidateConfig, value: float) -> dict:
+    """The split scans at one value, per horizon (the arrays of
+    :func:`compare._mapdata.splits_to_arrays`)."""
+    osc = cfg.oscillator_at(value)
+    centre = getattr(osc, cfg.uncertain)
+    smax = max(cfg.sigmas)
+    T = osc.forcing_period
+    found, runs, longest = {}, {}, None
+    # the longest horizon first; a shorter one reuses its runs (they hold the events
+    # up to the shorter horizon) and bisects with runs to its own horizon, and the
+    # chatter window past it (a burst at the horizon is told from both sides, as
+    # in the longer runs)
+    for h in sorted(cfg.horizons, reverse=True):
+        cache = {**runs, "t_end": (h + (CHATTER_WINDOW if runs else 0.0)) * T}
+        found[h] = scan_splits(
+            cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax,
+            centre + smax, h * T,
+            tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache,
+            outputs=time_grid(osc.omega, h, cfg.per_period),
+            needed_within=cfg.sigmas,
+            max_splits=MAX_SPLITS if h == min(cfg.horizons) else cfg.long_splits)
+        runs, longest = cache, longest or cache
+    cache = longest
+    seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache, centre)
+    scans = []
+    for h in cfg.horizons:
+        speed, when = seq_centre.slowest_impact(h * T)
+        scan = found[h]
+        scans.append(HorizonSplits(
+            h, sorted(scan.splits + scan.crossings, key=lambda sp: sp.value),
+            scan.truncated, speed, when / T, seq_centre.count(h * T),
+            scan.complete_within, scan.crossings_within))
+    return splits_to_arrays(scans)
+
+
+def value_splits(cfg: ValidateConfig, work: Work, value: float
+                 ) -> tuple[float, list[HorizonSplits]]:
+    """The centre of the ensembles and, per horizon (in ``cfg.horizons`` order), the
+    splits of the sampled systems' event sequences over the largest ensemble, kept as a
+    part (read once per task: every round's design reads it)."""
+    centre = getattr(cfg.oscillator_at(value), cfg.uncertain)
+    inputs = {"system": cfg.system_at(value), "uncertain": cfg.uncertain,
+              "sigmas": [min(cfg.sigmas), max(cfg.sigmas)], "horizons": cfg.horizons,
+              "tol": cfg.split_resolution, "per_period": cfg.per_period,
+              "options": cfg.options,
+              "limits": [MAX_SPLITS, cfg.long_splits, MAX_CROSSINGS, MIN_SPLITS],
+              "needed_within": list(cfg.sigmas), "runs": ["own horizon", CHATTER_WINDOW]}
+    if value not in work.scans:
+        stored = work.parts.get(f"splits_{_name(cfg, value)}", inputs,
+                                work.timed("split scans", lambda: _scan_value(cfg, value)))
+        work.scans[value] = centre, splits_from_arrays(stored)
+    return work.scans[value]
+
+
+def boundary(cfg: ValidateConfig, work: Work, value, grid: dict[float, Point], found=None):
+    """sigma* for every (variant, horizon, criterion) at N = Nmax, by bisection.
+
+    A bisection of horizon h's sigma* starts from the grid's verdicts and probes with
+    runs up to h only (``evaluate_point(..., horizon=h)``); the probes of one horizon
+    serve all its bisections, and the horizons are independent of each other
+    (:func:`boundary_at`; ``found``: their results, computed elsewhere, in
+    ``cfg.horizons`` order). Returns the brackets, the steps, and every sigma
+    evaluated with its verdicts (variant, horizon, criterion) at N = Nmax (1 agrees, 0
+    undecided, -1 disagrees, ``NOT_FORMED``)."""
+    k = -1  # N = Nmax; the probes run that order only
+    V, H, C = len(cfg.variants), len(cfg.horizons), 2
+    star = np.full((V, H, C, 2), np.nan)
+    steps = np.zeros((V, H, C), dtype=np.int64)
+    verdicts = {s: point.verdict[:, k].astype(np.int8) for s, point in grid.items()}
+    for h in range(H):
+        star[:, h], steps[:, h], rows = (boundary_at(cfg, work, value, grid, h)
+                                         if found is None else found[h])
+        for s, row_h in rows.items():
+            row = verdicts.setdefault(s, np.full((V, H, C), NOT_FORMED, np.int8))
+            row[:, h] = row_h
+    return star, steps, verdicts
+
+
+def boundary_at(cfg: ValidateConfig, work: Work, value, grid: dict[float, Point], h: int):
+    """The bisections of horizon ``h`` (an index into ``cfg.horizons``) at one value
+    (:func:`boundary`): the brackets (variant, criterion, 2), the steps (variant,
+    criterion), and the verdicts (variant, criterion) at N = Nmax of every sigma
+    probed that is not on the grid."""
+    k = -1
+    V, C = len(cfg.variants), 2
+    star = np.full((V, C, 2), np.nan)
+    steps = np.zeros((V, C), dtype=np.int64)
+    probes: dict[float, Point] = dict(grid)
+    for v in range(V):
+        for c in range(C):
+            def agrees(s, v=v, c=c):
+                s = float(np.round(s, 12))
+                known = probes.get(s)
+                # a probe another bisection made may leave this verdict
+                # undecided: its rounds go on (the ones done are read back)
+                if known is None or (known.verdict[v, -1, h, c] == 0
+                                     and known.samples * 2 <= cfg.max_samples):
+                    probes[s] = evaluate_point(cfg, value, s, work=work, orders=(cfg.nmax,),
+                                               focus=(v, h, c), horizon=h)
+                    work.tick()
+                return bool(probes[s].agrees[v, k, h, c])
+
+            known = sorted(probes)
+            for s in known:  # the probes of other bisections, decided for this one
+                if s not in grid:
+                    agrees(s)
+            failing = [s for s in known if not probes[s].agrees[v, k, h, c]]
+            if not failing:
+                star[v, c] = (known[-1], np.nan)  # agrees at every sigma tried
+                continue
+            hi = failing[0]
+            lo = max([s for s in known if s < hi], default=0.0)
+            with work.clock("bisection"):
+                lo, hi, n = bisect_boundary(agrees, lo, hi, cfg.resolution)
+            # the probes are stored under sigma rounded to 12 digits
+            star[v, c] = (np.round(lo, 12), np.round(hi, 12))
+            steps[v, c] = n
+    rows = {s: point.verdict[:, k, h] for s, point in probes.items() if s not in grid}
+    return star, steps, rows
+
+
+def grid_points(cfg: ValidateConfig, work: Work, value: float) -> dict[float, Point]:
+    """The grid's points at one value (:func:`evaluate_point` at every sigma)."""
+    grid = {}
+    for sigma in cfg.sigmas:
+        grid[float(sigma)] = evaluate_point(cfg, value, float(sigma), work=work)
+        if work.bar is not None:
+            work.bar.update(1)
+    return grid
+
+
+def value_work(cfg: ValidateConfig, work: Work, value: float, found=None) -> dict:
+    """Everything at one swept value: its split scan, its grid of points, the
+    bisections of its sigma* (``found``: those of every horizon, computed elsewhere,
+    :func:`boundary`); returns its point datasets (``points``), its value dataset
+    (``value``) and the sigma of its phase portraits (``phase_sigma``)."""
+    cdf = None if cfg.semicircle else cfg.measure().cdf
+    work.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
+             f"{len(cfg.sigmas)} sigmas x {len(cfg.variants) * len(cfg.orders)} OPA "
+             f"runs against Monte Carlo ...")
+    centre, scans = value_splits(cfg, work, value)
+    grid = grid_points(cfg, work, value)
+    star, steps, probes = boundary(cfg, work, value, grid, found)
+    work.ensembles.clear()
+    with work.clock("assembly"):
+        points = [point_dataset(cfg, value, grid[float(s)], centre, scans, cdf)
+                  for s in cfg.sigmas]
+        value_ds = value_dataset(cfg, value, centre, scans, star, steps, probes)
+    return {"points": points, "value": value_ds, "phase_sigma": _phase_sigma(cfg, grid)}
+
+
+def value_part(cfg: ValidateConfig, work: Work, value: float, found=None,
+               spill: bool = True) -> dict:
+    """:func:`value_work`, its datasets joined into the value's slice of the map
+    (:func:`compare._mapdata.value_slice`), its bulk written to ``OUTDIR/SLICES``
+    with ``spill`` (:func:`compare._mapdata.spill`); returns the slice (``slice``)
+    and the sigma of the phase portraits (``phase_sigma``)."""
+    result = value_work(cfg, work, value, found)
+    with work.clock("assembly"):
+        part = value_slice(cfg, value, result["points"], result["value"])
+        if spill:
+            part = spill_slice(part, os.path.join(cfg.outdir, SLICES), _name(cfg, value))
+    return {"slice": part, "phase_sigma": result["phase_sigma"]}
+
+
+def details_part(cfg: ValidateConfig, work: Work, sigma: float) -> xr.Dataset:
+    """:func:`_details` at the first swept value and ``sigma`` (the first grid sigma
+    where mean/galerkin fails over the first horizon there), kept as a part."""
+    value = cfg.values[0]
+    inputs = {"system": cfg.system_at(value, sigma=float(sigma), order=cfg.nmax),
+              "horizons": cfg.horizons, "per_period": cfg.per_period, "seed": cfg.seed,
+              "dense_per_period": DENSE_PER_PERIOD, "options": cfg.options}
+    return work.parts.get(f"details_{_name(cfg, value, sigma)}", inputs,
+                          work.timed("phase portraits", lambda: _details(cfg, sigma)),
+                          ".nc")
+
+
+# -- the map -------------------------------------------------------------------------------
+def run_map(cfg: ValidateConfig, *, progress: bool, log, tasks=None) -> xr.Dataset:
+    """The map's dataset, with the phase table and the counts of this run (``phase_*``
+    attributes: seconds not charged to a named phase go to "other": parts read back,
+    loops): the ledger of this process's own work plus those the tasks returned.
+
+    ``tasks(cfg, work, bar)``: the values' results and the frontier computed elsewhere,
+    and the sum of those tasks' ledgers (:func:`compare._mapflow.run_map_tasks`);
+    without it every value is computed here, one after the other."""
+    work = Work(cfg.outdir, log=log)
+    before = true_system_work()
+    start = time.perf_counter()
+    with work.clock("other"):
+        results, elsewhere = _compute(cfg, work, progress, tasks)
+        ds = _assemble(cfg, work, results)
+    after = true_system_work()
+    ledger = work.ledger((after[0] - before[0], after[1] - before[1])) + elsewhere
+    # what this run did (the rest of the dataset is the same for a rerun)
+    ds.attrs["wall_seconds"] = time.perf_counter() - start
+    ds.attrs.update(ledger.attrs())
+    ds.attrs["ran_on"] = (f"Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
+                          else f"{cfg.processes} local processes" if cfg.processes > 1
+                          else "one process")
+    return ds
+
+
+def _compute(cfg: ValidateConfig, work: Work, progress: bool, tasks) -> tuple[dict, Ledger]:
+    """Every value's slice and the frontier (here, or by ``tasks``), and the ledger of
+    the work done elsewhere."""
+    from tqdm.auto import tqdm
+
+    stale = clear_slices(os.path.join(cfg.outdir, SLICES))
+    if stale:
+        work.log(f"slices: removed {len(stale)} file(s) an interrupted run left behind")
+    if work.parts.removed:
+        work.log(f"parts: removed {len(work.parts.removed)} temporary file(s) an "
+                 f"interrupted run left behind: "
+                 f"{', '.join(os.path.basename(p) for p in work.parts.removed)}")
+    total = len(cfg.values) * len(cfg.sigmas)
+    with tqdm(total=total, unit="point", desc="trust map", disable=not progress) as bar:
+        if tasks is not None:
+            return tasks(cfg, work, bar)
+        work.bar = bar
+        results = {i: value_part(cfg, work, value) for i, value in enumerate(cfg.values)}
+        work.bar = None
+        if cfg.frontier:
+            work.log("cost-accuracy frontier at the largest sigma ...")
+            with work.clock("frontier"):
+                results["frontier"] = frontier(cfg, parts=work.parts)
+    return results, Ledger()
+
+
+def _assemble(cfg: ValidateConfig, work: Work, results: dict) -> xr.Dataset:
+    """The map from the values' slices, the phase portraits and the frontier."""
+    with work.clock("assembly"):
+        # each value's slice, its bulk on disk (compare._mapdata.spill): the map is
+        # written from them without ever being whole in this process's memory
+        ds = combine_slices(cfg, [results[i]["slice"] for i in range(len(cfg.values))])
+    ds = xr.merge([ds, details_part(cfg, work, results[0]["phase_sigma"])],
+                  combine_attrs="drop_conflicts")
+    if cfg.frontier:
+        ds = xr.merge([ds, results["frontier"]], combine_attrs="drop_conflicts")
+    ds.attrs.update(_attrs(cfg))
+    return ds.rename({"value": cfg.parameter})  # the sweep dimension (docs/datasets.md)
+
+
+class _Map:
+    """The map's run in the main process (:func:`run_map`), and the points and split
+    scans of one configuration for scripts (:func:`evaluate_point`,
+    :func:`value_splits`), sharing one :class:`compare._ledger.Work`."""
+
+    def __init__(self, cfg: ValidateConfig, *, progress: bool, log):
+        self.cfg, self.progress, self.log = cfg, progress, log
+        self._work = None  # opened when first used: a run opens its own
+
+    @property
+    def work(self) -> Work:
+        if self._work is None:
+            self._work = Work(self.cfg.outdir, log=self.log)
+        return self._work
 
     def run(self, tasks=None) -> xr.Dataset:
-        """The map's dataset, with the phase table of this run (``phase_*`` attributes:
-        seconds not charged to a named phase go to "other": parts read back, loops).
+        return run_map(self.cfg, progress=self.progress, log=self.log, tasks=tasks)
 
-        ``tasks(job, bar)``: the values' results and the frontier, computed elsewhere
-        (:func:`compare._mapflow.run_map_tasks`); without it every value is computed
-        here, one after the other."""
-        before = true_system_work()
-        with self.clock("other"):
-            ds = self._run(tasks)
-        after = true_system_work()
-        self.system_runs += after[0] - before[0]
-        self.system_time += after[1] - before[1]
-        ds.attrs["true_system_runs"] = int(self.system_runs)
-        ds.attrs["true_system_time"] = float(self.system_time)
-        return ds.assign_attrs(self.clock.attrs())
+    def evaluate(self, value: float, sigma: float, **kwargs) -> Point:
+        return evaluate_point(self.cfg, value, sigma, work=self.work, **kwargs)
 
-    def _run(self, tasks) -> xr.Dataset:
-        from tqdm.auto import tqdm
-
-        cfg = self.cfg
-        stale = clear_slices(os.path.join(cfg.outdir, SLICES))
-        if stale:
-            self.log(f"slices: removed {len(stale)} file(s) an interrupted run left behind")
-        if self.parts.removed:
-            self.log(f"parts: removed {len(self.parts.removed)} temporary file(s) an "
-                     f"interrupted run left behind: "
-                     f"{', '.join(os.path.basename(p) for p in self.parts.removed)}")
-        total = len(cfg.values) * len(cfg.sigmas)
-        start = time.perf_counter()
-        with tqdm(total=total, unit="point", desc="trust map", disable=not self.progress) as bar:
-            self.bar = bar
-            if tasks is not None:
-                results = tasks(self, bar)
-            else:
-                results = {}
-                for i, value in enumerate(cfg.values):
-                    results[i] = self.value_part(value)
-                if cfg.frontier:
-                    self.log("cost-accuracy frontier at the largest sigma ...")
-                    with self.clock("frontier"):
-                        results["frontier"] = frontier(cfg, parts=self.parts)
-        self.bar = None
-        with self.clock("assembly"):
-            # each value's slice, its bulk on disk (compare._mapdata.spill): the map is
-            # written from them without ever being whole in this process's memory
-            ds = combine_slices(cfg, [results[i]["slice"] for i in range(len(cfg.values))])
-        ds = xr.merge([ds, self.details(results[0]["phase_sigma"])],
-                      combine_attrs="drop_conflicts")
-        if cfg.frontier:
-            ds = xr.merge([ds, results["frontier"]], combine_attrs="drop_conflicts")
-        ds.attrs.update(_attrs(cfg))
-        ds = ds.rename({"value": cfg.parameter})  # the sweep dimension (docs/datasets.md)
-        # what this run did (the rest of the dataset is the same for a rerun)
-        ds.attrs["wall_seconds"] = time.perf_counter() - start
-        ds.attrs["mc_runs_computed"] = self.mc_runs
-        ds.attrs["true_runs_computed"] = self.true_runs
-        ds.attrs["true_periods_computed"] = self.true_periods
-        ds.attrs["opa_runs_computed"] = self.opa_runs
-        ds.attrs["parts_computed"] = self.parts.computed
-        ds.attrs["parts_set_aside"] = self.parts.set_aside
-        ds.attrs["ran_on"] = (f"Dask cluster at {cfg.scheduler}" if cfg.scheduler is not None
-                              else f"{cfg.processes} local processes" if cfg.processes > 1
-                              else "one process")
-        return ds
-
-    def value_part(self, value: float, found=None, spill: bool = True) -> dict:
-        """:meth:`value_work`, its datasets joined into the value's slice of the map
-        (:func:`compare._mapdata.value_slice`), its bulk written to ``OUTDIR/SLICES``
-        with ``spill`` (:func:`compare._mapdata.spill`); returns the slice (``slice``)
-        and the sigma of the phase portraits (``phase_sigma``)."""
-        result = self.value_work(value, found)
-        with self.clock("assembly"):
-            part = value_slice(self.cfg, value, result["points"], result["value"])
-            if spill:
-                part = spill_slice(part, os.path.join(self.cfg.outdir, SLICES),
-                                   self._name(value))
-        return {"slice": part, "phase_sigma": result["phase_sigma"]}
-
-    def value_work(self, value: float, found=None) -> dict:
-        """Everything at one swept value: its split scan, its grid of points, the
-        bisections of its sigma* (``found``: those of every horizon, computed elsewhere,
-        :meth:`boundary`); returns its point datasets (``points``), its value dataset
-        (``value``) and the sigma of its phase portraits (``phase_sigma``)."""
-        cfg = self.cfg
-        cdf = None if cfg.semicircle else self.measure.cdf
-        self.log(f"{cfg.parameter} = {value:g}: impact-sequence splits, then "
-                 f"{len(cfg.sigmas)} sigmas x {len(cfg.variants) * len(cfg.orders)} OPA "
-                 f"runs against Monte Carlo ...")
-        centre, scans = self.splits(value)
-        grid = self.grid(value)
-        star, steps, probes = self.boundary(value, grid, found)
-        self.ensembles.clear()
-        with self.clock("assembly"):
-            points = [point_dataset(cfg, value, grid[float(s)], centre, scans, cdf)
-                      for s in cfg.sigmas]
-            value_ds = value_dataset(cfg, value, centre, scans, star, steps, probes)
-        return {"points": points, "value": value_ds, "phase_sigma": _phase_sigma(cfg, grid)}
-
-    def grid(self, value: float) -> dict[float, Point]:
-        """The grid's points at one value (:meth:`evaluate` at every sigma)."""
-        grid = {}
-        for sigma in self.cfg.sigmas:
-            grid[float(sigma)] = self.evaluate(value, float(sigma))
-            if self.bar is not None:
-                self.bar.update(1)
-        return grid
-
-    def work(self, system: tuple[int, float] = (0, 0.0)) -> dict:
-        """What this object computed: counts and the phase table; ``system``: the true
-        impact systems it integrated (runs, time; :func:`opa.engine.true_system_work`)."""
-        return {"mc_runs": self.mc_runs, "true_runs": self.true_runs,
-                "system_runs": int(system[0]), "system_time": float(system[1]),
-                "true_periods": self.true_periods, "opa_runs": self.opa_runs,
-                "parts_computed": self.parts.computed,
-                "parts_set_aside": self.parts.set_aside, "phases": self.clock.rows()}
-
-    def details(self, sigma: float) -> xr.Dataset:
-        """:func:`_details` at the first swept value and ``sigma`` (the first grid sigma
-        where mean/galerkin fails over the first horizon there), kept as a part."""
-        cfg = self.cfg
-        value = cfg.values[0]
-        inputs = {"system": cfg.system_at(value, sigma=float(sigma), order=cfg.nmax),
-                  "horizons": cfg.horizons, "per_period": cfg.per_period, "seed": cfg.seed,
-                  "dense_per_period": DENSE_PER_PERIOD, "options": cfg.options}
-        return self.parts.get(f"details_{self._name(value, sigma)}", inputs,
-                              self._timed("phase portraits", lambda: _details(cfg, sigma)),
-                              ".nc")
+    def splits(self, value: float) -> tuple[float, list[HorizonSplits]]:
+        return value_splits(self.cfg, self.work, value)
 
 
 #: the folder of OUTDIR where the bulk of each value's slice of the map waits, from the

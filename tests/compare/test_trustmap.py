@@ -3,6 +3,7 @@ netCDF round trip, resume from parts/, the report, the configuration and the CLI
 
 import math
 import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ from scipy import stats
 
 from compare import load_config, run_validation, write_report
 from compare._config import VARIANTS
+from compare._ledger import Work
 from opa import simulate_opa
 from opa._surrogate import surrogate
 from opa.cli._main import main
@@ -71,15 +73,15 @@ def _design_ensemble(cfg, ds, q, s, times):
     true_runs). Returns x (M, T), xi, and the weights (each replicate's summing to 1)."""
     from types import SimpleNamespace
 
+    from compare._ledger import Work
     from compare._strata import replicate_points
-    from compare._trustmap import _Map
+    from compare._trustmap import design
     from opa.engine import true_runs
 
     value, sigma = cfg.values[q], cfg.sigmas[s]
-    job = _Map(cfg, progress=False, log=lambda *a: None)
-    strata, allocation = job._design(value, sigma, times)
+    strata, allocation = design(cfg, Work(cfg.outdir), value, sigma, times)
     samples = int(ds.mc_samples[q, s])
-    xi, w, rep = replicate_points(job.measure, strata, allocation, R, cfg.seed,
+    xi, w, rep = replicate_points(cfg.measure(), strata, allocation, R, cfg.seed,
                                   samples // cfg.samples)
     assert len(xi) == samples and np.allclose(np.bincount(rep, weights=w), 1.0)
     # the strata cut the law of xi at every change of the impact sequence the dataset
@@ -314,7 +316,7 @@ def test_the_longer_horizons_locate_at_most_long_splits(tmp_path, monkeypatch):
         return real_scan(*args, **kw)
 
     monkeypatch.setattr(trustmap, "scan_splits", scan)
-    trustmap._Map(cfg, progress=False, log=lambda *a: None).splits(3.98)
+    trustmap.value_splits(cfg, Work(cfg.outdir), 3.98)
     assert limits == {12: 5, 8: 5, 4: MAX_SPLITS}
 
 
@@ -343,7 +345,7 @@ def test_each_horizon_bisects_with_runs_to_its_own_horizon(tmp_path, monkeypatch
 
     monkeypatch.setattr(trustmap, "scan_splits", scan)
     monkeypatch.setattr(splits, "event_sequences", runs)
-    centre, scans = trustmap._Map(cfg, progress=False, log=lambda *a: None).splits(3.98)
+    centre, scans = trustmap.value_splits(cfg, Work(cfg.outdir), 3.98)
     monkeypatch.undo()
     short = 8 + splits.CHATTER_WINDOW
     assert calls == [(12, 12, cfg.sigmas), (8, short, cfg.sigmas)]
@@ -875,13 +877,15 @@ def test_a_doubled_ensemble_equals_one_run_whole(tmp_path, distribution):
     import compare._trustmap as trustmap
 
     cfg = load_config(None, outdir=str(tmp_path), distribution=distribution, **TINY)
-    m = trustmap._Map(cfg, progress=False, log=lambda *a: None)
+    work = Work(cfg.outdir)
     times = time_grid(3.98, max(cfg.horizons), cfg.per_period)
-    design = m._design(3.98, 0.03, times)
-    half = m._ensemble(3.98, 0.03, 64, times, design)
-    grown = m._ensemble(3.98, 0.03, 128, times, design, previous=half)
-    whole = m._ensemble(3.98, 0.03, 128, times, design)
-    assert m.true_runs == 64 + 64 + 128  # the doubling ran only its new half
+    design = trustmap.design(cfg, work, 3.98, 0.03, times)
+    half = trustmap.ensemble(cfg, work, 3.98, 0.03, 64, times, design)
+    grown = trustmap.ensemble(cfg, work, 3.98, 0.03, 128, times, design, previous=half)
+    whole = trustmap.ensemble(cfg, work, 3.98, 0.03, 128, times, design)
+    ledger = work.ledger()
+    assert ledger.true_runs == 64 + 64 + 128  # the doubling ran only its new half
+    assert ledger.mc_runs == 3
     for name in ("x", "xi", "weights", "impacts"):
         np.testing.assert_array_equal(grown[name], whole[name])
     assert grown["rhs"] == whole["rhs"]
@@ -897,14 +901,14 @@ def test_the_map_is_written_from_its_slices_without_holding_its_bulk(tmp_path, m
     from compare._mapdata import STREAMED_DIM, combine
 
     got = []
-    work = trustmap._Map.value_work
+    value_work = trustmap.value_work
 
-    def keep(self, value, found=None):
-        result = work(self, value, found)
+    def keep(cfg, work, value, found=None):
+        result = value_work(cfg, work, value, found)
         got.append(result)
         return result
 
-    monkeypatch.setattr(trustmap._Map, "value_work", keep)
+    monkeypatch.setattr(trustmap, "value_work", keep)
     cfg = load_config(None, outdir=str(tmp_path),
                       **{**TINY, "frontier": False, "values": (3.98, 4.09)})
     ds = run_validation(cfg, progress=False, log=lambda *a: None)
@@ -972,12 +976,11 @@ def test_bisection_probes_are_counted_beside_the_bar_not_in_its_total():
 
     from tqdm import tqdm
 
-    from compare._trustmap import _Map
+    from compare._ledger import Work
 
-    job = _Map.__new__(_Map)
-    with tqdm(total=4, file=io.StringIO()) as bar:
-        job.bar = bar
-        job._tick()
-        job._tick()
+    with tqdm(total=4, file=io.StringIO()) as bar, tempfile.TemporaryDirectory() as tmp:
+        job = Work(tmp, bar=bar)
+        job.tick()
+        job.tick()
         assert bar.total == 4 and bar.n == 0
         assert "probes=2" in bar.postfix
