@@ -159,7 +159,7 @@ class ChunkStats:
         )
 
 
-def run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_paths,
+def _run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_paths,
               recurrence=None, single_thread=False, device="cpu"):
     """Integrate one chunk of samples of ``system``'s law (on ``device``) and reduce it:
     (ChunkStats, n_impacts, finished (a mask), paths), or (None, n_impacts, finished, (m,
@@ -173,13 +173,13 @@ def run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_pa
 
 
 def integrate_chunk(y0, xi, times, system, options, device="cpu"):
-    """The runs of one chunk's samples (a ``Batch``), the first half of :func:`run_chunk`."""
+    """The runs of one chunk's samples (a ``Batch``), the first half of :func:`_run_chunk`."""
     return run_batch(system.sampled_inputs(options, xi=xi), y0, times, rtol=options.rtol,
                      atol=options.atol, stop_on_failure=device == "cpu", device=device)
 
 
 def reduce_chunk(batch, xi, w, rep, replicates, order, keep_paths, recurrence=None):
-    """The chunk's statistics from its runs, the second half of :func:`run_chunk`."""
+    """The chunk's statistics from its runs, the second half of :func:`_run_chunk`."""
     # the first sample that failed (the others may have been skipped after it)
     bad = np.flatnonzero(batch.failed)
     if len(bad):
@@ -194,14 +194,8 @@ def reduce_chunk(batch, xi, w, rep, replicates, order, keep_paths, recurrence=No
 
 
 def _chunk_size(n_times: int, requested: int | None, device: str = "cpu") -> int:
-    if requested is not None:
-        from opa.engine import check_count
-
-        try:
-            return check_count("chunk_size", requested)
-        except ValueError as err:
-            raise ValueError(str(err) if "at most" in str(err) else
-                             f"chunk_size must be a positive integer, got {requested}") from None
+    if requested is not None:  # checked by the Execution
+        return int(requested)
     if device == "cuda":  # a GPU wants many threads: up to GPU_CHUNK samples a launch
         return int(min(GPU_CHUNK, max(1024, GPU_CHUNK_BYTES // (16 * n_times))))
     return int(min(4096, max(64, CHUNK_BYTES // (16 * n_times))))
@@ -306,24 +300,74 @@ def simulate_mc(
     run = take_execution(execution, fields, "simulate_mc")
     options = check_instance("options", options, SolverOptions, SolverOptions())
     system = as_system(system, options, allowed=MC_FIELDS, where="simulate_mc", **fields)
-    device, checkpoint, log = run.device, run.checkpoint, run.log
-    oscillator, order, uncertain = system.oscillator, system.order, system.uncertain
     if keep_paths not in (True, False) or isinstance(keep_paths, str):
         raise ValueError(f"keep_paths must be True or False, got {keep_paths!r}")
+    plan = _plan(system, options, samples, sampler, seed, replicates, control,
+                 output_times(system.oscillator, periods, per_period, _control_times(
+                     control, system, times, samples, sampler, seed)), keep_paths, run)
+    # connect before the checkpoint is made: a wrong address leaves nothing behind
+    with run.client() as client:
+        runner = _Chunks.of(plan, run)
+        results = runner.local(run) if client is None else runner.dask(client, run)
+        try:
+            total, n_impacts, paths = _merged(results, plan)
+        finally:
+            results.close()  # a Dask run cancels the tasks left now, not at collection
+    ds = _dataset(total, plan.xi, plan.w, n_impacts, paths, plan.times, system, options,
+                  sampler, seed, plan.replicates, plan.law)
+    if control is not None:
+        ds = controlled(ds, total.x_rep, total.x2_rep, total.rep_weight, plan.xi,
+                        plan.replicates, control)
+    return ds
+
+
+def _control_times(control, system, times, samples, sampler, seed):
+    """The output times asked for, or a control run's (checked against the system) once
+    the sampler's settings are known to be good."""
     check_sampler(sampler, samples, seed)
-    samples = int(samples)
     if samples < 2 and sampler != "gauss":
         raise ValueError(f"samples must be >= 2 for a variance and a standard error, got "
                          f"{samples}")
     check_memory("sampling", samples * SAMPLE_BYTES,
                  f"samples {samples} x {SAMPLE_BYTES} bytes")
-    if device == "cuda":
+    return times if control is None else check_control(control, system, times)
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """One ensemble, checked and sampled: everything its chunks need."""
+
+    system: System
+    options: SolverOptions
+    sampler: str
+    samples: int
+    seed: int | None
+    replicates: int
+    times: np.ndarray
+    keep_paths: bool
+    size: int
+    measure: object
+    xi: np.ndarray
+    w: np.ndarray
+    recurrence: object
+
+    @property
+    def law(self) -> str:
+        return "semicircle" if self.measure is None else self.measure.name
+
+    @property
+    def bounds(self) -> list[tuple[int, int]]:
+        n = len(self.xi)
+        return [(s, min(s + self.size, n)) for s in range(0, n, self.size)]
+
+
+def _plan(system, options, samples, sampler, seed, replicates, control, times, keep_paths,
+          run) -> _Plan:
+    """The ensemble's replicates, chunks and samples, after every budget check."""
+    samples, order, T = int(samples), system.order, len(times)
+    if run.device == "cuda":
         require_gpu()
     system.check_samples()
-    if control is not None:
-        times = check_control(control, system, times)
-    times = output_times(oscillator, periods, per_period, times)
-    T = len(times)
     if sampler != "sobol":
         replicates = 1
     elif replicates is None:
@@ -334,11 +378,10 @@ def simulate_mc(
                          f"{sampler!r}, replicates={replicates}")
     from opa.engine import check_work
 
-    check_work("this Monte Carlo ensemble",
-               samples * float(times[-1] - times[0]) / oscillator.forcing_period,
-               [("samples", samples),
-                ("periods", f"{(times[-1] - times[0]) / oscillator.forcing_period:g}")])
-    size = min(_chunk_size(T, run.chunk_size, device), samples)
+    periods = float(times[-1] - times[0]) / system.oscillator.forcing_period
+    check_work("this Monte Carlo ensemble", samples * periods,
+               [("samples", samples), ("periods", f"{periods:g}")])
+    size = min(_chunk_size(T, run.chunk_size, run.device), samples)
     if keep_paths:
         check_memory("keep_paths", samples * T * 2 * 8,
                      f"samples {samples} x {T} outputs x 2 states")
@@ -356,51 +399,29 @@ def simulate_mc(
                  f"(replicates {replicates} + 1) x order + 1 = {order + 1} coefficients x "
                  f"{T} outputs, running sums and a chunk's")
     recurrence = None if measure is None else measure.recurrence(order + 1)
-    rep = np.arange(len(xi)) // (len(xi) // replicates)
-    y0 = system.deterministic().initial_state()
-    bounds = [(s, min(s + size, len(xi))) for s in range(0, len(xi), size)]
-    args = (times, system, options, int(order), keep_paths, recurrence)
+    return _Plan(system, options, sampler, samples, seed, replicates, times, keep_paths,
+                 size, measure, xi, w, recurrence)
 
-    # connect before the checkpoint is made: a wrong address leaves nothing behind
-    with run.client() as client:
-        check = _chunk_check(T, order, replicates, keep_paths)
-        store, finished = None, set()
-        if checkpoint is not None:
-            store = Checkpoint(checkpoint, _manifest(
-                system, options, sampler, samples, seed, replicates, times, measure,
-                recurrence, xi, w, bounds, keep_paths, device), log)
-            finished = store.finished(bounds, check)
-            if finished and log is not None:
-                log(f"resuming from checkpoint {store.directory}: {len(finished)} of "
-                    f"{len(bounds)} chunks already finished")
-        runner = _Chunks(y0, xi, w, rep, replicates, bounds, args, store, finished, check,
-                         device)
-        results = runner.local(run) if client is None else runner.dask(client, run)
-        total = None
-        n_impacts = np.empty(len(xi), dtype=np.int64)
-        paths = np.empty((len(xi), T, 2)) if keep_paths else None
-        try:
-            # chunks arrive in order and are merged at once: memory does not grow with M
-            for (lo, hi), (stats, imp, status, extra) in results:
-                if stats is None:
-                    m, xi_m, why = extra
-                    raise SimulationError(
-                        f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {uncertain} = "
-                        f"{getattr(oscillator, uncertain) + system.sigma * xi_m:.6g}) stopped: "
-                        f"{why}"
-                    )
-                n_impacts[lo:hi] = imp
-                if keep_paths:
-                    paths[lo:hi] = extra
-                total = stats if total is None else total.merge(stats)
-        finally:
-            results.close()  # a Dask run cancels the tasks left now, not at collection
-    ds = _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,
-                  replicates, "semicircle" if measure is None else measure.name)
-    if control is not None:
-        ds = controlled(ds, total.x_rep, total.x2_rep, total.rep_weight, xi, replicates,
-                        control)
-    return ds
+
+def _merged(results, plan: _Plan):
+    """The chunks' statistics merged in chunk order (memory does not grow with M), the
+    impact counts and, with keep_paths, the paths; a sample that stopped is raised."""
+    system = plan.system
+    total = None
+    n_impacts = np.empty(len(plan.xi), dtype=np.int64)
+    paths = np.empty((len(plan.xi), len(plan.times), 2)) if plan.keep_paths else None
+    for (lo, hi), (stats, imp, status, extra) in results:
+        if stats is None:
+            m, xi_m, why = extra
+            value = getattr(system.oscillator, system.uncertain) + system.sigma * xi_m
+            raise SimulationError(
+                f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {system.uncertain} = "
+                f"{value:.6g}) stopped: {why}")
+        n_impacts[lo:hi] = imp
+        if plan.keep_paths:
+            paths[lo:hi] = extra
+        total = stats if total is None else total.merge(stats)
+    return total, n_impacts, paths
 
 
 def _manifest(system, options, sampler, samples, seed, replicates, times, measure,
@@ -493,6 +514,28 @@ class _Chunks:
     finished: set
     check: Callable
     device: str = "cpu"
+
+    @classmethod
+    def of(cls, plan: _Plan, run: Execution) -> _Chunks:
+        """The chunks of ``plan``, with the finished ones of ``run``'s checkpoint."""
+        order, T, replicates = int(plan.system.order), len(plan.times), plan.replicates
+        bounds = plan.bounds
+        check = _chunk_check(T, order, replicates, plan.keep_paths)
+        store, finished = None, set()
+        if run.checkpoint is not None:
+            store = Checkpoint(run.checkpoint, _manifest(
+                plan.system, plan.options, plan.sampler, plan.samples, plan.seed,
+                replicates, plan.times, plan.measure, plan.recurrence, plan.xi, plan.w,
+                bounds, plan.keep_paths, run.device), run.log)
+            finished = store.finished(bounds, check)
+            if finished:
+                run.say(f"resuming from checkpoint {store.directory}: {len(finished)} of "
+                        f"{len(bounds)} chunks already finished")
+        rep = np.arange(len(plan.xi)) // (len(plan.xi) // replicates)
+        args = (plan.times, plan.system, plan.options, order, plan.keep_paths,
+                plan.recurrence)
+        return cls(plan.system.deterministic().initial_state(), plan.xi, plan.w, rep,
+                   replicates, bounds, args, store, finished, check, run.device)
 
     @property
     def keep_paths(self) -> bool:
@@ -599,7 +642,7 @@ class _Chunks:
         try:
             for i in range(len(self.bounds)):
                 if i not in self.finished:
-                    futures[i] = client.submit(run_chunk, *self.task(i), True, pure=False)
+                    futures[i] = client.submit(_run_chunk, *self.task(i), True, pure=False)
             unsaved = set(futures) if self.store is not None else set()
             with run.bar(len(self.bounds), initial=len(self.finished), unit="chunk",
                          desc="Monte Carlo (dask)") as bar:

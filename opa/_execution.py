@@ -137,7 +137,13 @@ class Execution:
             raise ValueError(f"checkpoint must be a directory path, got "
                              f"{self.checkpoint!r:.60}")
         if self.chunk_size is not None:
-            object.__setattr__(self, "chunk_size", check_count("chunk_size", self.chunk_size))
+            try:
+                size = check_count("chunk_size", self.chunk_size)
+            except ValueError as err:
+                raise ValueError(str(err) if "at most" in str(err) else
+                                 f"chunk_size must be a positive integer, got "
+                                 f"{self.chunk_size!r}") from None
+            object.__setattr__(self, "chunk_size", size)
         object.__setattr__(self, "connect_timeout",
                            _timeout("connect_timeout", self.connect_timeout, False))
         object.__setattr__(self, "worker_timeout",

@@ -566,7 +566,7 @@ def test_pipelined_chunks_count_their_runs_in_the_calling_thread():
     assert after[1] - time_units == pytest.approx(64 * 3 * 2 * np.pi / 3.98, rel=1e-12)
     from mc import _ensemble
 
-    chunks = [_ensemble.run_chunk(np.array([osc.x0, osc.v0]), ds.xi.values[lo:lo + 16],
+    chunks = [_ensemble._run_chunk(np.array([osc.x0, osc.v0]), ds.xi.values[lo:lo + 16],
                                   ds.weight.values[lo:lo + 16], np.zeros(16, int), 1,
                                   ds.time.values, opa.System(osc, sigma=0.02),
                                   opa.SolverOptions(), ds.attrs.get("order", 4), False)[0]
