@@ -27,14 +27,14 @@ import warnings
 
 import numpy as np
 
-from . import _kernel as K
+from . import _kernel as kernel
 
 DEVICES = ("cpu", "cuda")
 THREADS = 128  # threads per block of the ensemble kernel
 REDUCE_ROWS = 8  # sample rows per block of the reduction (x 32 output columns)
 # the shapes of each thread's work arrays, as module constants (a CUDA local array's
 # shape must be a compile-time constant)
-_ROWS, _STATS, _NODES = K.K_ROWS, K.N_STATS, 1
+_ROWS, _STATS, _NODES = kernel.K_ROWS, kernel.N_STATS, 1
 
 
 class DeviceError(ValueError):
@@ -87,7 +87,7 @@ def _numpy(a):
     return a if item is None else item._ary
 
 
-_integrate = None  # the driver a kernel calls: K.integrate_with (unwrapped when simulated)
+_integrate = None  # the driver a kernel calls: kernel.integrate_with (unwrapped when simulated)
 cuda = None  # numba.cuda, imported by the first _kernels() (a module global, so that the
 # CUDA simulator can swap it for its own while a kernel runs)
 
@@ -105,7 +105,8 @@ def _kernels():
     from numba import config, cuda
 
     float64 = np.float64
-    _integrate = _unwrapped(K.integrate_with) if config.ENABLE_CUDASIM else K.integrate_with
+    _integrate = (_unwrapped(kernel.integrate_with) if config.ENABLE_CUDASIM
+                  else kernel.integrate_with)
 
     @cuda.jit
     def ensemble(Y0, include_start, t_out, P, cfgs, nodes, weights, U, rtol, atol, out, logs,
@@ -188,7 +189,7 @@ def _launch_ensemble(cuda, ensemble, B, Y0, include_start, times, P, cfgs, nodes
 
 def _check_inputs(P, cfgs, nodes, U):
     """Only the 2-D true systems: N = 0 and one node (``opa._run.sampled``)."""
-    if nodes.shape[1] != 1 or U.shape[1:] != (1, 2) or np.any(cfgs[:, K.C_NCOEF] != 1):
+    if nodes.shape[1] != 1 or U.shape[1:] != (1, 2) or np.any(cfgs[:, kernel.C_NCOEF] != 1):
         raise ValueError('device="cuda" runs ensembles of the true (sampled) systems only: '
                          "state dimension 2, one node")
 

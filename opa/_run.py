@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from opa import _kernel as K
+from opa import _kernel as kernel
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
 from opa._memory import check_memory
 from opa._model import check_span, time_grid
@@ -74,10 +74,10 @@ def announce_compilation() -> bool:
     numba's on-disk cache, once for this process and the processes it starts afterwards
     (a map's pool workers compile the same cache): a command calls it before starting
     its workers. Returns whether it was said here."""
-    from opa import _kernel as K
+    from opa import _kernel as kernel
 
     cache = os.environ.get("NUMBA_CACHE_DIR", "")
-    if _ANNOUNCED or os.environ.get(ANNOUNCED_ENV) == cache or not _cold(K.integrate):
+    if _ANNOUNCED or os.environ.get(ANNOUNCED_ENV) == cache or not _cold(kernel.integrate):
         return False
     _ANNOUNCED.append(True)
     os.environ[ANNOUNCED_ENV] = cache
@@ -171,7 +171,7 @@ def compile_group(group: str, parent: int | None = None) -> None:
         if parent is not None and os.getppid() != parent:
             return
         try:
-            getattr(K, name).compile(signature)
+            getattr(kernel, name).compile(signature)
         except Exception:  # noqa: BLE001 - a head start must not fail the run
             continue
 
@@ -298,7 +298,7 @@ _GUARD_ADVICE = ("The step size collapsed, as when the state runs away in finite
 def step_guard(times, p) -> int:
     """Steps the runaway guard allows over ``times`` (module constants above)."""
     span = float(times[-1] - times[0]) if len(times) else 0.0
-    periods = span * p[K.P_OMEGA] / (2.0 * np.pi)
+    periods = span * p[kernel.P_OMEGA] / (2.0 * np.pi)
     return int(min(DEFAULT_MAX_STEPS, max(GUARD_FLOOR, GUARD_PER_PERIOD * periods,
                                           GUARD_PER_TIME * span)))
 
@@ -306,7 +306,7 @@ def step_guard(times, p) -> int:
 def step_guards(times, P) -> np.ndarray:
     """:func:`step_guard` of each row of ``P`` (B, N_PARAMS) at once."""
     span = float(times[-1] - times[0]) if len(times) else 0.0
-    periods = span * np.asarray(P)[:, K.P_OMEGA] / (2.0 * np.pi)
+    periods = span * np.asarray(P)[:, kernel.P_OMEGA] / (2.0 * np.pi)
     steps = np.maximum(np.maximum(GUARD_FLOOR, GUARD_PER_PERIOD * periods),
                        GUARD_PER_TIME * span)
     return np.minimum(DEFAULT_MAX_STEPS, steps).astype(np.int64)
@@ -319,23 +319,23 @@ def _guarded_cfgs(inputs: Inputs, times, guard: bool):
     cfgs = np.array(inputs.cfg, dtype=np.int64)
     guarded = np.zeros(len(cfgs), np.int64)
     if guard:
-        rows = np.flatnonzero(cfgs[:, K.C_MAXSTEPS] == DEFAULT_MAX_STEPS)
-        guarded[rows] = cfgs[rows, K.C_MAXSTEPS] = step_guards(times, inputs.p[rows])
+        rows = np.flatnonzero(cfgs[:, kernel.C_MAXSTEPS] == DEFAULT_MAX_STEPS)
+        guarded[rows] = cfgs[rows, kernel.C_MAXSTEPS] = step_guards(times, inputs.p[rows])
     return cfgs, guarded
 
 
 def advice(status: int) -> str:
     """What to try after a kernel status: tolerances help a collapsed step, not an escape."""
-    if status in (K.ESCAPED, K.DIVERGED):
+    if status in (kernel.ESCAPED, kernel.DIVERGED):
         return ("The parameters drive the state out of every bound: check them (e.g. the "
                 "signs of a and c, the sizes of f, F0 and mu).")
-    if status == K.BAD_TIME:
+    if status == kernel.BAD_TIME:
         return "Check the output times: they must be finite, with impulse times resolvable."
-    if status == K.MAX_STEPS:
+    if status == kernel.MAX_STEPS:
         return ("The run needs more steps than max_steps (SolverOptions.max_steps): ask for "
                 "fewer periods, looser tolerances or a larger --max-step, or check the "
                 "parameters.")
-    if status == K.STEP_COLLAPSE:
+    if status == kernel.STEP_COLLAPSE:
         return ("Near this time no step can be taken: check the parameters, and that "
                 "--max-step and the tolerances are not below round-off.")
     return "Check the parameters."
@@ -364,19 +364,20 @@ def output_times(oscillator, periods, per_period, times, dim: int = 2):
 # ---------------------------------------------------------------------------- the inputs
 #: the names of the kernel's float parameters, in the slots of its parameter vector
 PARAMETER_SLOTS = {
-    "mu": K.P_MU, "a": K.P_A, "c": K.P_C, "f": K.P_F, "omega": K.P_OMEGA, "eta": K.P_ETA,
-    "delta": K.P_DELTA, "F0": K.P_F0, "a1": K.P_A1, "omega1": K.P_OMEGA1, "n": K.P_N,
-    "pulse_width": K.P_TAU, "sigma": K.P_SIGMA, "chatter_velocity": K.P_CHATTER_V,
-    "max_step": K.P_HMAX,
+    "mu": kernel.P_MU, "a": kernel.P_A, "c": kernel.P_C, "f": kernel.P_F,
+    "omega": kernel.P_OMEGA, "eta": kernel.P_ETA, "delta": kernel.P_DELTA, "F0": kernel.P_F0,
+    "a1": kernel.P_A1, "omega1": kernel.P_OMEGA1, "n": kernel.P_N,
+    "pulse_width": kernel.P_TAU, "sigma": kernel.P_SIGMA, "chatter_velocity": kernel.P_CHATTER_V,
+    "max_step": kernel.P_HMAX,
 }
 #: the kernel's codes of each named choice
 CHOICE_CODES = {
-    "uncertain": {"mu": K.UNCERTAIN_MU, "a": K.UNCERTAIN_A, "c": K.UNCERTAIN_C},
-    "impulse": {"dirac": K.IMPULSE_DIRAC, "pulse": K.IMPULSE_PULSE},
-    "truncation": {"galerkin": K.TRUNC_GALERKIN, "paper": K.TRUNC_PAPER},
-    "impact_law": {"mean": K.LAW_MEAN, "ensemble": K.LAW_ENSEMBLE,
-                   "saltation": K.LAW_SALTATION},
-    "method": {"dop853": K.METHOD_DOP853, "dp5": K.METHOD_DP5},
+    "uncertain": {"mu": kernel.UNCERTAIN_MU, "a": kernel.UNCERTAIN_A, "c": kernel.UNCERTAIN_C},
+    "impulse": {"dirac": kernel.IMPULSE_DIRAC, "pulse": kernel.IMPULSE_PULSE},
+    "truncation": {"galerkin": kernel.TRUNC_GALERKIN, "paper": kernel.TRUNC_PAPER},
+    "impact_law": {"mean": kernel.LAW_MEAN, "ensemble": kernel.LAW_ENSEMBLE,
+                   "saltation": kernel.LAW_SALTATION},
+    "method": {"dop853": kernel.METHOD_DOP853, "dp5": kernel.METHOD_DP5},
 }
 
 
@@ -399,15 +400,16 @@ def pack(values: dict, *, order: int, max_steps: int, impulse_at_zero: bool,
     """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
     order N, the step limit, the impulse train's start, the named choices of
     :data:`CHOICE_CODES` and ``rule``, :func:`quadrature`'s (nodes, weights, basis)."""
-    p = np.zeros(K.N_PARAMS)
+    p = np.zeros(kernel.N_PARAMS)
     for name, value in values.items():
         p[PARAMETER_SLOTS[name]] = value
-    cfg = np.zeros(K.N_CFG, dtype=np.int64)
-    cfg[K.C_NCOEF] = order + 1
-    cfg[K.C_AT_ZERO] = int(impulse_at_zero)
-    cfg[K.C_MAXSTEPS] = int(max_steps)
-    slots = {"uncertain": K.C_UNCERTAIN, "impulse": K.C_IMPULSE, "truncation": K.C_TRUNC,
-             "impact_law": K.C_LAW, "method": K.C_METHOD}
+    cfg = np.zeros(kernel.N_CFG, dtype=np.int64)
+    cfg[kernel.C_NCOEF] = order + 1
+    cfg[kernel.C_AT_ZERO] = int(impulse_at_zero)
+    cfg[kernel.C_MAXSTEPS] = int(max_steps)
+    slots = {"uncertain": kernel.C_UNCERTAIN, "impulse": kernel.C_IMPULSE,
+             "truncation": kernel.C_TRUNC, "impact_law": kernel.C_LAW,
+             "method": kernel.C_METHOD}
     for name, value in choices.items():
         cfg[slots[name]] = CHOICE_CODES[name][value]
     nodes, weights, basis = kernel_quadrature(rule)
@@ -445,8 +447,8 @@ class Events:
     kind: np.ndarray
 
     #: the kinds, by name
-    IMPACT, GRAZE, STICK, RELEASE, KICK = (K.EV_IMPACT, K.EV_GRAZE, K.EV_STICK, K.EV_RELEASE,
-                                           K.EV_KICK)
+    IMPACT, GRAZE, STICK, RELEASE, KICK = (kernel.EV_IMPACT, kernel.EV_GRAZE, kernel.EV_STICK,
+                                           kernel.EV_RELEASE, kernel.EV_KICK)
 
     @classmethod
     def of(cls, log: np.ndarray) -> Events:
@@ -459,12 +461,12 @@ class Events:
     @property
     def impacts(self) -> np.ndarray:
         """Mask of the impacts: located ones (impact, graze) and kicks into the wall."""
-        return np.isin(self.kind, (K.EV_IMPACT, K.EV_GRAZE, K.EV_KICK))
+        return np.isin(self.kind, (kernel.EV_IMPACT, kernel.EV_GRAZE, kernel.EV_KICK))
 
     @property
     def located(self) -> np.ndarray:
         """Mask of the impacts located on the dense output (not kicks)."""
-        return np.isin(self.kind, (K.EV_IMPACT, K.EV_GRAZE))
+        return np.isin(self.kind, (kernel.EV_IMPACT, kernel.EV_GRAZE))
 
     def first_impact(self) -> float:
         """The time of the first impact, inf when there is none."""
@@ -473,8 +475,8 @@ class Events:
 
     def names(self, impact: str, stick: str, release: str) -> list[str]:
         """Each event's name, impacts of every kind under ``impact``."""
-        table = {K.EV_IMPACT: impact, K.EV_GRAZE: impact, K.EV_KICK: impact,
-                 K.EV_STICK: stick, K.EV_RELEASE: release}
+        table = {kernel.EV_IMPACT: impact, kernel.EV_GRAZE: impact, kernel.EV_KICK: impact,
+                 kernel.EV_STICK: stick, kernel.EV_RELEASE: release}
         return [table[int(k)] for k in self.kind]
 
     def dataset_vars(self) -> dict:
@@ -486,13 +488,14 @@ class Events:
             "impact_velocity": ("impact", self.velocity[impact],
                                 {"long_name": "pre-impact velocity of the (mean) coordinate",
                                  "units": "1"}),
-            "impact_graze": ("impact", (self.kind[impact] == K.EV_GRAZE).astype(np.int8),
+            "impact_graze": ("impact", (self.kind[impact] == kernel.EV_GRAZE).astype(np.int8),
                              {"long_name": f"1 where the impact velocity is below "
-                                           f"{K.EVENT_GRAZE_VELOCITY} (graze)", "units": "1"}),
-            "stick_time": ("stick", self.time[self.kind == K.EV_STICK],
+                                           f"{kernel.EVENT_GRAZE_VELOCITY} (graze)",
+                              "units": "1"}),
+            "stick_time": ("stick", self.time[self.kind == kernel.EV_STICK],
                            {"long_name": "chatter accumulation time, start of sticking",
                             "units": "1"}),
-            "release_time": ("release", self.time[self.kind == K.EV_RELEASE],
+            "release_time": ("release", self.time[self.kind == kernel.EV_RELEASE],
                              {"long_name": "time of release from the wall after sticking",
                               "units": "1"}),
         }
@@ -512,8 +515,9 @@ class Statistics:
 
     @classmethod
     def of(cls, stats: np.ndarray) -> Statistics:
-        return cls(*(stats[:, j].copy() for j in (K.S_IMPACTS, K.S_MIN_VELOCITY, K.S_STICKS,
-                                                   K.S_STEPS, K.S_STICKING, K.S_GAP)))
+        columns = (kernel.S_IMPACTS, kernel.S_MIN_VELOCITY, kernel.S_STICKS, kernel.S_STEPS,
+                   kernel.S_STICKING, kernel.S_GAP)
+        return cls(*(stats[:, j].copy() for j in columns))
 
 
 @dataclass(frozen=True)
@@ -527,7 +531,7 @@ class Record:
     steps: int
     rhs_evaluations: int
     impacts: int
-    status: int = K.OK
+    status: int = kernel.OK
     failure: str | None = None
     tangent: np.ndarray | None = None
     statistics: Statistics | None = None
@@ -535,7 +539,7 @@ class Record:
 
     @property
     def ok(self) -> bool:
-        return self.status == K.OK
+        return self.status == kernel.OK
 
 
 class Batch:
@@ -570,17 +574,17 @@ class Batch:
 
     @property
     def ok(self) -> np.ndarray:
-        return self.status == K.OK
+        return self.status == kernel.OK
 
     @property
     def failed(self) -> np.ndarray:
         """Runs that failed themselves (not the ones skipped after a failure)."""
-        return (self.status != K.OK) & (self.status != K.SKIPPED)
+        return (self.status != kernel.OK) & (self.status != kernel.SKIPPED)
 
     def message(self, b: int) -> str:
         """What became of run b, in words ("ok" when it finished)."""
         status = int(self.status[b])
-        if status == K.MAX_STEPS and self._guarded is not None and self._guarded[b] > 0:
+        if status == kernel.MAX_STEPS and self._guarded is not None and self._guarded[b] > 0:
             return (f"the runaway guard ended it after {int(self.steps[b])} steps "
                     f"{_GUARD_LIMITS}. {_GUARD_ADVICE}")
         return status_message(status)
@@ -594,15 +598,15 @@ class Batch:
 
 def status_message(status: int) -> str:
     """What a kernel status means, in words ("ok" when the run finished)."""
-    return K.STATUS_MESSAGES[int(status)]
+    return kernel.STATUS_MESSAGES[int(status)]
 
 
 #: a short name of each kernel status, indexed by its code (``Batch.status``); datasets
 #: store the codes with these names as their flag meanings
 STATUS_NAMES = tuple(dict(sorted({
-    K.OK: "finished", K.MAX_STEPS: "step_limit", K.STEP_COLLAPSE: "step_collapse",
-    K.DIVERGED: "diverged", K.ESCAPED: "escaped", K.BAD_TIME: "bad_time",
-    K.SKIPPED: "skipped"}.items())).values())
+    kernel.OK: "finished", kernel.MAX_STEPS: "step_limit", kernel.STEP_COLLAPSE: "step_collapse",
+    kernel.DIVERGED: "diverged", kernel.ESCAPED: "escaped", kernel.BAD_TIME: "bad_time",
+    kernel.SKIPPED: "skipped"}.items())).values())
 
 
 # ---------------------------------------------------------------------------- the runs
@@ -628,25 +632,57 @@ def add_true_system_work(runs: int, time: float) -> None:
 def _count(dim: int, p: np.ndarray, times, fresh: bool) -> None:
     if dim != 2 or not len(times):
         return
-    count = int(np.count_nonzero(np.atleast_2d(p)[:, K.P_SIGMA] == 0.0))
+    count = int(np.count_nonzero(np.atleast_2d(p)[:, kernel.P_SIGMA] == 0.0))
     _WORK.runs = getattr(_WORK, "runs", 0) + (count if fresh else 0)
     _WORK.time = getattr(_WORK, "time", 0.0) + count * float(times[-1] - times[0])
 
 
+@dataclass(frozen=True, eq=False)
+class Variational:
+    """Tangent vectors carried with a run (:func:`run`): the variational equation between
+    events and the saltation matrices at them.
+
+    Attributes
+    ----------
+    tangent : (D, m) the tangent vectors W at the start (the record's ``tangent`` is W at
+        the end).
+    renormalise : scale W to unit norm at every output time and record its log growth
+        per interval (Benettin's loop; the record's ``log_growth``).
+
+    Examples
+    --------
+    >>> Variational(np.eye(2)).tangent.shape
+    (2, 2)
+    >>> Variational(np.ones(2))
+    Traceback (most recent call last):
+    ...
+    ValueError: tangent must be a (D, m) array, got shape (2,)
+    """
+
+    tangent: np.ndarray
+    renormalise: bool = False
+
+    def __post_init__(self):
+        W = np.asarray(self.tangent, dtype=float)
+        if W.ndim != 2:
+            raise ValueError(f"tangent must be a (D, m) array, got shape {W.shape}")
+        if not isinstance(self.renormalise, (bool, np.bool_)):
+            raise ValueError(f"renormalise must be True or False, got {self.renormalise!r}")
+        object.__setattr__(self, "tangent", W)
+
+
 def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "trajectory",
-        tangent=None, statistics: bool = False, renormalise: bool = False,
+        variational: Variational | None = None, statistics: bool = False,
         events: bool = True, include_start: bool = True, partial: bool = False,
         guard: bool = True) -> Record:
     """Integrate one system from ``y0`` through ``times`` and return its :class:`Record`.
 
-    ``tangent`` (D, m) are tangent vectors carried with the variational equation and the
-    saltation matrices (the record's ``tangent`` is W at the end); ``renormalise`` scales
-    W to unit norm at every output time and records its log growth (Benettin's loop);
-    ``statistics`` records the per-interval :class:`Statistics`; without ``events`` no
-    event log is kept. With ``include_start`` an impulse at ``times[0]`` is applied (a run
-    from the start of the train); without, it belongs to the previous interval (a run
-    resumed mid-way). ``guard``: the runaway guard (:func:`step_guard`) when the step
-    limit is the default one.
+    ``variational``: tangent vectors carried with the run, renormalised or not
+    (:class:`Variational`); ``statistics`` records the per-interval :class:`Statistics`;
+    without ``events`` no event log is kept. With ``include_start`` an impulse at
+    ``times[0]`` is applied (a run from the start of the train); without, it belongs to
+    the previous interval (a run resumed mid-way). ``guard``: the runaway guard
+    (:func:`step_guard`) when the step limit is the default one.
 
     A run that cannot be completed raises :class:`SimulationError` (with its status), or
     with ``partial`` returns the outputs reached (NaN after) and the reason in
@@ -655,22 +691,25 @@ def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "tr
     times = np.ascontiguousarray(times, dtype=float)
     _count(y0.shape[-1], inputs.p, times, include_start)
     cfg = inputs.cfg
-    limit = step_guard(times, inputs.p) if guard and cfg[K.C_MAXSTEPS] == DEFAULT_MAX_STEPS \
-        else None
+    limit = (step_guard(times, inputs.p)
+             if guard and cfg[kernel.C_MAXSTEPS] == DEFAULT_MAX_STEPS else None)
     if limit is not None:
         cfg = cfg.copy()
-        cfg[K.C_MAXSTEPS] = limit
-    W = np.zeros((len(y0), 0)) if tangent is None else np.asarray(tangent, dtype=float)
+        cfg[kernel.C_MAXSTEPS] = limit
+    W = np.zeros((len(y0), 0)) if variational is None else variational.tangent
+    if W.shape[0] != len(y0):
+        raise ValueError(f"tangent must have {len(y0)} rows, got shape {W.shape}")
+    renormalise = variational is not None and variational.renormalise
     m = W.shape[1]
     capacity = max(64, 4 * len(times)) if events else 0
-    stats = np.empty((len(times) - 1 if statistics else 0, K.N_STATS))
+    stats = np.empty((len(times) - 1 if statistics else 0, kernel.N_STATS))
     growth = np.empty(len(times) - 1 if renormalise else 0)
     for _ in range(2):  # a log cut at its capacity is rerun once, large enough
         out = np.empty((len(times), len(y0)))
         log = np.empty((capacity, 3))
         z = np.concatenate([y0, W.ravel()])
-        prepare_kernels(K.integrate)
-        status, n_events, n_impacts, n_steps, n_rhs = K.integrate(
+        prepare_kernels(kernel.integrate)
+        status, n_events, n_impacts, n_steps, n_rhs = kernel.integrate(
             z, m, times, include_start, renormalise, inputs.p, cfg, inputs.nodes,
             inputs.weights, inputs.basis, rtol, atol, out, stats, growth, log)
         if not events or n_events <= capacity:
@@ -680,7 +719,7 @@ def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "tr
         raise SimulationError(f"{label}: the event count changed between two identical runs "
                               f"({n_events} events)", status=status)
     failure = None
-    if status != K.OK:
+    if status != kernel.OK:
         failure = _failure(label, status, out, times, z, n_steps, n_impacts, limit)
         if not partial:
             raise SimulationError(failure, status=status)
@@ -698,12 +737,12 @@ def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
     """The message of a run that stopped: what happened, where, and what to try."""
     reached = np.isfinite(out[:, 0])
     t_last = times[reached][-1] if reached.any() else times[0]
-    if status == K.MAX_STEPS and limit is not None:
+    if status == kernel.MAX_STEPS and limit is not None:
         size = float(np.max(np.abs(z))) if np.isfinite(z).all() else float("inf")
         return (f"{label} stopped by the runaway guard: {n_steps} steps by t = {t_last:.6g} "
                 f"of {times[-1]:.6g} {_GUARD_LIMITS}, the state's largest component "
                 f"{size:.3g}, {n_impacts} impacts. {_GUARD_ADVICE}")
-    return (f"{label} stopped: {K.STATUS_MESSAGES[status]} (last output time reached "
+    return (f"{label} stopped: {kernel.STATUS_MESSAGES[status]} (last output time reached "
             f"t = {t_last:.6g} of {times[-1]:.6g}; {n_steps} steps, {n_impacts} impacts). "
             f"{advice(status)}")
 
@@ -741,19 +780,19 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
         return Batch(out, logs, counters, guarded)
     apply_thread_grant()
     if own_states:
-        prepare_kernels(K.run_batch_from)
-        K.run_batch_from(np.ascontiguousarray(np.broadcast_to(y0, (B, dim))),
-                         bool(include_start), times, np.ascontiguousarray(inputs.p), cfgs,
-                         *(np.ascontiguousarray(a, dtype=float)
-                           for a in (inputs.nodes, inputs.weights, inputs.basis)),
-                         rtol, atol, out, logs, counters)
+        prepare_kernels(kernel.run_batch_from)
+        kernel.run_batch_from(np.ascontiguousarray(np.broadcast_to(y0, (B, dim))),
+                              bool(include_start), times, np.ascontiguousarray(inputs.p), cfgs,
+                              *(np.ascontiguousarray(a, dtype=float)
+                                for a in (inputs.nodes, inputs.weights, inputs.basis)),
+                              rtol, atol, out, logs, counters)
         return Batch(out, logs, counters, guarded)
     abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
-    prepare_kernels(K.run_batch)
-    K.run_batch(y0, times, np.ascontiguousarray(inputs.p), cfgs,
-                *(np.ascontiguousarray(a, dtype=float)
-                  for a in (inputs.nodes, inputs.weights, inputs.basis)),
-                rtol, atol, out, logs, counters, abort)
+    prepare_kernels(kernel.run_batch)
+    kernel.run_batch(y0, times, np.ascontiguousarray(inputs.p), cfgs,
+                     *(np.ascontiguousarray(a, dtype=float)
+                       for a in (inputs.nodes, inputs.weights, inputs.basis)),
+                     rtol, atol, out, logs, counters, abort)
     return Batch(out, logs, counters, guarded)
 
 

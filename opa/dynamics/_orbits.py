@@ -36,7 +36,7 @@ from opa._model import (
     SolverOptions,
     _choice,
 )
-from opa._run import SimulationError, run
+from opa._run import SimulationError, Variational, run
 from opa._system import SWEEPABLE, SYSTEM_FIELDS, System
 
 # The variational kernel implements the mean and ensemble laws (not saltation).
@@ -281,8 +281,8 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
         if W.shape[0] != D:
             raise ValueError(f"tangent must have {D} rows, got shape {W.shape}")
     rec = run(system._packed, y, times, rtol=system.options.rtol, atol=system.options.atol,
-              label=f"{system.model} variational flow", tangent=W, statistics=True,
-              include_start=include_start, guard=False)
+              label=f"{system.model} variational flow", variational=Variational(W),
+              statistics=True, include_start=include_start, guard=False)
     located = rec.events.located  # located impacts, not kicks
     return Flow(
         times=times,
@@ -693,8 +693,8 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
         start = False
     rec = run(system._packed, y, t_rec + np.arange(periods + 1) * T, rtol=system.options.rtol,
               atol=system.options.atol, label="Lyapunov run",
-              tangent=np.full((D, 1), 1.0 / math.sqrt(D)), statistics=True, renormalise=True,
-              events=False, include_start=start, guard=False)
+              variational=Variational(np.full((D, 1), 1.0 / math.sqrt(D)), renormalise=True),
+              statistics=True, events=False, include_start=start, guard=False)
     stats = rec.statistics
     return LyapunovEstimate(
         exponent=float(np.mean(rec.log_growth) / T), log_growth=rec.log_growth,

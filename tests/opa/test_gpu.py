@@ -126,7 +126,7 @@ def test_step_guards_are_the_guard_of_each_row():
     osc = opa.Oscillator()
     inputs = opa.System(osc, sigma=0.05).sampled_inputs(opa.SolverOptions(),
                                                         xi=np.linspace(-1, 1, 5))
-    inputs.p[:, _run.K.P_OMEGA] = [0.5, 1.0, 3.98, 40.0, 400.0]
+    inputs.p[:, _run.kernel.P_OMEGA] = [0.5, 1.0, 3.98, 40.0, 400.0]
     for times in (np.linspace(0.0, 30.0, 7), np.linspace(0.0, 3000.0, 3), np.zeros(0)):
         expected = [_run.step_guard(times, p) for p in inputs.p]
         assert list(_run.step_guards(times, inputs.p)) == expected

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import opa
-from opa import _kernel as K
+from opa import _kernel as kernel
 from opa._run import run
 from tests.conftest import kernel_inputs, rule
 from tests.opa.test_solver import HARMONIC, kernel_step
@@ -81,16 +81,16 @@ def test_cuda_kernels_live_only_in_the_gpu_module():
                 users.append(str(path.relative_to(ROOT)))
     assert sorted(set(users)) == ["opa/_gpu.py"]
     source = (ROOT / "opa" / "_gpu.py").read_text()
-    assert "K.integrate_with" in source and "def integrate_with" not in source
+    assert "kernel.integrate_with" in source and "def integrate_with" not in source
 
 
 def test_the_layout_indices_are_a_permutation():
-    params = [getattr(K, n) for n in dir(K) if n.startswith("P_")]
-    cfg = [getattr(K, n) for n in dir(K) if n.startswith("C_")]
-    stats = [getattr(K, n) for n in dir(K) if n.startswith("S_")]
-    assert sorted(params) == list(range(K.N_PARAMS))
-    assert sorted(cfg) == list(range(K.N_CFG))
-    assert sorted(stats) == list(range(K.N_STATS))
+    params = [getattr(kernel, n) for n in dir(kernel) if n.startswith("P_")]
+    cfg = [getattr(kernel, n) for n in dir(kernel) if n.startswith("C_")]
+    stats = [getattr(kernel, n) for n in dir(kernel) if n.startswith("S_")]
+    assert sorted(params) == list(range(kernel.N_PARAMS))
+    assert sorted(cfg) == list(range(kernel.N_CFG))
+    assert sorted(stats) == list(range(kernel.N_STATS))
 
 
 def test_the_packer_puts_every_model_field_in_its_slot():
@@ -104,27 +104,29 @@ def test_the_packer_puts_every_model_field_in_its_slot():
     inputs = kernel_inputs(osc, opts, sigma=0.061, order=7, uncertain="c",
                            truncation="paper", impact_law="saltation")
     p, cfg = inputs.p, inputs.cfg
-    want = {K.P_MU: 0.11, K.P_A: 1.13, K.P_C: 0.17, K.P_F: 0.19, K.P_OMEGA: 2.3,
-            K.P_ETA: 0.29, K.P_DELTA: 0.31, K.P_F0: 0.37, K.P_A1: 0.41, K.P_OMEGA1: 4.3,
-            K.P_N: 3.0, K.P_TAU: 0.53, K.P_SIGMA: 0.061, K.P_CHATTER_V: 3e-6,
-            K.P_HMAX: 0.59}
-    assert len(want) == K.N_PARAMS
+    want = {kernel.P_MU: 0.11, kernel.P_A: 1.13, kernel.P_C: 0.17, kernel.P_F: 0.19,
+            kernel.P_OMEGA: 2.3, kernel.P_ETA: 0.29, kernel.P_DELTA: 0.31, kernel.P_F0: 0.37,
+            kernel.P_A1: 0.41, kernel.P_OMEGA1: 4.3, kernel.P_N: 3.0, kernel.P_TAU: 0.53,
+            kernel.P_SIGMA: 0.061, kernel.P_CHATTER_V: 3e-6,
+            kernel.P_HMAX: 0.59}
+    assert len(want) == kernel.N_PARAMS
     for slot, value in want.items():
         assert p[slot] == value, slot
-    want_cfg = {K.C_NCOEF: 8, K.C_UNCERTAIN: K.UNCERTAIN_C, K.C_IMPULSE: K.IMPULSE_PULSE,
-                K.C_AT_ZERO: 0, K.C_TRUNC: K.TRUNC_PAPER, K.C_LAW: K.LAW_SALTATION,
-                K.C_MAXSTEPS: 12345, K.C_METHOD: K.METHOD_DP5}
-    assert len(want_cfg) == K.N_CFG
+    want_cfg = {kernel.C_NCOEF: 8, kernel.C_UNCERTAIN: kernel.UNCERTAIN_C,
+                kernel.C_IMPULSE: kernel.IMPULSE_PULSE, kernel.C_AT_ZERO: 0,
+                kernel.C_TRUNC: kernel.TRUNC_PAPER, kernel.C_LAW: kernel.LAW_SALTATION,
+                kernel.C_MAXSTEPS: 12345, kernel.C_METHOD: kernel.METHOD_DP5}
+    assert len(want_cfg) == kernel.N_CFG
     for slot, value in want_cfg.items():
         assert cfg[slot] == value, slot
     # the other choices of each switch
     cfg = kernel_inputs(osc, dataclasses.replace(opts, impulse="dirac", method="dop853",
                                                  impulse_at_zero=True),
                         uncertain="a", truncation="galerkin", impact_law="ensemble").cfg
-    assert (cfg[K.C_IMPULSE], cfg[K.C_METHOD], cfg[K.C_AT_ZERO]) == (
-        K.IMPULSE_DIRAC, K.METHOD_DOP853, 1)
-    assert (cfg[K.C_UNCERTAIN], cfg[K.C_TRUNC], cfg[K.C_LAW]) == (
-        K.UNCERTAIN_A, K.TRUNC_GALERKIN, K.LAW_ENSEMBLE)
+    assert (cfg[kernel.C_IMPULSE], cfg[kernel.C_METHOD], cfg[kernel.C_AT_ZERO]) == (
+        kernel.IMPULSE_DIRAC, kernel.METHOD_DOP853, 1)
+    assert (cfg[kernel.C_UNCERTAIN], cfg[kernel.C_TRUNC], cfg[kernel.C_LAW]) == (
+        kernel.UNCERTAIN_A, kernel.TRUNC_GALERKIN, kernel.LAW_ENSEMBLE)
     # the x0, v0 fields are the initial state, not parameters
     assert osc.x0 not in p and osc.v0 not in p
 
@@ -270,8 +272,8 @@ def unrolled_dense_stages(name, A, C, first, stop):
 
 
 def kernel_steps_source() -> str:
-    return (unrolled_step("_stages2_dop853", K.D8_A, K.D8_C, K.D8_B, 12) + "\n\n"
-            + unrolled_dense_stages("_dense_stages2_dop853", K.D8_A, K.D8_C, 13, 16))
+    return (unrolled_step("_stages2_dop853", kernel.D8_A, kernel.D8_C, kernel.D8_B, 12) + "\n\n"
+            + unrolled_dense_stages("_dense_stages2_dop853", kernel.D8_A, kernel.D8_C, 13, 16))
 
 
 def test_the_unrolled_steps_are_generated_from_the_tableaux():
@@ -281,7 +283,7 @@ def test_the_unrolled_steps_are_generated_from_the_tableaux():
     assert kernel_steps_source() in source
 
 
-@pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
+@pytest.mark.parametrize("method", [kernel.METHOD_DOP853, kernel.METHOD_DP5])
 @pytest.mark.parametrize("h, force, sticking", [(0.07, 0.0, False), (0.3, 0.8, False),
                                                 (1.0, 0.0, False), (0.07, 0.5, True)])
 def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h, force,
@@ -297,19 +299,20 @@ def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h,
     z = np.array([-0.37, 0.81])
     stages, results = [], []
     for rule_nodes in (nodes, general_nodes):
-        Ks = np.zeros((K.K_ROWS, 2))
+        Ks = np.zeros((kernel.K_ROWS, 2))
         work = np.empty((6, 1))
-        drive = K.forcing(2.3, p, force)
-        K.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, sticking, Ks[0], work)
+        drive = kernel.forcing(2.3, p, force)
+        kernel.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, sticking, Ks[0], work)
         z_new = np.empty(2)
-        K.rk_step(method, 2.3, z, h, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
-                  U, force, sticking, work)
+        kernel.rk_step(method, 2.3, z, h, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
+                       U, force, sticking, work)
         F = np.zeros((7, 2))  # and the dense output: DOP853's three more stages, then F
-        K.dense_prepare(method, 2.3, z, z_new, h, Ks, F, np.empty(2), 0, p, cfg, rule_nodes,
-                        weights, U, force, sticking, work)
+        kernel.dense_prepare(method, 2.3, z, z_new, h, Ks, F, np.empty(2), 0, p, cfg, rule_nodes,
+                             weights, U, force, sticking, work)
         stages.append(Ks)
         results.append(np.concatenate([z_new, F.ravel()]))
-    assert K.is_deterministic(0, cfg, nodes) and not K.is_deterministic(0, cfg, general_nodes)
+    assert kernel.is_deterministic(0, cfg, nodes)
+    assert not kernel.is_deterministic(0, cfg, general_nodes)
     np.testing.assert_array_equal(stages[0], stages[1])
     np.testing.assert_array_equal(results[0], results[1])
 
@@ -342,16 +345,16 @@ def test_the_register_path_of_the_driver_is_the_general_loop_bit_for_bit(case, w
     runs = []
     for rule_nodes in (nodes, np.array([1e-300])):
         out, log = np.empty((len(times), 2)), np.empty((4000, 3))
-        stats = np.empty((len(times) - 1, K.N_STATS)) if with_stats else np.empty((0, K.N_STATS))
-        counters = K.integrate(np.array([osc.x0, osc.v0]), 0, times, True, False, p, cfg,
-                               rule_nodes, weights, U, options.rtol, options.atol, out, stats,
-                               np.empty(0), log)
+        stats = np.empty((len(times) - 1 if with_stats else 0, kernel.N_STATS))
+        counters = kernel.integrate(np.array([osc.x0, osc.v0]), 0, times, True, False, p, cfg,
+                                    rule_nodes, weights, U, options.rtol, options.atol, out, stats,
+                                    np.empty(0), log)
         runs.append((counters, out, stats, log[:counters[1]]))
     (counters, out, stats, log), general = runs
-    assert counters[0] == K.OK and counters[2] >= 5  # impacts
+    assert counters[0] == kernel.OK and counters[2] >= 5  # impacts
     kinds = set(log[:, 2].astype(int))
     if case.startswith("sticking"):
-        assert {K.EV_STICK, K.EV_RELEASE} <= kinds
+        assert {kernel.EV_STICK, kernel.EV_RELEASE} <= kinds
     assert counters == general[0]
     for mine, theirs in zip((out, stats, log), general[1:]):
         np.testing.assert_array_equal(mine, theirs)
@@ -379,20 +382,20 @@ def test_a_shallow_impact_is_found_whatever_the_step_length(depth, tol, method):
     assert ds.impact_velocity.item() == pytest.approx(math.sqrt(1 - delta**2), rel=0.1)
 
 
-@pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
+@pytest.mark.parametrize("method", [kernel.METHOD_DOP853, kernel.METHOD_DP5])
 @pytest.mark.parametrize("h", [0.05, 0.3, 1.0, 1.5])
 def test_the_wall_margin_bounds_the_rise_inside_a_step(h, method):
     """On x = -cos t the true excess of x over the higher end value inside a step (the
     apex 1 at t = pi where the step contains it) and the dense output's excess stay below
     ``wall_margin``, for steps placed anywhere around the apex."""
-    last = K.last_stage(method)
+    last = kernel.last_stage(method)
     for start in np.linspace(math.pi - 1.2 * h, math.pi + 0.2 * h, 15):
         y0 = np.array([-math.cos(start), math.sin(start)])
         stages, y_new, F = kernel_step(HARMONIC, start, y0, h, method)
-        margin = K.wall_margin(stages, last, 1, h)
+        margin = kernel.wall_margin(stages, last, 1, h)
         theta = np.linspace(0.0, 1.0, 401)
         true_top = np.max(-np.cos(start + theta * h))
-        dense_top = max(K.dense_value(method, th, y0, F, 0) for th in theta)
+        dense_top = max(kernel.dense_value(method, th, y0, F, 0) for th in theta)
         ends = max(y0[0], y_new[0])
         assert true_top - ends <= margin
         assert dense_top - ends <= margin
@@ -416,30 +419,31 @@ def free_mass(f=0.0, omega=1e-6):
                           x0=-0.5, v0=0.0)
 
 
-@pytest.mark.parametrize("method", [K.METHOD_DOP853, K.METHOD_DP5])
+@pytest.mark.parametrize("method", [kernel.METHOD_DOP853, kernel.METHOD_DP5])
 def test_the_impact_phase_restepping_to_the_wall_reflects_the_velocity(method):
     """Free flight x = -0.5 + 2 t reaches the wall at t = 0.25, halfway through a step
     of 0.5: the impact phase re-steps there (exact for a straight line), applies
     v+ = -eta v-, logs the impact with v- and sets K[0] = f(t, y+)."""
     p, cfg, nodes, weights, U, work = phase_system(free_mass())
-    cfg[K.C_METHOD] = method
+    cfg[kernel.C_METHOD] = method
     z, z_new, ztmp = np.array([-0.5, 2.0]), np.empty(2), np.empty(2)
-    stages, stages2 = np.zeros((K.K_ROWS, 2)), np.zeros((K.K_ROWS, 2))
+    stages, stages2 = np.zeros((kernel.K_ROWS, 2)), np.zeros((kernel.K_ROWS, 2))
     stages[0] = [2.0, 0.0]  # f(0, z)
     f_minus, f_plus = np.empty(2), np.empty(2)
-    stats = np.zeros((1, K.N_STATS))
-    stats[0, K.S_MIN_VELOCITY] = np.inf
+    stats = np.zeros((1, kernel.N_STATS))
+    stats[0, kernel.S_MIN_VELOCITY] = np.inf
     log = np.zeros((4, 3))
-    t, status, sticking, n_events, n_impacts, evals = K.impact_event(
+    t, status, sticking, n_events, n_impacts, evals = kernel.impact_event(
         method, 0.0, 0.5, 0.5, z, z_new, 0, 0.0, 0, 0, 0, p, cfg, nodes, weights, U, stages,
         stages2, ztmp, f_minus, f_plus, work, stats, log, np.inf)
-    assert status == K.OK and not sticking and (n_events, n_impacts) == (1, 1)
+    assert status == kernel.OK and not sticking and (n_events, n_impacts) == (1, 1)
     assert t == pytest.approx(0.25, abs=1e-14)
     np.testing.assert_allclose(z, [0.0, -ETA * 2.0], rtol=0, atol=1e-14)
-    np.testing.assert_allclose(log[0], [t, 2.0, K.EV_IMPACT], rtol=1e-14)
-    assert stats[0, K.S_IMPACTS] == 1.0 and stats[0, K.S_MIN_VELOCITY] == pytest.approx(2.0)
+    np.testing.assert_allclose(log[0], [t, 2.0, kernel.EV_IMPACT], rtol=1e-14)
+    assert stats[0, kernel.S_IMPACTS] == 1.0
+    assert stats[0, kernel.S_MIN_VELOCITY] == pytest.approx(2.0)
     np.testing.assert_allclose(stages[0], [-ETA * 2.0, 0.0], rtol=0, atol=1e-14)
-    assert evals >= K.last_stage(method) + 1
+    assert evals >= kernel.last_stage(method) + 1
 
 
 @pytest.mark.parametrize("g", [G, -G])
@@ -451,8 +455,8 @@ def test_the_chatter_phase_sticks_at_the_accumulation_time(g):
     p, cfg, nodes, weights, U, work = phase_system(free_mass(f=g))
     v_minus = 1e-7
     z = np.array([0.0, -ETA * v_minus])  # after the impact law
-    sticking, t_stick = K.chatter(1.0, z, 0, v_minus, 0.0, p, cfg, nodes, weights, U,
-                                  np.empty(2), work)
+    sticking, t_stick = kernel.chatter(1.0, z, 0, v_minus, 0.0, p, cfg, nodes, weights, U,
+                                       np.empty(2), work)
     if g > 0:
         assert sticking
         assert t_stick == pytest.approx(1.0 + 2 * ETA * v_minus / (g * (1 - ETA)), rel=1e-12)
@@ -468,13 +472,13 @@ def test_the_kick_phase_at_rest_on_the_wall(strength):
     kick, logged EV_KICK with the kick); either kick ends the sticking (EV_RELEASE)."""
     p, cfg, *_ = phase_system(free_mass())
     z = np.array([0.0, 0.0])
-    stats, log = np.zeros((1, K.N_STATS)), np.zeros((4, 3))
-    sticking, n_events, n_impacts = K.kick(2.0, z, 0, strength, True, 0, 0, 0, p, cfg, stats,
-                                           log)
+    stats, log = np.zeros((1, kernel.N_STATS)), np.zeros((4, 3))
+    sticking, n_events, n_impacts = kernel.kick(2.0, z, 0, strength, True, 0, 0, 0, p, cfg, stats,
+                                                log)
     into = strength > 0
-    assert not sticking and n_impacts == int(into) and stats[0, K.S_IMPACTS] == int(into)
+    assert not sticking and n_impacts == int(into) and stats[0, kernel.S_IMPACTS] == int(into)
     assert z[1] == (-ETA * strength if into else strength)
-    kinds = [K.EV_KICK, K.EV_RELEASE] if into else [K.EV_RELEASE]
+    kinds = [kernel.EV_KICK, kernel.EV_RELEASE] if into else [kernel.EV_RELEASE]
     np.testing.assert_array_equal(log[:n_events, 2], kinds)
     if into:
         np.testing.assert_array_equal(log[0, :2], [2.0, strength])
@@ -484,23 +488,23 @@ def test_the_release_phase_finds_where_the_force_turns():
     """x'' = cos t held on the wall over a step from 1 to 2.5: released at t = pi/2,
     where the force turns away from the wall, at rest there, with K[0] = f(t, y)."""
     p, cfg, nodes, weights, U, work = phase_system(free_mass(f=1.0, omega=1.0))
-    method, t0, h = K.METHOD_DOP853, 1.0, 1.5
+    method, t0, h = kernel.METHOD_DOP853, 1.0, 1.5
     z, z_new, ztmp = np.zeros(2), np.empty(2), np.empty(2)
-    stages, F = np.zeros((K.K_ROWS, 2)), np.empty((7, 2))
-    K.rk_step(method, t0, z, h, stages, z_new, ztmp, 0, p, cfg, nodes, weights, U, 0.0, True,
-              work)
-    K.dense_prepare(method, t0, z, z_new, h, stages, F, ztmp, 0, p, cfg, nodes, weights, U,
-                    0.0, True, work)
-    assert K.pulls_off(t0 + h, z_new, 0.0, p, cfg, nodes, weights, U, np.empty(2), work)
-    assert not K.pulls_off(t0, z, 0.0, p, cfg, nodes, weights, U, np.empty(2), work)
+    stages, F = np.zeros((kernel.K_ROWS, 2)), np.empty((7, 2))
+    kernel.rk_step(method, t0, z, h, stages, z_new, ztmp, 0, p, cfg, nodes, weights, U, 0.0, True,
+                   work)
+    kernel.dense_prepare(method, t0, z, z_new, h, stages, F, ztmp, 0, p, cfg, nodes, weights, U,
+                         0.0, True, work)
+    assert kernel.pulls_off(t0 + h, z_new, 0.0, p, cfg, nodes, weights, U, np.empty(2), work)
+    assert not kernel.pulls_off(t0, z, 0.0, p, cfg, nodes, weights, U, np.empty(2), work)
     log = np.zeros((2, 3))
-    t, status, n_events, evals = K.release_event(method, t0, h, z, 0, 0.0, 0, p, cfg, nodes,
-                                                 weights, U, stages, F, ztmp, np.empty(2),
-                                                 work, log, np.inf)
-    assert status == K.OK and n_events == 1 and evals > 30
+    t, status, n_events, evals = kernel.release_event(method, t0, h, z, 0, 0.0, 0, p, cfg, nodes,
+                                                      weights, U, stages, F, ztmp, np.empty(2),
+                                                      work, log, np.inf)
+    assert status == kernel.OK and n_events == 1 and evals > 30
     assert t == pytest.approx(math.pi / 2, abs=1e-12)
     np.testing.assert_array_equal(z, [0.0, 0.0])
-    np.testing.assert_array_equal(log[0], [t, 0.0, K.EV_RELEASE])
+    np.testing.assert_array_equal(log[0], [t, 0.0, kernel.EV_RELEASE])
     np.testing.assert_allclose(stages[0], [0.0, math.cos(t)], rtol=0, atol=1e-15)
 
 
@@ -510,17 +514,17 @@ def test_the_outputs_phase_stores_and_renormalises():
     entries) when sticking collapsed it."""
     z = np.array([1.0, 2.0, 3.0, 4.0, 0.0, 0.0])  # y (2) and W (2 x 2)
     t_out = np.array([0.0, 1.0, 1.0 + 1e-9, 2.0])
-    out, stats = np.full((4, 2), np.nan), np.zeros((3, K.N_STATS))
-    k = K.store_outputs(1.0, z, 2, 1, True, t_out, out, stats)
+    out, stats = np.full((4, 2), np.nan), np.zeros((3, kernel.N_STATS))
+    k = kernel.store_outputs(1.0, z, 2, 1, True, t_out, out, stats)
     assert k == 2 and np.isnan(out[0]).all() and np.isnan(out[2:]).all()
     np.testing.assert_array_equal(out[1], [1.0, 2.0])
-    assert stats[0, K.S_STICKING] == 1.0 and stats[1, K.S_STICKING] == 0.0
+    assert stats[0, kernel.S_STICKING] == 1.0 and stats[1, kernel.S_STICKING] == 0.0
     growth = np.zeros(3)
-    K.renormalise_tangent(z, 2, 1, 3, growth)
+    kernel.renormalise_tangent(z, 2, 1, 3, growth)
     assert growth[0] == pytest.approx(math.log(5.0)) and growth[1] == pytest.approx(0.0)
     np.testing.assert_allclose(z[2:], [0.6, 0.8, 0.0, 0.0])
     z[2:] = 0.0
-    K.renormalise_tangent(z, 2, 3, 4, growth)
+    kernel.renormalise_tangent(z, 2, 3, 4, growth)
     assert growth[2] == -np.inf
     np.testing.assert_array_equal(z[2:], np.full(4, 0.5))
 
@@ -532,4 +536,4 @@ def test_the_outputs_phase_stores_and_renormalises():
 def test_the_contact_at_a_breakpoint(sticking, acc, x0, v0, changes):
     """Sticking ends at a breakpoint when the force turns away from the wall, and begins
     there only at rest on the wall with the force into it."""
-    assert K.contact_changes(sticking, acc, x0, v0, 0.0) == changes
+    assert kernel.contact_changes(sticking, acc, x0, v0, 0.0) == changes

@@ -36,15 +36,15 @@ def test_callee_table_is_what_integrate_calls(tmp_path):
         import json
         from numba.core import event
         import opa
-        from opa import _kernel as K, _run
+        from opa import _kernel as kernel, _run
         _run.compile_group("helper")
         _run.compile_group("main")
         _run._ANNOUNCED.append(True)  # the table is compiled: no helper process
         with event.install_recorder("numba:compile") as record:
             opa.simulate_dmr(periods=1)
         compiled = [e.data["dispatcher"].py_func.__name__ for _, e in record.buffer
-                    if e.is_start and e.data["dispatcher"].py_func.__module__ == K.__name__]
-        counts = {name: len(getattr(K, name).signatures)
+                    if e.is_start and e.data["dispatcher"].py_func.__module__ == kernel.__name__]
+        counts = {name: len(getattr(kernel, name).signatures)
                   for group in _run.callee_signatures().values() for name in group}
         print(json.dumps([compiled, counts]))
         """, tmp_path)
@@ -95,10 +95,10 @@ def test_a_stale_table_entry_is_skipped_not_raised(monkeypatch):
 
     monkeypatch.setattr(_run, "callee_signatures", lambda: {"main": {
         "is_deterministic": (nt.int64,), "last_stage": (nt.float64,)}})
-    assert (nt.float64,) not in _run.K.last_stage.signatures
+    assert (nt.float64,) not in _run.kernel.last_stage.signatures
     _run.compile_group("main")
-    assert all(len(sig) == 3 for sig in _run.K.is_deterministic.signatures)
-    assert (nt.float64,) in _run.K.last_stage.signatures
+    assert all(len(sig) == 3 for sig in _run.kernel.is_deterministic.signatures)
+    assert (nt.float64,) in _run.kernel.last_stage.signatures
 
 
 def test_no_helper_without_a_python_to_start(monkeypatch):
@@ -165,3 +165,38 @@ def test_a_cold_map_on_two_processes_says_it_compiles_once(tmp_path):
         capture_output=True, text=True, timeout=1200)
     assert done.returncode == 0, done.stderr
     assert done.stderr.count(MESSAGE) == 1, done.stderr
+
+
+def test_tangents_ride_along_and_renormalising_only_rescales_them():
+    """Tangent vectors (``Variational``) carried through a run of the DMR with its wall far
+    away: W at the end is the flow's derivative, checked against central differences of
+    plain runs; one renormalised vector's log growths add up to the log of the norm the
+    same vector reaches unrenormalised; a tangent that is not (D, m) is refused by name."""
+    system = opa.System(opa.preset("3.1", F0=0.0).replace(delta=10.0)).deterministic()
+    inputs = system.kernel_inputs(opa.SolverOptions(rtol=1e-12, atol=1e-12))
+    y0 = system.initial_state()
+    times = np.linspace(0.0, 3 * system.oscillator.forcing_period, 7)
+    kw = dict(rtol=1e-12, atol=1e-12)
+    W = _run.run(inputs, y0, times, variational=_run.Variational(np.eye(2)), **kw).tangent
+    eps = 1e-6
+    for j in range(2):
+        step = eps * np.eye(2)[j]
+        ahead = _run.run(inputs, y0 + step, times, **kw).states[-1]
+        behind = _run.run(inputs, y0 - step, times, **kw).states[-1]
+        np.testing.assert_allclose(W[:, j], (ahead - behind) / (2 * eps), rtol=1e-6,
+                                   atol=1e-8)
+    w0 = np.array([[0.6], [0.8]])
+    plain = _run.run(inputs, y0, times, variational=_run.Variational(w0), **kw)
+    scaled = _run.run(inputs, y0, times, variational=_run.Variational(w0, renormalise=True),
+                      **kw)
+    assert plain.log_growth is None and len(scaled.log_growth) == len(times) - 1
+    assert scaled.log_growth.sum() == pytest.approx(np.log(np.linalg.norm(plain.tangent)),
+                                                    rel=1e-10)
+    np.testing.assert_allclose(scaled.tangent, plain.tangent / np.linalg.norm(plain.tangent),
+                               rtol=1e-10)
+    with pytest.raises(ValueError, match=r"tangent must be a \(D, m\) array, got shape \(2,\)"):
+        _run.Variational(np.ones(2))
+    with pytest.raises(ValueError, match="renormalise must be True or False, got 'yes'"):
+        _run.Variational(np.eye(2), renormalise="yes")
+    with pytest.raises(ValueError, match=r"tangent must have 2 rows, got shape \(3, 1\)"):
+        _run.run(inputs, y0, times, variational=_run.Variational(np.ones((3, 1))), **kw)

@@ -27,7 +27,7 @@ import pytest
 
 import opa
 from opa import Oscillator, SolverOptions, preset, simulate_dmr, simulate_opa
-from opa import _kernel as K
+from opa import _kernel as kernel
 from tests.conftest import kernel_inputs, rule
 from tests.reference import reference_trajectory
 from tests.truths import (
@@ -75,7 +75,7 @@ def state_difference(a, b) -> np.ndarray:
 
 
 def test_dormand_prince_tableau_satisfies_its_order_conditions():
-    A, b, c, e = K.DP_A, K.DP_B[:6], K.DP_C[:6], K.DP_E
+    A, b, c, e = kernel.DP_A, kernel.DP_B[:6], kernel.DP_C[:6], kernel.DP_E
     np.testing.assert_allclose(A.sum(axis=1), c, rtol=0, atol=1e-15)  # row sums = nodes
     assert b.sum() == pytest.approx(1.0, abs=1e-15)
     # quadrature conditions sum b c^(k-1) = 1/k up to order 5
@@ -86,18 +86,18 @@ def test_dormand_prince_tableau_satisfies_its_order_conditions():
     assert b @ A @ c**2 == pytest.approx(1 / 12, abs=1e-15)
     # the error estimate is the difference of two consistent weight vectors
     assert e.sum() == pytest.approx(0.0, abs=1e-15)
-    assert (K.DP_B - e).sum() == pytest.approx(1.0, abs=1e-15)
+    assert (kernel.DP_B - e).sum() == pytest.approx(1.0, abs=1e-15)
     # the dense output reproduces the step at theta = 1 (FSAL stage has weight 0)
-    np.testing.assert_allclose(K.DP_P.sum(axis=1), K.DP_B, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(kernel.DP_P.sum(axis=1), kernel.DP_B, rtol=0, atol=1e-14)
 
 
 def test_dop853_tableau_satisfies_its_order_conditions():
     """Order conditions of the 8th-order weights (quadrature and a few trees), the
     embedded estimates (consistent: their weights sum to 0), the dense-output stages
     (row sums = nodes) -- computed here from the tableau, not from the kernel."""
-    A, c = K.D8_A[:12, :12], K.D8_C[:12]
-    b = K.D8_B
-    np.testing.assert_allclose(K.D8_A.sum(axis=1), K.D8_C, rtol=0, atol=1e-14)
+    A, c = kernel.D8_A[:12, :12], kernel.D8_C[:12]
+    b = kernel.D8_B
+    np.testing.assert_allclose(kernel.D8_A.sum(axis=1), kernel.D8_C, rtol=0, atol=1e-14)
     for k in range(1, 9):
         assert (b * c ** (k - 1)).sum() == pytest.approx(1.0 / k, abs=1e-13)
     assert b @ A @ c == pytest.approx(1 / 6, abs=1e-13)
@@ -105,27 +105,27 @@ def test_dop853_tableau_satisfies_its_order_conditions():
     assert b @ A @ A @ c == pytest.approx(1 / 24, abs=1e-13)
     assert (b * c) @ A @ c**3 == pytest.approx(1 / 24, abs=1e-13)  # gamma = 6 * 4
     assert b @ A @ A @ A @ A @ A @ A @ c == pytest.approx(1 / 40320, abs=1e-15)  # tall tree, 8
-    assert K.D8_E5.sum() == pytest.approx(0.0, abs=1e-13)
-    assert K.D8_E3.sum() == pytest.approx(0.0, abs=1e-13)
+    assert kernel.D8_E5.sum() == pytest.approx(0.0, abs=1e-13)
+    assert kernel.D8_E3.sum() == pytest.approx(0.0, abs=1e-13)
 
 
-METHODS = [K.METHOD_DOP853, K.METHOD_DP5]
+METHODS = [kernel.METHOD_DOP853, kernel.METHOD_DP5]
 
 
-def kernel_step(osc: Oscillator, t0: float, y0, h: float, method: int = K.METHOD_DP5):
+def kernel_step(osc: Oscillator, t0: float, y0, h: float, method: int = kernel.METHOD_DP5):
     """One compiled step of the DMR: returns (K stages, y_new, dense coefficients F)."""
     inputs = kernel_inputs(osc, SolverOptions())
     p, cfg = inputs.p, inputs.cfg
     nodes, weights, U = rule(inputs)
     y0 = np.asarray(y0, dtype=float)
-    stages, y_new, ytmp = np.zeros((K.K_ROWS, 2)), np.empty(2), np.empty(2)
+    stages, y_new, ytmp = np.zeros((kernel.K_ROWS, 2)), np.empty(2), np.empty(2)
     work, F = np.empty((6, 1)), np.empty((7, 2))
-    K.vector_field(y0, 0, p, cfg, nodes, weights, U, K.forcing(t0, p, 0.0), False, stages[0],
+    kernel.vector_field(y0, 0, p, cfg, nodes, weights, U, kernel.forcing(t0, p, 0.0), False,
+                        stages[0], work)
+    kernel.rk_step(method, t0, y0, h, stages, y_new, ytmp, 0, p, cfg, nodes, weights, U, 0.0, False,
                    work)
-    K.rk_step(method, t0, y0, h, stages, y_new, ytmp, 0, p, cfg, nodes, weights, U, 0.0, False,
-              work)
-    K.dense_prepare(method, t0, y0, y_new, h, stages, F, ytmp, 0, p, cfg, nodes, weights, U,
-                    0.0, False, work)
+    kernel.dense_prepare(method, t0, y0, y_new, h, stages, F, ytmp, 0, p, cfg, nodes, weights, U,
+                         0.0, False, work)
     return stages, y_new, F
 
 
@@ -133,28 +133,29 @@ def kernel_step(osc: Oscillator, t0: float, y0, h: float, method: int = K.METHOD
 HARMONIC = Oscillator(mu=0.0, a=1.0, c=0.0, f=0.0, omega=1.0, F0=0.0, delta=1e6, x0=-1.0)
 
 
-@pytest.mark.parametrize("method, tol", [(K.METHOD_DP5, 2e-5), (K.METHOD_DOP853, 1e-8)])
+@pytest.mark.parametrize("method, tol", [(kernel.METHOD_DP5, 2e-5), (kernel.METHOD_DOP853, 1e-8)])
 def test_dense_output_is_continuous_with_the_step_and_accurate(method, tol):
     t0, h = 2.5, 0.5
     y0 = np.array([-math.cos(t0), math.sin(t0)])
     stages, y_new, F = kernel_step(HARMONIC, t0, y0, h, method)
     for j in range(2):
-        assert K.dense_value(method, 0.0, y0, F, j) == y0[j]
-        assert K.dense_value(method, 1.0, y0, F, j) == pytest.approx(y_new[j], abs=1e-15)
+        assert kernel.dense_value(method, 0.0, y0, F, j) == y0[j]
+        assert kernel.dense_value(method, 1.0, y0, F, j) == pytest.approx(y_new[j], abs=1e-15)
     theta = np.linspace(0.0, 1.0, 11)
-    x = [K.dense_value(method, th, y0, F, 0) for th in theta]
+    x = [kernel.dense_value(method, th, y0, F, 0) for th in theta]
     # quartic interpolant (DP5): local error O(h^5) ~ 1e-5 here; DOP853's is 7th order
     np.testing.assert_allclose(x, -np.cos(t0 + theta * h), rtol=0, atol=tol)
     # the slope is the derivative of the interpolant (central differences) and x' = v
     for th in (0.1, 0.5, 0.9):
         d = 1e-6
-        fd = (K.dense_value(method, th + d, y0, F, 0) - K.dense_value(method, th - d, y0, F, 0))
-        assert K.dense_dx(method, th, tuple(F[:, 0])) == pytest.approx(fd / (2 * d), abs=1e-7)
-        assert K.dense_dx(method, th, tuple(F[:, 0])) / h == pytest.approx(
+        fd = (kernel.dense_value(method, th + d, y0, F, 0)
+              - kernel.dense_value(method, th - d, y0, F, 0))
+        assert kernel.dense_dx(method, th, tuple(F[:, 0])) == pytest.approx(fd / (2 * d), abs=1e-7)
+        assert kernel.dense_dx(method, th, tuple(F[:, 0])) / h == pytest.approx(
             math.sin(t0 + th * h), abs=50 * tol)
 
 
-@pytest.mark.parametrize("method, order", [(K.METHOD_DP5, 4), (K.METHOD_DOP853, 7)])
+@pytest.mark.parametrize("method, order", [(kernel.METHOD_DP5, 4), (kernel.METHOD_DOP853, 7)])
 def test_dense_output_converges_at_its_order(method, order):
     """Halving h divides the interpolation error by about 2^(order + 1) (local error of
     an order-p interpolant is O(h^(p+1))); measured 2^5.3 (DP5) and 2^8.05 (DOP853)."""
@@ -163,7 +164,7 @@ def test_dense_output_converges_at_its_order(method, order):
     for h in (0.5, 0.25, 0.125):
         y0 = np.array([-math.cos(t0), math.sin(t0)])
         _, _, F = kernel_step(HARMONIC, t0, y0, h, method)
-        x = np.array([K.dense_value(method, th, y0, F, 0) for th in theta])
+        x = np.array([kernel.dense_value(method, th, y0, F, 0) for th in theta])
         errors.append(np.abs(x + np.cos(t0 + theta * h)).max())
     for coarse, fine in zip(errors, errors[1:]):
         assert coarse / fine > 0.8 * 2.0 ** (order + 1)
@@ -184,10 +185,10 @@ def test_wall_crossing_between_two_points_below_the_wall_is_found(depth, method)
     stages, y_new, F = kernel_step(HARMONIC, t0, y0, h, method)
     delta = 1.0 - depth
     assert y0[0] < delta and y_new[0] < delta
-    theta = K.wall_crossing(method, y0[0], tuple(F[:, 0]), h, delta)
+    theta = kernel.wall_crossing(method, y0[0], tuple(F[:, 0]), h, delta)
     exact = (math.pi - math.acos(delta) - t0) / h  # first crossing, rising side
     assert 0.0 < theta < 0.42
-    assert K.dense_value(method, theta, y0, F, 0) == pytest.approx(delta, abs=1e-12)
+    assert kernel.dense_value(method, theta, y0, F, 0) == pytest.approx(delta, abs=1e-12)
     # the interpolant is accurate to ~1e-5, the slope there is sqrt(2 depth)
     assert theta == pytest.approx(exact, abs=5e-3)
 
@@ -197,8 +198,8 @@ def test_no_wall_crossing_when_the_step_stays_below(method):
     t0, h = math.pi - 0.21, 0.5
     y0 = np.array([-math.cos(t0), math.sin(t0)])
     stages, y_new, F = kernel_step(HARMONIC, t0, y0, h, method)
-    assert K.wall_crossing(method, y0[0], tuple(F[:, 0]), h, 1.0 + 1e-4) == -1.0
-    assert K.wall_crossing(method, y0[0], tuple(F[:, 0]), h, 50.0) == -1.0
+    assert kernel.wall_crossing(method, y0[0], tuple(F[:, 0]), h, 1.0 + 1e-4) == -1.0
+    assert kernel.wall_crossing(method, y0[0], tuple(F[:, 0]), h, 50.0) == -1.0
 
 
 def test_kernel_reports_status_codes_and_fills_unreached_outputs_with_nan():
@@ -208,10 +209,10 @@ def test_kernel_reports_status_codes_and_fills_unreached_outputs_with_nan():
     p, cfg = inputs.p, inputs.cfg
     times = np.linspace(0.0, 20.0, 5)
     out, log = np.empty((5, 2)), np.empty((16, 3))
-    status, _, _, n_steps, _ = K.run_one(
+    status, _, _, n_steps, _ = kernel.run_one(
         np.array([osc.x0, osc.v0]), times, p, cfg, *rule(inputs), 1e-10,
         1e-10, out, log)
-    assert status == K.MAX_STEPS and n_steps == 50
+    assert status == kernel.MAX_STEPS and n_steps == 50
     assert np.isfinite(out[0]).all() and np.isnan(out[-1]).all()
 
 
@@ -403,7 +404,7 @@ def test_graze_is_reported_not_a_crash(delta, graze, eta):
         return
     assert ds.impact_time.size == 1
     assert bool(ds.impact_graze.item()) is graze
-    assert (ds.impact_velocity.item() < K.EVENT_GRAZE_VELOCITY) is graze
+    assert (ds.impact_velocity.item() < kernel.EVENT_GRAZE_VELOCITY) is graze
     v_hit = math.sqrt(-2 * delta)
     t_hit = 1.0 - v_hit
     assert ds.impact_time.item() == pytest.approx(t_hit, abs=1e-7)
