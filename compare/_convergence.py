@@ -11,21 +11,22 @@ forcing periods:
   true impact system), on the same edges;
 * single-element OPA for N = 0..8, single-element collocation, and plain Monte Carlo and
   scrambled Sobol at increasing M (seeds other than the reference's);
-* control variates (:func:`mc.cv_estimates`, as ``simulate_mc(control=...)``): the
-  Sobol ladder's M true systems paired with the adaptive ME-OPA of ``order_budget``
-  elements (saltation law) as the control.
+* control variates: M true systems at stratified randomised-QMC points (the law of xi cut
+  at the changes of the impact sequence, as the trust map's ensembles are) paired with the
+  adaptive ME-OPA of ``order_budget`` elements (saltation law) as the control;
 
 each with its RMS error of the mean x_0 (and of the standard deviation) over the window,
 its right-hand-side evaluations (for OPA also times the Q nodes each one evaluates) and
 its wall time. Slopes are fitted to log error against log K. The errors are meaningful
 down to the reference's own standard error, which is stored beside them.
 
-The MC and Sobol ladders are nested: each is one ensemble of the largest M, run rung by
-rung, each rung's points a prefix of the next's (every replicate's Sobol' sequence goes
-on), and the control-variate rows reuse the Sobol ladder's true systems. A rung's points
-are those of a separate run of that size (``sample_xi``), so a rung's estimate is the
-one a separate ensemble would give; its cost (right-hand sides, seconds) is that of all
-the true systems it holds. The runs of the study are listed by :func:`study_runs`.
+The MC, Sobol and control-variate ladders are nested: each is one ensemble of its
+largest M, run rung by rung, each rung's points held by the next (every replicate's, or
+every stratum's, Sobol' sequence goes on). A rung's points are those of a separate
+ensemble of that size (``sample_xi``; :func:`compare._strata.replicate_points`), so its
+estimate is the one a separate ensemble would give; its cost (right-hand sides, seconds)
+is that of all the true systems it holds. The runs of the study are listed by
+:func:`study_runs`.
 """
 
 from __future__ import annotations
@@ -47,6 +48,8 @@ from opa.engine import (
     quadrature_order, run_measure, simulate_opa, SimulationError, SolverOptions, surrogate,
     surrogate_moments, System, time_grid, true_runs, uniform_edges, write_netcdf,
 )
+from compare._pairs import REPLICATES
+from compare._strata import build_strata, replicate_allocation, replicate_points, split_values
 from compare._verify import verify
 
 STUDY_LAWS = ("mean", "saltation")
@@ -327,46 +330,103 @@ def _mc_ladder(cfg: ConvergenceConfig, ref: dict) -> dict:
 
 
 def _sobol_ladder(cfg: ConvergenceConfig, ref: dict) -> dict:
-    """Scrambled Sobol' and control variates at every rung, over one ensemble whose
-    rungs are nested (:func:`ladder_rows`). Sobol': the mean, and the variance about it
-    plus the replicates' variance of the mean (as ``simulate_mc``). Control variates
-    (:func:`mc.cv_estimates`, as ``simulate_mc(control=...)``): the same true systems
-    paired with the surrogate of the adaptive ME-OPA of ``order_budget`` elements
-    (saltation law), at the rungs that are powers of two >= 8; each pays for its
-    control run."""
+    """Scrambled Sobol' at every rung, over one ensemble whose rungs are nested
+    (:func:`ladder_rows`): the mean, and the variance about it plus the replicates'
+    variance of the mean (as ``simulate_mc``)."""
     R = ladder_replicates(cfg)
-    x, xi, rows, rhs, seconds = _ladder_paths(cfg, "sobol", R)
-    out = {"sizes": np.array([len(r) for r in rows]), "rhs": rhs, "seconds": seconds}
+    x, _, rows, rhs, seconds = _ladder_paths(cfg, "sobol", R)
     err = []
     for r in rows:
         xs = x[r].reshape(R, -1, x.shape[1])
         means = xs.mean(axis=1)
         sem2 = means.var(axis=0, ddof=1) / R if R > 1 else 0.0
         err.append(_errors(ref, xs.mean(axis=(0, 1)), xs.var(axis=(0, 1)) + sem2))
-    out["error"], out["sd_error"] = np.array(err).T
-    cv = [k for k, r in enumerate(rows) if len(r) >= 8 and not len(r) & (len(r) - 1)]
-    out["cv_rung"] = np.array(cv, np.int64)
-    if not cv:
-        return out
+    error, sd_error = np.array(err).T
+    return {"sizes": np.array([len(r) for r in rows]), "error": error, "sd_error": sd_error,
+            "rhs": rhs, "seconds": seconds}
+
+
+def cv_sizes(cfg: ConvergenceConfig) -> list[int]:
+    """The rungs of the control-variate ladder: those of ``mc_samples`` that are powers
+    of two, at least 2 points per replicate (``REPLICATES`` of them) on the first."""
+    return [m for m in ladder_sizes(cfg) if m >= 2 * REPLICATES and not m & (m - 1)]
+
+
+def stratified_rows(allocation, replicates: int, scale: int, most: int) -> np.ndarray:
+    """The rows of :func:`compare._strata.replicate_points` at ``scale`` among those at
+    ``most`` (a multiple of it): in each replicate and stratum, the first ``scale *
+    allocation[j]`` of its ``most * allocation[j]`` points (each stratum's Sobol'
+    sequence goes on).
+
+    >>> stratified_rows([1, 2], 2, 1, 2).tolist()
+    [0, 2, 3, 6, 8, 9]
+    """
+    counts = np.asarray(allocation, int)
+    starts = np.concatenate([[0], np.cumsum(counts * most)[:-1]])
+    per = int(counts.sum()) * most
+    return np.concatenate([r * per + start + np.arange(scale * n)
+                           for r in range(replicates) for start, n in zip(starts, counts)])
+
+
+def _cv_design(cfg: ConvergenceConfig):
+    """The control-variate ladder's points: the law of xi cut at the changes of the
+    impact sequence over the window (:func:`compare._strata.split_values`, zones merged to
+    at most half the first rung's points per replicate), stratified randomised QMC in
+    ``REPLICATES`` replicates (:func:`compare._strata.replicate_points`) at the largest
+    rung; returns xi, weights, the allocation and the strata."""
+    setting = _setting(cfg)
+    sizes = cv_sizes(cfg)
+    per_replicate = sizes[0] // REPLICATES
+    split_xi, complete = split_values(setting.base.replace(order=0), cfg.options,
+                                      setting.measure, float(setting.times[-1]))
+    lo, hi = setting.measure.lo, setting.measure.hi
+    strata = build_strata(setting.measure, [lo, hi], split_xi, complete=complete,
+                          max_strata=max(1, per_replicate // 2))
+    allocation = replicate_allocation(per_replicate, strata.probability)
+    xi, weights, _ = replicate_points(setting.measure, strata, allocation, REPLICATES,
+                                      cfg.seed + 1, sizes[-1] // sizes[0])
+    return xi, weights, allocation, strata
+
+
+def _cv_ladder(cfg: ConvergenceConfig, ref: dict) -> dict:
+    """Control variates at every rung of :func:`cv_sizes`: the true systems at the points
+    of one stratified design (:func:`_cv_design`; a rung's points are the first of every
+    stratum's Sobol' sequence in every replicate, the same as a design of that size)
+    paired with the surrogate of the adaptive ME-OPA of ``order_budget`` elements
+    (saltation law): per replicate the weighted means of x, x^2, x_hat, x_hat^2, and
+    :func:`mc.cv_estimates`. Each rung pays for the control run and its true systems."""
+    setting = _setting(cfg)
+    sizes = cv_sizes(cfg)
+    if not sizes:
+        return {"sizes": np.zeros(0, np.int64), "error": np.zeros(0),
+                "sd_error": np.zeros(0), "rhs": np.zeros(0, np.int64), "seconds": np.zeros(0)}
     control, control_seconds = _control(cfg)
     t = time.perf_counter()
+    xi, weights, allocation, _ = _cv_design(cfg)
+    most = sizes[-1] // sizes[0]
     x_hat = surrogate(control, xi, measure=run_measure(control))[0]
     moments = surrogate_moments(control)
-    surrogate_seconds = time.perf_counter() - t
-    err = []
-    for k in cv:
-        xs = x[rows[k]].reshape(R, -1, x.shape[1])
-        hs = x_hat[rows[k]].reshape(R, -1, x.shape[1])
-        with warnings.catch_warnings():  # one replicate: no standard error (NaN)
-            warnings.simplefilter("ignore", RuntimeWarning)
-            est = cv_estimates(xs.mean(axis=1), (xs**2).mean(axis=1), moments["x_mean"],
-                               moments["x_second"], hs.mean(axis=1), (hs**2).mean(axis=1))
+    x = np.empty_like(x_hat)
+    system, done = setting.base.replace(order=0), np.zeros(0, np.int64)
+    rhs, seconds, err, total = [], [], [], int(control.attrs["rhs_evaluations"])
+    for m in sizes:
+        held = stratified_rows(allocation, REPLICATES, m // sizes[0], most)
+        new = np.setdiff1d(held, done)
+        paths, n_rhs = true_runs(system, cfg.options, xi[new], setting.times,
+                                 what="control-variate sample")
+        x[new], done, total = paths[:, :, 0], held, total + n_rhs
+        # each replicate's weights sum to 1 (P_j / n_j, n_j the stratum's points here)
+        w = (weights[held] * (most * sizes[0] // m)).reshape(REPLICATES, -1, 1)
+        xs, hs = x[held].reshape(REPLICATES, -1, len(setting.times)), \
+            x_hat[held].reshape(REPLICATES, -1, len(setting.times))
+        est = cv_estimates((w * xs).sum(1), (w * xs**2).sum(1), moments["x_mean"],
+                           moments["x_second"], (w * hs).sum(1), (w * hs**2).sum(1))
         err.append(_errors(ref, est["mean"], est["var"]))
-    out["cv_error"], out["cv_sd_error"] = np.array(err).T
-    out["cv_rhs"] = int(control.attrs["rhs_evaluations"]) + rhs[cv]
-    out["cv_seconds"] = control_seconds + surrogate_seconds + seconds[cv]
-    out["total_seconds"] = control_seconds + surrogate_seconds + seconds[-1]
-    return out
+        rhs.append(total)
+        seconds.append(control_seconds + time.perf_counter() - t)
+    error, sd_error = np.array(err).T
+    return {"sizes": np.array(sizes), "error": error, "sd_error": sd_error,
+            "rhs": np.array(rhs, np.int64), "seconds": np.array(seconds)}
 
 
 # -- the list of runs ----------------------------------------------------------------------
@@ -413,10 +473,10 @@ def _collocation_name(method: str, edges, nodes: int) -> str:
     return _slug(f"{method}-K{len(edges) - 1}-Q{nodes}")
 
 
-def _ladder_names(cfg: ConvergenceConfig) -> tuple[str, str]:
+def _ladder_names(cfg: ConvergenceConfig) -> tuple[str, str, str]:
     most = ladder_sizes(cfg)[-1]
-    return (_slug(f"MC ladder-M{most}"),
-            _slug(f"QMC (Sobol) and CV-K{cfg.order_budget} ladder-M{most}"))
+    return (_slug(f"MC ladder-M{most}"), _slug(f"QMC (Sobol) ladder-M{most}"),
+            _slug(f"CV-K{cfg.order_budget} ladder-M{most}"))
 
 
 def study_runs(cfg: ConvergenceConfig, known: dict) -> list[StudyRun]:
@@ -438,14 +498,18 @@ def study_runs(cfg: ConvergenceConfig, known: dict) -> list[StudyRun]:
         runs.append(_run(setting, _collocation_name(method, edges, nodes),
                          {"method": method, "edges": edges.tolist(), "nodes": int(nodes)},
                          _collocation, cfg, ref, edges, int(nodes)))
-    mc, sobol = _ladder_names(cfg)
+    mc, sobol, cv = _ladder_names(cfg)
     ladder = {"samples": ladder_sizes(cfg), "ladder_seed": cfg.seed + 1, "nested": 1}
     runs.append(_run(setting, mc, {**ladder, "sampler": "random"}, _mc_ladder, cfg, ref))
     runs.append(_run(setting, sobol, {**ladder, "sampler": "sobol",
-                                      "replicates": ladder_replicates(cfg),
-                                      "control": {"budget": int(cfg.order_budget),
-                                                  "order": int(cfg.order)}},
+                                      "replicates": ladder_replicates(cfg)},
                      _sobol_ladder, cfg, ref))
+    runs.append(_run(setting, cv, {**ladder, "samples": cv_sizes(cfg),
+                                   "sampler": "stratified sobol at the splits",
+                                   "replicates": REPLICATES,
+                                   "control": {"budget": int(cfg.order_budget),
+                                               "order": int(cfg.order)}},
+                     _cv_ladder, cfg, ref))
     unique = {run.name: run for run in runs}  # two budgets may stop at the same edges
     return list(unique.values())
 
@@ -518,17 +582,13 @@ def _rows(cfg: ConvergenceConfig, known: dict, log) -> tuple[list, list[str]]:
         rows.append((method, "true system", len(edges) - 1, int(nodes),
                      float(result["error"]), float(result["sd_error"]), int(result["rhs"]),
                      int(result["rhs"]), float(result["seconds"])))
-    mc, sobol = (known[name] for name in _ladder_names(cfg))
-    for name, ladder in (("MC", mc), ("QMC (Sobol)", sobol)):
+    names = ("MC", "QMC (Sobol)", f"control variate (ME-OPA K={cfg.order_budget})")
+    for name, run in zip(names, _ladder_names(cfg)):
+        ladder = known[run]
         for k, m in enumerate(ladder["sizes"]):
             rows.append((name, "true system", int(m), 0, float(ladder["error"][k]),
                          float(ladder["sd_error"][k]), int(ladder["rhs"][k]),
                          int(ladder["rhs"][k]), float(ladder["seconds"][k])))
-    for j, k in enumerate(np.asarray(sobol["cv_rung"], np.int64)):
-        rhs = int(sobol["cv_rhs"][j])
-        rows.append((f"control variate (ME-OPA K={cfg.order_budget})", "true system",
-                     int(sobol["sizes"][k]), 0, float(sobol["cv_error"][j]),
-                     float(sobol["cv_sd_error"][j]), rhs, rhs, float(sobol["cv_seconds"][j])))
     return rows, failures
 
 
@@ -579,13 +639,12 @@ def assemble_study(cfg: ConvergenceConfig, known: dict, *, log=print) -> xr.Data
         reference_sem=_rms(ref["x_sem"]), reference_seconds=float(ref["seconds"]),
         reference_rhs_evaluations=int(ref["rhs"]),
         # every run once (a ladder's rungs share its runs)
-        wall_seconds=float(sum(float(r.get("total_seconds", np.max(r["seconds"])))
+        wall_seconds=float(sum(float(np.max(r["seconds"], initial=0.0))
                                for r in known.values())),
         failures=len(failures),
         failure_text=" | ".join(failures) if failures else "none",
-        ladders=("nested: each rung of the MC and Sobol ladders is a prefix of the "
-                 "largest rung's ensemble; the control-variate rows pair the Sobol "
-                 "ladder's true systems with the control"),
+        ladders=("nested: each rung of the MC, Sobol and control-variate ladders holds "
+                 "the points of the rung below (one ensemble per ladder, run rung by rung)"),
     )
     return ds
 
@@ -699,6 +758,6 @@ def write_report(ds, outdir, *, draw, command="opa-mc converge") -> list[str]:
     return [md, png]
 
 
-__all__ = ["ConvergenceConfig", "StudyRun", "assemble_study", "ladder_rows", "pending_runs",
-           "study_runs", "cheapest_reaching", "run_convergence", "slope",
-           "summary_lines", "table", "write_report"]
+__all__ = ["ConvergenceConfig", "StudyRun", "assemble_study", "cheapest_reaching", "cv_sizes",
+           "ladder_rows", "pending_runs", "run_convergence", "slope", "stratified_rows",
+           "study_runs", "summary_lines", "table", "write_report"]

@@ -58,10 +58,37 @@ def _rms_errors(ref, mean, var):
 
 
 def test_ladder_rows_match_separate_ensembles(study):
-    """The nested ladders: each rung of MC, Sobol' and control variates equals a separate
-    simulate_mc run of that size at the ladder's seed (random; scrambled Sobol' with 16
-    replicates; Sobol' with the adaptive ME-OPA control, simulate_mc(control=...)), its
-    right-hand sides those of that run (plus the control's for the control variates)."""
+    """The nested ladders: each rung of MC and Sobol' equals a separate simulate_mc run of
+    that size at the ladder's seed (random; scrambled Sobol' with 16 replicates), its
+    right-hand sides those of that run."""
+    cfg, ds, _ = study
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    ref = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=cfg.reference,
+                      sampler="sobol", seed=cfg.seed, order=0, times=times,
+                      options=cfg.options, progress=False)
+    for method, sampler in (("MC", "random"), ("QMC (Sobol)", "sobol")):
+        rows = np.flatnonzero(ds.method.values == method)
+        assert list(ds["size"].values[rows]) == list(cfg.mc_samples), method
+        for i in rows:
+            alone = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=int(ds["size"][i]),
+                                sampler=sampler, seed=cfg.seed + 1, order=0, times=times,
+                                options=cfg.options, progress=False)
+            err, sd = _rms_errors(ref, alone.x_mean.values, alone.x_var.values)
+            assert ds.error.values[i] == pytest.approx(err, rel=1e-9), method
+            assert ds.sd_error.values[i] == pytest.approx(sd, rel=1e-9), method
+            assert ds.rhs_evaluations.values[i] == alone.attrs["rhs_evaluations"], method
+
+
+def test_control_variate_rows_match_separate_stratified_ensembles(study):
+    """Each control-variate rung equals a separate stratified ensemble of its size (the
+    law cut at the splits, 16 replicates, compare._strata.replicate_points at the rung's
+    scale) paired with the adaptive ME-OPA control, the estimate written out here: per
+    replicate E_cv = E[x_hat] + sum w (x - x_hat), Var_cv = E[x_hat^2] + sum w (x^2 -
+    x_hat^2) - E_cv^2, averaged over the replicates."""
+    from compare._strata import build_strata, replicate_allocation, replicate_points, \
+        split_values
+    from opa.engine import surrogate, surrogate_moments, true_runs
+
     cfg, ds, _ = study
     times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
     ref = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=cfg.reference,
@@ -72,23 +99,28 @@ def test_ladder_rows_match_separate_ensembles(study):
                                elements="adaptive", tolerance=1e-14,
                                max_elements=cfg.order_budget, impact_law="saltation",
                                times=times, options=cfg.options)
-    cv_name = f"control variate (ME-OPA K={cfg.order_budget})"
-    for method, sampler, cv in (("MC", "random", False), ("QMC (Sobol)", "sobol", False),
-                                (cv_name, "sobol", True)):
-        rows = np.flatnonzero(ds.method.values == method)
-        assert list(ds["size"].values[rows]) == list(cfg.mc_samples), method
-        for i in rows:
-            alone = simulate_mc(cfg.oscillator, sigma=cfg.sigma, samples=int(ds["size"][i]),
-                                sampler=sampler, seed=cfg.seed + 1, order=0, times=times,
-                                options=cfg.options, progress=False,
-                                control=control if cv else None)
-            names = ("cv_x_mean", "cv_x_var") if cv else ("x_mean", "x_var")
-            err, sd = _rms_errors(ref, alone[names[0]].values, alone[names[1]].values)
-            assert ds.error.values[i] == pytest.approx(err, rel=1e-9), method
-            assert ds.sd_error.values[i] == pytest.approx(sd, rel=1e-9), method
-            rhs = alone.attrs["rhs_evaluations"] + (control.attrs["rhs_evaluations"]
-                                                    if cv else 0)
-            assert ds.rhs_evaluations.values[i] == rhs, method
+    moments = surrogate_moments(control)
+    system = cfg.system.replace(order=0)
+    measure = cfg.system.measure
+    first = min(cfg.mc_samples)
+    split_xi, complete = split_values(system, cfg.options, measure, times[-1])
+    strata = build_strata(measure, [measure.lo, measure.hi], split_xi, complete=complete,
+                          max_strata=max(1, first // 16 // 2))
+    allocation = replicate_allocation(first // 16, strata.probability)
+    rows = np.flatnonzero(ds.method.values == f"control variate (ME-OPA K={cfg.order_budget})")
+    assert list(ds["size"].values[rows]) == list(cfg.mc_samples)
+    for i in rows:
+        m = int(ds["size"].values[i])
+        xi, w, _ = replicate_points(measure, strata, allocation, 16, cfg.seed + 1, m // first)
+        x = true_runs(system, cfg.options, xi, times, what="test")[0][:, :, 0]
+        h = surrogate(control, xi)[0]
+        w, x, h = w.reshape(16, -1, 1), x.reshape(16, -1, len(times)), \
+            h.reshape(16, -1, len(times))
+        mean_r = moments["x_mean"] + (w * (x - h)).sum(1)
+        var_r = moments["x_second"] + (w * (x**2 - h**2)).sum(1) - mean_r**2
+        err, sd = _rms_errors(ref, mean_r.mean(0), var_r.mean(0))
+        assert ds.error.values[i] == pytest.approx(err, rel=1e-9)
+        assert ds.sd_error.values[i] == pytest.approx(sd, rel=1e-9)
 
 
 def test_the_run_list_is_what_the_study_runs(study, monkeypatch):
@@ -118,7 +150,8 @@ def test_the_run_list_is_what_the_study_runs(study, monkeypatch):
     assert sum(name.startswith("ME-collocation-adaptive") for name in listed) == len(
         cfg.budgets)  # named once the adaptive runs' edges were known
     most = max(cfg.mc_samples)
-    assert true_systems == {"random ladder sample": most, "sobol ladder sample": most}
+    assert true_systems == {"random ladder sample": most, "sobol ladder sample": most,
+                            "control-variate sample": most}
     np.testing.assert_array_equal(again.error.values, ds.error.values)
 
 

@@ -225,15 +225,15 @@ def test_the_convergence_study_runs_each_run_once(tmp_path, monkeypatch):
         return parts.get(f"frontier_{run}", spec, compute)
 
     first = run_convergence(cfg, log=lambda *a: None, write=False, memo=memo)
-    # every run the study lists (the reference, each OPA and collocation row, the two
+    # every run the study lists (the reference, each OPA and collocation row, the three
     # ladders), beside store.json
     runs = {}
     while todo := convergence.pending_runs(cfg, runs):
         runs.update((run.name, run.compute()) for run in todo)
     assert parts.computed == len(os.listdir(tmp_path)) - 1 == len(runs)
-    # the MC, Sobol' and control-variate rows at each rung come from two ladder runs
+    # the MC, Sobol' and control-variate rows at each rung come from three ladder runs
     ladder_rows = 3 * len(cfg.mc_samples)
-    assert len(runs) == 1 + first.sizes["run"] - ladder_rows + 2
+    assert len(runs) == 1 + first.sizes["run"] - ladder_rows + 3
     plain = run_convergence(cfg, log=lambda *a: None, write=False)
     # the same rows as without parts, apart from the wall times
     _same(first.drop_vars("seconds").drop_attrs(deep=False),
