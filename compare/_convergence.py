@@ -643,8 +643,6 @@ def assemble_study(cfg: ConvergenceConfig, known: dict, *, log=print) -> xr.Data
                                for r in known.values())),
         failures=len(failures),
         failure_text=" | ".join(failures) if failures else "none",
-        ladders=("nested: each rung of the MC, Sobol and control-variate ladders holds "
-                 "the points of the rung below (one ensemble per ladder, run rung by rung)"),
     )
     return ds
 
