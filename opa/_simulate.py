@@ -175,9 +175,8 @@ def simulate_opa(
     """
     options = check_instance("options", options, SolverOptions, SolverOptions())
     tolerance, max_elements = _refinement(elements, tolerance, max_elements)
-    if elements is not None and not isinstance(system, System) \
-            and fields.get("impact_law") is None:
-        fields["impact_law"] = "saltation"  # the law whose elements converge
+    if not isinstance(system, System) and fields.get("impact_law") is None:
+        fields["impact_law"] = default_impact_law(elements)
     system = as_system(system, options, where="simulate_opa", **fields)
     system.check_samples()
     oscillator, order = system.oscillator, system.order
@@ -198,6 +197,17 @@ def simulate_opa(
               rtol=options.rtol, atol=options.atol, label=f"OPA (N={order}) trajectory",
               partial=partial)
     return _single_element(system, options, times, rec)
+
+
+def default_impact_law(elements) -> str:
+    """The impact law of an OPA run that names none: ``"saltation"`` with ``elements``
+    (any K or ``"adaptive"``: the law whose elements converge), else ``"mean"`` (the
+    paper's eq. (28)). :func:`simulate_opa` and ``opa-mc simulate opa`` both use it.
+
+    >>> default_impact_law(None), default_impact_law(4), default_impact_law("adaptive")
+    ('mean', 'saltation', 'saltation')
+    """
+    return "mean" if elements is None else "saltation"
 
 
 def _refinement(elements, tolerance, max_elements) -> tuple[float, int]:

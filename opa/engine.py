@@ -57,7 +57,7 @@ from opa._model import (
 )
 from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, \
     follow_thread_grant, output_times, run_batch, true_system_work, usable_cores
-from opa._simulate import opa_variants, simulate_dmr, simulate_opa
+from opa._simulate import default_impact_law, opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
     CHATTER_WINDOW,
     MAX_CROSSINGS,
@@ -88,7 +88,7 @@ __all__ = [
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
     "as_system", "atomic_write", "chebyshev_u", "check_count", "check_device", "check_instance",
     "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",
-    "collocation", "count_probabilities", "digest", "event_sequence", "gauss_nodes",
+    "collocation", "count_probabilities", "default_impact_law", "digest", "event_sequence", "gauss_nodes",
     "follow_thread_grant", "global_coefficients", "identify_motion", "impulse_cycle",
     "local_executor",
     "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",

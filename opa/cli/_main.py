@@ -54,6 +54,7 @@ def cmd_simulate(args) -> int:
 def _simulate(args) -> int:
     from opa._dataset import write_netcdf
     from opa._elements import ElementBudgetWarning
+    from opa.engine import default_impact_law
     from opa.plots._diagrams import plot_run
 
     if args.model == "opa":
@@ -67,10 +68,8 @@ def _simulate(args) -> int:
     if args.model == "mc" and args.sampler == "gauss":
         refuse_given(args, ["seed"], "has no effect with --sampler gauss (a quadrature "
                                      "draws nothing)")
-    # with elements the default impact law is the one whose elements converge
-    law = getattr(args, "impact_law", None) or (
-        "saltation" if getattr(args, "elements", None) is not None else "mean")
-    system = (system_from(args, impact_law=law) if args.model == "opa" else
+    system = (system_from(args, impact_law=args.impact_law or
+                          default_impact_law(args.elements)) if args.model == "opa" else
               system_from(args, **({"sigma": 0.0} if args.model == "dmr" else {})))
     opts = options_from(args)
     if args.model == "opa" and args.verify is not None:

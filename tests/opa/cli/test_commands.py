@@ -575,3 +575,29 @@ def test_a_variance_reduction_below_one_is_explained():
     ds.attrs["variance_reduction"] = 0.6
     assert any("below 1: x - x_hat varies more than x itself" in line
                for line in _verify_lines(ds))
+
+
+# --- the rules the CLI takes from the library (issue 41, item 4): the API gets them too ---
+
+
+def test_the_default_impact_law_is_the_librarys_for_the_api_and_the_cli(tmp_path):
+    """docs/elements.md: with elements the default law is saltation (the law whose
+    elements converge), without them the paper's mean law (eq. 28); ``simulate opa`` and
+    ``opa.simulate_opa`` both take it from ``default_impact_law``."""
+    import opa
+    from opa.engine import default_impact_law
+
+    assert [default_impact_law(k) for k in (None, 1, 3, "adaptive")] == \
+        ["mean", "saltation", "saltation", "saltation"]
+    common = ["--sigma", 0.02, "--order", 2, "--periods", 2, "--quiet"]
+    for elements, law in ((None, "mean"), (2, "saltation")):
+        out = tmp_path / f"{elements}.nc"
+        run(["simulate", "opa", *common, *(["--elements", elements] if elements else []),
+             "--out", out])
+        api = opa.simulate_opa(sigma=0.02, order=2, periods=2, elements=elements)
+        explicit = opa.simulate_opa(sigma=0.02, order=2, periods=2, elements=elements,
+                                    impact_law=law)
+        cli = load(out)
+        assert cli.attrs["impact_law"] == api.attrs["impact_law"] == law
+        np.testing.assert_array_equal(cli.x_mean, explicit.x_mean)
+        np.testing.assert_array_equal(api.x_mean, explicit.x_mean)
