@@ -211,15 +211,19 @@ EXECUTION_KEYWORDS = ("workers", "scheduler", "device", "progress", "log", "chec
                       "chunk_size", "connect_timeout", "worker_timeout", "executor")
 
 
-def take_execution(execution: Execution | None, keywords: dict, where: str) -> Execution:
-    """The Execution of a call: ``execution``, or one made of the execution keywords
-    still found among a call's ``keywords`` (removed from them: the keywords of earlier
-    releases, e.g. ``simulate_mc(scheduler=...)``); both at once is refused."""
+def take_execution(execution: Execution | None, keywords: dict, where: str,
+                   defaults: dict | None = None) -> Execution:
+    """The Execution of a call: ``execution``, or one made of ``defaults`` (the caller's
+    own, e.g. a sweep's two workers) and the execution keywords still found among a
+    call's ``keywords`` (removed from them: the keywords of earlier releases, e.g.
+    ``simulate_mc(scheduler=...)``); both at once is refused."""
     given = {k: keywords.pop(k) for k in EXECUTION_KEYWORDS if k in keywords}
     if given and execution is not None:
         raise ValueError(f"{where}: give {', '.join(sorted(given))} inside execution="
                          f"Execution(...), not beside it")
-    return Execution(**given) if given else as_execution(execution)
+    if execution is not None:
+        return as_execution(execution)
+    return Execution(**{**(defaults or {}), **given})
 
 
 def connect_scheduler(scheduler, connect_timeout: float = CONNECT_TIMEOUT):

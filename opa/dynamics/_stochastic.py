@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from opa._execution import Execution
 from opa._model import UNCERTAIN_PARAMETERS as UNCERTAIN
 from opa._model import Oscillator, SolverOptions
 from opa._system import System
@@ -387,14 +388,17 @@ class DiagramInputs:
     coexist: int  # the samples classified from the other states (at most ``samples``)
     emr: bool
     emr_order: int
-    workers: int
+    execution: Execution  # workers, scheduler, the parts folder (checkpoint) and log
+
+    @property
+    def workers(self) -> int:
+        return self.execution.workers
 
 
 def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
                   distribution=None, samples=1024, seed=0, options=None, transient=1000,
                   record=64, xtol=1e-10, extra_states=EXTRA_STATES, coexist=None,
-                  emr=False, emr_order=None, workers=1, scheduler=None, parts=None,
-                  log=None) -> DiagramInputs:
+                  emr=False, emr_order=None, execution=None, **legacy) -> DiagramInputs:
     """The inputs of :func:`stochastic_diagram` (same keywords) checked before any work:
     a :class:`DiagramInputError` (a ValueError) naming the first keyword that is wrong,
     of the wrong type, out of range, or without effect in the combination; a
@@ -403,6 +407,7 @@ def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
     from opa._measure import parse
     from opa._model import PARAMETER_NAMES, check_span
 
+    workers, scheduler, parts, log = _execution_keywords(execution, legacy)
     given = oscillator
     if isinstance(oscillator, System):
         oscillator = oscillator.oscillator
@@ -482,6 +487,13 @@ def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
             raise DiagramInputError("{scheduler} must be a Dask scheduler address such as "
                                     "tcp://host:8786 or a distributed.Client, got {0!r}",
                                     scheduler)
+        if isinstance(scheduler, str):
+            from opa._model import check_scheduler_address
+
+            try:  # nothing is contacted yet: the address must read as one
+                check_scheduler_address(scheduler)
+            except ValueError as err:
+                raise _named("scheduler", err, scheduler) from None
     elif workers > 1 and len(values) == 1:
         raise DiagramInputError("{workers} {0} has no effect with one control value (the "
                                 "values are shared out among the workers)", workers)
@@ -535,12 +547,38 @@ def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
                 raise DiagramInputError("{emr} (its sweep runs {0} + {1} periods) at {2} = "
                                         "{3:g}: " + _quoted(err), EMR_TRANSIENT, EMR_RECORD,
                                         parameter, v) from None
+    execution = Execution(workers=workers, scheduler=scheduler, checkpoint=parts, log=log,
+                          progress=False)
     return DiagramInputs(
         oscillator=oscillator, parameter=parameter, values=values,
         oscillators=tuple(oscillators), sigma=sigma, uncertain=uncertain, measure=measure,
         system=system, samples=samples, seed=seed, options=options, settings=settings,
         xtol=xtol, extra_states=extra_states, coexist=coexist, emr=emr, emr_order=emr_order,
-        workers=workers)
+        execution=execution)
+
+
+#: the execution keywords the diagram took before :class:`opa.Execution` (still taken)
+_EXECUTION_KEYWORDS = ("workers", "scheduler", "parts", "log")
+
+
+def _execution_keywords(execution, legacy: dict) -> tuple:
+    """(workers, scheduler, parts, log) of an ``execution`` (its checkpoint is the parts
+    folder) or of the keywords of earlier releases; unknown keywords are a TypeError as
+    for any function."""
+    unknown = sorted(set(legacy) - set(_EXECUTION_KEYWORDS))
+    if unknown:
+        raise TypeError(f"stochastic_diagram() got an unexpected keyword argument "
+                        f"{unknown[0]!r}")
+    if execution is None:
+        return (legacy.get("workers", 1), legacy.get("scheduler"), legacy.get("parts"),
+                legacy.get("log"))
+    if not isinstance(execution, Execution):
+        raise DiagramInputError("{execution} must be an opa.Execution or None, got {0!r}",
+                                execution)
+    if legacy:
+        raise DiagramInputError("{execution}: give " + ", ".join(sorted(legacy)) +
+                                " inside it, not beside it")
+    return execution.workers, execution.scheduler, execution.checkpoint, execution.log
 
 
 def _at_value(parameter: str, value: float, err: Exception) -> DiagramInputError:
@@ -650,8 +688,8 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                        options: SolverOptions | None = None, transient: int = 1000,
                        record: int = 64, xtol: float = 1e-10,
                        extra_states: int = EXTRA_STATES, coexist: int | None = None,
-                       emr: bool = False, emr_order: int | None = None, workers: int = 1,
-                       scheduler=None, parts: str | None = None, log=None):
+                       emr: bool = False, emr_order: int | None = None,
+                       execution: Execution | None = None, **legacy):
     """Attractor types and their probabilities along ``parameter`` (module docstring).
 
     Parameters
@@ -672,27 +710,27 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
         at the same sigma, semicircle law only: the paper's diagrams) over the increasing
         values, 500 transient and 100 recorded periods from the paper's start, for the
         figure.
-    workers : processes; the control values are shared out among them (1 with a
-        ``scheduler``, and with one value).
-
     Every input is checked before any work (:func:`check_diagram`): a ValueError names the
     keyword that is wrong, of the wrong type, out of range or without effect in the
     combination (``seed`` without samples, ``emr_order`` without ``emr``), or a sigma
     that makes the uncertain parameter negative for some xi or that double precision
     cannot resolve; a diagram beyond the work budget (``opa._work``) or the memory budget
     is refused naming the inputs its cost grows with.
-    scheduler : a Dask scheduler address or ``distributed.Client``: the control values
-        (and the EMR sweep) run there as tasks instead, each with one numba thread; the
-        result is the same to the bit.
-    parts : a folder where each finished control value is kept as it finishes, a
-        :class:`opa._dataset.Store` keyed by everything the value depends on; a rerun
-        with the same folder reads them back instead of computing them again (an
-        interrupted diagram resumes), and a damaged file (unreadable, or edited since it
-        was written: each part carries the digest of its content) is set aside, named
-        (``log``, else a warning) and computed again. The folder is locked while the
-        diagram runs: another process writing it is refused (ValueError naming it).
-        None: nothing is kept.
-    log : callable taking a progress line, or None.
+    execution : how the control values run (:class:`opa.Execution`): ``workers``
+        processes share the control values out (1 with a ``scheduler``, and with one
+        value); ``scheduler``, a Dask scheduler address or ``distributed.Client``: the
+        control values (and the EMR sweep) run there as tasks instead, each with one
+        numba thread, and the result is the same to the bit; ``checkpoint``, a folder
+        where each finished control value is kept as it finishes, a
+        :class:`opa._dataset.Store` keyed by everything the value depends on: a rerun with
+        the same folder reads them back instead of computing them again (an interrupted
+        diagram resumes), and a damaged file (unreadable, or edited since it was written:
+        each part carries the digest of its content) is set aside, named (``log``, else a
+        warning) and computed again; the folder is locked while the diagram runs (another
+        process writing it is refused: ValueError naming it); None: nothing is kept;
+        ``log``, a callable taking a progress line, or None. The keywords ``workers``,
+        ``scheduler``, ``parts`` (the checkpoint) and ``log`` are still taken on their
+        own, as before.
 
     Returns
     -------
@@ -726,8 +764,9 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
         oscillator, parameter, values, sigma=sigma, uncertain=uncertain,
         distribution=distribution, samples=samples, seed=seed, options=options,
         transient=transient, record=record, xtol=xtol, extra_states=extra_states,
-        coexist=coexist, emr=emr, emr_order=emr_order, workers=workers, scheduler=scheduler,
-        parts=parts, log=log)
+        coexist=coexist, emr=emr, emr_order=emr_order, execution=execution, **legacy)
+    run = checked.execution
+    scheduler, parts, log = run.scheduler, run.checkpoint, run.log
     values, sigma, samples = checked.values, checked.sigma, checked.samples
     options, settings, measure = checked.options, checked.settings, checked.measure
     system, emr, emr_order, workers = (checked.system, checked.emr, checked.emr_order,
@@ -741,7 +780,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
         # the scheduler answers before the parts folder is made: a refusal leaves nothing
         client = None
         if scheduler is not None:
-            client, own = _connect(scheduler)
+            client, own = _connect(scheduler, run.connect_timeout)
             if own:
                 held.callback(client.close)
         try:  # the lock of the parts folder is held until the diagram is assembled
@@ -776,7 +815,7 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
             _log(log, i, len(tasks), parameter, piece, reused=False)
 
         if client is not None and todo:
-            _run_slices_dask(tasks, todo, finish, client)
+            _run_slices_dask(tasks, todo, finish, client, run)
         else:
             _run_slices(tasks, todo, finish, workers)
         slices = [results[i] for i in range(len(tasks))]
@@ -791,7 +830,8 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
                     f"values of {parameter}")
             opa = sweep("opa", parameter, values, system.replace(order=emr_order),
                         transient=EMR_TRANSIENT, record=EMR_RECORD, options=options,
-                        workers=workers, scheduler=client, progress=False, locate=False)
+                        locate=False, execution=run.replace(scheduler=client, log=None,
+                                                            checkpoint=None))
             ds["emr_x"] = ((parameter, "emr_point"), opa.section_x.values, {
                 "long_name": f"stroboscopic x_0 of the EMR (OPA N = {emr_order}) after "
                 f"{EMR_TRANSIENT} periods, {EMR_RECORD} recorded", "units": "1"})
@@ -837,7 +877,7 @@ def _single_threaded_slice(task: SliceTask) -> dict:
     return compute_slice(task)
 
 
-def _connect(scheduler):
+def _connect(scheduler, timeout: float):
     """(a distributed.Client, whether it is ours to close) for ``scheduler``, an address
     or a Client, by the one connection rule (:func:`opa._execution.connect_scheduler`: the
     address is checked before anything is contacted, and must answer as a Dask scheduler
@@ -845,17 +885,15 @@ def _connect(scheduler):
     from opa._execution import connect_scheduler
 
     try:
-        return connect_scheduler(scheduler)
+        return connect_scheduler(scheduler, timeout)
     except ValueError as err:
         raise _named("scheduler", err, scheduler) from None
 
 
-def _run_slices_dask(tasks, todo, finish, client) -> None:
+def _run_slices_dask(tasks, todo, finish, client, run: Execution) -> None:
     """Compute the control values ``todo`` as tasks on a Dask cluster (``client``)."""
-    from opa._execution import Execution
-
     futures = {client.submit(_single_threaded_slice, tasks[i], pure=False): i for i in todo}
-    watchdog = Execution().watchdog(client, lambda: len(futures), "control values")
+    watchdog = run.watchdog(client, lambda: len(futures), "control values")
     try:
         for future in watchdog.finished(list(futures)):
             i = futures.pop(future)

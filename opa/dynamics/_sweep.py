@@ -40,6 +40,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from opa._dataset import Store, provenance_attrs, remove_store, write_netcdf
+from opa._execution import Execution, take_execution
 from opa._lazy import lazy
 from opa._model import (
     Oscillator,
@@ -356,12 +357,9 @@ def sweep(
     graze_gap: float = MOTION_GRAZE_GAP,
     out: str | os.PathLike | None = None,
     keep_parts: bool = False,
-    scheduler=None,
-    workers: int = DEFAULT_WORKERS,
-    executor=None,
-    progress: bool | None = None,
     locate: bool | None = None,
     source: Callable | None = None,
+    execution: Execution | None = None,
     **fields,
 ) -> xr.Dataset:
     """Bifurcation diagram: sections and motion labels over values of one parameter.
@@ -395,11 +393,6 @@ def sweep(
     out : netCDF path. Finished points go to ``<out>.parts/`` as they come and a rerun
         with the same settings resumes; the dataset is written atomically at the end.
     keep_parts : keep ``<out>.parts`` after the final write.
-    scheduler : Dask distributed scheduler address or ``Client``: points run there.
-    workers : local processes (default 2; 1 runs in this process). Ignored with
-        ``scheduler`` or ``executor``, and for continuation sweeps (sequential).
-    executor : a ``concurrent.futures`` executor to reuse (e.g. a warm process pool).
-    progress : progress bar (default: when stderr is a terminal).
     locate : locate the bifurcations of the observed periodic attractors
         (``opa.dynamics._continuation.locate_bifurcations``, seeded with the final states of the
         values with a periodic motion, ``observed_seeds``). None (default): for "dmr" when the
@@ -407,6 +400,13 @@ def sweep(
         period), else not; True: required (ValueError before any point is computed if
         it cannot be done); False: not. Not for "mc". Adds a few seconds to tens of
         seconds (see ``locate_bifurcations``).
+
+    execution : how the points run (:class:`opa.Execution`): ``workers`` local processes
+        (default 2; 1 runs in this process; sequential for continuation sweeps), a Dask
+        ``scheduler`` (points run there), an ``executor`` to reuse (e.g. a warm process
+        pool), ``progress`` (a bar; default when stderr is a terminal). The keywords
+        ``workers``, ``scheduler``, ``executor`` and ``progress`` are still taken on their
+        own, as before.
 
     Returns
     -------
@@ -436,6 +436,8 @@ def sweep(
     >>> ds.label.values.tolist()
     ['4/4', '2/2']
     """
+    run = take_execution(execution, fields, "sweep",
+                         {"workers": DEFAULT_WORKERS} if execution is None else {})
     _choice("model", model, SWEEP_MODELS)
     _choice("continuation", continuation, CONTINUATIONS)
     _choice("parameter", param, SWEEPABLE)
@@ -454,7 +456,7 @@ def sweep(
         raise ValueError("continuation is not defined for 'mc' (every sample has its own "
                          "state); use continuation='fixed'")
     for name, value, low in (("transient", transient, 0), ("record", record, 2),
-                             ("per_period", per_period, 1), ("workers", workers, 1)):
+                             ("per_period", per_period, 1)):
         if isinstance(value, bool) or int(value) != value or value < low:
             raise ValueError(f"{name} must be an integer >= {low}, got {value}")
     values = np.asarray(values, dtype=float).ravel()
@@ -496,13 +498,9 @@ def sweep(
     out = None if out is None else os.fspath(out)
     parts, done = _open_parts(out, manifest, len(tasks))
     try:  # the lock of <out>.parts is held to the final write
-        if progress is None:
-            progress = sys.stderr.isatty()
-        from tqdm.auto import tqdm
-
         results = dict(done)
-        with tqdm(total=len(tasks), initial=len(done), unit="point", disable=not progress,
-                  desc=f"{model} sweep over {param}") as bar:
+        with run.bar(len(tasks), initial=len(done), unit="point",
+                     desc=f"{model} sweep over {param}") as bar:
 
             def finish(result):
                 if parts is not None:
@@ -512,10 +510,10 @@ def sweep(
 
             if continuation == "fixed":
                 todo = [t for t in tasks if t.index not in done]
-                _run_parallel(todo, finish, scheduler, executor, workers)
+                _run_parallel(todo, finish, run)
             else:
                 order_ = tasks if continuation == "forward" else tasks[::-1]
-                _run_continuation(order_, done, finish, scheduler)
+                _run_continuation(order_, done, finish, run)
         computed = len(tasks) - len(done)
         ordered = [results[i] for i in range(len(tasks))]
         ds = assemble(model, param, values, ordered, base, options, kw, continuation)
@@ -637,12 +635,14 @@ def add_located(ds: xr.Dataset, points: list, *, method: str) -> xr.Dataset:
     return out
 
 
-def _run_parallel(tasks, finish, scheduler, executor, workers) -> None:
+def _run_parallel(tasks, finish, run: Execution) -> None:
+    """The points here, on ``run``'s local processes (or its executor) or its cluster."""
     if not tasks:
         return
-    if scheduler is not None:
-        _run_dask(tasks, finish, scheduler)
+    if run.scheduler is not None:
+        _run_dask(tasks, finish, run)
         return
+    executor, workers = run.executor, run.workers
     if executor is None and (workers <= 1 or len(tasks) == 1):
         for task in tasks:
             finish(compute_point(task))
@@ -714,15 +714,13 @@ def start_fork_server(preload: tuple[str, ...] = ()) -> None:
     forkserver.ensure_running()
 
 
-def _run_dask(tasks, finish, scheduler) -> None:
-    """The points as tasks on a Dask cluster, each with one numba thread, connected and
-    watched as every batch of opa-mc is (:class:`opa._execution.Execution`)."""
-    from opa._execution import Execution
-
-    with Execution(scheduler=scheduler).client() as client:
+def _run_dask(tasks, finish, run: Execution) -> None:
+    """The points as tasks on ``run``'s Dask cluster, each with one numba thread,
+    connected and watched as every batch of opa-mc is (:class:`opa.Execution`)."""
+    with run.client() as client:
         single = [PointTask(**{**_task_fields(t), "single_thread": True}) for t in tasks]
         futures = {client.submit(compute_point, t, pure=False): t for t in single}
-        watchdog = Execution().watchdog(client, lambda: len(futures), "points")
+        watchdog = run.watchdog(client, lambda: len(futures), "points")
         try:
             for fut in watchdog.finished(list(futures)):
                 task = futures.pop(fut)
@@ -735,35 +733,30 @@ def _task_fields(task: PointTask) -> dict:
     return {f: getattr(task, f) for f in PointTask.__dataclass_fields__}
 
 
-def _run_continuation(ordered, done, finish, scheduler) -> None:
-    """Sequential sweep, each value from the final state of the previous one."""
-    from opa._execution import Execution
+def _run_continuation(ordered, done, finish, run: Execution) -> None:
+    """Sequential sweep, each value from the final state of the previous one (each a
+    task on ``run``'s cluster where it has one)."""
+    with run.client() as client:
+        _continue(ordered, done, finish, client, run)
 
+
+def _continue(ordered, done, finish, client, run: Execution) -> None:
     initial = None
-    client, own, watchdog = None, False, None
-    try:
-        for task in ordered:
-            if task.index in done:
-                final = np.asarray(done[task.index]["final"], dtype=float)
-                initial = final if np.all(np.isfinite(final)) else None
-                continue
-            task = PointTask(**{**_task_fields(task), "initial": initial})
-            if scheduler is None:
-                result = compute_point(task)
-            else:
-                if client is None:
-                    from opa._execution import connect_scheduler
-
-                    client, own = connect_scheduler(scheduler)
-                    watchdog = Execution().watchdog(client, lambda: 1, "points")
-                future = client.submit(compute_point, task, pure=False)
-                result = watchdog.result(future, f"point {task.index} (value {task.value:g})")
-            finish(result)
-            final = np.asarray(result["final"], dtype=float)
+    watchdog = None if client is None else run.watchdog(client, lambda: 1, "points")
+    for task in ordered:
+        if task.index in done:
+            final = np.asarray(done[task.index]["final"], dtype=float)
             initial = final if np.all(np.isfinite(final)) else None
-    finally:
-        if client is not None and own:
-            client.close()
+            continue
+        task = PointTask(**{**_task_fields(task), "initial": initial})
+        if client is None:
+            result = compute_point(task)
+        else:
+            future = client.submit(compute_point, task, pure=False)
+            result = watchdog.result(future, f"point {task.index} (value {task.value:g})")
+        finish(result)
+        final = np.asarray(result["final"], dtype=float)
+        initial = final if np.all(np.isfinite(final)) else None
 
 
 # --------------------------------------------------------------------------- assembly

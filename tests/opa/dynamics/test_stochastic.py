@@ -163,6 +163,26 @@ def test_an_interrupted_diagram_resumes_from_its_parts(tmp_path, monkeypatch):
     np.testing.assert_array_equal(again.mc_type.values, both.mc_type.values)
 
 
+def test_an_execution_record_keeps_the_parts_where_its_checkpoint_says(tmp_path):
+    """``execution=Execution(checkpoint=...)`` keeps the parts as ``parts=`` did and a
+    rerun reads them back; ``parts`` beside an execution is refused by name."""
+    from opa import Execution
+
+    lines = []
+    run = Execution(checkpoint=str(tmp_path / "kept"), log=lines.append)
+    kw = dict(sigma=0.03, samples=8, transient=200, extra_states=0)
+    first = stochastic_diagram(SECTION_31, "c", [0.04], execution=run, **kw)
+    assert len(list((tmp_path / "kept").glob("slice-*.npz"))) == 1
+    again = stochastic_diagram(SECTION_31, "c", [0.04], execution=run, **kw)
+    assert any("read back" in line for line in lines)
+    np.testing.assert_array_equal(again.probability.values, first.probability.values)
+    with pytest.raises(ValueError, match=r"execution: give parts inside it"):
+        stochastic_diagram(SECTION_31, "c", [0.04], execution=run,
+                           parts=str(tmp_path / "other"), **kw)
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'progress'"):
+        stochastic_diagram(SECTION_31, "c", [0.04], progress=False, **kw)
+
+
 def test_a_dask_cluster_gives_the_same_diagram():
     """The control values as tasks on a LocalCluster of 2 worker processes: every
     variable the same as in this process, to the bit."""

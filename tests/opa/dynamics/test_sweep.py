@@ -118,6 +118,22 @@ def test_parallel_equals_serial():
     assert_same(serial, parallel)
 
 
+def test_an_execution_record_runs_the_points_as_its_keywords_did():
+    """``execution=Execution(workers=2)`` is the keywords' run; both at once is refused."""
+    from opa import Execution
+
+    osc = preset("3.1")
+    values = np.linspace(0.03, 0.06, 3)
+    by_keywords = sweep("dmr", "c", values, osc, transient=30, record=10, workers=2)
+    by_record = sweep("dmr", "c", values, osc, transient=30, record=10,
+                      execution=Execution(workers=2, progress=False))
+    assert_same(by_keywords, by_record)
+    with pytest.raises(ValueError, match=r"sweep: give workers inside execution="):
+        sweep("dmr", "c", values, osc, workers=2, execution=Execution())
+    with pytest.raises(ValueError, match=r"workers must be an integer >= 1, got 0"):
+        sweep("dmr", "c", values, osc, workers=0)
+
+
 @pytest.mark.slow  # a local cluster's workers each import opa and load the kernel
 def test_dask_scheduler_gives_the_local_result(tmp_path):
     """Points as Dask tasks on two worker processes, by Client and by address, fixed and
