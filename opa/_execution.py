@@ -30,8 +30,7 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from opa._gpu import check_device
-from opa._model import check_count, check_scheduler_address
+from opa._model import check_count, check_device, check_scheduler_address
 from opa._run import SimulationError
 
 #: seconds a Dask scheduler has to answer

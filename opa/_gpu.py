@@ -29,7 +29,6 @@ import numpy as np
 
 from . import _kernel as kernel
 
-DEVICES = ("cpu", "cuda")
 THREADS = 128  # threads per block of the ensemble kernel
 REDUCE_ROWS = 8  # sample rows per block of the reduction (x 32 output columns)
 # the shapes of each thread's work arrays, as module constants (a CUDA local array's
@@ -40,14 +39,6 @@ _ROWS, _STATS, _NODES = kernel.K_ROWS, kernel.N_STATS, 1
 class DeviceError(ValueError):
     """``device="cuda"`` was asked for on a machine that cannot run it (a ValueError:
     the command line answers it as bad input, exit status 2)."""
-
-
-def check_device(device) -> str:
-    """``device`` as given ("cpu" or "cuda"), or ValueError naming it."""
-    if device not in DEVICES:
-        raise ValueError(f"device must be one of {', '.join(map(repr, DEVICES))}, got "
-                         f"{device!r:.60}")
-    return device
 
 
 def unavailable() -> str | None:

@@ -72,6 +72,18 @@ def _finite(name: str, value) -> float:
     return value
 
 
+#: where runs may go: this process's CPU cores, or a CUDA GPU (:mod:`opa._gpu`)
+DEVICES = ("cpu", "cuda")
+
+
+def check_device(device) -> str:
+    """``device`` as given ("cpu" or "cuda"), or ValueError naming it."""
+    if device not in DEVICES:
+        raise ValueError(f"device must be one of {', '.join(map(repr, DEVICES))}, got "
+                         f"{device!r:.60}")
+    return device
+
+
 def check_scheduler_address(address: str) -> str:
     """``address`` if it reads as a Dask scheduler's (``tcp://host:port``, ``tls://``,
     ``ws://``, ``wss://`` or ``ucx://`` with a port, ``inproc://...``, or ``host:port``),

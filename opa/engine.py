@@ -37,7 +37,6 @@ from opa._execution import (
     connect_scheduler,
     take_execution,
 )
-from opa._gpu import check_device
 from opa._gpu import require as require_gpu
 from opa._lock import OutputLock
 from opa._measure import Measure, parse
@@ -48,6 +47,7 @@ from opa._model import (
     Oscillator,
     SolverOptions,
     check_count,
+    check_device,
     check_instance,
     check_scheduler_address,
     check_order,

@@ -163,7 +163,8 @@ def strongly_connected(graph: dict[str, list[str]]) -> list[list[str]]:
 def test_the_kernel_has_one_caller():
     """``opa._run`` is the only module of the packages that imports the compiled kernel,
     beside ``opa._gpu``, which compiles the kernel's driver for a GPU and whose launches
-    only ``opa._run`` makes (``opa.engine`` takes its device checks from it);
+    only ``opa._run`` makes (``opa.engine`` takes ``require`` from it: the device check
+    itself lives with the other checks in ``opa._model``);
     everything else goes through ``_run``'s interface (``run``, ``run_batch``, ``Record``)."""
     importers = sorted(m for m in MODULES if any(t == "opa._kernel" for t, _ in imports(m)))
     assert importers == ["opa._gpu", "opa._run"]
@@ -172,7 +173,7 @@ def test_the_kernel_has_one_caller():
     taken = {a.name for node in ast.walk(TREES["opa.engine"])
              if isinstance(node, ast.ImportFrom) and node.module == "opa._gpu"
              for a in node.names}
-    assert taken == {"check_device", "require"}
+    assert taken == {"require"}
 
 
 def _private_imports(module: str) -> list[str]:
