@@ -336,6 +336,34 @@ class Motion:
         return asdict(self)
 
 
+@dataclass(frozen=True)
+class MotionTolerances:
+    """The thresholds that name a motion (:func:`identify`, :func:`identify_motion`).
+
+    period_tol : relative stroboscopic repeat distance below which a period is taken.
+    max_period : the longest period looked for (None: half the recorded periods).
+    graze_velocity, graze_gap : a motion grazes where an impact is slower than
+        ``graze_velocity`` or a free flight comes within ``graze_gap`` of the wall.
+    """
+
+    period_tol: float = PERIOD_TOL
+    max_period: int | None = None
+    graze_velocity: float = MOTION_GRAZE_VELOCITY
+    graze_gap: float = MOTION_GRAZE_GAP
+
+    def __post_init__(self):
+        for name in ("period_tol", "graze_velocity", "graze_gap"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.floating)) \
+                    or not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be > 0, got {value!r}")
+        if self.max_period is not None and (
+                isinstance(self.max_period, bool)
+                or not isinstance(self.max_period, (int, np.integer)) or self.max_period < 1):
+            raise ValueError(f"max_period must be None or an integer >= 1, got "
+                             f"{self.max_period!r}")
+
+
 def identify(
     t: np.ndarray,
     x: np.ndarray,
@@ -348,14 +376,15 @@ def identify(
     impact_velocity: np.ndarray | None = None,
     breaks: np.ndarray = (),
     sticking: np.ndarray | None = None,
-    period_tol: float = PERIOD_TOL,
-    max_period: int | None = None,
-    graze_velocity: float = MOTION_GRAZE_VELOCITY,
-    graze_gap: float = MOTION_GRAZE_GAP,
+    tolerances: MotionTolerances | None = None,
 ) -> Motion:
     """Array form of ``identify_motion``: outputs ``t, x, v`` (n,), impacts (m,) or None
     when the run has no impact record (MC mean), ``breaks`` the times where the velocity
-    or force jumps, ``sticking`` (n,) True while resting on the wall."""
+    or force jumps, ``sticking`` (n,) True while resting on the wall; ``tolerances`` the
+    period and grazing thresholds (:class:`MotionTolerances`, default its defaults)."""
+    tol = MotionTolerances() if tolerances is None else tolerances
+    period_tol, max_period = tol.period_tol, tol.max_period
+    graze_velocity, graze_gap = tol.graze_velocity, tol.graze_gap
     t = np.asarray(t, dtype=float)
     T = float(forcing_period)
     start = _optional_time("start", start)
@@ -531,13 +560,15 @@ def identify_motion(
         t, x, v, forcing_period=_forcing_period(ds), delta=float(ds.attrs["delta"]),
         start=start, impact_time=ds.impact_time.values if has_impacts else None,
         impact_velocity=ds.impact_velocity.values if has_impacts else None,
-        breaks=run_breaks(ds), sticking=sticking, period_tol=period_tol,
-        max_period=max_period, graze_velocity=graze_velocity, graze_gap=graze_gap,
+        breaks=run_breaks(ds), sticking=sticking, tolerances=MotionTolerances(
+            period_tol=period_tol, max_period=max_period, graze_velocity=graze_velocity,
+            graze_gap=graze_gap),
     )
 
 
 __all__ = [
     "Motion",
+    "MotionTolerances",
     "constraint_section",
     "detect_period",
     "free_flight_maxima",

@@ -53,6 +53,7 @@ from opa.dynamics._sections import (
     MOTION_GRAZE_GAP,
     MOTION_GRAZE_VELOCITY,
     PERIOD_TOL,
+    MotionTolerances,
     grazing_points,
     identify,
     period_doubling,
@@ -178,8 +179,9 @@ def compute_point(task: PointTask) -> dict:
     motion = identify(times, run["x"], run["v"], forcing_period=T, delta=osc.delta,
                       start=start, impact_time=run["impact_time"],
                       impact_velocity=run["impact_velocity"], breaks=np.concatenate(breaks),
-                      sticking=sticking, period_tol=task.period_tol,
-                      graze_velocity=task.graze_velocity, graze_gap=task.graze_gap)
+                      sticking=sticking, tolerances=MotionTolerances(
+                          period_tol=task.period_tol, graze_velocity=task.graze_velocity,
+                          graze_gap=task.graze_gap))
     strobe = stroboscopic_mask(times, T, start)
     if run["impact_time"] is not None:
         hit = run["impact_time"] > start

@@ -142,6 +142,25 @@ def test_constructed_graze_by_a_slow_impact():
     assert slow.min_impact_velocity == 1e-3
 
 
+def test_the_tolerances_record_sets_the_grazing_threshold():
+    """An impact at 5e-3 grazes under the default threshold (1e-2), not under 1e-3; the
+    record refuses thresholds that cannot be one, naming them."""
+    from opa.dynamics._sections import MotionTolerances
+
+    t, x, v, T = free_flight(0.3)
+    kw = dict(forcing_period=T, delta=0.0, start=0.0, impact_time=np.array([3.0, 9.0]),
+              impact_velocity=np.array([0.9, 5e-3]))
+    assert identify(t, x, v, **kw).grazing == 1
+    strict = identify(t, x, v, tolerances=MotionTolerances(graze_velocity=1e-3), **kw)
+    assert strict.grazing == 0
+    for bad, message in ((dict(period_tol=0), "period_tol must be > 0, got 0"),
+                         (dict(graze_gap=float("nan")), "graze_gap must be > 0"),
+                         (dict(graze_velocity=True), "graze_velocity must be > 0"),
+                         (dict(max_period=0), "max_period must be None or an integer >= 1")):
+        with pytest.raises(ValueError, match=message):
+            MotionTolerances(**bad)
+
+
 def test_grazing_is_not_resolved_from_sparse_outputs():
     t, x, v, T = free_flight(2e-5, per_period=4)
     m = identify(t, x, v, forcing_period=T, delta=0.0, impact_time=np.zeros(0),
