@@ -157,6 +157,7 @@ def test_the_docs_build_is_one_command_and_ci_runs_it_last():
         assert command in _read(*page), page
 
 
+@pytest.mark.long  # every block runs as printed: CI runs it, the quick loop does not
 def test_the_reference_examples_run(tmp_path, monkeypatch):
     """The Python blocks of docs/reference.md (the README's before) run as printed."""
     import re

@@ -14,7 +14,8 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 README = (ROOT / "README.md").read_text(encoding="utf-8")
 DEVELOPERS = (ROOT / "docs" / "developers.md").read_text(encoding="utf-8")
-TEST_COMMAND = 'python -m pytest -q -m "not slow" --doctest-modules tests opa mc compare'
+TEST_COMMAND = ('python -m pytest -q -n 2 -m "not slow and not long" --doctest-modules '
+                'tests opa mc compare')
 
 
 def python_blocks() -> list[str]:

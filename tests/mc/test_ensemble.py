@@ -467,6 +467,7 @@ def test_peak_memory_does_not_grow_with_the_number_of_samples():
 # --------------------------------------------------------------------------- Dask
 
 
+@pytest.mark.long  # the quick suite's equivalent: tests/mc/test_dask.py's resumed run
 def test_dask_local_cluster_gives_exactly_the_local_result():
     """Two worker processes, chunks as tasks, merged in submission order: bit-identical to
     the local engine for the same seed and chunk size (by Client and by address). The
