@@ -1,6 +1,6 @@
 """mc: sampling and Monte Carlo ensembles of the true sampled impact systems."""
 
-from mc._checkpoint import remove_checkpoint
+from mc._checkpoint import checkpoint_for, checkpoint_lifetime, remove_checkpoint
 from mc._control import cv_estimates
 from mc._ensemble import simulate_mc
 from opa.engine import DaskError, check_scheduler_address, connect_scheduler
@@ -12,6 +12,8 @@ __all__ = [
     "connect_scheduler",
     "check_scheduler_address",
     "remove_checkpoint",
+    "checkpoint_for",
+    "checkpoint_lifetime",
     "DaskError",
     "sample_xi",
     "semicircle_cdf",

@@ -27,13 +27,14 @@ of ``simulate_mc``), by ``remove_checkpoint`` in the same process, or at exit.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from opa.engine import remove_store, Store
+from opa.engine import DaskError, SimulationError, remove_store, Store
 
 # Version of the chunk files' contents. 2: ChunkStats gained x_moment_m2 and x_moment_rep
 # (the coefficients' standard errors); chunks of format 1 lack them.
@@ -104,6 +105,42 @@ def remove_checkpoint(directory: str | os.PathLike) -> None:
     in it. A missing directory is fine.
     """
     remove_store(directory)
+
+
+def checkpoint_for(out: str | os.PathLike | None) -> str | None:
+    """The checkpoint folder of a run whose result is written to ``out``: ``OUT.parts``
+    beside it (None without ``out``: nothing is kept).
+
+    >>> checkpoint_for("runs/mc.nc"), checkpoint_for(None)
+    ('runs/mc.nc.parts', None)
+    """
+    return None if out is None or os.fspath(out) == "" else f"{os.fspath(out)}.parts"
+
+
+@contextlib.contextmanager
+def checkpoint_lifetime(directory: str | os.PathLike | None, *,
+                        keep: bool = False) -> Iterator[None]:
+    """Apply the lifetime rules of a run's checkpoint ``directory`` to the block that
+    runs the ensemble, checks its result and writes it:
+
+    - the block ends (the result is written): the checkpoint is removed, unless ``keep``;
+    - it raises :class:`opa.SimulationError` (a sample that cannot be integrated, a
+      result that is not finite): removed, since every rerun of these settings fails
+      the same way and would only trip over it;
+    - it raises :class:`DaskError` (a lost cluster): kept, so that a rerun resumes from
+      the finished chunks; so for anything else (an interruption, a refused or unwritable
+      path, a checkpoint of another run, which is never ours to delete).
+
+    ``directory`` None (no checkpoint) makes this a no-op.
+    """
+    try:
+        yield
+    except SimulationError as err:
+        if directory is not None and not isinstance(err, DaskError):
+            remove_checkpoint(directory)
+        raise
+    if directory is not None and not keep:
+        remove_checkpoint(directory)
 
 
 def stats_arrays(stats) -> dict:

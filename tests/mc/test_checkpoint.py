@@ -356,3 +356,65 @@ def test_a_run_killed_mid_way_resumes_bit_identical(tmp_path):
     fresh = mc.simulate_mc(OSC, **kwargs)
     for name in VARIABLES[:-2]:
         np.testing.assert_array_equal(resumed[name].values, fresh[name].values, err_msg=name)
+
+
+# --- the folder's name and lifetime (mc.checkpoint_for, mc.checkpoint_lifetime) ----------
+
+
+def test_the_checkpoint_of_an_output_is_the_folder_beside_it(tmp_path):
+    assert mc.checkpoint_for("runs/mc.nc") == "runs/mc.nc.parts"
+    assert mc.checkpoint_for(tmp_path / "a.nc") == f"{tmp_path}/a.nc.parts"
+    assert mc.checkpoint_for(None) is None and mc.checkpoint_for("") is None
+
+
+@pytest.fixture
+def finished(tmp_path):
+    """The checkpoint of a finished run: 6 chunk files."""
+    parts = tmp_path / "run.nc.parts"
+    mc.simulate_mc(OSC, checkpoint=parts, **RUN)
+    assert len(chunk_files(parts)) == 6
+    return parts
+
+
+@pytest.mark.parametrize(("error", "kept"), [
+    (opa.SimulationError("Monte Carlo sample 3 stopped"), False),  # fails every rerun
+    (mc.DaskError("the Dask cluster has had no worker for 60 s"), True),  # resumable
+    (ValueError("checkpoint belongs to another run"), True),  # not ours to delete
+    (OSError(28, "No space left on device"), True),  # the write failed: rerun resumes
+    (KeyboardInterrupt(), True),
+])  # fmt: skip
+def test_after_a_failure_the_checkpoint_goes_only_when_a_rerun_would_fail_again(
+        finished, counted, error, kept):
+    with pytest.raises(type(error)):
+        with mc.checkpoint_lifetime(finished):
+            raise error
+    assert finished.exists() is kept
+    if kept:  # every chunk is still there and loaded by a rerun, none computed again
+        mc.simulate_mc(OSC, checkpoint=finished, **RUN)
+        assert counted == []
+
+
+def test_after_the_write_the_checkpoint_goes_unless_it_is_kept(finished):
+    with mc.checkpoint_lifetime(finished, keep=True):
+        pass
+    assert len(chunk_files(finished)) == 6
+    with mc.checkpoint_lifetime(finished):
+        pass
+    assert not finished.exists()
+    with mc.checkpoint_lifetime(None):  # no checkpoint: nothing to do
+        pass
+
+
+def test_a_sample_that_cannot_be_integrated_leaves_no_checkpoint(tmp_path):
+    """c < 0 blows up (the runaway guard stops the first sample): the run's folder, made
+    before its first chunk, is left behind by simulate_mc alone and removed under the
+    lifetime rules."""
+    runaway = dict(sigma=0.01, samples=16, periods=50, progress=False)
+    alone, ruled = tmp_path / "alone.parts", tmp_path / "ruled.parts"
+    with pytest.raises(opa.SimulationError, match="runaway guard"):
+        mc.simulate_mc(opa.Oscillator(c=-1.0), checkpoint=alone, **runaway)
+    assert os.listdir(alone) == ["store.json"]
+    with pytest.raises(opa.SimulationError, match="runaway guard"):
+        with mc.checkpoint_lifetime(ruled):
+            mc.simulate_mc(opa.Oscillator(c=-1.0), checkpoint=ruled, **runaway)
+    assert not ruled.exists()
