@@ -133,6 +133,32 @@ def check_opa_layout(ds, name: str = "the opa dataset") -> None:
                          f"opa-mc?); run it again")
 
 
+#: variables whose NaN or inf is documented (docs/datasets.md), not a failure: the
+#: refinement history of adaptive elements
+_MAY_BE_NON_FINITE = ("refinement_mean_change", "refinement_share")
+
+
+def first_non_finite(ds) -> tuple[str, int] | None:
+    """The first float variable of a run's dataset that holds a NaN or an infinity, with
+    how many of its values are not finite; None when the run is finite.
+
+    A run with such a value could not be completed (its result is not to be written).
+    The documented non-finite values do not count: the standard errors (``*_sem``) of a
+    Gauss quadrature (``attrs["sampler"] == "gauss"``: it has no sampling error) and the
+    refinement history of adaptive elements (``refinement_share``,
+    ``refinement_mean_change``).
+    """
+    gauss = ds.attrs.get("sampler") == "gauss"
+    for name, var in ds.data_vars.items():
+        if var.dtype.kind != "f" or name in _MAY_BE_NON_FINITE or (
+                gauss and name.endswith("_sem")):
+            continue
+        bad = int((~np.isfinite(var.values)).sum())
+        if bad:
+            return name, bad
+    return None
+
+
 # --------------------------------------------------------------------------- atomic files
 
 # Temporaries are named .tmp-opa-mc-<pid>-<random><suffix> so that a later run can tell
