@@ -1392,6 +1392,22 @@ def _distinct(found: list, length: float) -> list[Located]:
     return out
 
 
+
+def orbit_dataset(system: ImpactSystem, orbit: PeriodicOrbit, *, t0: float = 0.0):
+    """One periodic orbit as a dataset of :func:`branch_dataset`'s layout: one branch of
+    one orbit, in the parameter ``c`` at the system's value (``end = "single orbit"``),
+    the form ``opa-mc stability`` writes without ``--sweep``.
+
+    >>> import opa
+    >>> system = opa.ImpactSystem.of(opa.System(opa.preset("3.1", F0=0.0)))
+    >>> ds = orbit_dataset(system, opa.periodic_orbit(system))
+    >>> ds.sizes["branch_id"], ds.sizes["point"], int(ds.period[0])
+    (1, 1, 2)
+    """
+    branch = Branch(parameter="c", periods=orbit.periods, values=[system.oscillator.c],
+                    orbits=[orbit], end="single orbit")
+    return branch_dataset(system, "c", [branch], [], t0=t0)
+
 __all__ = [
     "Bifurcation",
     "Branch",
@@ -1407,4 +1423,5 @@ __all__ = [
     "locate_fold",
     "continue_orbits",
     "branch_dataset",
+    "orbit_dataset",
 ]

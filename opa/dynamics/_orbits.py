@@ -810,6 +810,19 @@ def lyapunov_benettin(system: ImpactSystem, *, periods: int = 2000, transient: i
     )
 
 
+
+def benettin_engine(system: ImpactSystem) -> str:
+    """The engine of :func:`lyapunov_benettin` as the check of :func:`lyapunov_exponent`
+    (``opa-mc stability --lyapunov --benettin``): the kernel's own runs (``"solver"``)
+    without impulses, this module's plain flow (``"plain"``) with them (F0 != 0).
+
+    >>> import opa
+    >>> [benettin_engine(opa.ImpactSystem.of(opa.System(opa.preset("3.1", F0=F0))))
+    ...  for F0 in (0.0, 0.1)]
+    ['solver', 'plain']
+    """
+    return "solver" if system.oscillator.F0 == 0.0 else "plain"
+
 __all__ = [
     "ImpactSystem",
     "PeriodicOrbit",
@@ -824,4 +837,5 @@ __all__ = [
     "lyapunov_exponent",
     "transverse_lyapunov_exponent",
     "lyapunov_benettin",
+    "benettin_engine",
 ]
