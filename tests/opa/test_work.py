@@ -88,3 +88,16 @@ def test_the_cli_budget_flag_lets_the_work_run(tmp_path, capsys, monkeypatch):
     assert main(argv + ["--work-budget", "10s"]) == 2  # 128 periods at 1 per second
     assert "more than the work budget of 10 s" in capsys.readouterr().err
     assert main(argv + ["--work-budget", "inf"]) == 0
+
+
+def test_process_started_reads_the_start_of_the_process_not_now():
+    """A process that waits 0.5 s before asking finds its start at least 0.5 s back on the
+    perf_counter clock (the /proc clock ticks are 10 ms), and not minutes back."""
+    import subprocess
+    import sys
+
+    code = ("import time; time.sleep(0.5); from opa._work import process_started; "
+            "print(time.perf_counter() - process_started())")
+    age = float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                               check=True).stdout)
+    assert 0.5 - 0.02 <= age < 60
