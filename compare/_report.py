@@ -5,8 +5,8 @@ process pool that draws the figures while this process writes the summary
 Everything here is read off the dataset that :func:`compare.run_validation` wrote; nothing
 is assumed about the model. The headline is the boundary table: sigma* per swept value and
 horizon, beside the nearest split of the sampled systems' impact sequences. The sentences
-are :mod:`compare._findings`', the tables :mod:`compare._tables`', the figures
-:mod:`compare._mapfigures`'.
+come from :mod:`compare._findings`, the tables from :mod:`compare._tables`, the figures
+from :mod:`compare._mapfigures`.
 """
 
 from __future__ import annotations
