@@ -50,9 +50,6 @@ from opa._model import (
 )
 from opa._system import SWEEPABLE, SYSTEM_FIELDS, System, as_system
 from opa.dynamics._sections import (
-    MOTION_GRAZE_GAP,
-    MOTION_GRAZE_VELOCITY,
-    PERIOD_TOL,
     MotionTolerances,
     grazing_points,
     identify,
@@ -305,12 +302,13 @@ def _write_part(parts: Store, result: dict) -> None:
                {k: np.asarray(v) for k, v in result.items()})
 
 
-def _open_parts(out: str | None, manifest: dict, count: int) -> tuple[Store | None, dict]:
-    """The store ``<out>.parts`` of this sweep (:class:`opa._dataset.Store`, refused when
-    it holds another sweep) and the finished points it holds, by index."""
-    if out is None:
+def _open_parts(folder: str | None, manifest: dict, count: int
+                ) -> tuple[Store | None, dict]:
+    """The store of this sweep's parts in ``folder`` (:class:`opa._dataset.Store`,
+    refused when it holds another sweep) and the finished points it holds, by index."""
+    if folder is None:
         return None, {}
-    parts = Store(_parts_dir(out), "sweep", settings=manifest, lock=True)
+    parts = Store(folder, "sweep", settings=manifest, lock=True)
     done = {}
     try:
         for index in range(count):
@@ -346,21 +344,13 @@ def sweep(
     values,
     system: System | Oscillator | None = None,
     *,
-    transient: int = 500,
-    record: int = 100,
-    per_period: int = 16,
+    window: Window | None = None,
     continuation: str = "fixed",
-    samples: int = 256,
-    sampler: str = "sobol",
-    seed: int = 0,
+    mc: MonteCarlo | None = None,
     options: SolverOptions | None = None,
-    period_tol: float = PERIOD_TOL,
-    graze_velocity: float = MOTION_GRAZE_VELOCITY,
-    graze_gap: float = MOTION_GRAZE_GAP,
+    motion: MotionTolerances | None = None,
     out: str | os.PathLike | None = None,
-    keep_parts: bool = False,
     locate: bool | None = None,
-    source: Callable | None = None,
     execution: Execution | None = None,
     **fields,
 ) -> xr.Dataset:
@@ -369,11 +359,7 @@ def sweep(
     Parameters
     ----------
     model : "dmr" (eq. (29)), "opa" (the EMR; ``sigma = 0`` gives EMR_0) or "mc" (the
-        Monte Carlo mean of ``samples`` sampled systems; needs ``source``).
-    source : the trajectory source of one point, ``source(task, times) -> dict`` of
-        arrays (a module-level function, so that workers can unpickle it), for models
-        this layer does not integrate itself: ``mc.sweep_source`` for "mc". ``opa.sweep``
-        passes it for "mc"; this module never imports ``mc``.
+        Monte Carlo mean of sampled systems; needs ``mc``).
     param : the swept parameter, any of ``mu a c f omega eta delta F0 a1 omega1 n x0 v0``
         or ``sigma`` (opa, mc).
     values : (P,) distinct parameter values (stored in increasing order).
@@ -383,18 +369,24 @@ def sweep(
         default 4, ``uncertain``, ``truncation``, ``impact_law``, ``allow_negative``,
         ``impulse``, ``pulse_width``, ``impulse_at_zero``; the DMR ignores the
         uncertainty; xi has the semicircle law).
-    transient, record : forcing periods 2 pi/omega dropped, then recorded.
-    per_period : outputs per forcing period in the record (>= 8 resolves free-flight
-        maxima for grazing; the transient is sampled once per period).
+    window : the run of each value (:class:`Window`): ``transient`` forcing periods 2
+        pi/omega dropped, then ``record`` recorded, ``per_period`` outputs per forcing
+        period in the record (>= 8 resolves free-flight maxima for grazing; the
+        transient is sampled once per period). Default ``Window()``: 500, 100, 16.
     continuation : "fixed" (every value starts from ``x0, v0``), "forward" (increasing
         values, each from the final state of the previous) or "backward" (decreasing).
         A failed value hands ``x0, v0`` on to the next.
-    samples, sampler, seed : Monte Carlo settings (model "mc").
+    mc : model "mc"'s settings (:class:`MonteCarlo`): its trajectory ``source`` (one
+        point's Monte Carlo mean, ``source(task, times) -> dict`` of arrays, a
+        module-level function so that workers can unpickle it: ``mc.sweep_source``;
+        this module never imports ``mc``), ``samples``, ``sampler``, ``seed``.
     options : solver options.
-    period_tol, graze_velocity, graze_gap : see ``identify_motion``.
-    out : netCDF path. Finished points go to ``<out>.parts/`` as they come and a rerun
-        with the same settings resumes; the dataset is written atomically at the end.
-    keep_parts : keep ``<out>.parts`` after the final write.
+    motion : the period and grazing thresholds (:class:`MotionTolerances`, see
+        ``identify_motion``; ``max_period`` is not taken here).
+    out : netCDF path. Finished points go to ``<out>.parts/`` (or ``execution``'s
+        ``checkpoint``) as they come and a rerun with the same settings resumes; the
+        dataset is written atomically at the end, and ``<out>.parts`` removed (a
+        checkpoint folder given in ``execution`` is kept).
     locate : locate the bifurcations of the observed periodic attractors
         (``opa.dynamics._continuation.locate_bifurcations``, seeded with the final states of the
         values with a periodic motion, ``observed_seeds``). None (default): for "dmr" when the
@@ -406,9 +398,14 @@ def sweep(
     execution : how the points run (:class:`opa.Execution`): ``workers`` local processes
         (default 2; 1 runs in this process; sequential for continuation sweeps), a Dask
         ``scheduler`` (points run there), an ``executor`` to reuse (e.g. a warm process
-        pool), ``progress`` (a bar; default when stderr is a terminal). The keywords
-        ``workers``, ``scheduler``, ``executor`` and ``progress`` are still taken on their
-        own, as before.
+        pool), ``progress`` (a bar; default when stderr is a terminal), ``checkpoint``
+        (the parts folder, kept after the write).
+
+    The keywords of earlier releases are still taken: ``transient``, ``record``,
+    ``per_period`` (the window), ``samples``, ``sampler``, ``seed``, ``source`` (mc),
+    ``period_tol``, ``graze_velocity``, ``graze_gap`` (motion), ``keep_parts`` (the parts
+    folder as the checkpoint), ``workers``, ``scheduler``, ``executor``, ``progress``
+    (execution); a keyword beside the record it belongs to is refused.
 
     Returns
     -------
@@ -433,21 +430,121 @@ def sweep(
     Examples
     --------
     >>> from opa import preset
-    >>> ds = sweep("dmr", "c", [0.035, 0.05], preset("3.1", F0=0.0), transient=200,
-    ...            record=40, workers=1)
+    >>> ds = sweep("dmr", "c", [0.035, 0.05], preset("3.1", F0=0.0),
+    ...            window=Window(transient=200, record=40), execution=Execution(workers=1))
     >>> ds.label.values.tolist()
     ['4/4', '2/2']
     """
+    setup = _setup(model, param, values, system, window, continuation, mc, options, motion,
+                   out, execution, fields)
+    tasks = setup.tasks
+    located, not_located = locate_setup(locate, model, param, setup.values, setup.base,
+                                        setup.options)
+    parts, done = _open_parts(setup.parts, setup.manifest, len(tasks))
+    try:  # the lock of the parts folder is held to the final write
+        results = _run_points(setup, done, parts)
+        ds = assemble(model, param, setup.values, results, setup.base, setup.options,
+                      setup.kw, continuation)
+        ds.attrs.update(points_resumed=len(done), points_computed=len(tasks) - len(done))
+        ds = _with_located(ds, located, not_located, setup, results)
+        if setup.out is not None:
+            write_netcdf(ds, setup.out)
+            if not setup.keep_parts:
+                remove_store(parts.directory)
+        return ds
+    finally:
+        if parts is not None:
+            parts.close()
+
+
+@dataclass(frozen=True)
+class Window:
+    """The run of each swept value: ``transient`` forcing periods dropped, ``record``
+    recorded, ``per_period`` outputs per forcing period in the record."""
+
+    transient: int = 500
+    record: int = 100
+    per_period: int = 16
+
+    def __post_init__(self):
+        for name, low in (("transient", 0), ("record", 2), ("per_period", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
+                                                                 np.floating)) \
+                    or int(value) != value or value < low:
+                raise ValueError(f"{name} must be an integer >= {low}, got {value}")
+            object.__setattr__(self, name, int(value))
+
+
+@dataclass(frozen=True)
+class MonteCarlo:
+    """Model "mc" of a sweep: the Monte Carlo mean of ``samples`` sampled systems drawn
+    by ``sampler`` with ``seed``, each point's trajectory from ``source``
+    (``mc.sweep_source``)."""
+
+    source: Callable | None = None
+    samples: int = 256
+    sampler: str = "sobol"
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.source is not None and not callable(self.source):
+            raise ValueError(f"source must be a function (task, times) -> arrays, got "
+                             f"{self.source!r}")
+
+
+#: the keywords of earlier releases, by the record that now holds them
+_RECORD_KEYWORDS = {
+    "window": ("transient", "record", "per_period"),
+    "mc": ("samples", "sampler", "seed", "source"),
+    "motion": ("period_tol", "graze_velocity", "graze_gap"),
+}
+
+
+def _record(name: str, given, cls, fields: dict):
+    """The record ``name`` of a sweep: ``given``, or one of its keywords found among
+    ``fields`` (removed from them); both at once is refused."""
+    taken = {k: fields.pop(k) for k in _RECORD_KEYWORDS[name] if k in fields}
+    if taken and given is not None:
+        raise ValueError(f"sweep: give {', '.join(sorted(taken))} inside {name}="
+                         f"{cls.__name__}(...), not beside it")
+    if given is not None and not isinstance(given, cls):
+        raise ValueError(f"{name} must be an opa.dynamics.{cls.__name__} or None, got "
+                         f"{given!r:.60}")
+    return given if given is not None else cls(**taken)
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """A sweep's inputs, checked: its points and where they are kept."""
+
+    model: str
+    param: str
+    values: np.ndarray
+    base: System
+    options: SolverOptions
+    kw: dict
+    tasks: list
+    continuation: str
+    run: Execution
+    manifest: dict
+    out: str | None
+    parts: str | None
+    keep_parts: bool
+
+
+def _setup(model, param, values, system, window, continuation, mc, options, motion, out,
+           execution, fields) -> _Setup:
+    """Check every input of :func:`sweep` before any work, and make its points."""
+    keep_parts = fields.pop("keep_parts", False)
     run = take_execution(execution, fields, "sweep",
                          {"workers": DEFAULT_WORKERS} if execution is None else {})
+    window = _record("window", window, Window, fields)
+    mc = _record("mc", mc, MonteCarlo, fields)
+    motion = _record("motion", motion, MotionTolerances, fields)
     _choice("model", model, SWEEP_MODELS)
     _choice("continuation", continuation, CONTINUATIONS)
     _choice("parameter", param, SWEEPABLE)
-    if model == "mc" and source is None:
-        raise ValueError("model 'mc' needs its trajectory source: pass source=mc.sweep_source "
-                         "(opa.sweep and the CLI do)")
-    if source is not None and not callable(source):
-        raise ValueError(f"source must be a function (task, times) -> arrays, got {source!r}")
     options = check_instance("options", options, SolverOptions, SolverOptions())
     base = as_system(system, options, allowed=SWEEP_FIELDS, where="sweep", **fields)
     base = (base.deterministic() if model == "dmr" else
@@ -457,35 +554,16 @@ def sweep(
     if continuation != "fixed" and model == "mc":
         raise ValueError("continuation is not defined for 'mc' (every sample has its own "
                          "state); use continuation='fixed'")
-    for name, value, low in (("transient", transient, 0), ("record", record, 2),
-                             ("per_period", per_period, 1)):
-        if isinstance(value, bool) or int(value) != value or value < low:
-            raise ValueError(f"{name} must be an integer >= {low}, got {value}")
-    values = np.asarray(values, dtype=float).ravel()
-    if len(values) < 1 or not np.all(np.isfinite(values)):
-        raise ValueError(f"sweep values of {param} must be finite, got {values.tolist()}")
-    values = np.sort(values)
-    if np.any(np.diff(values) == 0):
-        raise ValueError(f"sweep values of {param} must be distinct, got {values.tolist()}")
-    from opa._work import check_work
-
-    # one run of transient + record periods per value; "mc" runs ``samples`` of them
-    runs = samples if model == "mc" and isinstance(samples, int) and samples > 0 else 1
-    drivers = [("values", len(values)), ("transient + record", f"({transient} + {record})")]
-    check_work("this bifurcation sweep",
-               len(values) * runs * (float(transient) + float(record))
-               if all(isinstance(v, (int, float)) for v in (transient, record)) else 0.0,
-               drivers + ([("samples", runs)] if runs > 1 else []))
-    for name, value in (("period_tol", period_tol), ("graze_velocity", graze_velocity),
-                        ("graze_gap", graze_gap)):
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"{name} must be > 0, got {value}")
-
+    if model == "mc" and mc.source is None:
+        raise ValueError("model 'mc' needs its trajectory source: pass mc=MonteCarlo("
+                         "source=mc.sweep_source) (opa.sweep and the CLI do)")
+    values = _swept_values(param, values)
+    _check_sweep_work(model, values, window, mc)
     kw = {
-        "samples": int(samples), "sampler": sampler,
-        "seed": int(seed), "transient": int(transient), "record": int(record),
-        "per_period": int(per_period), "period_tol": float(period_tol),
-        "graze_velocity": float(graze_velocity), "graze_gap": float(graze_gap),
+        "samples": int(mc.samples), "sampler": mc.sampler, "seed": int(mc.seed),
+        "transient": window.transient, "record": window.record,
+        "per_period": window.per_period, "period_tol": float(motion.period_tol),
+        "graze_velocity": float(motion.graze_velocity), "graze_gap": float(motion.graze_gap),
     }
     tasks = []
     for i, value in enumerate(values):
@@ -493,52 +571,75 @@ def sweep(
         if model != "dmr":
             point.check_samples()
         tasks.append(PointTask(index=i, value=float(value), model=model, system=point,
-                               options=options, source=source, **kw))
-    system, not_located = locate_setup(locate, model, param, values, base, options)
+                               options=options, source=mc.source, **kw))
     manifest = _settings(model, param, values, base, options,
                          {**kw, "continuation": continuation})
     out = None if out is None else os.fspath(out)
-    parts, done = _open_parts(out, manifest, len(tasks))
-    try:  # the lock of <out>.parts is held to the final write
-        results = dict(done)
-        with run.bar(len(tasks), initial=len(done), unit="point",
-                     desc=f"{model} sweep over {param}") as bar:
+    parts = (os.fspath(run.checkpoint) if run.checkpoint is not None
+             else None if out is None else _parts_dir(out))
+    return _Setup(model, param, values, base, options, kw, tasks, continuation, run,
+                  manifest, out, parts, bool(keep_parts) or run.checkpoint is not None)
 
-            def finish(result):
-                if parts is not None:
-                    _write_part(parts, result)
-                results[int(result["index"])] = result
-                bar.update(1)
 
-            if continuation == "fixed":
-                todo = [t for t in tasks if t.index not in done]
-                _run_parallel(todo, finish, run)
-            else:
-                order_ = tasks if continuation == "forward" else tasks[::-1]
-                _run_continuation(order_, done, finish, run)
-        computed = len(tasks) - len(done)
-        ordered = [results[i] for i in range(len(tasks))]
-        ds = assemble(model, param, values, ordered, base, options, kw, continuation)
-        ds.attrs.update(points_resumed=len(done), points_computed=computed)
-        if system is None:
-            ds = add_located(ds, [], method=f"not located: {not_located}")
+def _swept_values(param: str, values) -> np.ndarray:
+    values = np.asarray(values, dtype=float).ravel()
+    if len(values) < 1 or not np.all(np.isfinite(values)):
+        raise ValueError(f"sweep values of {param} must be finite, got {values.tolist()}")
+    values = np.sort(values)
+    if np.any(np.diff(values) == 0):
+        raise ValueError(f"sweep values of {param} must be distinct, got {values.tolist()}")
+    return values
+
+
+def _check_sweep_work(model: str, values, window: Window, mc: MonteCarlo) -> None:
+    """The work budget (:mod:`opa._work`): one run of transient + record periods per
+    value; "mc" runs ``samples`` of them."""
+    from opa._work import check_work
+
+    samples = mc.samples
+    runs = samples if model == "mc" and isinstance(samples, int) and samples > 0 else 1
+    transient, record = window.transient, window.record
+    drivers = [("values", len(values)), ("transient + record", f"({transient} + {record})")]
+    check_work("this bifurcation sweep", len(values) * runs * float(transient + record),
+               drivers + ([("samples", runs)] if runs > 1 else []))
+
+
+def _run_points(setup: _Setup, done: dict, parts) -> list[dict]:
+    """Every point's result, in order: those in ``done`` and the others computed (each
+    kept in ``parts`` as it finishes)."""
+    results = dict(done)
+    tasks, run = setup.tasks, setup.run
+    with run.bar(len(tasks), initial=len(done), unit="point",
+                 desc=f"{setup.model} sweep over {setup.param}") as bar:
+
+        def finish(result):
+            if parts is not None:
+                _write_part(parts, result)
+            results[int(result["index"])] = result
+            bar.update(1)
+
+        if setup.continuation == "fixed":
+            _run_parallel([t for t in tasks if t.index not in done], finish, run)
         else:
-            from opa.dynamics._continuation import locate_bifurcations
+            ordered = tasks if setup.continuation == "forward" else tasks[::-1]
+            _run_continuation(ordered, done, finish, run)
+    return [results[i] for i in range(len(tasks))]
 
-            seeds = observed_seeds(param, values, ordered, base, kw)
-            points = locate_bifurcations(system, param, float(values[0]), float(values[-1]),
-                                         seeds=seeds)
-            ds = add_located(ds, points, method=(
-                "continuation of the observed periodic attractors (locate_bifurcations, "
-                f"{len(seeds)} seeds)"))
-        if out is not None:
-            write_netcdf(ds, out)
-            if not keep_parts:
-                remove_store(parts.directory)
-        return ds
-    finally:
-        if parts is not None:
-            parts.close()
+
+def _with_located(ds, located, not_located, setup: _Setup, results):
+    """``ds`` with the located bifurcations of its observed periodic attractors (or the
+    reason they were not located)."""
+    if located is None:
+        return add_located(ds, [], method=f"not located: {not_located}")
+    from opa.dynamics._continuation import locate_bifurcations
+
+    values = setup.values
+    seeds = observed_seeds(setup.param, values, results, setup.base, setup.kw)
+    points = locate_bifurcations(located, setup.param, float(values[0]), float(values[-1]),
+                                 seeds=seeds)
+    return add_located(ds, points, method=(
+        "continuation of the observed periodic attractors (locate_bifurcations, "
+        f"{len(seeds)} seeds)"))
 
 
 # --------------------------------------------------------------------------- located points

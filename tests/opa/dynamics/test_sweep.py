@@ -118,6 +118,32 @@ def test_parallel_equals_serial():
     assert_same(serial, parallel)
 
 
+def test_the_records_give_the_keywords_run_and_refuse_both_at_once(tmp_path):
+    """``window=Window(...)`` and ``motion=MotionTolerances(...)`` are the keywords' run to
+    the bit; a keyword beside its record is refused naming both; a checkpoint folder given
+    in the execution record holds the parts and is kept after the write."""
+    from opa import Execution
+    from opa.dynamics._sections import MotionTolerances
+    from opa.dynamics._sweep import Window
+
+    osc = preset("3.1")
+    values = [0.035, 0.05]
+    by_keywords = sweep("dmr", "c", values, osc, transient=30, record=10, per_period=8,
+                        period_tol=1e-3, workers=1)
+    kept = tmp_path / "kept"
+    by_records = sweep("dmr", "c", values, osc, window=Window(30, 10, 8),
+                       motion=MotionTolerances(period_tol=1e-3), out=tmp_path / "d.nc",
+                       execution=Execution(workers=1, checkpoint=str(kept)))
+    assert_same(by_keywords, by_records)
+    assert len(list(kept.glob("point-*"))) == 2  # kept: the user named it
+    with pytest.raises(ValueError, match=r"sweep: give record inside window=Window"):
+        sweep("dmr", "c", values, osc, window=Window(30, 10, 8), record=20)
+    with pytest.raises(ValueError, match=r"window must be an opa.dynamics.Window"):
+        sweep("dmr", "c", values, osc, window=(30, 10, 8))
+    with pytest.raises(ValueError, match=r"per_period must be an integer >= 1, got 0"):
+        Window(per_period=0)
+
+
 def test_an_execution_record_runs_the_points_as_its_keywords_did():
     """``execution=Execution(workers=2)`` is the keywords' run; both at once is refused."""
     from opa import Execution
