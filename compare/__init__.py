@@ -1,14 +1,24 @@
 """compare: OPA against Monte Carlo — error metrics, the trust map, reports."""
 
 #: where each public name lives: imported on first use, so that ``import compare`` (and
-#: any ``compare._module``) stays light until a name is used
+#: any ``compare._module``) stays light until a name is used; "module:name" where the
+#: public name is not the module's own
 _HOMES = {
     "ValidateConfig": "compare._config", "load_config": "compare._config",
     "compare_runs": "compare._metrics", "error_metrics": "compare._metrics",
     "boundary_table": "compare._tables", "findings": "compare._findings",
     "verdict_grid": "compare._tables", "write_report": "compare._report",
     "count_distribution": "compare._mapdata", "run_validation": "compare._mapflow",
-    "verify": "compare._verify",
+    "verify": "compare._verify", "check_counts": "compare._verify",
+    # the map's screen (what opa-mc validate prints) and its workers' preload
+    "first_screen": "compare._findings", "cause": "compare._findings",
+    "bullet": "compare._findings", "frontier_lines": "compare._findings",
+    "wall_text": "compare._report", "map_preload": "compare._scaleout",
+    # the convergence study of multi-element OPA (opa-mc converge)
+    "ConvergenceConfig": "compare._convergence", "run_convergence": "compare._convergence",
+    "convergence_lines": "compare._convergence:summary_lines",
+    "write_convergence_report": "compare._convergence:write_report",
+    "plot_frontier": "compare._mapfigures",
     # the paper's figures: matplotlib only when they are asked for
     "reproduce": "compare._figures", "FIGURES": "compare._figures",
 }
@@ -19,14 +29,27 @@ def __getattr__(name: str):
     if name in _HOMES:
         import importlib
 
-        value = getattr(importlib.import_module(_HOMES[name]), name)
+        module, _, own = _HOMES[name].partition(":")
+        value = getattr(importlib.import_module(module), own or name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'compare' has no attribute {name!r}")
 
 
 __all__ = [
+    "ConvergenceConfig",
     "FIGURES",
+    "bullet",
+    "cause",
+    "check_counts",
+    "convergence_lines",
+    "first_screen",
+    "frontier_lines",
+    "map_preload",
+    "plot_frontier",
+    "run_convergence",
+    "wall_text",
+    "write_convergence_report",
     "reproduce",
     "ValidateConfig",
     "boundary_table",

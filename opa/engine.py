@@ -8,10 +8,12 @@ test forbids them ``from opa._x import``), so each name here is a commitment.
 
 from opa._basis import chebyshev_u, gauss_nodes, orthonormal, quadrature_order
 from opa._dataset import (
+    COMMAND,
     Store,
     atomic_write,
     check_opa_layout,
     digest,
+    first_non_finite,
     package_version,
     provenance_attrs,
     remove_store,
@@ -56,6 +58,7 @@ from opa._model import (
     time_grid,
 )
 from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, \
+    announce_compilation, \
     follow_thread_grant, output_times, run_batch, true_system_work, usable_cores
 from opa._simulate import default_impact_law, opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
@@ -71,13 +74,17 @@ from opa._splits import (
 )
 from opa._surrogate import run_measure, surrogate, surrogate_moments, surrogate_values
 from opa._system import IMPULSE_FIELDS, System, as_system
-from opa._work import check_work
+from opa._work import WorkBudgetError, budget, check_work, parse_duration, process_started
 from opa.dynamics._orbits import MAX_CYCLE, impulse_cycle
 from opa.dynamics._sections import identify_motion, mean_state, phase_section
 from opa.dynamics._sweep import local_executor, locate_setup, pool_shared, summary_lines, sweep, \
-    sweep_times
+    start_fork_server, sweep_times
 
 __all__ = [
+    # what opa.cli takes besides (the command line's provenance, the work budget, the
+    # compilation notice, the map's fork server, the rule of a failed run's numbers)
+    "COMMAND", "WorkBudgetError", "announce_compilation",
+    "budget", "first_non_finite", "parse_duration", "process_started", "start_fork_server",
     "DaskError", "Execution", "Watchdog", "as_execution", "connect_scheduler",
     "take_execution",
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
@@ -88,7 +95,8 @@ __all__ = [
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
     "as_system", "atomic_write", "chebyshev_u", "check_count", "check_device", "check_instance",
     "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",
-    "collocation", "count_probabilities", "default_impact_law", "digest", "event_sequence", "gauss_nodes",
+    "collocation", "count_probabilities", "default_impact_law", "digest", "event_sequence",
+    "gauss_nodes",
     "follow_thread_grant", "global_coefficients", "identify_motion", "impulse_cycle",
     "local_executor",
     "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",

@@ -6,13 +6,14 @@ not even inside a function:
     0  opa core      opa._model, opa._system, opa._kernel, opa._run, opa._simulate, ...
     1  dynamics      opa.dynamics (sections, sweeps, orbits, Lyapunov, continuation)
     2  plots         opa.plots (matplotlib only)
-    3  facade        opa (the package's public names) and opa._shims
+    3  facade        opa (the package's public names) and opa.engine
     4  mc            Monte Carlo ensembles, the MC trajectory source
     5  compare       metrics, validation, trust map, reports, the paper's figures
-    6  cli           opa.cli (argparse; the only place that imports all three packages)
+    6  application   opa.cli (argparse; parses, calls the layers below, prints)
 
-The one exception is ``opa._shims``, whose functions keep ``opa.sweep`` (model "mc") and
-``opa.reproduce`` working by importing ``mc`` and ``compare`` when called.
+There is no exception. The application lives in ``opa/cli`` (the console script's home,
+``opa-mc = opa.cli:main``) but is a layer of its own, above ``compare``: no module of the
+packages imports it, and it takes only public names from the layers below.
 """
 
 from __future__ import annotations
@@ -26,9 +27,13 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("opa", "mc", "compare")
-LAYERS = ("opa core", "dynamics", "plots", "facade", "mc", "compare", "cli")
-# (importer, imported) pairs allowed to go upward, only inside a function body
-SHIMS = {("opa._shims", "mc"), ("opa._shims", "compare._figures")}
+LAYERS = ("opa core", "dynamics", "plots", "facade", "mc", "compare", "application")
+#: the application layer: a package of its own in all but its folder
+APPLICATION = "opa.cli"
+
+
+def in_application(module: str) -> bool:
+    return module == APPLICATION or module.startswith(APPLICATION + ".")
 
 
 def module_name(path: Path) -> str:
@@ -52,13 +57,13 @@ TREES = {m: ast.parse(path.read_text(), filename=str(path)) for m, path in MODUL
 
 
 def layer(module: str) -> int:
-    if module.startswith("opa.cli"):
-        return LAYERS.index("cli")
+    if in_application(module):
+        return LAYERS.index("application")
     if module.startswith("compare"):
         return LAYERS.index("compare")
     if module.startswith("mc"):
         return LAYERS.index("mc")
-    if module in ("opa", "opa._shims", "opa.engine"):
+    if module in ("opa", "opa.engine"):
         return LAYERS.index("facade")
     if module.startswith("opa.plots"):
         return LAYERS.index("plots")
@@ -113,20 +118,25 @@ def test_every_module_has_a_layer():
 
 
 def test_no_module_imports_upward():
+    """Lazy imports included: no module may reach a higher layer, not even when called
+    (``opa.sweep("mc")`` and ``opa.reproduce`` once did, through ``opa._shims``)."""
     upward = []
     for module in MODULES:
         for target, nested in imports(module):
-            if layer(target) > layer(module) and not (nested and (module, target) in SHIMS):
+            if layer(target) > layer(module):
                 upward.append(f"{module} ({LAYERS[layer(module)]}) imports {target} "
                               f"({LAYERS[layer(target)]})")
     assert upward == []
 
 
-def test_the_shims_are_the_only_exception_and_import_only_when_called():
-    for module, target in SHIMS:
-        found = imports(module)
-        assert (target, True) in found
-        assert (target, False) not in found
+def test_the_application_is_the_top_layer():
+    """Nothing below imports ``opa.cli`` (though ``opa`` is its folder's package), and
+    ``opa.cli`` reaches all three packages."""
+    importers = sorted({m for m in MODULES if not in_application(m)
+                        for t, _ in imports(m) if in_application(t)})
+    assert importers == []
+    reached = {t.split(".")[0] for m in MODULES if in_application(m) for t, _ in imports(m)}
+    assert reached == {"opa", "mc", "compare"}
 
 
 def strongly_connected(graph: dict[str, list[str]]) -> list[list[str]]:
@@ -192,6 +202,54 @@ def _private_imports(module: str) -> list[str]:
             found.append(f"from {node.module} import ...")
         found += [f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_")]
     return found
+
+
+def _application_reaches(module: str) -> list[str]:
+    """The imports of ``module`` that reach a private module (``opa._run``,
+    ``opa.dynamics._sweep``, ``compare._findings``) or a private name (``from opa import
+    _kernel``) outside the application ``opa.cli``."""
+    found = []
+    for node in ast.walk(TREES[module]):
+        if isinstance(node, ast.Import):
+            found += [f"import {a.name}" for a in node.names
+                      if a.name.split(".")[0] in PACKAGES and not in_application(a.name)
+                      and any(p.startswith("_") for p in a.name.split(".")[1:])]
+        elif isinstance(node, ast.ImportFrom):
+            name = node.module or ""
+            if node.level:  # relative: from the module's package (its own, for __init__)
+                path = MODULES.get(module)
+                base = module.split(".")
+                if path is None or path.name != "__init__.py":
+                    base = base[:-1]
+                base = base[: len(base) - (node.level - 1)]
+                name = ".".join(base + ([node.module] if node.module else []))
+            if name.split(".")[0] not in PACKAGES or in_application(name):
+                continue
+            if any(p.startswith("_") for p in name.split(".")[1:]):
+                found.append(f"from {name} import ...")
+            found += [f"{name}.{a.name}" for a in node.names if a.name.startswith("_")
+                      and not in_application(f"{name}.{a.name}")]
+    return found
+
+
+def test_the_application_imports_public_names_only():
+    """ARCHITECTURE.md: no private name imported outside its own package. ``opa.cli``
+    takes ``opa``, ``opa.engine``, ``opa.dynamics``, ``opa.plots``, ``mc`` and
+    ``compare``; its own private modules (``opa.cli._flags``) are its own."""
+    found = {m: _application_reaches(m) for m in MODULES if in_application(m)}
+    assert len(found) > 5
+    assert {m: f for m, f in found.items() if f} == {}
+    # the check sees planted private imports of every form, and passes the application's own
+    TREES["opa.cli._planted"] = ast.parse(
+        "from opa._run import run\nfrom opa import _kernel\nimport compare._findings\n"
+        "from opa.dynamics._sweep import sweep\nfrom opa.cli._flags import say\n"
+        "from . import _args\nfrom .._dataset import COMMAND\n")
+    try:
+        assert _application_reaches("opa.cli._planted") == [
+            "from opa._run import ...", "opa._kernel", "import compare._findings",
+            "from opa.dynamics._sweep import ...", "from opa._dataset import ..."]
+    finally:
+        del TREES["opa.cli._planted"]
 
 
 def test_packages_import_only_each_others_public_names():

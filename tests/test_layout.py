@@ -51,7 +51,7 @@ TESTED_IN = {
     "opa/cli/_paths.py": ("tests/opa/cli/test_bad_inputs.py",),
     "opa/cli/_validate.py": ("tests/opa/cli/test_bad_inputs.py",),
     "opa/cli/_stochastic.py": ("tests/opa/cli/test_commands.py",),
-    "mc/_source.py": ("tests/opa/test_shims.py",),
+    "mc/_source.py": ("tests/opa/cli/test_commands.py",),
     "compare/_report.py": ("tests/compare/test_trustmap.py",),
     "compare/_findings.py": ("tests/compare/test_report_sentences.py",
                              "tests/compare/test_trust.py"),

@@ -8,7 +8,7 @@ import re
 
 import numpy as np
 
-from opa._model import MAX_WHOLE  # whole numbers above 2^53 are not exact as floats
+from opa import MAX_WHOLE  # whole numbers above 2^53 are not exact as floats
 
 EXIT_USAGE = 2
 # A sweep of more values than this is refused: at the paper's 600 periods per value it

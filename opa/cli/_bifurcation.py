@@ -11,14 +11,12 @@ import time
 
 import numpy as np
 
+from opa import DEFAULT_ORDER, SWEEPABLE
 from opa.cli._args import positive_int, whole_number
 from opa.cli._args import parse_sweep as _parse_sweep
-from opa._system import DEFAULT_ORDER
 from opa.cli._flags import _common_flags, _impulse_flags, _model_flags
-
-from opa._system import SWEEPABLE
-from opa.dynamics._sweep import CONTINUATIONS, DEFAULT_WORKERS, SWEEP_MODELS, summary_lines
-from opa.dynamics._sections import MOTION_GRAZE_GAP, MOTION_GRAZE_VELOCITY, PERIOD_TOL
+from opa.dynamics import (CONTINUATIONS, DEFAULT_WORKERS, MOTION_GRAZE_GAP,
+                          MOTION_GRAZE_VELOCITY, PERIOD_TOL, SWEEP_MODELS, summary_lines)
 
 SECTIONS = ("phase", "constraint", "both")
 
@@ -39,8 +37,7 @@ def parse_sweep(spec: str) -> tuple[str, np.ndarray]:
 
 def _check_sizes(osc, param, values, args) -> None:
     """Refuse sweeps that cannot finish or fit: the span of each run and the sections."""
-    from opa._memory import check_memory
-    from opa._model import check_span
+    from opa.engine import check_memory, check_span
 
     span = args.transient + args.record
     swept = [float(values.min()), float(values.max())] if param in ("omega", "omega1") else []
@@ -54,8 +51,8 @@ def _check_sizes(osc, param, values, args) -> None:
 
 def cmd_bifurcation(args) -> int:
     from mc import sweep_source
-    from opa.dynamics._sweep import sweep
     from opa.cli._flags import check_outputs, options_from, system_from
+    from opa.dynamics import sweep
 
     check_outputs(args)
     if args.model != "mc":
@@ -101,8 +98,8 @@ def cmd_bifurcation(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
+    from compare import FIGURES, reproduce
     from opa.cli._flags import check_outputs
-    from compare._figures import FIGURES, reproduce
 
     check_outputs(args)
     names = list(FIGURES) if args.figure == "all" else [args.figure]
@@ -127,11 +124,11 @@ def _set_help(parser: argparse.ArgumentParser, dest: str, text: str, default) ->
 
 
 class _FigureNames:
-    """The figures ``reproduce`` draws (:data:`compare._figures.FIGURES`) and "all", read
-    when the parser checks or lists them: building the parser imports no matplotlib."""
+    """The figures ``reproduce`` draws (:data:`compare.FIGURES`) and "all", read when the
+    parser checks or lists them: building the parser imports no matplotlib."""
 
     def _names(self) -> tuple[str, ...]:
-        from compare._figures import FIGURES
+        from compare import FIGURES
 
         return (*FIGURES, "all")
 

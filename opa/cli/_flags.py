@@ -12,21 +12,25 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import sys
 
-from opa._model import (
+from opa import (
+    DEFAULT_ORDER,
+    DEFAULT_SIGMA,
     IMPACT_LAWS,
     IMPULSE_MODELS,
     METHODS,
     PARAMETER_DOCS,
     PARAMETER_NAMES,
     PRESETS,
+    SYSTEM_FIELDS,
     TRUNCATIONS,
     UNCERTAIN_PARAMETERS,
+    Execution,
     Oscillator,
     SolverOptions,
+    System,
 )
-
-from opa._system import DEFAULT_ORDER, DEFAULT_SIGMA, SYSTEM_FIELDS, System
 from opa.cli._args import positive_int, whole_number
 
 EXIT_SIMULATION = 3
@@ -268,6 +272,23 @@ def oscillator_from(args) -> Oscillator:
 def options_from(args) -> SolverOptions:
     return SolverOptions(rtol=args.rtol, atol=args.atol, max_step=args.max_step,
                          chatter_velocity=args.chatter_velocity, method=args.method)
+
+
+def say(message: str) -> None:
+    """One line on stderr, ``opa-mc: message`` (a command's log)."""
+    print(f"opa-mc: {message}", file=sys.stderr)
+
+
+def execution_from(args, **changes) -> Execution:
+    """The ``opa.Execution`` of the parsed flags: ``--workers``, ``--scheduler``,
+    ``--connect-timeout`` and ``--device`` where the subcommand has them, a progress bar
+    and log lines on stderr unless ``--quiet``; ``changes`` (e.g. ``checkpoint=``) win."""
+    fields = {name: getattr(args, name) for name in ("workers", "scheduler", "device",
+                                                     "connect_timeout")
+              if getattr(args, name, None) is not None}
+    quiet = getattr(args, "quiet", False)
+    return Execution(**{**fields, "progress": not quiet, "log": None if quiet else say,
+                        **changes})
 
 
 def system_from(args, **changes) -> System:

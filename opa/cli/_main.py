@@ -9,6 +9,7 @@ with status 3. No tracebacks for either.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import sys
 import time
@@ -33,29 +34,28 @@ from opa.cli._flags import (
     _verify_flags,
     _summary_events,
     check_outputs,
+    execution_from,
     refuse_given,
     options_from,
+    say,
     system_from,
 )
 
 
 def cmd_simulate(args) -> int:
-    from opa._lock import OutputLock
+    from opa.engine import OutputLock
 
     check_outputs(args)
     if not args.out:
         return _simulate(args)
     # OUT stays locked from before the run until it is written (its checkpoint has its own)
-    with OutputLock(args.out, "output file", folder=False,
-                    log=lambda line: print(f"opa-mc: {line}", file=sys.stderr)):
+    with OutputLock(args.out, "output file", folder=False, log=say):
         return _simulate(args)
 
 
 def _simulate(args) -> int:
-    from opa._dataset import write_netcdf
-    from opa._elements import ElementBudgetWarning
+    from opa import write_netcdf
     from opa.engine import default_impact_law
-    from opa.plots._diagrams import plot_run
 
     if args.model == "opa":
         if args.elements != "adaptive":
@@ -73,84 +73,26 @@ def _simulate(args) -> int:
               system_from(args, **({"sigma": 0.0} if args.model == "dmr" else {})))
     opts = options_from(args)
     if args.model == "opa" and args.verify is not None:
-        from compare._verify import check_counts
+        from compare import check_counts
 
-        check_counts(args.verify, args.verify_max if args.verify_max is not None
-                     else max(args.verify, DEFAULT_VERIFY_MAX), flags=True)
+        check_counts(args.verify, _verify_max(args), flags=True)
+    lifetime = contextlib.nullcontext()
+    if args.model == "mc":
+        from mc import checkpoint_for, checkpoint_lifetime
+
+        # with --out, finished chunks are kept in OUT.parts/ so a killed run resumes; the
+        # folder's lifetime (removed after a failed sample, kept after a lost cluster) is mc's
+        lifetime = checkpoint_lifetime(checkpoint_for(args.out), keep=args.keep_parts)
     start = time.perf_counter()
-    if args.model == "dmr":
-        from opa._simulate import simulate_dmr
-
-        ds = simulate_dmr(system, periods=args.periods, per_period=args.per_period,
-                          options=opts)
-        final = f"x = {float(ds.x[-1]):.10g}, v = {float(ds.v[-1]):.10g}"
-    elif args.model == "opa":
-        from opa._simulate import simulate_opa
-
-        with warnings.catch_warnings():  # the budget warning is said in the summary
-            warnings.simplefilter("ignore", ElementBudgetWarning)
-            ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
-                              options=opts, elements=args.elements,
-                              **({"tolerance": args.element_tolerance,
-                                  "max_elements": args.max_elements}
-                                 if args.elements == "adaptive" else {}))
-        final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = "
-                 f"{float(ds.x_var[-1]):.4g}")
-        if ds.sizes["element"] > 1:
-            final += f" ({ds.sizes['element']} elements)"
-        if args.verify is not None:
-            from compare._verify import verify
-
-            ds = verify(ds, samples=args.verify, max_samples=args.verify_max
-                        if args.verify_max is not None else max(args.verify,
-                                                                DEFAULT_VERIFY_MAX),
-                        seed=args.seed, options=opts, log=None if args.quiet else
-                        (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
-    else:
-        from mc import simulate_mc
-
-        from opa._run import SimulationError
-
-        # with --out, finished chunks are kept in OUT.parts/ so a killed run resumes
-        parts = f"{args.out}.parts" if args.out else None
-
-        try:
-            ds = simulate_mc(system,
-                             samples=args.samples, sampler=args.sampler, seed=args.seed,
-                             periods=args.periods, per_period=args.per_period, options=opts,
-                             scheduler=args.scheduler, progress=not args.quiet,
-                             checkpoint=parts, device=args.device,
-                             connect_timeout=args.connect_timeout,
-                             log=None if args.quiet else
-                             (lambda message: print(f"opa-mc: {message}", file=sys.stderr)))
-        except SimulationError as err:
-            from mc import DaskError, remove_checkpoint
-
-            # a sample that cannot be integrated fails every rerun of these settings: keep
-            # no checkpoint to trip over; a lost cluster keeps its finished chunks
-            if parts and not isinstance(err, DaskError):
-                remove_checkpoint(parts)
-            raise
-        sem = float(ds.x_sem[-1])
-        final = (f"E[x] = {float(ds.x_mean[-1]):.8g} ± {sem:.2g} (SE), Var[x] = "
-                 f"{float(ds.x_var[-1]):.4g}; impacts per sample "
-                 f"{int(ds.n_impacts.min())}..{int(ds.n_impacts.max())}")
-    elapsed = time.perf_counter() - start
-    try:
+    with lifetime:
+        ds, final = _run(args, system, opts)
+        elapsed = time.perf_counter() - start
         _refuse_non_finite(ds, args)
-    except Exception:
-        if args.model == "mc" and args.out:
-            from mc import remove_checkpoint
-
-            remove_checkpoint(f"{args.out}.parts")  # a failed run keeps no checkpoint
-        raise
-    if args.out:
-        write_netcdf(ds, args.out)
-        if args.model == "mc" and not args.keep_parts:
-            from mc import remove_checkpoint
-
-            remove_checkpoint(f"{args.out}.parts")
+        if args.out:
+            write_netcdf(ds, args.out)
     if args.plot:
+        from opa.plots import plot_run
+
         plot_run(ds, args.plot, per_period=args.per_period)
     if not args.quiet:
         print(f"opa-mc simulate {args.model}: t in [0, {float(ds.time[-1]):.6g}] "
@@ -174,30 +116,66 @@ def _simulate(args) -> int:
     return 0
 
 
-# variables whose NaN or inf is documented (docs/datasets.md), not a failure
-_MAY_BE_NON_FINITE = ("refinement_mean_change", "refinement_share")
+def _verify_max(args) -> int:
+    return args.verify_max if args.verify_max is not None else max(args.verify,
+                                                                   DEFAULT_VERIFY_MAX)
+
+
+def _run(args, system, opts):
+    """The dataset of ``simulate MODEL`` and its final state in words."""
+    if args.model == "dmr":
+        from opa import simulate_dmr
+
+        ds = simulate_dmr(system, periods=args.periods, per_period=args.per_period,
+                          options=opts)
+        return ds, f"x = {float(ds.x[-1]):.10g}, v = {float(ds.v[-1]):.10g}"
+    if args.model == "opa":
+        from opa import simulate_opa
+        from opa.engine import ElementBudgetWarning
+
+        with warnings.catch_warnings():  # the budget warning is said in the summary
+            warnings.simplefilter("ignore", ElementBudgetWarning)
+            ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
+                              options=opts, elements=args.elements,
+                              **({"tolerance": args.element_tolerance,
+                                  "max_elements": args.max_elements}
+                                 if args.elements == "adaptive" else {}))
+        final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = "
+                 f"{float(ds.x_var[-1]):.4g}")
+        if ds.sizes["element"] > 1:
+            final += f" ({ds.sizes['element']} elements)"
+        if args.verify is not None:
+            from compare import verify
+
+            ds = verify(ds, samples=args.verify, max_samples=_verify_max(args),
+                        seed=args.seed, options=opts, log=None if args.quiet else say)
+        return ds, final
+    from mc import checkpoint_for, simulate_mc
+
+    ds = simulate_mc(system, samples=args.samples, sampler=args.sampler, seed=args.seed,
+                     periods=args.periods, per_period=args.per_period, options=opts,
+                     execution=execution_from(args, checkpoint=checkpoint_for(args.out)))
+    return ds, (f"E[x] = {float(ds.x_mean[-1]):.8g} ± {float(ds.x_sem[-1]):.2g} (SE), "
+                f"Var[x] = {float(ds.x_var[-1]):.4g}; impacts per sample "
+                f"{int(ds.n_impacts.min())}..{int(ds.n_impacts.max())}")
 
 
 def _refuse_non_finite(ds, args) -> None:
-    """A result with a non-finite number (other than the documented ones: the standard
-    errors of a Gauss quadrature, which has no sampling error, and the refinement history)
-    is a run that could not be completed: nothing is written, exit status 3."""
-    from opa._run import SimulationError
+    """A result with a non-finite number (:func:`opa.engine.first_non_finite` says which
+    are documented) is a run that could not be completed: nothing is written, exit
+    status 3."""
+    from opa import SimulationError
+    from opa.engine import first_non_finite
 
-    gauss = ds.attrs.get("sampler") == "gauss"
-    for name, var in ds.data_vars.items():
-        if var.dtype.kind != "f" or name in _MAY_BE_NON_FINITE or (
-                gauss and name.endswith("_sem")):
-            continue
-        values = var.values
-        if not np.isfinite(values).all():
-            bad = int((~np.isfinite(values)).sum())
-            law = ds.attrs.get("distribution", "")
-            raise SimulationError(
-                f"simulate {args.model}: {bad} of {values.size} values of {name} are not "
-                f"finite" + (f" (law of xi {law}, N = {ds.attrs.get('N', '?')})" if law else "")
-                + "; nothing written: try a lower --order, a milder --distribution or "
-                  "smaller --sigma")
+    found = first_non_finite(ds)
+    if found is not None:
+        name, bad = found
+        law = ds.attrs.get("distribution", "")
+        raise SimulationError(
+            f"simulate {args.model}: {bad} of {ds[name].size} values of {name} are not "
+            f"finite" + (f" (law of xi {law}, N = {ds.attrs.get('N', '?')})" if law else "")
+            + "; nothing written: try a lower --order, a milder --distribution or "
+              "smaller --sigma")
 
 
 def _verify_lines(ds) -> list[str]:
@@ -400,7 +378,7 @@ def _scheduler(text: str) -> str:
 
 
 def _duration(text: str) -> float:
-    from opa._work import parse_duration
+    from opa.engine import parse_duration
 
     try:
         return parse_duration(text)
@@ -427,12 +405,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = list(sys.argv[1:] if argv is None else argv)
-    from opa._run import SimulationError
-
-    from opa._dataset import COMMAND
+    from opa import SimulationError
+    from opa.engine import COMMAND, WorkBudgetError, budget
 
     token = COMMAND.set(("opa-mc", *args.argv))
-    from opa._work import WorkBudgetError, budget
 
     try:
         with budget(getattr(args, "work_budget", None)):

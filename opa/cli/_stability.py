@@ -13,7 +13,7 @@ import numpy as np
 
 from opa.cli._args import parse_sweep, positive_int, whole_number
 from opa.cli._flags import _model_flags, _solver_flags, _system_flags
-
+from opa.dynamics import CONTINUABLE, STABILITY_LAWS
 
 
 def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
@@ -23,8 +23,6 @@ def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
     >>> parse_branch_sweep("c=0.1:0.02:40")
     ('c', 0.1, 0.02, 40)
     """
-    from opa.dynamics._orbits import CONTINUABLE
-
     name, _, (start, stop, count) = parse_sweep(spec, names=CONTINUABLE, default_count=20,
                                                 ranges_only=True)
     if count < 2:
@@ -34,7 +32,7 @@ def parse_branch_sweep(spec: str) -> tuple[str, float, float, int]:
 
 def _system(args):
     from opa.cli._flags import options_from, system_from
-    from opa.dynamics._orbits import ImpactSystem
+    from opa.dynamics import ImpactSystem
 
     return ImpactSystem.of(system_from(args), model=args.model, options=options_from(args))
 
@@ -63,17 +61,10 @@ def cmd_stability(args) -> int:
     if not args.sweep:
         refuse_given(args, ["seed_value", "depth", "max_points"],
                      "applies with --sweep only (the continuation of a branch)")
-    from opa.dynamics._continuation import (  # noqa: E402 -- the paths are checked first, cheaply
-        BIFURCATION_KINDS,
-        Branch,
-        ContinuationOptions,
-        branch_dataset,
-        continue_orbits,
-    )
-    from opa.plots import plot_branches
-    from opa._dataset import write_netcdf
-    from opa.dynamics._orbits import (impulse_cycle, lyapunov_benettin, lyapunov_exponent,
-                                      periodic_orbit)
+    from opa import write_netcdf
+    from opa.dynamics import (BIFURCATION_KINDS, ContinuationOptions, benettin_engine,
+                              continue_orbits, impulse_cycle, lyapunov_benettin,
+                              lyapunov_exponent, orbit_dataset, periodic_orbit)
 
     system = _system(args)
     start = time.perf_counter()
@@ -102,9 +93,7 @@ def cmd_stability(args) -> int:
                       f"{int(ds.branch_period[int(ds.bifurcation_branch[i])])})")
     else:
         orbit = periodic_orbit(system, periods=periods, t0=args.t0, transient=args.transient)
-        branch = Branch(parameter="c", periods=orbit.periods, values=[system.oscillator.c],
-                        orbits=[orbit], end="single orbit")
-        ds = branch_dataset(system, "c", [branch], [], t0=args.t0)
+        ds = orbit_dataset(system, orbit, t0=args.t0)
         if not args.quiet:
             print(f"opa-mc stability {args.model}: period-{orbit.periods} orbit (label "
                   f"{orbit.label}) in {time.perf_counter() - start:.2f} s; "
@@ -122,9 +111,8 @@ def cmd_stability(args) -> int:
             print(f"  largest Lyapunov exponent {est.exponent:+.5f} ± {est.standard_error:.5f} "
                   f"per unit time ({est.periods} periods, {est.method})")
         if args.benettin:
-            engine = "solver" if system.oscillator.F0 == 0.0 else "plain"
             check = lyapunov_benettin(system, periods=args.lyapunov_periods,
-                                      transient=args.transient, engine=engine)
+                                      transient=args.transient, engine=benettin_engine(system))
             ds.attrs["lyapunov_benettin"] = check.exponent
             if not args.quiet:
                 print(f"  Benettin check            {check.exponent:+.5f} ± "
@@ -134,6 +122,8 @@ def cmd_stability(args) -> int:
         if not args.quiet:
             print(f"  wrote {args.out}")
     if args.plot:
+        from opa.plots import plot_branches
+
         plot_branches(ds, args.plot)
         if not args.quiet:
             print(f"  wrote {args.plot}")
@@ -142,8 +132,6 @@ def cmd_stability(args) -> int:
 
 def register_stability(subparsers) -> None:
     """Add ``stability`` to the ``opa-mc`` subcommands (flags from ``opa.cli._flags``)."""
-    from opa.dynamics._orbits import STABILITY_LAWS
-
     p = subparsers.add_parser(
         "stability",
         help="periodic orbits, Floquet multipliers, branches through period doubling, "

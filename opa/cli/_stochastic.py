@@ -17,9 +17,8 @@ import time
 
 import numpy as np
 
-from opa._lock import OutputLock
+from opa import PARAMETER_NAMES
 from opa.cli._args import parse_sweep, positive_int, whole_number
-from opa._model import PARAMETER_NAMES
 from opa.cli._flags import _model_flags, _output_flags, _solver_flags
 
 
@@ -87,10 +86,10 @@ FLAGS = {"sigma": "--sigma", "uncertain": "--uncertain", "distribution": "--dist
 
 
 def cmd_stochastic(args) -> int:
-    from opa._work import WorkBudgetError
     from opa.cli._flags import check_outputs, given, options_from, oscillator_from, \
         refuse_given
-    from opa.dynamics._stochastic import DiagramInputError, check_diagram
+    from opa.dynamics import DiagramInputError, check_diagram
+    from opa.engine import WorkBudgetError
 
     check_outputs(args)  # refuses --keep-parts without --out too; --workers bound
     swept = args.sweep.partition("=")[0].strip().lstrip("-")
@@ -134,7 +133,8 @@ def cmd_stochastic(args) -> int:
 
 def _run(args, osc, name, values, keywords) -> int:
     """The diagram of the checked inputs, written and summed up."""
-    from opa.dynamics._stochastic import stochastic_diagram
+    from opa.dynamics import stochastic_diagram
+    from opa.engine import OutputLock
 
     start = time.perf_counter()
     log = None if args.quiet else (lambda line: print(f"opa-mc: {line}", file=sys.stderr))
@@ -147,13 +147,13 @@ def _run(args, osc, name, values, keywords) -> int:
         ds = stochastic_diagram(osc, name, values, **keywords, parts=parts, log=log)
         elapsed = time.perf_counter() - start
         if args.out:
-            from opa._dataset import remove_store, write_netcdf
+            from opa.engine import remove_store, write_netcdf
 
             write_netcdf(ds, args.out)
             if not args.keep_parts:  # each value was kept as it finished: a killed run resumes
                 remove_store(parts)
     if args.plot:
-        from opa.plots._stochastic import plot_stochastic
+        from opa.plots import plot_stochastic
 
         plot_stochastic(ds, args.plot)
     if not args.quiet:

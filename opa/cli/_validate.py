@@ -9,11 +9,9 @@ import sys
 
 import numpy as np
 
+from opa import IMPULSE_FIELDS, MAX_GRID, PARAMETER_NAMES, UNCERTAIN_PARAMETERS
 from opa.cli._args import parse_sweep, positive_int, whole_number
 from opa.cli._flags import _elements_arg, _impulse_flags, _model_flags, _solver_flags
-
-from opa._model import MAX_GRID, PARAMETER_NAMES, UNCERTAIN_PARAMETERS
-from opa._system import IMPULSE_FIELDS
 
 
 
@@ -168,7 +166,7 @@ def _check_outdir(path: str) -> None:
 
 
 def cmd_validate(args) -> int:
-    from compare._config import load_config
+    from compare import load_config
 
     model = {name: getattr(args, name) for name in PARAMETER_NAMES
              if getattr(args, name, None) is not None}
@@ -194,22 +192,18 @@ def cmd_validate(args) -> int:
         workers=args.workers, frontier=False if args.no_frontier else None, **impulse,
     )
     _check_outdir(cfg.outdir)
-    from opa._run import announce_compilation
+    from opa.engine import announce_compilation
 
     announce_compilation()  # here, once: the workers started below then compile in silence
     if cfg.processes > 1 and cfg.scheduler is None:
         # the workers' fork server imports the map's modules while this process does
-        from compare._scaleout import map_preload
-        from opa.dynamics._sweep import start_fork_server
+        from compare import map_preload
+        from opa.engine import start_fork_server
 
         start_fork_server(map_preload(cfg.plots))
-    from compare._mapflow import run_validation
-    from compare._findings import bullet, cause, findings, first_screen, frontier_lines
-    from compare._report import wall_text, write_report
-    from compare._tables import verdict_grid
-    from opa._work import process_started
-
-    from opa.engine import OutputLock
+    from compare import (bullet, cause, findings, first_screen, frontier_lines,
+                         run_validation, verdict_grid, wall_text, write_report)
+    from opa.engine import OutputLock, process_started
 
     start = process_started()  # the one clock of the run: every wall time below reads it
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
@@ -294,11 +288,9 @@ def register_converge(sub) -> None:
 
 
 def cmd_converge(args) -> int:
-    from compare._convergence import ConvergenceConfig, run_convergence, summary_lines, \
-        write_report
-    from opa.cli._flags import oscillator_from, options_from
-
-    from opa.cli._flags import MAX_WORKERS
+    from compare import (ConvergenceConfig, convergence_lines, run_convergence,
+                         write_convergence_report)
+    from opa.cli._flags import MAX_WORKERS, oscillator_from, options_from
 
     if args.workers > MAX_WORKERS:
         raise ValueError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got "
@@ -315,11 +307,11 @@ def cmd_converge(args) -> int:
                             **kw)
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     ds = run_convergence(cfg, log=log, workers=args.workers, scheduler=args.scheduler)
-    from compare._mapfigures import plot_frontier
+    from compare import plot_frontier  # matplotlib, once the study's workers are done
 
     command = "opa-mc " + shlex.join(getattr(args, "argv", ["converge"]))
-    written = write_report(ds, args.outdir, draw=plot_frontier, command=command)
-    for line in summary_lines(ds):
+    written = write_convergence_report(ds, args.outdir, draw=plot_frontier, command=command)
+    for line in convergence_lines(ds):
         print(f"* {line}")
     print(f"\nwrote {os.path.join(args.outdir, 'convergence.nc')}, " + ", ".join(written))
     return 0

@@ -8,15 +8,20 @@ imports ``mc`` or ``compare``.
 """
 
 from opa.dynamics._continuation import (
+    BIFURCATION_KINDS,
     ContinuationOptions,
     Located,
     branch_dataset,
     continue_orbits,
     locate_bifurcations,
+    orbit_dataset,
 )
 from opa.dynamics._orbits import (
+    CONTINUABLE,
+    STABILITY_LAWS,
     ImpactSystem,
     PeriodicOrbit,
+    benettin_engine,
     impulse_cycle,
     lyapunov_benettin,
     lyapunov_exponent,
@@ -25,28 +30,41 @@ from opa.dynamics._orbits import (
     transverse_lyapunov_exponent,
 )
 from opa.dynamics._sections import (
+    MOTION_GRAZE_GAP,
+    MOTION_GRAZE_VELOCITY,
+    PERIOD_TOL,
     Motion,
     constraint_section,
     detect_period,
     identify_motion,
     phase_section,
 )
-from opa.dynamics._stochastic import stochastic_diagram
-from opa.dynamics._sweep import summary_lines, sweep
+from opa.dynamics._stochastic import DiagramInputError, check_diagram, stochastic_diagram
+from opa.dynamics._sweep import (
+    CONTINUATIONS,
+    DEFAULT_WORKERS,
+    SWEEP_MODELS,
+    summary_lines,
+    sweep,
+)
 
 __all__ = [
     "ContinuationOptions",
+    "DiagramInputError",
     "ImpactSystem",
     "Located",
     "Motion",
     "PeriodicOrbit",
+    "benettin_engine",
     "branch_dataset",
+    "check_diagram",
     "constraint_section",
     "continue_orbits",
     "detect_period",
     "identify_motion",
     "impulse_cycle",
     "locate_bifurcations",
+    "orbit_dataset",
     "lyapunov_benettin",
     "lyapunov_exponent",
     "periodic_orbit",
@@ -56,4 +74,14 @@ __all__ = [
     "summary_lines",
     "sweep",
     "transverse_lyapunov_exponent",
+    # the vocabulary of the analyses' arguments and their defaults (``opa.cli``'s flags)
+    "BIFURCATION_KINDS",
+    "CONTINUABLE",
+    "CONTINUATIONS",
+    "DEFAULT_WORKERS",
+    "MOTION_GRAZE_GAP",
+    "MOTION_GRAZE_VELOCITY",
+    "PERIOD_TOL",
+    "STABILITY_LAWS",
+    "SWEEP_MODELS",
 ]

@@ -2,6 +2,7 @@
 (``import opa`` does not import matplotlib)."""
 
 from opa.plots._branches import plot_branches
+from opa.plots._stochastic import plot_stochastic
 from opa.plots._diagrams import (
     COLORS,
     PoincareMarks,
@@ -19,7 +20,7 @@ from opa.plots._diagrams import (
 )
 
 __all__ = [
-    "plot_bifurcation", "plot_branches", "plot_run",
+    "plot_bifurcation", "plot_branches", "plot_run", "plot_stochastic",
     # the drawing blocks of the paper's figures (``compare._figures``)
     "COLORS", "PoincareMarks", "SECTION_LABELS", "describe_marks", "diagram", "draw_marks",
     "history", "located_marks", "portrait", "section_bars", "window",

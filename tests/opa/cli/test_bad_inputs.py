@@ -842,3 +842,27 @@ def test_a_parts_path_that_is_a_file_names_out(command, capsys, tmp_path, monkey
     assert status == 2 and err.count("\n") == 1 and "Traceback" not in err
     assert "--out r.nc: its parts folder r.nc.parts" in err and "is a file" in err
     assert not (tmp_path / "r.nc").exists()
+
+
+def test_a_non_finite_result_exits_3_writes_nothing_and_keeps_no_checkpoint(
+        tmp_path, capsys, monkeypatch):
+    """The run's numbers are judged by opa.engine.first_non_finite; the CLI words it with
+    its flags (the line as before the rule moved) and mc.checkpoint_lifetime removes the
+    run's OUT.parts."""
+    import mc
+
+    real = mc.simulate_mc
+
+    def with_nan(*args, **kwargs):
+        ds = real(*args, **kwargs)
+        ds["x_var"][-1] = np.nan
+        return ds
+
+    monkeypatch.setattr(mc, "simulate_mc", with_nan)
+    monkeypatch.chdir(tmp_path)
+    status, out, err, _ = run_cli(MC + ["--distribution", "uniform", "--out", "r.nc"], capsys)
+    assert status == 3
+    assert err == ("opa-mc: simulation failed: simulate mc: 1 of 3 values of x_var are not "
+                   "finite (law of xi uniform, N = 4); nothing written: try a lower --order, "
+                   "a milder --distribution or smaller --sigma\n")
+    assert sorted(os.listdir(tmp_path)) == []  # neither r.nc nor r.nc.parts

@@ -519,7 +519,7 @@ def test_validate_starts_its_workers_fork_server_before_the_maps_imports(monkeyp
     import subprocess
     import sys
 
-    import opa.dynamics._sweep as sweep
+    import opa.engine
     from compare._scaleout import FIGURE_PRELOAD, MAP_PRELOAD
 
     started = []
@@ -528,7 +528,7 @@ def test_validate_starts_its_workers_fork_server_before_the_maps_imports(monkeyp
         started.append(preload)
         raise _Started
 
-    monkeypatch.setattr(sweep, "start_fork_server", start)
+    monkeypatch.setattr(opa.engine, "start_fork_server", start)  # the CLI's door to it
     tiny = ["--values", "3.98", "--sigmas", "0.01,0.03", "--orders", "0:2", "--horizons",
             "2,4", "--samples", "64", "--max-samples", "128", "--no-frontier",
             "--no-plots", "--quiet"]
@@ -601,3 +601,39 @@ def test_the_default_impact_law_is_the_librarys_for_the_api_and_the_cli(tmp_path
         assert cli.attrs["impact_law"] == api.attrs["impact_law"] == law
         np.testing.assert_array_equal(cli.x_mean, explicit.x_mean)
         np.testing.assert_array_equal(api.x_mean, explicit.x_mean)
+
+
+def test_a_run_is_failed_by_its_non_finite_numbers_except_the_documented_ones():
+    """docs/datasets.md: a Gauss quadrature's standard errors are NaN (it has no sampling
+    error) and the refinement history may hold NaN and inf; any other NaN or inf makes a
+    run that could not be completed (``first_non_finite``, what ``simulate`` refuses)."""
+    import mc
+    from opa.engine import first_non_finite
+
+    ds = xr.Dataset({"x_mean": ("time", [0.5, 1.0]), "x_sem": ("time", [np.nan, np.nan]),
+                     "refinement_share": ("step", [np.inf]),
+                     "refinement_mean_change": ("step", [np.nan]),
+                     "n_impacts": ("sample", [1, 2])})
+    assert first_non_finite(ds) == ("x_sem", 2)  # a sampler's standard error: a failure
+    ds.attrs["sampler"] = "gauss"
+    assert first_non_finite(ds) is None
+    ds["x_var"] = ("time", [0.1, np.inf])
+    assert first_non_finite(ds) == ("x_var", 1)
+    gauss = mc.simulate_mc(sigma=0.02, samples=8, sampler="gauss", periods=2, progress=False)
+    assert np.isnan(gauss.x_sem).all() and first_non_finite(gauss) is None
+
+
+def test_the_api_sweeps_the_monte_carlo_mean_with_mcs_source(sections_33):
+    """``opa.sweep`` is ``opa.dynamics.sweep``: the Monte Carlo mean needs its trajectory
+    source from the layer above, ``mc.sweep_source`` (what ``bifurcation mc`` passes), and
+    is then the section 3.3 reference, as in the CLI's test above."""
+    import mc
+    import opa
+
+    system = opa.System(opa.preset("3.3", F0=0.0), sigma=0.001)
+    kwargs = dict(samples=8, transient=200, record=40, per_period=16, workers=1)
+    with pytest.raises(ValueError, match=r"source=mc\.sweep_source"):
+        opa.sweep("mc", "omega", [4.8, 5.1], system, **kwargs)
+    ds = opa.sweep("mc", "omega", [4.8, 5.1], system, source=mc.sweep_source, **kwargs)
+    assert ds.label.values.tolist() == ["1/?", "2/?"]
+    _sweep_matches(ds, sections_33, atol=1e-5)
