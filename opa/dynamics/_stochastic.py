@@ -36,6 +36,7 @@ probabilities are the Monte Carlo ones, and ``method`` says so (``note`` says wh
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import numbers
 import os
@@ -143,65 +144,14 @@ def compute_slice(task: SliceTask) -> dict:
     """The diagram at one control value (module docstring), as arrays (a store part)."""
     import time
 
-    from opa._measure import parse
-
     clock = time.process_time()
-    measure = parse(task.distribution)
-    osc, sigma, s = task.oscillator, task.sigma, task.settings
-    centre = float(getattr(osc, task.uncertain))
-    lo, hi = measure.lo, measure.hi
-    T = osc.forcing_period
-
-    def at(xi, state=None):
-        return attractors(osc, task.uncertain, centre + sigma * np.asarray(xi, dtype=float),
-                          options=task.options, settings=s, state=state)
-
-    # the grid: equal steps of the CDF, and both ends of the support (a type confined to
-    # a thin layer at an end is seeded too)
-    ends = [lo + GRID_END * (hi - lo), hi - GRID_END * (hi - lo)]
-    grid = np.sort(np.concatenate([measure.ppf((np.arange(GRID) + 0.5) / GRID), ends]))
-    grid_found = at(grid)
-    cycle = impulse_cycle(osc) or 1
-
-    def seeds_of(xis, found_):
-        return [(centre + sigma * x, a.state, a.periods * T, a.points)
-                for x, a in zip(xis, found_) if a.periodic and a.type not in NON_PERIODIC
-                and a.period <= MAX_SEED_PERIOD * cycle]
-
-    def continuation(seeds):
-        """(note, located (xi, kind) in the support)"""
-        if not seeds:
-            return "no periodic attractor on the grid to continue", []
-        try:
-            located = locate_bifurcations(osc, task.uncertain, centre + sigma * lo,
-                                          centre + sigma * hi, options=task.options,
-                                          seeds=seeds, xtol=task.xtol * sigma)
-        except ValueError as err:  # e.g. no common period of the forcing
-            return f"continuation refused: {err}", []
-        found_ = sorted(((p.value - centre) / sigma, p.kind) for p in located)
-        return "", [(x, k) for x, k in found_ if lo < x < hi]
-
-    def intervals_of(found_):
-        """(intervals (lo, hi, type, last mid), boundaries, mids, their attractors)"""
-        edges = [lo, *[x for x, _ in found_], hi]
-        mids_ = [0.5 * (a + b) for a, b in zip(edges[:-1], edges[1:])]
-        mid_found_ = at(mids_)
-        intervals_, boundaries_ = [], []
-        start = edges[0]
-        for i, a in enumerate(mid_found_):  # merge neighbours of the same type
-            last = i == len(mid_found_) - 1
-            if last or mid_found_[i + 1].type != a.type:
-                intervals_.append((start, edges[i + 1], a.type, i))
-                if not last:
-                    boundaries_.append((edges[i + 1], found_[i][1]))
-                    start = edges[i + 1]
-        return intervals_, boundaries_, mids_, mid_found_
-
-    seeds = seeds_of(grid, grid_found)
-    note, found = continuation(seeds)
-    intervals, boundaries, mids, mid_found = intervals_of(found)
+    at = _Slice(task)
+    grid, grid_found = at.grid()
+    seeds = at.seeds_of(grid, grid_found)
+    note, found = at.continuation(seeds)
+    intervals, boundaries, mids, mid_found = at.intervals_of(found)
     rng = np.random.default_rng(task.seed)
-    xi = measure.ppf(rng.random(task.samples)) if task.samples else np.zeros(0)
+    xi = at.measure.ppf(rng.random(task.samples)) if task.samples else np.zeros(0)
     mc = at(xi)
     mc_types = [a.type for a in mc]
     known = {kind for _, _, kind, _ in intervals}
@@ -211,46 +161,13 @@ def compute_slice(task: SliceTask) -> dict:
         # continue from a few of them too (the nearest to each end of their range)
         picks = sorted({missed[0], missed[-1], *[j for j in missed
                                                   if mc_types[j] != mc_types[missed[0]]][:2]})
-        extra = seeds_of(xi[picks], [mc[j] for j in picks])
+        extra = at.seeds_of(xi[picks], [mc[j] for j in picks])
         if extra:
-            note, found = continuation(seeds + extra)
-            intervals, boundaries, mids, mid_found = intervals_of(found)
-    # coexisting attractors: the same points from other initial states
-    others = initial_states(osc, task.extra_states)[1:]
-    checked = np.arange(min(task.coexist, task.samples))
-    mid_other = [at(mids, state=st) for st in others]
-    mc_other = [at(xi[checked], state=st) for st in others]
-    interval_other = []
-    for _, _, kind, i in intervals:
-        alt = set()
-        for j in _members(intervals, i, mid_found):
-            for r in mid_other:
-                if not same_attractor(r[j], mid_found[j]):
-                    alt.add(r[j].type if r[j].type != kind else f"{kind} (another orbit)")
-        interval_other.append("|".join(sorted(alt)))
-    mc_coexist = np.array([any(not same_attractor(r[j], mc[j]) for r in mc_other)
-                           for j in range(len(checked))], dtype=np.int8)
-    cdf = measure.cdf
-    prob = {}
-    for a, b, kind, _ in intervals:
-        prob[kind] = prob.get(kind, 0.0) + float(cdf(b) - cdf(a))
-    counts = {k: mc_types.count(k) for k in set(mc_types)}
-    unseen = {k: n for k, n in counts.items() if k not in prob}
-    if not note and any(k in NON_PERIODIC for k in prob):
-        note = "a type between the boundaries is not periodic: " + ", ".join(
-            sorted(k for k in prob if k in NON_PERIODIC))
-    if not note and any(n > 1 for n in unseen.values()):
-        note = "Monte Carlo samples of types no interval has: " + ", ".join(
-            f"{k} ({n})" for k, n in sorted(unseen.items()) if n > 1)
-    coexist_mass = sum(float(cdf(b) - cdf(a)) for (a, b, _, _), o in
-                       zip(intervals, interval_other) if o)
-    if note and not task.samples:
-        note += ("; without samples the probabilities are the law mass of the types at "
-                 "the interval middles")
-    points = np.full((len(mc), POINTS, 2), np.nan, dtype=np.float32)
-    for j, a in enumerate(mc):
-        kept = a.points[-POINTS:]
-        points[j, :len(kept)] = kept
+            note, found = at.continuation(seeds + extra)
+            intervals, boundaries, mids, mid_found = at.intervals_of(found)
+    interval_other, mc_coexist = _coexistence(at, intervals, mids, mid_found, xi, mc)
+    prob, note, coexist_mass = _interval_masses(at.measure, intervals, interval_other,
+                                                mc_types, note, task.samples)
     return {
         "value": float(task.value), "method": int(bool(note)), "note": note,
         "samples": int(task.samples),
@@ -270,11 +187,133 @@ def compute_slice(task: SliceTask) -> dict:
         "mc_lyapunov": np.array([a.lyapunov for a in mc], dtype=float),
         "mc_periods": np.array([a.periods for a in mc], dtype=np.int64),
         "mc_settled": np.array([a.settled for a in mc], dtype=np.int8),
-        "mc_points": points,
+        "mc_points": _last_points(mc),
         "mc_coexist": mc_coexist,
         "mc_mismatch": _mismatch(xi, mc_types, intervals),
         "cpu_seconds": time.process_time() - clock,
     }
+
+
+class _Slice:
+    """One control value's attractors along xi: ``self(xi)`` classifies the sampled
+    systems at ``xi``; the grid that seeds the continuation, the continuation of its
+    periodic attractors to the boundaries, and the intervals between them."""
+
+    def __init__(self, task: SliceTask):
+        from opa._measure import parse
+
+        self.task = task
+        self.measure = parse(task.distribution)
+        self.osc, self.sigma = task.oscillator, task.sigma
+        self.centre = float(getattr(self.osc, task.uncertain))
+        self.lo, self.hi = self.measure.lo, self.measure.hi
+        self.cycle = impulse_cycle(self.osc) or 1
+
+    def __call__(self, xi, state=None):
+        task = self.task
+        return attractors(self.osc, task.uncertain,
+                          self.centre + self.sigma * np.asarray(xi, dtype=float),
+                          options=task.options, settings=task.settings, state=state)
+
+    def grid(self):
+        """The grid: equal steps of the CDF, and both ends of the support (a type confined
+        to a thin layer at an end is seeded too), with its attractors."""
+        lo, hi = self.lo, self.hi
+        ends = [lo + GRID_END * (hi - lo), hi - GRID_END * (hi - lo)]
+        grid = np.sort(np.concatenate([self.measure.ppf((np.arange(GRID) + 0.5) / GRID),
+                                       ends]))
+        return grid, self(grid)
+
+    def seeds_of(self, xis, found):
+        """The continuation's seeds: the periodic attractors found at ``xis``."""
+        T = self.osc.forcing_period
+        return [(self.centre + self.sigma * x, a.state, a.periods * T, a.points)
+                for x, a in zip(xis, found) if a.periodic and a.type not in NON_PERIODIC
+                and a.period <= MAX_SEED_PERIOD * self.cycle]
+
+    def continuation(self, seeds):
+        """(note, located (xi, kind) in the support)"""
+        if not seeds:
+            return "no periodic attractor on the grid to continue", []
+        centre, sigma, task = self.centre, self.sigma, self.task
+        try:
+            located = locate_bifurcations(self.osc, task.uncertain, centre + sigma * self.lo,
+                                          centre + sigma * self.hi, options=task.options,
+                                          seeds=seeds, xtol=task.xtol * sigma)
+        except ValueError as err:  # e.g. no common period of the forcing
+            return f"continuation refused: {err}", []
+        found = sorted(((p.value - centre) / sigma, p.kind) for p in located)
+        return "", [(x, k) for x, k in found if self.lo < x < self.hi]
+
+    def intervals_of(self, found):
+        """(intervals (lo, hi, type, last mid), boundaries, mids, their attractors)"""
+        edges = [self.lo, *[x for x, _ in found], self.hi]
+        mids = [0.5 * (a + b) for a, b in zip(edges[:-1], edges[1:])]
+        mid_found = self(mids)
+        intervals, boundaries = [], []
+        start = edges[0]
+        for i, a in enumerate(mid_found):  # merge neighbours of the same type
+            last = i == len(mid_found) - 1
+            if last or mid_found[i + 1].type != a.type:
+                intervals.append((start, edges[i + 1], a.type, i))
+                if not last:
+                    boundaries.append((edges[i + 1], found[i][1]))
+                    start = edges[i + 1]
+        return intervals, boundaries, mids, mid_found
+
+
+def _coexistence(at: _Slice, intervals, mids, mid_found, xi, mc):
+    """Coexisting attractors: the same points from other initial states. (Each
+    interval's other types, joined by "|"; 1 for each checked sample whose attractor
+    depends on the start.)"""
+    task = at.task
+    others = initial_states(at.osc, task.extra_states)[1:]
+    checked = np.arange(min(task.coexist, task.samples))
+    mid_other = [at(mids, state=st) for st in others]
+    mc_other = [at(xi[checked], state=st) for st in others]
+    interval_other = []
+    for _, _, kind, i in intervals:
+        alt = set()
+        for j in _members(intervals, i, mid_found):
+            for r in mid_other:
+                if not same_attractor(r[j], mid_found[j]):
+                    alt.add(r[j].type if r[j].type != kind else f"{kind} (another orbit)")
+        interval_other.append("|".join(sorted(alt)))
+    mc_coexist = np.array([any(not same_attractor(r[j], mc[j]) for r in mc_other)
+                           for j in range(len(checked))], dtype=np.int8)
+    return interval_other, mc_coexist
+
+
+def _interval_masses(measure, intervals, interval_other, mc_types, note, samples):
+    """(type -> law mass of its intervals, the note saying why continuation does not
+    decide, the law mass of the intervals with coexisting attractors)."""
+    cdf = measure.cdf
+    prob = {}
+    for a, b, kind, _ in intervals:
+        prob[kind] = prob.get(kind, 0.0) + float(cdf(b) - cdf(a))
+    counts = {k: mc_types.count(k) for k in set(mc_types)}
+    unseen = {k: n for k, n in counts.items() if k not in prob}
+    if not note and any(k in NON_PERIODIC for k in prob):
+        note = "a type between the boundaries is not periodic: " + ", ".join(
+            sorted(k for k in prob if k in NON_PERIODIC))
+    if not note and any(n > 1 for n in unseen.values()):
+        note = "Monte Carlo samples of types no interval has: " + ", ".join(
+            f"{k} ({n})" for k, n in sorted(unseen.items()) if n > 1)
+    coexist_mass = sum(float(cdf(b) - cdf(a)) for (a, b, _, _), o in
+                       zip(intervals, interval_other) if o)
+    if note and not samples:
+        note += ("; without samples the probabilities are the law mass of the types at "
+                 "the interval middles")
+    return prob, note, coexist_mass
+
+
+def _last_points(mc) -> np.ndarray:
+    """Each sample's last Poincare points (at most ``POINTS``; NaN padded)."""
+    points = np.full((len(mc), POINTS, 2), np.nan, dtype=np.float32)
+    for j, a in enumerate(mc):
+        kept = a.points[-POINTS:]
+        points[j, :len(kept)] = kept
+    return points
 
 
 def _mismatch(xi, types, intervals) -> int:
@@ -395,19 +434,124 @@ class DiagramInputs:
         return self.execution.workers
 
 
-def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
-                  distribution=None, samples=1024, seed=0, options=None, transient=1000,
-                  record=64, xtol=1e-10, extra_states=EXTRA_STATES, coexist=None,
-                  emr=False, emr_order=None, execution=None, **legacy) -> DiagramInputs:
+@dataclass(frozen=True)
+class EMR:
+    """The EMR beside a stochastic diagram (the OPA system of ``order`` at the same
+    sigma, semicircle law only: the paper's diagrams), swept over the increasing values,
+    500 transient and 100 recorded periods from the paper's start, for the figure."""
+
+    order: int = 4
+
+
+#: the keywords of earlier releases, by the record or object that now holds them
+_LEGACY = {
+    "uncertainty": ("sigma", "uncertain", "distribution"),  # the System
+    "settle": ("transient", "record"),  # Settings
+    "emr": ("emr_order",),  # EMR
+    "execution": ("workers", "scheduler", "parts", "log"),  # Execution
+}
+
+
+def check_diagram(oscillator, parameter, values, *, samples=1024, seed=0, options=None,
+                  settle=None, xtol=1e-10, extra_states=EXTRA_STATES, coexist=None,
+                  emr=False, execution=None, **legacy) -> DiagramInputs:
     """The inputs of :func:`stochastic_diagram` (same keywords) checked before any work:
     a :class:`DiagramInputError` (a ValueError) naming the first keyword that is wrong,
     of the wrong type, out of range, or without effect in the combination; a
     ``opa._work.WorkBudgetError`` for a diagram beyond the work budget. The CLI calls it
     first, and names its flags (``DiagramInputError.message``)."""
-    from opa._measure import parse
-    from opa._model import PARAMETER_NAMES, check_span
+    allowed = {k for keys in _LEGACY.values() for k in keys}
+    unknown = sorted(set(legacy) - allowed)
+    if unknown:
+        raise TypeError(f"stochastic_diagram() got an unexpected keyword argument "
+                        f"{unknown[0]!r}")
+    execution_keywords = {k: legacy.pop(k) for k in _LEGACY["execution"] if k in legacy}
+    workers, scheduler, parts, log = _execution_keywords(execution, execution_keywords)
+    sigma, uncertain, distribution = _uncertainty(oscillator, legacy)
+    transient, record = _settle_keywords(settle, legacy)
+    emr, emr_order = _emr_keywords(emr, legacy)
+    checked = _check_inputs(
+        oscillator, parameter, values, sigma=sigma, uncertain=uncertain,
+        distribution=distribution, samples=samples, seed=seed, options=options,
+        transient=transient, record=record, xtol=xtol, extra_states=extra_states,
+        coexist=coexist, emr=emr, emr_order=emr_order, workers=workers,
+        scheduler=scheduler, parts=parts, log=log)
+    if settle is not None:  # its other fields (check, tolerances) too
+        checked = dataclasses.replace(checked, settings=settle)
+    return checked
 
-    workers, scheduler, parts, log = _execution_keywords(execution, legacy)
+
+def _uncertainty(oscillator, legacy: dict) -> tuple:
+    """(sigma, uncertain, distribution): the keywords, or a System's own."""
+    if "sigma" in legacy:
+        return (legacy["sigma"], legacy.get("uncertain", "mu"),
+                legacy.get("distribution"))
+    if isinstance(oscillator, System):
+        if "uncertain" in legacy or "distribution" in legacy:
+            raise DiagramInputError("{oscillator}: a System holds its uncertainty; give "
+                                    "{sigma} too, or none of {uncertain}, {distribution}")
+        return oscillator.sigma, oscillator.uncertain, oscillator.distribution
+    raise DiagramInputError("{sigma} is required with an opa.Oscillator (or pass an "
+                            "opa.System, which holds its uncertainty)")
+
+
+def _settle_keywords(settle, legacy: dict) -> tuple:
+    """(transient, record): a Settings record's, or the keywords (1000, 64)."""
+    if settle is None:
+        return legacy.get("transient", 1000), legacy.get("record", 64)
+    if not isinstance(settle, Settings):
+        raise DiagramInputError("{settle} must be an opa.dynamics Settings record or None, "
+                                "got {0!r}", settle)
+    given = sorted(k for k in _LEGACY["settle"] if k in legacy)
+    if given:
+        raise DiagramInputError("{settle}: give " + ", ".join(given) + " inside it, not "
+                                "beside it")
+    return settle.transient, settle.record
+
+
+def _emr_keywords(emr, legacy: dict) -> tuple:
+    """(emr, emr_order) of ``emr`` (False, True or an :class:`EMR`) and the keyword
+    ``emr_order`` of earlier releases."""
+    if isinstance(emr, EMR):
+        if "emr_order" in legacy:
+            raise DiagramInputError("{emr}: give emr_order inside EMR(...), not beside it")
+        return True, emr.order
+    return emr, legacy.get("emr_order")
+
+
+def _check_inputs(oscillator, parameter, values, *, sigma, uncertain, distribution, samples,
+                  seed, options, transient, record, xtol, extra_states, coexist, emr,
+                  emr_order, workers, scheduler, parts, log) -> DiagramInputs:
+    """:func:`check_diagram` on the keywords of every input, one part after the other."""
+    oscillator, system, values, measure, sigma, xtol = _check_model(
+        oscillator, parameter, values, sigma, uncertain, distribution, xtol)
+    samples, seed, settings, extra_states, coexist = _check_sampling(
+        samples, seed, transient, record, extra_states, coexist)
+    emr, emr_order = _check_emr(emr, emr_order, measure, values, system)
+    execution = _check_execution(workers, scheduler, parts, log, values)
+    if options is None:
+        options = SolverOptions()
+    elif not isinstance(options, SolverOptions):
+        raise DiagramInputError("{options} must be an opa.SolverOptions or None, got {0!r}",
+                                options)
+    _check_work(len(values), samples, extra_states, coexist, settings.transient,
+                settings.record)
+    _check_memory(len(values), samples, settings.transient, settings.record, settings.check,
+                  min(execution.workers, len(values)))
+    oscillators = _check_spans(oscillator, parameter, values, settings, emr)
+    return DiagramInputs(
+        oscillator=oscillator, parameter=parameter, values=values,
+        oscillators=tuple(oscillators), sigma=sigma, uncertain=uncertain, measure=measure,
+        system=system, samples=samples, seed=seed, options=options, settings=settings,
+        xtol=xtol, extra_states=extra_states, coexist=coexist, emr=emr, emr_order=emr_order,
+        execution=execution)
+
+
+def _check_model(oscillator, parameter, values, sigma, uncertain, distribution, xtol):
+    """The model, the control parameter and its values, the uncertainty and its law."""
+    from opa._measure import parse
+    from opa._model import PARAMETER_NAMES
+
     given = oscillator
     if isinstance(oscillator, System):
         oscillator = oscillator.oscillator
@@ -441,6 +585,12 @@ def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
     except ValueError as err:
         raise _named("distribution", err, distribution) from None
     _check_spread(oscillator, uncertain, sigma, measure, xtol)
+    system = System(oscillator, sigma=sigma, uncertain=uncertain, distribution=distribution)
+    return oscillator, system, values, measure, sigma, xtol
+
+
+def _check_sampling(samples, seed, transient, record, extra_states, coexist):
+    """The Monte Carlo samples and seed, the classification's runs, the other states."""
     if isinstance(samples, (bool, np.bool_)) or not isinstance(samples, (int, np.integer)) \
             or samples < 0 or samples == 1:
         raise DiagramInputError("{samples} must be 0 or an integer >= 2, got {0!r}", samples)
@@ -455,28 +605,47 @@ def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
         raise DiagramInputError("{record} must be >= 4 periods (an integer: periods up to "
                                 "record / 2 are found), got {0!r}", record)
     settings = Settings(transient=transient, record=int(record))
-    record = settings.record
     extra_states = _whole("extra_states", extra_states, 0, MAX_EXTRA_STATES,
                           " (other initial states on a circle of radius 1)")
     if coexist is None:
-        coexist = min(COEXIST_SAMPLES, samples)
-    else:
-        coexist = _whole("coexist", coexist, 0)
-        if not extra_states:
-            raise DiagramInputError("{coexist} {0} has no effect with {extra_states} 0 (no "
-                                    "other initial states)", coexist)
-        if not samples:
-            raise DiagramInputError("{coexist} {0} has no effect with {samples} 0 (no "
-                                    "samples to classify again)", coexist)
-        if coexist > samples:
-            raise DiagramInputError("{coexist} {0} is more than the {samples} {1}: only "
-                                    "samples can be classified again", coexist, samples)
+        return samples, seed, settings, extra_states, min(COEXIST_SAMPLES, samples)
+    coexist = _whole("coexist", coexist, 0)
+    if not extra_states:
+        raise DiagramInputError("{coexist} {0} has no effect with {extra_states} 0 (no "
+                                "other initial states)", coexist)
+    if not samples:
+        raise DiagramInputError("{coexist} {0} has no effect with {samples} 0 (no "
+                                "samples to classify again)", coexist)
+    if coexist > samples:
+        raise DiagramInputError("{coexist} {0} is more than the {samples} {1}: only "
+                                "samples can be classified again", coexist, samples)
+    return samples, seed, settings, extra_states, coexist
+
+
+def _check_emr(emr, emr_order, measure, values, system) -> tuple[bool, int]:
+    """The EMR beside the diagram: whether, and its order."""
     if not isinstance(emr, (bool, np.bool_)):
         raise DiagramInputError("{emr} must be True or False, got {0!r}", emr)
     emr = bool(emr)
     if not emr and emr_order is not None:
         raise DiagramInputError("{emr_order} {0!r} has no effect without {emr}", emr_order)
     emr_order = 4 if emr_order is None else _whole("emr_order", emr_order, 1)
+    if emr:
+        if measure.name != "semicircle":
+            raise DiagramInputError("{emr}: the EMR is the paper's OPA system, whose sweeps "
+                                    "use the semicircle law, not {0}", measure.name)
+        if np.any(np.diff(values) <= 0):
+            raise DiagramInputError("{values} must increase with {emr} (the EMR's sweep "
+                                    "goes up the control parameter)")
+        try:
+            system.replace(order=emr_order)
+        except ValueError as err:
+            raise _named("emr_order", err, emr_order) from None
+    return emr, emr_order
+
+
+def _check_execution(workers, scheduler, parts, log, values) -> Execution:
+    """Where the control values run, where they are kept, and the log."""
     workers = _whole("workers", workers, 1)
     if scheduler is not None:
         if workers != 1:
@@ -497,32 +666,21 @@ def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
     elif workers > 1 and len(values) == 1:
         raise DiagramInputError("{workers} {0} has no effect with one control value (the "
                                 "values are shared out among the workers)", workers)
-    if options is None:
-        options = SolverOptions()
-    elif not isinstance(options, SolverOptions):
-        raise DiagramInputError("{options} must be an opa.SolverOptions or None, got {0!r}",
-                                options)
     if parts is not None and not (isinstance(parts, (str, os.PathLike))
                                   and os.fspath(parts).strip()):
         raise DiagramInputError("{parts} must be a folder's path or None, got {0!r}", parts)
     if log is not None and not callable(log):
         raise DiagramInputError("{log} must be a callable taking one line, or None, got "
                                 "{0!r}", log)
-    system = System(oscillator, sigma=sigma, uncertain=uncertain, distribution=distribution)
-    if emr:
-        if measure.name != "semicircle":
-            raise DiagramInputError("{emr}: the EMR is the paper's OPA system, whose sweeps "
-                                    "use the semicircle law, not {0}", measure.name)
-        if np.any(np.diff(values) <= 0):
-            raise DiagramInputError("{values} must increase with {emr} (the EMR's sweep "
-                                    "goes up the control parameter)")
-        try:
-            system.replace(order=emr_order)
-        except ValueError as err:
-            raise _named("emr_order", err, emr_order) from None
-    _check_work(len(values), samples, extra_states, coexist, transient, record)
-    _check_memory(len(values), samples, transient, record, settings.check,
-                  min(workers, len(values)))
+    return Execution(workers=workers, scheduler=scheduler, checkpoint=parts, log=log,
+                     progress=False)
+
+
+def _check_spans(oscillator, parameter, values, settings, emr) -> list:
+    """The oscillator at each control value, each run's span checked."""
+    from opa._model import check_span
+
+    transient, record = settings.transient, settings.record
     oscillators = []
     for v in values:
         try:
@@ -547,14 +705,7 @@ def check_diagram(oscillator, parameter, values, *, sigma, uncertain="mu",
                 raise DiagramInputError("{emr} (its sweep runs {0} + {1} periods) at {2} = "
                                         "{3:g}: " + _quoted(err), EMR_TRANSIENT, EMR_RECORD,
                                         parameter, v) from None
-    execution = Execution(workers=workers, scheduler=scheduler, checkpoint=parts, log=log,
-                          progress=False)
-    return DiagramInputs(
-        oscillator=oscillator, parameter=parameter, values=values,
-        oscillators=tuple(oscillators), sigma=sigma, uncertain=uncertain, measure=measure,
-        system=system, samples=samples, seed=seed, options=options, settings=settings,
-        xtol=xtol, extra_states=extra_states, coexist=coexist, emr=emr, emr_order=emr_order,
-        execution=execution)
+    return oscillators
 
 
 #: the execution keywords the diagram took before :class:`opa.Execution` (still taken)
@@ -683,33 +834,34 @@ def _check_memory(count, samples, transient, record, check, processes) -> None:
 
 
 def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, *,
-                       sigma: float, uncertain: str = "mu", distribution=None,
                        samples: int = 1024, seed: int = 0,
-                       options: SolverOptions | None = None, transient: int = 1000,
-                       record: int = 64, xtol: float = 1e-10,
-                       extra_states: int = EXTRA_STATES, coexist: int | None = None,
-                       emr: bool = False, emr_order: int | None = None,
+                       options: SolverOptions | None = None, settle: Settings | None = None,
+                       xtol: float = 1e-10, extra_states: int = EXTRA_STATES,
+                       coexist: int | None = None, emr: bool | EMR = False,
                        execution: Execution | None = None, **legacy):
     """Attractor types and their probabilities along ``parameter`` (module docstring).
 
     Parameters
     ----------
-    oscillator : the deterministic model (an :class:`opa.Oscillator`, or a System's).
+    oscillator : an :class:`opa.System`: the deterministic model and the uncertainty ``p
+        = p_bar + sigma xi`` with the law of xi; or an :class:`opa.Oscillator` with the
+        keywords ``sigma``, ``uncertain`` (default mu) and ``distribution`` (default the
+        semicircle).
     parameter : the control parameter swept over ``values`` (not the uncertain one).
-    sigma, uncertain, distribution : the uncertainty ``p = p_bar + sigma xi`` and the law
-        of xi (default the semicircle).
     samples, seed : Monte Carlo samples classified at each value (0: none).
-    transient, record : the longest run before a type is decided from its last
-        ``record`` periods (a run stops as soon as it has settled, ``settle``).
+    settle : how a run is classified (:class:`opa.dynamics._attractor.Settings`): the
+        longest run, ``transient`` periods, before a type is decided from its last
+        ``record`` periods (a run stops as soon as it has settled); default 1000 and 64,
+        also given as the keywords ``transient`` and ``record``.
     xtol : tolerance of the located boundaries in xi.
     extra_states, coexist : other initial states (``initial_states``; at most
         ``MAX_EXTRA_STATES``), and how many of the samples are classified from them too
         (the interval middles always are; default 64, or all the samples if fewer; at
         most ``samples``, and only with samples and other states).
-    emr, emr_order : also sweep the EMR (the OPA system of order ``emr_order``, default 4,
-        at the same sigma, semicircle law only: the paper's diagrams) over the increasing
-        values, 500 transient and 100 recorded periods from the paper's start, for the
-        figure.
+    emr : also sweep the EMR (:class:`EMR`: the OPA system of its ``order``, at the same
+        sigma, semicircle law only: the paper's diagrams) over the increasing values, 500
+        transient and 100 recorded periods from the paper's start, for the figure;
+        ``True`` is ``EMR()`` (order 4, or the keyword ``emr_order``).
     Every input is checked before any work (:func:`check_diagram`): a ValueError names the
     keyword that is wrong, of the wrong type, out of range or without effect in the
     combination (``seed`` without samples, ``emr_order`` without ``emr``), or a sigma
@@ -758,86 +910,103 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
     >>> [round(float(p), 6) for p in ds.probability[0].values]   # half and half
     [0.5, 0.5]
     """
-    from opa._dataset import Store, package_version
-
     checked = check_diagram(
-        oscillator, parameter, values, sigma=sigma, uncertain=uncertain,
-        distribution=distribution, samples=samples, seed=seed, options=options,
-        transient=transient, record=record, xtol=xtol, extra_states=extra_states,
-        coexist=coexist, emr=emr, emr_order=emr_order, execution=execution, **legacy)
+        oscillator, parameter, values, samples=samples, seed=seed, options=options,
+        settle=settle, xtol=xtol, extra_states=extra_states, coexist=coexist, emr=emr,
+        execution=execution, **legacy)
     run = checked.execution
-    scheduler, parts, log = run.scheduler, run.checkpoint, run.log
-    values, sigma, samples = checked.values, checked.sigma, checked.samples
-    options, settings, measure = checked.options, checked.settings, checked.measure
-    system, emr, emr_order, workers = (checked.system, checked.emr, checked.emr_order,
-                                       checked.workers)
-    tasks = [SliceTask(value=float(v), oscillator=osc, uncertain=uncertain, sigma=sigma,
-                       distribution=measure.name, samples=samples, seed=checked.seed + i,
-                       options=options, settings=settings, xtol=checked.xtol,
-                       extra_states=checked.extra_states, coexist=checked.coexist)
-             for i, (v, osc) in enumerate(zip(values, checked.oscillators))]
     with contextlib.ExitStack() as held:
         # the scheduler answers before the parts folder is made: a refusal leaves nothing
         client = None
-        if scheduler is not None:
-            client, own = _connect(scheduler, run.connect_timeout)
+        if run.scheduler is not None:
+            client, own = _connect(run.scheduler, run.connect_timeout)
             if own:
                 held.callback(client.close)
-        try:  # the lock of the parts folder is held until the diagram is assembled
-            store = (None if parts is None else
-                     Store(parts, "stochastic diagram", log=log, lock=True))
-        except (ValueError, OSError) as err:
-            raise _named("parts", err, os.fspath(parts)) from None
+        store = _parts_store(run)
         if store is not None:
             held.callback(store.close)
-
-        def inputs(task):
-            return {"task": repr(task), "version": package_version()}
-
-        def name(task):
-            return f"slice-{parameter}{task.value:g}"
-
-        results = {}
-        todo = []
-        for i, task in enumerate(tasks):
-            found = None if store is None else store.load(name(task), inputs(task))
-            if found is not None:
-                results[i] = found
-                _log(log, i, len(tasks), parameter, found, reused=True)
-            else:
-                todo.append(i)
-
-        def finish(i, piece):
-            if store is not None:
-                store.save(name(tasks[i]), inputs(tasks[i]), piece)
-                piece = store.load(name(tasks[i]), inputs(tasks[i]))  # as a rerun reads it
-            results[i] = piece
-            _log(log, i, len(tasks), parameter, piece, reused=False)
-
-        if client is not None and todo:
-            _run_slices_dask(tasks, todo, finish, client, run)
-        else:
-            _run_slices(tasks, todo, finish, workers)
-        slices = [results[i] for i in range(len(tasks))]
-        ds = _dataset(slices, parameter, values, system, options, measure, settings,
-                      checked.seed, samples, checked.xtol, checked.extra_states,
-                      checked.coexist)
-        if emr:
-            from opa.dynamics._sweep import sweep
-
-            if log is not None:
-                log(f"the EMR (OPA N = {emr_order}, sigma = {sigma:g}) over {len(values)} "
-                    f"values of {parameter}")
-            opa = sweep("opa", parameter, values, system.replace(order=emr_order),
-                        transient=EMR_TRANSIENT, record=EMR_RECORD, options=options,
-                        locate=False, execution=run.replace(scheduler=client, log=None,
-                                                            checkpoint=None))
-            ds["emr_x"] = ((parameter, "emr_point"), opa.section_x.values, {
-                "long_name": f"stroboscopic x_0 of the EMR (OPA N = {emr_order}) after "
-                f"{EMR_TRANSIENT} periods, {EMR_RECORD} recorded", "units": "1"})
-            ds.attrs.update(emr_order=int(emr_order), emr_transient=EMR_TRANSIENT,
-                            emr_record=EMR_RECORD)
+        slices = _slices(checked, store, client)
+        ds = _dataset(slices, checked.parameter, checked.values, checked.system,
+                      checked.options, checked.measure, checked.settings, checked.seed,
+                      checked.samples, checked.xtol, checked.extra_states, checked.coexist)
+        if checked.emr:
+            ds = _with_emr(ds, checked, client)
         return ds
+
+
+def _parts_store(run: Execution):
+    """The store of the diagram's parts (``run.checkpoint``), locked until the diagram
+    is assembled, or None."""
+    from opa._dataset import Store
+
+    if run.checkpoint is None:
+        return None
+    try:
+        return Store(run.checkpoint, "stochastic diagram", log=run.log, lock=True)
+    except (ValueError, OSError) as err:
+        raise _named("parts", err, os.fspath(run.checkpoint)) from None
+
+
+def _slices(checked: DiagramInputs, store, client) -> list[dict]:
+    """Every control value's slice, in order: read back from ``store`` or computed here,
+    on local processes or on ``client``'s cluster (each kept as it finishes)."""
+    from opa._dataset import package_version
+
+    run, parameter = checked.execution, checked.parameter
+    tasks = [SliceTask(value=float(v), oscillator=osc, uncertain=checked.uncertain,
+                       sigma=checked.sigma, distribution=checked.measure.name,
+                       samples=checked.samples, seed=checked.seed + i,
+                       options=checked.options, settings=checked.settings,
+                       xtol=checked.xtol, extra_states=checked.extra_states,
+                       coexist=checked.coexist)
+             for i, (v, osc) in enumerate(zip(checked.values, checked.oscillators))]
+
+    def inputs(task):
+        return {"task": repr(task), "version": package_version()}
+
+    def name(task):
+        return f"slice-{parameter}{task.value:g}"
+
+    results, todo = {}, []
+    for i, task in enumerate(tasks):
+        found = None if store is None else store.load(name(task), inputs(task))
+        if found is not None:
+            results[i] = found
+            _log(run.log, i, len(tasks), parameter, found, reused=True)
+        else:
+            todo.append(i)
+
+    def finish(i, piece):
+        if store is not None:
+            store.save(name(tasks[i]), inputs(tasks[i]), piece)
+            piece = store.load(name(tasks[i]), inputs(tasks[i]))  # as a rerun reads it
+        results[i] = piece
+        _log(run.log, i, len(tasks), parameter, piece, reused=False)
+
+    if client is not None and todo:
+        _run_slices_dask(tasks, todo, finish, client, run)
+    else:
+        _run_slices(tasks, todo, finish, run.workers)
+    return [results[i] for i in range(len(tasks))]
+
+
+def _with_emr(ds, checked: DiagramInputs, client):
+    """``ds`` with the EMR's stroboscopic points over the same values (``emr_x``)."""
+    from opa.dynamics._sweep import Window, sweep
+
+    run, order, values = checked.execution, checked.emr_order, checked.values
+    run.say(f"the EMR (OPA N = {order}, sigma = {checked.sigma:g}) over {len(values)} "
+            f"values of {checked.parameter}")
+    opa = sweep("opa", checked.parameter, values, checked.system.replace(order=order),
+                window=Window(transient=EMR_TRANSIENT, record=EMR_RECORD),
+                options=checked.options, locate=False,
+                execution=run.replace(scheduler=client, log=None, checkpoint=None))
+    ds["emr_x"] = ((checked.parameter, "emr_point"), opa.section_x.values, {
+        "long_name": f"stroboscopic x_0 of the EMR (OPA N = {order}) after "
+        f"{EMR_TRANSIENT} periods, {EMR_RECORD} recorded", "units": "1"})
+    ds.attrs.update(emr_order=int(order), emr_transient=EMR_TRANSIENT,
+                    emr_record=EMR_RECORD)
+    return ds
 
 
 def _run_slices(tasks, todo, finish, workers) -> None:
@@ -1054,6 +1223,6 @@ def type_order(kind: str):
     return (1, NON_PERIODIC.index(kind) if kind in NON_PERIODIC else 99, 0, kind)
 
 
-__all__ = ["AGREEMENT_SE", "DiagramInputError", "DiagramInputs", "MAX_EXTRA_STATES",
+__all__ = ["AGREEMENT_SE", "DiagramInputError", "DiagramInputs", "EMR", "MAX_EXTRA_STATES",
            "SliceTask", "attractors", "check_diagram", "classify", "compute_slice",
            "stochastic_diagram", "stochastic_slice", "type_order"]

@@ -183,6 +183,31 @@ def test_an_execution_record_keeps_the_parts_where_its_checkpoint_says(tmp_path)
         stochastic_diagram(SECTION_31, "c", [0.04], progress=False, **kw)
 
 
+def test_the_records_give_the_keywords_diagram():
+    """A System holding its uncertainty, ``settle=Settings(...)`` and ``emr=EMR(order)``
+    give the keywords' diagram to the bit; a keyword beside its record is refused, and an
+    Oscillator without ``sigma`` names it."""
+    from opa import System
+    from opa.dynamics._attractor import Settings
+    from opa.dynamics._stochastic import EMR
+
+    osc = preset("3.1", F0=0.0)
+    kw = dict(samples=8, extra_states=0)
+    by_keywords = stochastic_diagram(osc, "c", [0.035, 0.04], sigma=0.03, transient=200,
+                                     emr=True, emr_order=2, **kw)
+    by_records = stochastic_diagram(System(osc, sigma=0.03), "c", [0.035, 0.04],
+                                    settle=Settings(transient=200), emr=EMR(order=2), **kw)
+    for name in by_keywords.variables:
+        np.testing.assert_array_equal(by_keywords[name].values, by_records[name].values,
+                                      err_msg=name)
+    with pytest.raises(ValueError, match=r"settle: give transient inside it"):
+        stochastic_diagram(osc, "c", [0.04], sigma=0.03, settle=Settings(), transient=10)
+    with pytest.raises(ValueError, match=r"emr: give emr_order inside EMR"):
+        stochastic_diagram(osc, "c", [0.04], sigma=0.03, emr=EMR(), emr_order=3)
+    with pytest.raises(ValueError, match=r"sigma is required with an opa.Oscillator"):
+        stochastic_diagram(osc, "c", [0.04])
+
+
 def test_a_dask_cluster_gives_the_same_diagram():
     """The control values as tasks on a LocalCluster of 2 worker processes: every
     variable the same as in this process, to the bit."""
