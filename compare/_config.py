@@ -98,6 +98,16 @@ class ValidateConfig:
     max_elements: int | None = None
 
     @property
+    def execution(self):
+        """Where the map's tasks run (:class:`opa.Execution`): :attr:`processes` local
+        processes, or the Dask cluster ``scheduler``."""
+        from opa.engine import Execution
+
+        if self.scheduler is not None:
+            return Execution(scheduler=self.scheduler)
+        return Execution(workers=self.processes)
+
+    @property
     def processes(self) -> int:
         """The local processes the map runs on (``workers``, 0 resolved by
         :func:`compare._scaleout.auto_workers`: a pool where the values and the frontier

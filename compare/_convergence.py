@@ -44,7 +44,8 @@ import xarray as xr
 
 from mc import cv_estimates, sample_xi, simulate_mc
 from opa.engine import (
-    collocation, ElementBudgetWarning, Oscillator, parse, preset, provenance_attrs,
+    collocation, ElementBudgetWarning, Execution, take_execution, Oscillator, parse, preset,
+    provenance_attrs,
     quadrature_order, run_measure, simulate_opa, SimulationError, SolverOptions, surrogate,
     surrogate_moments, System, time_grid, true_runs, uniform_edges, write_netcdf,
 )
@@ -519,8 +520,8 @@ def pending_runs(cfg: ConvergenceConfig, known: dict) -> list[StudyRun]:
     return [run for run in study_runs(cfg, known) if run.name not in known]
 
 
-def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
-                    memo=None, workers: int = 1, scheduler=None) -> xr.Dataset:
+def run_convergence(cfg: ConvergenceConfig, *, write: bool = True, memo=None,
+                    execution: Execution | None = None, **legacy) -> xr.Dataset:
     """Run the study; returns its dataset (also written to OUTDIR/convergence.nc unless
     ``write`` is false).
 
@@ -533,11 +534,15 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     ``wall_seconds`` is the sum of the runs' wall times (for reused runs, the time they
     took when they were done).
 
-    With ``workers`` > 1 or a Dask ``scheduler`` (and no ``memo``), each stage's runs are
-    tasks side by side (:func:`compare._scaleout.run_tasks`); the rows are the same as in
-    one process.
+    ``execution`` (:class:`opa.Execution`): with ``workers`` > 1 or a Dask ``scheduler``
+    (and no ``memo``), each stage's runs are tasks side by side
+    (:func:`compare._scaleout.run_tasks`), and the rows are the same as in one process;
+    its ``log`` takes the progress lines. Default: in this process, lines to ``print``;
+    the keywords ``log``, ``workers`` and ``scheduler`` of earlier releases are still
+    taken.
     """
-    pooled = (workers > 1 or scheduler is not None) and memo is None
+    where, log = _convergence_run(execution, legacy)
+    pooled = (where.workers > 1 or where.scheduler is not None) and memo is None
     log(f"reference: {reference_text(cfg.reference, cfg.reference_method, cfg.order_budget)}"
         f" ...")
     known: dict = {}
@@ -547,7 +552,7 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
 
             log(f"{len(todo)} runs of the study as tasks ...")
             tasks = [(run.name, run.compute, ()) for run in todo]
-            known.update(run_tasks(tasks, workers=workers, scheduler=scheduler))
+            known.update(run_tasks(tasks, execution=where))
             continue
         for run in todo:
             known[run.name] = run.compute() if memo is None else memo(run.name, run.spec,
@@ -556,6 +561,22 @@ def run_convergence(cfg: ConvergenceConfig, *, log=print, write: bool = True,
     if write:
         write_netcdf(ds, os.path.join(cfg.outdir, "convergence.nc"))
     return ds
+
+
+def _convergence_run(execution, legacy: dict) -> tuple[Execution, Callable]:
+    """(where the study runs, its log) of :func:`run_convergence`'s inputs."""
+    unknown = sorted(set(legacy) - {"log", "workers", "scheduler"})
+    if unknown:
+        raise TypeError(f"run_convergence() got an unexpected keyword argument "
+                        f"{unknown[0]!r}")
+    log = legacy.pop("log", None)
+    if execution is not None and log is not None:
+        raise ValueError("run_convergence: give log inside execution=Execution(...), not "
+                         "beside it")
+    run = take_execution(execution, legacy, "run_convergence")
+    if execution is not None:
+        return run, run.log or (lambda line: None)
+    return run, print if log is None else log
 
 
 # -- the dataset ---------------------------------------------------------------------------

@@ -38,7 +38,7 @@ from compare._ledger import Ledger, Work
 from compare._trustmap import (SLICES, _Map, boundary_at, clear_slices, details_part,
                                evaluate_point, frontier, frontier_part, frontier_runs,
                                grid_points, value_part, value_splits)
-from opa.engine import OutputLock, Store, true_system_work, write_netcdf
+from opa.engine import Execution, OutputLock, Store, true_system_work, write_netcdf
 
 def task_config(cfg: ValidateConfig) -> ValidateConfig:
     """The configuration a task runs with: in one process, no nested pool or cluster."""
@@ -248,8 +248,8 @@ def run_map_tasks(cfg: ValidateConfig, work: Work, bar) -> tuple[dict, Ledger]:
              f"{where} ...")
     results, ledgers = {}, []
     with work.clock("waiting for workers"):
-        for key, result in run_flow(first, flow.follow, workers=cfg.processes,
-                                    scheduler=cfg.scheduler, preload=map_preload(cfg.plots)):
+        for key, result in run_flow(first, flow.follow, preload=map_preload(cfg.plots),
+                                    execution=cfg.execution):
             for line in result["log"]:
                 work.log(line)
             ledgers.append(result["ledger"])
@@ -265,13 +265,18 @@ def run_map_tasks(cfg: ValidateConfig, work: Work, bar) -> tuple[dict, Ledger]:
     return results, sum(ledgers, Ledger())
 
 
-def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
-                   started: float | None = None) -> xr.Dataset:
+def run_validation(cfg: ValidateConfig, *, started: float | None = None,
+                   execution: Execution | None = None, **legacy) -> xr.Dataset:
     """Run the trust map and return its dataset (also written to OUTDIR/validate.nc):
-    in this process, or as a flow of tasks on ``cfg.workers`` local processes or the
-    Dask cluster ``cfg.scheduler`` (:func:`run_map_tasks`), to the same bits. The
-    dataset returned reads its time series (``STREAMED_DIM``) from validate.nc when they
-    are used (:func:`open_map`).
+    in this process, or as a flow of tasks on local processes or a Dask cluster
+    (:func:`run_map_tasks`), to the same bits. The dataset returned reads its time
+    series (``STREAMED_DIM``) from validate.nc when they are used (:func:`open_map`).
+
+    ``execution``: how the map runs (:class:`opa.Execution`: ``workers``, ``scheduler``,
+    ``progress``, ``log``); default: the configuration's ``workers`` (0: auto) and
+    ``scheduler`` (the TOML's keys), a progress bar and ``print``, or the keywords
+    ``progress`` and ``log`` of earlier releases. An execution with workers or a
+    scheduler set in the configuration too is refused (one place says where the map runs).
 
     ``started``: the ``time.perf_counter()`` reading at which the command started (the
     one clock of a run); the attribute ``wall_seconds`` is the time from it to the
@@ -283,6 +288,7 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
     line (the CLI: exit status 2); the lock of a killed run is taken over (one ``log``
     line)."""
     started = time.perf_counter() if started is None else started
+    cfg, progress, log = _validation_run(cfg, execution, legacy)
     # OUTDIR is locked from before the first part to validate.nc: a second run there is
     # refused at once, naming this one (its tasks share OUTDIR/parts, unlocked)
     with OutputLock(cfg.outdir, "output folder", folder=True, log=log):
@@ -311,6 +317,26 @@ def run_validation(cfg: ValidateConfig, *, progress: bool = True, log=print,
         finally:
             clear_slices(os.path.join(cfg.outdir, SLICES))
         return open_map(path)
+
+
+def _validation_run(cfg: ValidateConfig, execution, legacy: dict):
+    """(the configuration to run, progress, log) of :func:`run_validation`'s inputs."""
+    unknown = sorted(set(legacy) - {"progress", "log"})
+    if unknown:
+        raise TypeError(f"run_validation() got an unexpected keyword argument "
+                        f"{unknown[0]!r}")
+    if execution is None:
+        return cfg, legacy.get("progress", True), legacy.get("log", print)
+    if not isinstance(execution, Execution):
+        raise ValueError(f"execution must be an opa.Execution, got {execution!r:.60}")
+    if legacy:
+        raise ValueError(f"run_validation: give {', '.join(sorted(legacy))} inside "
+                         f"execution=Execution(...), not beside it")
+    if cfg.workers or cfg.scheduler is not None:
+        raise ValueError("run_validation: the configuration's workers or scheduler beside "
+                         "execution=: say where the map runs in one place")
+    cfg = replace(cfg, workers=execution.workers, scheduler=execution.scheduler)
+    return cfg, execution.shows_progress, execution.log or (lambda line: None)
 
 
 def open_map(path: str) -> xr.Dataset:

@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterator
 
-from opa.engine import usable_cores
+from opa.engine import Execution, take_execution, usable_cores
 
 
 #: what the map's worker processes import once, in the fork server they come from: its
@@ -110,21 +110,32 @@ def auto_workers(tasks: int, cores: int | None = None) -> int:
     return min(cores, tasks) if tasks >= 3 and cores >= 2 else 1
 
 
-def run_tasks(tasks: list[tuple[object, Callable, tuple]], *, workers: int = 1,
-              scheduler=None) -> Iterator[tuple[object, object]]:
+def run_tasks(tasks: list[tuple[object, Callable, tuple]], *,
+              execution: Execution | None = None, **legacy) -> Iterator[tuple[object, object]]:
     """Run ``tasks`` = [(key, fn, args), ...]; yield (key, fn(*args)) as each finishes
-    (:func:`run_flow` with no followers).
+    (:func:`run_flow` with no followers; at most one process per task).
 
     >>> list(run_tasks([("a", max, (1, 2)), ("b", min, (1, 2))]))
     [('a', 2), ('b', 1)]
     """
-    yield from run_flow(tasks, workers=min(int(workers), max(1, len(tasks))),
-                        scheduler=scheduler)
+    run = _execution(execution, legacy, "run_tasks")
+    yield from run_flow(tasks, execution=run.replace(
+        workers=min(run.workers, max(1, len(tasks)))))
+
+
+def _execution(execution, legacy: dict, where: str) -> Execution:
+    """The Execution of a flow: ``execution``, or the keywords ``workers`` and
+    ``scheduler`` of earlier releases."""
+    unknown = sorted(set(legacy) - {"workers", "scheduler"})
+    if unknown:
+        raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
+    return take_execution(execution, legacy, where)
 
 
 def run_flow(tasks: list[tuple[object, Callable, tuple]],
-             follow: Callable[[object, object], list] | None = None, *, workers: int = 1,
-             scheduler=None, preload: tuple[str, ...] = ()) -> Iterator[tuple[object, object]]:
+             follow: Callable[[object, object], list] | None = None, *,
+             preload: tuple[str, ...] = (), execution: Execution | None = None,
+             **legacy) -> Iterator[tuple[object, object]]:
     """Run ``tasks`` = [(key, fn, args), ...] and the tasks that become ready as they
     finish: ``follow(key, result)``, called (here) as each finishes, returns the tasks it
     made ready (those that needed it). Yields (key, fn(*args)) as each finishes.
@@ -132,7 +143,9 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
     Tasks start in the order given, the ones ``follow`` returned ahead of those not yet
     started (the work the rest waits on); at most ``workers`` run at once on a local
     pool, sharing the cores as numba threads (:func:`share_cores`, read by each task
-    before each of its parallel batches).
+    before each of its parallel batches). Where they run is ``execution``'s
+    (:class:`opa.Execution`: ``workers``, ``scheduler``, its Dask connection timeout and
+    lost-worker policy; the keywords ``workers`` and ``scheduler`` are still taken).
     With ``workers`` 1 and no ``scheduler`` they run in this process, one after the
     other; else never in this process (what a task counts in its own thread is its
     own). On a Dask cluster every ready task is submitted at once, the followers with a
@@ -145,9 +158,11 @@ def run_flow(tasks: list[tuple[object, Callable, tuple]],
     [('a', 2), ('b', 2)]
     """
     follow = follow or (lambda key, result: [])
-    if scheduler is not None:
-        yield from _flow_dask(tasks, follow, scheduler)
+    run = _execution(execution, legacy, "run_flow")
+    if run.scheduler is not None:
+        yield from _flow_dask(tasks, follow, run)
         return
+    workers = run.workers
     ready = deque(tasks)
     if workers <= 1:
         while ready:
@@ -195,39 +210,42 @@ def _order(key) -> str:
     return repr(key)
 
 
-def _flow_dask(tasks, follow, scheduler) -> Iterator[tuple[object, object]]:
-    from distributed import as_completed
+def _flow_dask(tasks, follow, run: Execution) -> Iterator[tuple[object, object]]:
+    """The flow on ``run``'s Dask cluster: connected, and its waits watched for lost
+    workers, by the one rule of :class:`opa.Execution`."""
+    from distributed import wait
 
-    from opa.engine import connect_scheduler
+    with run.client() as client:
+        keys: dict = {}
 
-    # an endpoint that is not a Dask scheduler is refused within the connection timeout
-    client, own = connect_scheduler(scheduler)
-    keys: dict = {}
+        def submit(batch, priority):
+            for i, (key, fn, args) in enumerate(batch):
+                future = client.submit(_threaded, None, fn, args, pure=False,
+                                       priority=priority - i)
+                keys[future] = key
 
-    def submit(batch, priority):
-        for i, (key, fn, args) in enumerate(batch):
-            future = client.submit(_threaded, None, fn, args, pure=False,
-                                   priority=priority - i)
-            keys[future] = key
-            yield future
-
-    try:
-        pending = as_completed(list(submit(tasks, 0)))
-        followers = 0
-        for future in pending:
-            key = keys.pop(future)
-            result = future.result()
-            more = list(follow(key, result))
-            if more:
-                followers += 1
-                for fut in submit(more, 1_000_000 * followers):
-                    pending.add(fut)
-            yield key, result
-    finally:
-        for future in keys:
-            future.cancel()
-        if own:
-            client.close()
+        watchdog = run.watchdog(client, lambda: len(keys), "tasks")
+        try:
+            submit(tasks, 0)
+            followers = 0
+            while keys:
+                try:
+                    done = wait(list(keys), timeout=watchdog.poll,
+                                return_when="FIRST_COMPLETED").done
+                except TimeoutError:
+                    watchdog.check()
+                    continue
+                for future in sorted(done, key=lambda f: _order(keys[f])):
+                    key = keys.pop(future)
+                    result = watchdog.result(future, f"the task {key!r}")
+                    more = list(follow(key, result))
+                    if more:
+                        followers += 1
+                        submit(more, 1_000_000 * followers)
+                    yield key, result
+        finally:
+            for future in keys:
+                future.cancel()
 
 
 __all__ = ["FIGURE_PRELOAD", "MAP_PRELOAD", "auto_workers", "dask_threads",

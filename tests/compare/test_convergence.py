@@ -304,3 +304,17 @@ def test_the_study_on_a_dask_cluster_has_the_same_rows(study):
     assert list(there.method.values) == list(ds.method.values)
     for name in ("size", "error", "sd_error", "rhs_evaluations"):
         np.testing.assert_array_equal(there[name].values, ds[name].values, err_msg=name)
+
+
+def test_the_log_goes_inside_the_execution_record(tmp_path):
+    """run_convergence takes where it runs and its log as one opa.Execution; the keyword
+    ``log`` beside it, or one it never took, is refused before any run."""
+    from opa import Execution
+
+    cfg = ConvergenceConfig(outdir=str(tmp_path))
+    with pytest.raises(ValueError, match=r"give log inside execution="):
+        run_convergence(cfg, execution=Execution(), log=print)
+    with pytest.raises(ValueError, match=r"give workers inside execution="):
+        run_convergence(cfg, execution=Execution(), workers=2)
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'progress'"):
+        run_convergence(cfg, progress=False)

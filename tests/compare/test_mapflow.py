@@ -117,3 +117,26 @@ def test_element_variants_under_another_law_as_tasks_give_the_one_process_map(tm
     assert any("ME-adaptive" in str(v) for v in two.variant.values)
     assert two.attrs["distribution"] == "uniform"
     assert_same_map(one, two)
+
+
+def test_an_execution_record_says_where_the_map_runs(tmp_path):
+    """``execution=Execution(workers=2, log=...)`` runs the flow on 2 processes and gives
+    the one-process map of the configuration's own workers = 1; workers in both places,
+    or the keywords beside the record, are refused by name."""
+    from opa import Execution
+
+    kw = dict(values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 2), horizons=(2,),
+              samples=64, max_samples=128, per_period=4, frontier=False, plots=False)
+    lines = []
+    one = run_validation(load_config(None, outdir=str(tmp_path / "one"), workers=1, **kw),
+                         progress=False, log=lambda *a: None)
+    two = run_validation(load_config(None, outdir=str(tmp_path / "two"), **kw),
+                         execution=Execution(workers=2, progress=False, log=lines.append))
+    assert two.attrs["ran_on"] == "2 local processes" and lines
+    assert_same_map(one, two)
+    with pytest.raises(ValueError, match=r"workers or scheduler beside execution="):
+        run_validation(load_config(None, outdir=str(tmp_path / "x"), workers=2, **kw),
+                       execution=Execution(workers=2))
+    with pytest.raises(ValueError, match=r"give progress inside execution="):
+        run_validation(load_config(None, outdir=str(tmp_path / "y"), **kw),
+                       execution=Execution(), progress=False)
