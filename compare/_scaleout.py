@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections import deque
 from collections.abc import Callable, Iterator
 
-from opa.engine import Execution, take_execution, usable_cores
+from opa.engine import Execution, set_threads, take_execution, usable_cores
 
 
 #: what the map's worker processes import once, in the fork server they come from: its
@@ -51,7 +51,7 @@ def _threaded(threads: int | None, fn: Callable, args: tuple):
 
     if threads is None:
         threads = dask_threads()
-    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    set_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
     return fn(*args)
 
 

@@ -35,7 +35,8 @@ from mc._checkpoint import Checkpoint, stats_arrays
 from mc._control import check_control, controlled
 from mc._sampling import check_sampler, sample_xi
 from opa.engine import (
-    Execution, IMPULSE_FIELDS, as_system, chebyshev_u, check_instance, take_execution,
+    Execution, IMPULSE_FIELDS, as_system, chebyshev_u, check_instance, set_threads,
+    take_execution, thread_count,
     check_memory, digest,
     orthonormal, require_gpu, add_true_system_work, true_system_work,
     Oscillator, output_times, package_version, provenance_attrs, run_batch, SimulationError,
@@ -165,9 +166,7 @@ def _run_chunk(y0, xi, w, rep, replicates, times, system, options, order, keep_p
     (ChunkStats, n_impacts, finished (a mask), paths), or (None, n_impacts, finished, (m,
     xi_m, why)) for the first sample m that failed."""
     if single_thread:
-        import numba
-
-        numba.set_num_threads(1)
+        set_threads(1)
     batch = integrate_chunk(y0, xi, times, system, options, device)
     return reduce_chunk(batch, xi, w, rep, replicates, order, keep_paths, recurrence)
 
@@ -604,14 +603,12 @@ class _Chunks:
         its share of the cores)."""
         from concurrent.futures import ThreadPoolExecutor
 
-        import numba
-
         todo = [i for i in range(len(self.bounds)) if i not in self.finished]
         with run.bar(len(self.xi), initial=self.done_samples(), unit="sample",
                      desc="Monte Carlo") as bar, \
                 ThreadPoolExecutor(1, thread_name_prefix="opa-mc-chunks",
-                                   initializer=numba.set_num_threads,
-                                   initargs=(numba.get_num_threads(),)) as ahead:
+                                   initializer=set_threads,
+                                   initargs=(thread_count(),)) as ahead:
             pending = {}
             try:
                 for i, (lo, hi) in enumerate(self.bounds):

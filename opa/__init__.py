@@ -10,15 +10,8 @@ front ends such as ``opa.cli`` that list the choices; it is not in ``__all__``, 
 holds what users call.
 """
 
-import os as _os
-
-# numba's OpenMP threads sleep between parallel regions instead of spinning: the kernel
-# runs many small batches (the levels of a split scan's or an ensemble's bisections), and
-# spinning threads made one split scan 3.5x slower on a loaded 2-core machine (issue 29;
-# a 2048-sample ensemble took the same time either way). Set before numba starts its
-# threads; the user's own setting wins.
-_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
+# importing opa changes no process-wide state: numba's threads are told to sleep between
+# parallel regions when opa first starts them (opa._run.quiet_threads)
 from opa import dynamics as _dynamics  # noqa: E402
 from opa.dynamics import *  # noqa: F403 -- exactly opa.dynamics.__all__
 from opa._basis import chebyshev_u, cubic_projection, gauss_nodes, project, triple_product

@@ -241,6 +241,31 @@ def follow_thread_grant(grant) -> None:
     apply_thread_grant()
 
 
+def quiet_threads() -> None:
+    """Let numba's OpenMP threads sleep between parallel regions instead of spinning
+    (``OMP_WAIT_POLICY=PASSIVE``, unless the user set it): the kernel runs many small
+    batches (the levels of a split scan's or an ensemble's bisections), and spinning
+    threads made one split scan 3.5x slower on a loaded 2-core machine (issue 29; a
+    2048-sample ensemble took the same time either way). It must be set before numba
+    starts its threads, so :func:`set_threads` and :func:`run_batch` call it, the only
+    ways this package starts them; importing opa changes nothing."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def set_threads(threads: int) -> None:
+    """numba's thread count for the calling thread (its threads started quiet:
+    :func:`quiet_threads`)."""
+    import numba
+
+    quiet_threads()
+    numba.set_num_threads(int(threads))
+
+
+def thread_count() -> int:
+    """numba's thread count for the calling thread, without starting its thread pool."""
+    return _threads()
+
+
 def apply_thread_grant() -> int | None:
     """Set numba's thread count for this thread to the grant followed
     (:func:`follow_thread_grant`) and return it; None where none is followed."""
@@ -250,8 +275,8 @@ def apply_thread_grant() -> int | None:
     import numba
 
     threads = max(1, min(int(grant()), numba.config.NUMBA_NUM_THREADS))
-    if threads != numba.get_num_threads():
-        numba.set_num_threads(threads)
+    if threads != _threads():
+        set_threads(threads)
     return threads
 
 
@@ -778,6 +803,7 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
             np.broadcast_to(y0, (B, dim)), include_start, times, inputs.p, cfgs,
             inputs.nodes, inputs.weights, inputs.basis, rtol, atol, capacity)
         return Batch(out, logs, counters, guarded)
+    quiet_threads()
     apply_thread_grant()
     if own_states:
         prepare_kernels(kernel.run_batch_from)

@@ -59,7 +59,8 @@ from opa._model import (
 )
 from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, \
     announce_compilation, \
-    follow_thread_grant, output_times, run_batch, true_system_work, usable_cores
+    follow_thread_grant, output_times, run_batch, set_threads, thread_count, \
+    true_system_work, usable_cores
 from opa._simulate import default_impact_law, opa_variants, simulate_dmr, simulate_opa
 from opa._splits import (
     CHATTER_WINDOW,
@@ -86,7 +87,7 @@ __all__ = [
     "COMMAND", "WorkBudgetError", "announce_compilation",
     "budget", "first_non_finite", "parse_duration", "process_started", "start_fork_server",
     "DaskError", "Execution", "Watchdog", "as_execution", "connect_scheduler",
-    "take_execution",
+    "take_execution", "set_threads", "thread_count",
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",

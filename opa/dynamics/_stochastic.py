@@ -1040,9 +1040,9 @@ def _run_slices(tasks, todo, finish, workers) -> None:
 def _single_threaded_slice(task: SliceTask) -> dict:
     """:func:`compute_slice` with one numba thread (a Dask worker runs several tasks at
     once; the cores are shared out by its thread count)."""
-    import numba
+    from opa._run import set_threads
 
-    numba.set_num_threads(1)
+    set_threads(1)
     return compute_slice(task)
 
 

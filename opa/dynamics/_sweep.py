@@ -146,9 +146,9 @@ def compute_point(task: PointTask) -> dict:
     from opa._run import SimulationError
 
     if task.single_thread:
-        import numba
+        from opa._run import set_threads
 
-        numba.set_num_threads(1)
+        set_threads(1)
     ncoef = task.system.order + 1
     osc = task.oscillator
     times = sweep_times(task.system, task.transient, task.record, task.per_period)
@@ -215,11 +215,11 @@ def _init_worker(owner: int | None = None, shared=None) -> None:
     parent-death signal. The watcher on ``owner`` is the fallback where that signal is not
     available; it can only act between two kernel calls, which hold the GIL.
     """
-    import numba
+    from opa._run import set_threads
 
     global _SHARED
     _SHARED = shared
-    numba.set_num_threads(1)
+    set_threads(1)
     _kill_on_parent_death()
     if owner is not None:
         exit_with_parent(owner)

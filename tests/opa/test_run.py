@@ -114,21 +114,24 @@ def test_no_helper_without_a_python_to_start(monkeypatch):
     assert started == []
 
 
-def test_importing_opa_lets_the_kernel_threads_sleep_unless_told_otherwise():
-    """opa sets OMP_WAIT_POLICY=PASSIVE before numba starts its OpenMP threads, and keeps
-    a value the user set (a fresh process each)."""
+def test_the_kernel_threads_sleep_unless_told_otherwise_and_importing_changes_nothing():
+    """Importing opa leaves OMP_WAIT_POLICY alone (no process-wide state changed at
+    import); the first parallel batch sets it to PASSIVE before numba starts its OpenMP
+    threads, and keeps a value the user set (a fresh process each)."""
     import os
     import subprocess
     import sys
 
-    code = "import os, opa; print(os.environ['OMP_WAIT_POLICY'])"
+    code = ("import os, opa, mc; before = os.environ.get('OMP_WAIT_POLICY', 'unset'); "
+            "mc.simulate_mc(samples=16, periods=1); "
+            "print(before, os.environ['OMP_WAIT_POLICY'])")
     env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
                          text=True, check=True).stdout.strip()
-    assert out == "PASSIVE"
+    assert out == "unset PASSIVE"
     out = subprocess.run([sys.executable, "-c", code], env=env | {"OMP_WAIT_POLICY": "ACTIVE"},
                          capture_output=True, text=True, check=True).stdout.strip()
-    assert out == "ACTIVE"
+    assert out == "ACTIVE ACTIVE"
 
 
 def test_a_command_says_it_compiles_once_for_the_workers_it_starts(tmp_path, monkeypatch):
