@@ -22,6 +22,8 @@ THEMES = {
     "tests/test_layout.py": "this rule",
     "tests/test_reference.py": "tests/reference.py against closed forms",
     "tests/test_truths.py": "tests/truths.py against scipy",
+    "tests/test_sizes.py": "no function over 120 lines, no public one over 12 named "
+                           "parameters",
     "tests/test_matrix.py": "every law, uncertain parameter and element setting through "
                             "simulate, --plot and compare_runs",
     "tests/opa/test_solver.py": "the event-driven integrator (opa._kernel) and simulate_dmr",
