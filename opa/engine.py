@@ -34,8 +34,6 @@ from opa._elements import (
 from opa._execution import (
     DaskError,
     Execution,
-    Watchdog,
-    as_execution,
     connect_scheduler,
     take_execution,
 )
@@ -49,7 +47,6 @@ from opa._model import (
     Oscillator,
     SolverOptions,
     check_count,
-    check_device,
     check_instance,
     check_scheduler_address,
     check_order,
@@ -86,7 +83,7 @@ __all__ = [
     # compilation notice, the map's fork server, the rule of a failed run's numbers)
     "COMMAND", "WorkBudgetError", "announce_compilation",
     "budget", "first_non_finite", "parse_duration", "process_started", "start_fork_server",
-    "DaskError", "Execution", "Watchdog", "as_execution", "connect_scheduler",
+    "DaskError", "Execution", "connect_scheduler",
     "take_execution", "set_threads", "thread_count",
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
@@ -94,7 +91,7 @@ __all__ = [
     "OutputLock", "check_work", "check_scheduler_address",
     "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",
-    "as_system", "atomic_write", "chebyshev_u", "check_count", "check_device", "check_instance",
+    "as_system", "atomic_write", "chebyshev_u", "check_count", "check_instance",
     "check_memory", "check_opa_layout", "check_order", "check_span", "collocate_element",
     "collocation", "count_probabilities", "default_impact_law", "digest", "event_sequence",
     "gauss_nodes",

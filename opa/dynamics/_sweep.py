@@ -556,7 +556,7 @@ def _setup(model, param, values, system, window, continuation, mc, options, moti
                          "state); use continuation='fixed'")
     if model == "mc" and mc.source is None:
         raise ValueError("model 'mc' needs its trajectory source: pass mc=MonteCarlo("
-                         "source=mc.sweep_source) (opa.sweep and the CLI do)")
+                         "source=mc.sweep_source) (the CLI does)")
     values = _swept_values(param, values)
     _check_sweep_work(model, values, window, mc)
     kw = {
