@@ -50,9 +50,9 @@ def _check_sizes(osc, param, values, args) -> None:
 
 
 def cmd_bifurcation(args) -> int:
-    from mc import sweep_source
-    from opa.cli._flags import check_outputs, options_from, system_from
-    from opa.dynamics import sweep
+    from mc import checkpoint_for, sweep_source
+    from opa.cli._flags import check_outputs, execution_from, options_from, system_from
+    from opa.dynamics import MonteCarlo, MotionTolerances, Window, sweep
 
     check_outputs(args)
     if args.model != "mc":
@@ -69,14 +69,18 @@ def cmd_bifurcation(args) -> int:
     _check_sizes(system.oscillator, param, values, args)
     start = time.perf_counter()
     ds = sweep(
-        args.model, param, values, system, transient=args.transient, record=args.record,
-        per_period=args.per_period, continuation=args.continuation,
-        samples=getattr(args, "samples", 256), sampler=getattr(args, "sampler", "sobol"),
-        seed=getattr(args, "seed", 0), options=opts, period_tol=args.period_tol,
-        graze_velocity=args.graze_velocity, graze_gap=args.graze_gap, out=args.out,
-        keep_parts=args.keep_parts, scheduler=getattr(args, "scheduler", None),
-        workers=args.workers, progress=not args.quiet, locate=args.locate,
-        source=sweep_source if args.model == "mc" else None,
+        args.model, param, values, system,
+        window=Window(args.transient, args.record, args.per_period),
+        continuation=args.continuation,
+        mc=MonteCarlo(source=sweep_source if args.model == "mc" else None,
+                      samples=getattr(args, "samples", 256),
+                      sampler=getattr(args, "sampler", "sobol"), seed=getattr(args, "seed", 0)),
+        options=opts, out=args.out, locate=args.locate,
+        motion=MotionTolerances(period_tol=args.period_tol, graze_velocity=args.graze_velocity,
+                                graze_gap=args.graze_gap),
+        # --keep-parts: OUT.parts is the run's named checkpoint, kept after the write
+        execution=execution_from(args, log=None, checkpoint=(
+            checkpoint_for(args.out) if args.keep_parts else None)),
     )
     elapsed = time.perf_counter() - start
     if args.plot:

@@ -3,7 +3,7 @@ periodic orbits with their Floquet multipliers, Lyapunov exponents, and continua
 with located bifurcations.
 
 They serve the DMR, the OPA system and, through a trajectory *source*
-(``sweep(..., source=mc.sweep_source)``), the Monte Carlo mean; this package never
+(``sweep(..., mc=MonteCarlo(source=mc.sweep_source))``), the Monte Carlo mean; this package never
 imports ``mc`` or ``compare``.
 """
 
@@ -34,21 +34,30 @@ from opa.dynamics._sections import (
     MOTION_GRAZE_VELOCITY,
     PERIOD_TOL,
     Motion,
+    MotionTolerances,
     constraint_section,
     detect_period,
     identify_motion,
     phase_section,
 )
-from opa.dynamics._stochastic import DiagramInputError, check_diagram, stochastic_diagram
+from opa.dynamics._attractor import Settings
+from opa.dynamics._stochastic import EMR, DiagramInputError, check_diagram, stochastic_diagram
 from opa.dynamics._sweep import (
     CONTINUATIONS,
     DEFAULT_WORKERS,
     SWEEP_MODELS,
+    MonteCarlo,
+    Window,
     summary_lines,
     sweep,
 )
 
 __all__ = [
+    "EMR",
+    "MonteCarlo",
+    "MotionTolerances",
+    "Settings",
+    "Window",
     "ContinuationOptions",
     "DiagramInputError",
     "ImpactSystem",

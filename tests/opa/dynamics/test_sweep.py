@@ -104,7 +104,11 @@ def test_opa_sigma_sweep_and_emr0_equals_dmr():
 
 
 def test_mc_sweep_has_phase_section_only():
-    ds = sweep("mc", "c", [0.05], preset("3.1", F0=0.0), sigma=0.01, samples=8, **QUICK)
+    from mc import sweep_source
+    from opa.dynamics import MonteCarlo
+
+    ds = sweep("mc", "c", [0.05], preset("3.1", F0=0.0), sigma=0.01,
+               mc=MonteCarlo(source=sweep_source, samples=8), **QUICK)
     assert np.all(np.isfinite(ds.section_x.values[0, :10]))
     assert np.all(np.isnan(ds.impact_v.values)) and ds.impacts.values.tolist() == [-1]
     assert ds.attrs["samples"] == 8 and ds.attrs["sampler"] == "sobol"
