@@ -19,6 +19,7 @@ import re
 import numpy as np
 import pytest
 
+from mc import sweep_source
 from opa import SolverOptions, preset, simulate_dmr, sweep
 from opa.dynamics._continuation import (
     BIFURCATION_KINDS,
@@ -255,7 +256,8 @@ def test_bad_requests_are_refused():
     with pytest.raises(ValueError, match="options belong to the ImpactSystem"):
         locate_bifurcations(ImpactSystem(osc), "c", 0.05, 0.1, options=SolverOptions())
     with pytest.raises(ValueError, match="locate=True: the Monte Carlo mean"):
-        sweep("mc", "c", [0.05, 0.06], osc, sigma=0.01, samples=4, locate=True, workers=1)
+        sweep("mc", "c", [0.05, 0.06], osc, sigma=0.01, samples=4, locate=True, workers=1,
+              source=sweep_source)
     with pytest.raises(ValueError, match="locate must be"):
         sweep("dmr", "c", [0.05, 0.06], osc, locate="yes", workers=1)
     # by default a sweep that cannot be located says why instead of failing
