@@ -17,7 +17,7 @@ import pytest
 from benchmarks.conftest import smoke_mode
 from mc import simulate_mc
 from opa import Oscillator, SolverOptions, simulate_opa
-from opa._elements import _SPLIT_CACHE, ElementBudgetWarning
+from opa._elements import SHARED_SPLITS, ElementBudgetWarning
 from opa._model import time_grid
 
 OPTIONS = SolverOptions(rtol=1e-9, atol=1e-9)
@@ -41,7 +41,7 @@ def _error(mean, case):
 
 
 def _me_opa(case):
-    _SPLIT_CACHE.clear()  # every round pays for its split search, as a first call does
+    SHARED_SPLITS.clear()  # every round pays for its split search, as a first call does
     with warnings.catch_warnings():  # tolerance 1e-14: the budget is meant to stop it
         warnings.simplefilter("ignore", ElementBudgetWarning)
         return simulate_opa(case["osc"], sigma=0.05, order=1, impact_law="saltation",

@@ -43,7 +43,7 @@ def split_phase(**fields) -> dict:
     folder: every scan computed), after one short scan that loads the kernels."""
     from compare._config import ValidateConfig
     from compare._trustmap import _Map
-    from opa._splits import scan_splits
+    from opa._splits import ScanOptions, scan_splits
 
     out = {"values": []}
     with tempfile.TemporaryDirectory() as tmp:
@@ -51,7 +51,7 @@ def split_phase(**fields) -> dict:
         value = cfg.values[0]
         osc = cfg.oscillator_at(value)
         scan_splits(cfg.system_at(value), cfg.options, cfg.uncertain, osc.mu - 0.01,
-                    osc.mu + 0.01, osc.forcing_period, tol=1e-4)
+                    osc.mu + 0.01, osc.forcing_period, ScanOptions(tol=1e-4))
         out.update(horizons=list(cfg.horizons), sigmas=list(cfg.sigmas))
         maps = _Map(cfg, progress=False, log=lambda *a: None)
         start, cpu = time.perf_counter(), _cpu()

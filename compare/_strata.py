@@ -75,7 +75,7 @@ def split_values(system, options, measure, horizon: float) -> tuple[np.ndarray, 
     """The values of xi in the law's support where the impact sequence up to ``horizon``
     changes (discontinuities of x(t, xi) only), increasing, and whether the scan was
     complete."""
-    from opa.engine import scan_splits
+    from opa.engine import ScanOptions, scan_splits
 
     sigma = float(system.sigma)
     if sigma == 0.0:
@@ -84,7 +84,8 @@ def split_values(system, options, measure, horizon: float) -> tuple[np.ndarray, 
     centre = float(getattr(system.oscillator, name))
     lo, hi = centre + sigma * measure.a, centre + sigma * measure.b
     tol = max(SPLIT_TOL * sigma, 8.0 * np.finfo(float).eps * max(abs(lo), abs(hi)))
-    found = scan_splits(system, options, name, lo, hi, horizon, tol=tol, center=centre)
+    found = scan_splits(system, options, name, lo, hi, horizon,
+                        ScanOptions(tol=tol, center=centre))
     xi = np.array(sorted((s.value - centre) / sigma for s in found.splits
                          if s.kind not in CONTINUOUS_KINDS))
     xi = xi[(xi > measure.a) & (xi < measure.b)]

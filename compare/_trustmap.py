@@ -78,7 +78,8 @@ from mc import simulate_mc
 from opa.engine import (
     CHATTER_WINDOW, MAX_CROSSINGS, MAX_SPLITS, MIN_SPLITS, adaptive_edges, collocate_element,
     true_runs,
-    Measure, opa_variants, provenance_attrs, run_elements, scan_splits,
+    Measure, opa_variants, provenance_attrs, run_elements, SampledRuns, scan_splits,
+    ScanOptions,
     simulate_dmr, simulate_opa, SimulationError, SolverOptions, Store, System,
     time_grid, true_system_work, uniform_edges,
 )
@@ -509,23 +510,25 @@ def _scan_value(cfg: ValidateConfig, value: float) -> dict:
     centre = getattr(osc, cfg.uncertain)
     smax = max(cfg.sigmas)
     T = osc.forcing_period
-    found, runs, longest = {}, {}, None
+    found, runs, longest = {}, None, None
     # the longest horizon first; a shorter one reuses its runs (they hold the events
     # up to the shorter horizon) and bisects with runs to its own horizon, and the
     # chatter window past it (a burst at the horizon is told from both sides, as
     # in the longer runs)
     for h in sorted(cfg.horizons, reverse=True):
-        cache = {**runs, "t_end": (h + (CHATTER_WINDOW if runs else 0.0)) * T}
+        end = (h + (CHATTER_WINDOW if runs else 0.0)) * T
+        runs = (runs.until(end) if runs else
+                SampledRuns(cfg.system_at(value), cfg.options, cfg.uncertain, end))
         found[h] = scan_splits(
             cfg.system_at(value), cfg.options, cfg.uncertain, centre - smax,
             centre + smax, h * T,
-            tol=cfg.split_resolution * min(cfg.sigmas), center=centre, cache=cache,
-            outputs=time_grid(osc.omega, h, cfg.per_period),
-            needed_within=cfg.sigmas,
-            max_splits=MAX_SPLITS if h == min(cfg.horizons) else cfg.long_splits)
-        runs, longest = cache, longest or cache
-    cache = longest
-    seq_centre = cache.get(centre) or _sequence(cfg.system_at(value), cfg, cache, centre)
+            ScanOptions(tol=cfg.split_resolution * min(cfg.sigmas), center=centre,
+                        needed_within=cfg.sigmas,
+                        max_splits=MAX_SPLITS if h == min(cfg.horizons) else cfg.long_splits),
+            runs=runs, outputs=time_grid(osc.omega, h, cfg.per_period))
+        longest = longest or runs
+    seq_centre = longest.get(centre) or _sequence(cfg.system_at(value), cfg,
+                                                  {"t_end": longest.t_end}, centre)
     scans = []
     for h in cfg.horizons:
         speed, when = seq_centre.slowest_impact(h * T)

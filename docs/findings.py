@@ -144,13 +144,13 @@ def grazing(omega: float = 3.98, periods: int = 10, per_period: int = 256) -> li
     ``per_period`` outputs per forcing period, for each d of ``GRAZING_STEPS``, and the
     exponent fitted to it (1/2: continuous with a square-root singularity; 0: a jump)."""
     from opa import SolverOptions, preset, simulate_dmr
-    from opa._splits import scan_splits
+    from opa._splits import ScanOptions, scan_splits
 
     osc = preset("3.2", omega=omega)
     options = SolverOptions(rtol=1e-12, atol=1e-12)
     T = osc.forcing_period
-    scan = scan_splits(osc, options, "mu", 0.7775, 0.7776, periods * T, scan=9, tol=1e-13,
-                       center=0.7775630)
+    scan = scan_splits(osc, options, "mu", 0.7775, 0.7776, periods * T,
+                       ScanOptions(scan=9, tol=1e-13, center=0.7775630))
     (split,) = [s for s in scan.splits if s.kind == "grazing"]
     lines = [f"omega = {omega:g}, {periods} periods, rtol = atol = {options.rtol:g}: grazing "
              f"split at mu_s = {split.value:.10f} (bracket {split.tol:.1e}), new impact at "

@@ -45,11 +45,40 @@ SPLIT_BUDGET = 1024
 # ... and at most this many per element of the budget (long horizons of a sensitive
 # system have splits everywhere; finding them all would cost more than the elements).
 SPLITS_PER_ELEMENT = 4
-_SPLIT_CACHE: dict = {}  # the splits of the last few problems (a study repeats them)
 # The splits may take at most 1/SPLIT_SHARE of the element budget; refinement has the
 # rest. Measured (opa-mc converge defaults, saltation law): with a quarter, 48 elements
 # reach an RMS error of 1e-4 where a half needs 64.
 SPLIT_SHARE = 4
+
+
+class SplitCache:
+    """The splits :func:`split_edges` located for the last ``size`` problems, oldest
+    forgotten first: a study repeats them (every impact law and order of one system at one
+    sigma shares them). Owned by whoever keeps it (a map, a study) and passed as
+    ``splits=``; a call without one uses this module's shared one (:data:`SHARED_SPLITS`)."""
+
+    def __init__(self, size: int = 8):
+        self.size = check_count("size", size, 1)
+        self._found: dict = {}
+
+    def get(self, key, locate):
+        """The splits of problem ``key``, located by ``locate()`` the first time."""
+        if key not in self._found:
+            if len(self._found) >= self.size:
+                self._found.pop(next(iter(self._found)))
+            self._found[key] = locate()
+        return self._found[key]
+
+    def clear(self) -> None:
+        self._found.clear()
+
+    def __len__(self) -> int:
+        return len(self._found)
+
+
+#: the splits of calls that bring no SplitCache of their own (simulate_opa's, the map's):
+#: the one piece of process-wide state left here, until those callers keep their own
+SHARED_SPLITS = SplitCache()
 
 
 class ElementBudgetWarning(UserWarning):
@@ -262,10 +291,11 @@ def uniform_edges(measure: Measure, count: int) -> np.ndarray:
     return np.maximum.accumulate(edges)
 
 
-def split_edges(system, options, measure, *, t_end, max_splits=64,
-                tol=1e-6) -> tuple[np.ndarray, list]:
+def split_edges(system, options, measure, *, t_end, max_splits=64, tol=1e-6,
+                splits: SplitCache | None = None) -> tuple[np.ndarray, list]:
     """Edges at the splits of the sampled systems' impact sequences up to ``t_end`` (xi
-    located to ``tol``); returns the edges and the splits."""
+    located to ``tol``); returns the edges and the splits. ``splits``: where splits
+    located before are kept (default :data:`SHARED_SPLITS`)."""
     from opa._splits import find_splits
 
     sigma, uncertain = system.sigma, system.uncertain
@@ -274,14 +304,9 @@ def split_edges(system, options, measure, *, t_end, max_splits=64,
         return np.array([measure.lo, measure.hi]), []
     key = (system.deterministic(), options, uncertain, sigma, measure.name, measure.lo,
            measure.hi, t_end, max_splits, tol)
-    if key not in _SPLIT_CACHE:
-        if len(_SPLIT_CACHE) >= 8:
-            _SPLIT_CACHE.pop(next(iter(_SPLIT_CACHE)))
-        _SPLIT_CACHE[key] = find_splits(
-            system, options, uncertain, centre + sigma * measure.lo,
-            centre + sigma * measure.hi, t_end, tol=tol * sigma, max_splits=max_splits,
-            center=centre, order="generation")[0]
-    found = _SPLIT_CACHE[key]
+    found = (SHARED_SPLITS if splits is None else splits).get(key, lambda: find_splits(
+        system, options, uncertain, centre + sigma * measure.lo, centre + sigma * measure.hi,
+        t_end, tol=tol * sigma, max_splits=max_splits, center=centre, order="generation")[0])
     cuts = sorted({(s.value - centre) / sigma for s in found if s.kind != "horizon"})
     cuts = [c for c in cuts if measure.lo < c < measure.hi]
     return np.array([measure.lo, *cuts, measure.hi]), found
@@ -301,9 +326,11 @@ def merge_smallest(measure: Measure, edges, count: int) -> np.ndarray:
     return np.array(edges)
 
 
-def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, log=None):
-    """Edges at the splits, then halving of the element with the largest variance share
-    ``P_k max_t s_k(t)`` until it is below ``tolerance`` or ``max_elements`` is reached.
+def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, log=None,
+                   splits: SplitCache | None = None):
+    """Edges at the splits (kept in ``splits``: :func:`split_edges`), then halving of the
+    element with the largest variance share ``P_k max_t s_k(t)`` until it is below
+    ``tolerance`` or ``max_elements`` is reached.
 
     Returns (runs, history) where history lists, per step, (elements, largest share, RMS
     change of the assembled mean E[x] from the step before: NaN at the first step, which
@@ -318,7 +345,8 @@ def adaptive_edges(system, options, measure, *, times, tolerance, max_elements, 
             isinstance(tolerance, numbers.Real) and tolerance > 0 and math.isfinite(tolerance)):
         raise ValueError(f"tolerance must be a positive number, got {tolerance!r}")
     edges, _ = split_edges(system, options, measure, t_end=float(times[-1]),
-                           max_splits=min(SPLIT_BUDGET, SPLITS_PER_ELEMENT * max_elements))
+                           max_splits=min(SPLIT_BUDGET, SPLITS_PER_ELEMENT * max_elements),
+                           splits=splits)
     # at least one cut at a split when there is one and the budget allows two elements:
     # an element straddling a grazing split is where the saltation law fails (section 3.2,
     # omega = 3.98, sigma = 0.03, uniform law: 4 elements cut in probability alone are 4x
@@ -388,8 +416,10 @@ def collocation(system, options, measure, edges, q, *, times):
     return mean, np.maximum(w @ (x - mean) ** 2, 0.0), n_rhs
 
 
-def simulate_elements(system, *, options, times, elements, tolerance, max_elements, log=None):
-    """The multi-element OPA dataset (see :func:`opa.simulate_opa`)."""
+def simulate_elements(system, *, options, times, elements, tolerance, max_elements, log=None,
+                      splits: SplitCache | None = None):
+    """The multi-element OPA dataset (see :func:`opa.simulate_opa`; ``splits``: as for
+    :func:`split_edges`)."""
     import xarray as xr
 
     from opa._dataset import element_layout, provenance_attrs, time_coord
@@ -404,7 +434,8 @@ def simulate_elements(system, *, options, times, elements, tolerance, max_elemen
             raise ValueError(f"elements must be a positive integer, 'adaptive' or a list of "
                              f"edges, got {elements!r}")
         runs, history = adaptive_edges(system, options, measure, times=times,
-                                       tolerance=tolerance, max_elements=max_elements, log=log)
+                                       tolerance=tolerance, max_elements=max_elements, log=log,
+                                       splits=splits)
     else:
         if np.ndim(elements) == 0:
             edges = uniform_edges(measure, elements)
@@ -495,7 +526,8 @@ def simulate_elements(system, *, options, times, elements, tolerance, max_elemen
     return ds
 
 
-__all__ = ["ElementBudgetWarning", "ElementRun", "adaptive_edges", "assemble", "collocation",
-           "collocate_element", "element_rule", "global_coefficients", "merge_smallest",
-           "replace_failed", "run_element", "run_elements", "simulate_elements", "split_edges",
-           "straddling", "true_runs", "uniform_edges"]
+__all__ = ["ElementBudgetWarning", "ElementRun", "SHARED_SPLITS", "SplitCache",
+           "adaptive_edges", "assemble", "collocation", "collocate_element", "element_rule",
+           "global_coefficients", "merge_smallest", "replace_failed", "run_element",
+           "run_elements", "simulate_elements", "split_edges", "straddling", "true_runs",
+           "uniform_edges"]

@@ -312,7 +312,7 @@ def test_the_longer_horizons_locate_at_most_long_splits(tmp_path, monkeypatch):
     real_scan = trustmap.scan_splits
 
     def scan(*args, **kw):
-        limits[round(args[5] / cfg.oscillator_at(3.98).forcing_period, 9)] = kw["max_splits"]
+        limits[round(args[5] / cfg.oscillator_at(3.98).forcing_period, 9)] = args[6].max_splits
         return real_scan(*args, **kw)
 
     monkeypatch.setattr(trustmap, "scan_splits", scan)
@@ -326,6 +326,8 @@ def test_each_horizon_bisects_with_runs_to_its_own_horizon(tmp_path, monkeypatch
     asked to be complete within every sigma. The longest horizon's scan is cut here (a
     limit of 8), so the shorter one bisects runs of its own: its splits are those of its
     scan alone, and the counts at the centre those of one run to the longest horizon."""
+    import dataclasses
+
     import compare._trustmap as trustmap
     import opa._splits as splits
 
@@ -335,9 +337,10 @@ def test_each_horizon_bisects_with_runs_to_its_own_horizon(tmp_path, monkeypatch
     real_scan, real_runs = trustmap.scan_splits, splits.event_sequences
 
     def scan(*args, **kw):
-        calls.append((round(args[5] / T, 9), round(kw["cache"]["t_end"] / T, 9),
-                      kw["needed_within"]))
-        return real_scan(*args, **{**kw, **({"max_splits": 8} if len(calls) == 1 else {})})
+        calls.append((round(args[5] / T, 9), round(kw["runs"].t_end / T, 9),
+                      args[6].needed_within))
+        cut = dataclasses.replace(args[6], max_splits=8) if len(calls) == 1 else args[6]
+        return real_scan(*args[:6], cut, *args[7:], **kw)
 
     def runs(system, options, parameter, values, t_end):
         ends.append((calls[-1][0], round(t_end / T, 9)))
@@ -353,8 +356,10 @@ def test_each_horizon_bisects_with_runs_to_its_own_horizon(tmp_path, monkeypatch
     assert {end for h, end in ends if h == 12} == {12}
     assert {end for h, end in ends if h == 8} == {short}
     alone = splits.scan_splits(cfg.system_at(3.98), cfg.options, "mu", centre - 0.03,
-                               centre + 0.03, 8 * T, center=centre,
-                               tol=cfg.split_resolution * 0.01, cache={"t_end": short * T})
+                               centre + 0.03, 8 * T,
+                               splits.ScanOptions(center=centre, tol=cfg.split_resolution * 0.01),
+                               runs=splits.SampledRuns(cfg.system_at(3.98), cfg.options, "mu",
+                                                       short * T))
     assert alone.splits
     assert ([(s.value, s.kind, s.left, s.right) for s in scans[0].splits
              if s.kind != "output crossing"]

@@ -12,7 +12,9 @@ from mc import simulate_mc
 from opa import Oscillator, SolverOptions, simulate_opa
 from opa._system import System
 from opa._elements import (
+    SHARED_SPLITS,
     ElementBudgetWarning,
+    SplitCache,
     ElementRun,
     assemble,
     collocate_element,
@@ -104,6 +106,25 @@ def test_an_element_edge_sits_on_the_scipy_grazing():
         for xi in nodes:
             seq = event_sequence(osc.replace(mu=mu_bar + sigma * xi), OPTIONS, t_end)
             assert seq.count(t_end) == count
+
+
+def test_split_edges_keep_their_splits_where_the_caller_says(monkeypatch):
+    """A caller's own SplitCache: a problem located once while kept, the oldest forgotten
+    past its size, the shared one left alone."""
+    located = []
+    monkeypatch.setattr("opa._splits.find_splits",
+                        lambda system, *args, **kw: located.append(system.oscillator.mu)
+                        or ([], False))
+    own, shared = SplitCache(size=1), len(SHARED_SPLITS)
+
+    def edges(mu):
+        system = System(Oscillator(mu=mu), sigma=0.01, uncertain="mu")
+        return split_edges(system, OPTIONS, semicircle(), t_end=1.0, splits=own)
+
+    edges(0.8), edges(0.8), edges(0.7), edges(0.8)
+    assert located == [0.8, 0.7, 0.8] and len(own) == 1 and len(SHARED_SPLITS) == shared
+    with pytest.raises(ValueError, match="size"):
+        SplitCache(size=0)
 
 
 def test_saltation_law_matches_finite_differences_of_the_reference():
