@@ -390,6 +390,7 @@ def test_report_files_and_tables(tiny):
     assert a["parts_computed"] > a["mc_runs_computed"] > 0 and a["opa_runs_computed"] > 0
 
 
+@pytest.mark.long  # the quick loop draws every figure in one process
 def test_figures_drawn_on_two_processes_are_the_same_files(tiny, tmp_path):
     """``write_report(workers=2)`` draws the figures side by side on worker processes:
     the same PNG bytes as drawn in this process, in the same order, whether the workers

@@ -27,6 +27,7 @@ def _python(script: str, cache_dir: Path) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=300, check=True)
 
 
+@pytest.mark.long  # a fresh process lists integrate's callees (CI runs it)
 def test_callee_table_is_what_integrate_calls(tmp_path):
     """With both groups of the table compiled, ``integrate``'s own compilation compiles
     no kernel function but itself: every callee it needs was in the table, with the
@@ -53,6 +54,7 @@ def test_callee_table_is_what_integrate_calls(tmp_path):
     assert set(counts.values()) == {1}
 
 
+@pytest.mark.long  # a cold compile; the quick loop keeps the once-per-command message test
 def test_cold_first_call_says_so_once_and_matches_the_cached_run(tmp_path):
     """The cold run prints the message once, starts the helper (which compiles its group
     and exits cleanly), and computes what the cached run and this process compute."""

@@ -256,6 +256,7 @@ def test_validate_against_collocation_of_the_reference(tmp_path):
         assert point.count_prob.sel(horizon=2.0, count=counts.pop()).item() == 1.0
 
 
+@pytest.mark.long  # the quick loop keeps test_converge_uncertain_c and compare's own study tests
 def test_converge_errors_against_the_collocation_of_the_reference(tmp_path):
     """The study's reference R (1024 Sobol samples) is within a few standard errors of the
     exact mean T (scipy collocation), so each reported error |X - R| is |X - T| to within
