@@ -15,11 +15,16 @@ MAX_LINES = 120
 MAX_PARAMETERS = 12
 
 
+# parsed once, at collection (as tests/test_architecture.py does): CPython 3.11.7's
+# ast.parse can fail with "AST constructor recursion depth mismatch" while threads of an
+# earlier test (a Dask cluster shutting down) still compile code
+SOURCES = [(path, ast.parse(path.read_text(encoding="utf-8"), filename=str(path)))
+           for package in ("opa", "mc", "compare")
+           for path in sorted((ROOT / package).rglob("*.py")) if path.name != "_kernel.py"]
+
+
 def _sources():
-    for package in ("opa", "mc", "compare"):
-        for path in sorted((ROOT / package).rglob("*.py")):
-            if path.name != "_kernel.py":
-                yield path, ast.parse(path.read_text(encoding="utf-8"))
+    return SOURCES
 
 
 def _named(args: ast.arguments) -> int:
