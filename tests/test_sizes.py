@@ -61,18 +61,20 @@ def test_no_public_function_takes_more_than_12_named_parameters():
     assert wide == []
 
 
+_BODY = "\n".join(["    x = 1"] * 120)
+#: a written example (parsed at collection too)
+EXAMPLE = ast.parse(f"def long():\n{_BODY}\n"
+                    "def wide(a, b, c, d, e, f, g, h, i, j, k, l, m): pass\n"
+                    "def bag(a, b, c, d, e, f, g, h, i, j, k, l, **more): pass\n"
+                    "def _private(a, b, c, d, e, f, g, h, i, j, k, l, m): pass\n"
+                    "class C:\n    def method(self, a, b, c, d, e, f, g, h, i, j, k, l): pass\n")
+
+
 def test_the_rules_see_what_they_are_meant_to():
     """The counts on a written example: a 121-line function and a 13-parameter public
     one are caught, ``self`` and a ``**`` bag are not counted, private names pass."""
-    body = "\n".join(["    x = 1"] * 120)
-    code = (f"def long():\n{body}\n"
-            "def wide(a, b, c, d, e, f, g, h, i, j, k, l, m): pass\n"
-            "def bag(a, b, c, d, e, f, g, h, i, j, k, l, **more): pass\n"
-            "def _private(a, b, c, d, e, f, g, h, i, j, k, l, m): pass\n"
-            "class C:\n    def method(self, a, b, c, d, e, f, g, h, i, j, k, l): pass\n")
-    tree = ast.parse(code)
-    lengths = {n.name: n.end_lineno - n.lineno + 1 for n in ast.walk(tree)
+    lengths = {n.name: n.end_lineno - n.lineno + 1 for n in ast.walk(EXAMPLE)
                if isinstance(n, ast.FunctionDef)}
     assert lengths["long"] == 121 > MAX_LINES
-    counts = {name: _named(node.args) for name, node in _public_functions(tree)}
+    counts = {name: _named(node.args) for name, node in _public_functions(EXAMPLE)}
     assert counts == {"long": 0, "wide": 13, "bag": 12, "C.method": 12}
