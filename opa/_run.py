@@ -85,12 +85,19 @@ def announce_compilation() -> bool:
     return True
 
 
+#: the kernel entry points found compiled (here or in the cache): not looked at again
+_WARM: set = set()
+
+
 def prepare_kernels(dispatcher) -> None:
     """Before a kernel entry point that is neither compiled in this process nor in
     numba's on-disk cache: say so once (:func:`announce_compilation`: not again in the
     workers of a process that said it), to stderr, and compile the driver's callees on
     two cores (:func:`compile_callees`): a first run sits for several seconds compiling."""
-    if _ANNOUNCED or not _cold(dispatcher):
+    if _ANNOUNCED or dispatcher in _WARM:
+        return
+    if not _cold(dispatcher):
+        _WARM.add(dispatcher)  # numba's list of signatures is rebuilt on every look
         return
     if os.environ.get(ANNOUNCED_ENV) != os.environ.get("NUMBA_CACHE_DIR", ""):
         os.environ[ANNOUNCED_ENV] = os.environ.get("NUMBA_CACHE_DIR", "")
