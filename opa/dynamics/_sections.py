@@ -340,6 +340,8 @@ class Motion:
 class MotionTolerances:
     """The thresholds that name a motion (:func:`identify`, :func:`identify_motion`).
 
+    Parameters
+    ----------
     period_tol : relative stroboscopic repeat distance below which a period is taken.
     max_period : the longest period looked for (None: half the recorded periods).
     graze_velocity, graze_gap : a motion grazes where an impact is slower than
