@@ -10,6 +10,7 @@ status, wall time (process start-up included) and last line are printed. Both mu
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import subprocess
@@ -19,7 +20,10 @@ import threading
 import time
 
 
-def silent_endpoint() -> tuple[socket.socket, str]:
+@contextlib.contextmanager
+def silent_endpoint():
+    """The address of a TCP endpoint that accepts connections and never says a word,
+    open for the block (every socket closed after it)."""
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen(8)
@@ -34,11 +38,15 @@ def silent_endpoint() -> tuple[socket.socket, str]:
             held.append(conn)
 
     threading.Thread(target=serve, daemon=True).start()
-    return server, f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
 
 
 def main() -> None:
-    server, address = silent_endpoint()
     out = tempfile.mkdtemp()
     commands = {
         "bifurcation": ["bifurcation", "dmr", "--sweep", "c=0.03:0.06:3", "--transient",
@@ -47,14 +55,14 @@ def main() -> None:
                        "--samples", "0", "--out", os.path.join(out, "s.nc")],
     }
     print(f"load average {os.getloadavg()[0]:.2f}")
-    for name, argv in commands.items():
-        start = time.perf_counter()
-        done = subprocess.run([sys.executable, "-m", "opa.cli", *argv, "--scheduler", address],
-                              capture_output=True, text=True, timeout=120)
-        last = (done.stderr.strip().splitlines() or [""])[-1]
-        print(f"{name}: exit {done.returncode} after {time.perf_counter() - start:.1f} s: "
-              f"{last}")
-    server.close()
+    with silent_endpoint() as address:
+        for name, argv in commands.items():
+            start = time.perf_counter()
+            done = subprocess.run([sys.executable, "-m", "opa.cli", *argv, "--scheduler",
+                                   address], capture_output=True, text=True, timeout=120)
+            last = (done.stderr.strip().splitlines() or [""])[-1]
+            print(f"{name}: exit {done.returncode} after {time.perf_counter() - start:.1f} s: "
+                  f"{last}")
 
 
 if __name__ == "__main__":

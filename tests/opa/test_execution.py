@@ -4,11 +4,11 @@ connection rule and its one lost-worker policy."""
 from __future__ import annotations
 
 import socket
-import threading
 import time
 
 import pytest
 
+from benchmarks.silent_scheduler import silent_endpoint
 from opa import Execution
 from opa._execution import (
     DaskError,
@@ -92,39 +92,13 @@ def test_the_keywords_of_earlier_releases_make_the_same_record():
     assert take_execution(None, {}, "x") == Execution()
 
 
-def _silent_server():
-    """A TCP endpoint that accepts connections and never says a word (not a Dask
-    scheduler, which speaks first)."""
-    server = socket.socket()
-    server.bind(("127.0.0.1", 0))
-    server.listen(4)
-    held = []
-
-    def serve():
-        while True:
-            try:
-                conn, _ = server.accept()
-            except OSError:
-                return
-            held.append(conn)
-
-    threading.Thread(target=serve, daemon=True).start()
-    return server, held
-
-
 def test_an_endpoint_that_says_nothing_is_refused_within_the_timeout():
-    server, held = _silent_server()
-    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
-    try:
+    with silent_endpoint() as address:  # the benchmark's: accepts, never speaks
         start = time.monotonic()
         with pytest.raises(ValueError, match=r"did not answer within 0.5 s \(connect_timeout\)"):
             with Execution(scheduler=address, connect_timeout=0.5).client():
                 pass
         assert time.monotonic() - start < 3
-    finally:
-        server.close()
-        for conn in held:
-            conn.close()
 
 
 def test_a_closed_port_is_refused_naming_it():
