@@ -76,7 +76,8 @@ from compare._trust import (band_multiplier, bisect_boundary, bound_excess, exce
                             window_errors_all)
 from mc import simulate_mc
 from opa.engine import (
-    CHATTER_WINDOW, MAX_CROSSINGS, MAX_SPLITS, MIN_SPLITS, adaptive_edges, collocate_element,
+    CHATTER_WINDOW, Execution, MAX_CROSSINGS, MAX_SPLITS, MIN_SPLITS, adaptive_edges,
+    collocate_element,
     true_runs,
     Measure, opa_variants, provenance_attrs, run_elements, SampledRuns, scan_splits,
     ScanOptions,
@@ -711,8 +712,6 @@ def run_map(cfg: ValidateConfig, *, progress: bool, log, tasks=None) -> xr.Datas
 def _compute(cfg: ValidateConfig, work: Work, progress: bool, tasks) -> tuple[dict, Ledger]:
     """Every value's slice and the frontier (here, or by ``tasks``), and the ledger of
     the work done elsewhere."""
-    from tqdm.auto import tqdm
-
     stale = clear_slices(os.path.join(cfg.outdir, SLICES))
     if stale:
         work.log(f"slices: removed {len(stale)} file(s) an interrupted run left behind")
@@ -721,7 +720,8 @@ def _compute(cfg: ValidateConfig, work: Work, progress: bool, tasks) -> tuple[di
                  f"interrupted run left behind: "
                  f"{', '.join(os.path.basename(p) for p in work.parts.removed)}")
     total = len(cfg.values) * len(cfg.sigmas)
-    with tqdm(total=total, unit="point", desc="trust map", disable=not progress) as bar:
+    # the one progress display of every batch (opa.Execution.bar)
+    with Execution(progress=bool(progress)).bar(total, unit="point", desc="trust map") as bar:
         if tasks is not None:
             return tasks(cfg, work, bar)
         work.bar = bar
