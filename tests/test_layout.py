@@ -41,6 +41,7 @@ THEMES = {
         "the hostile-input corpus of compare's entry points (compare._inputs)",
     "tests/opa/dynamics/test_stochastic_hostile.py":
         "the hostile-input corpus of opa-mc stochastic and stochastic_diagram",
+    "tests/opa/cli/test_hard_numerics.py": "the hard-numerics corpus of opa-mc (real processes)",
 }
 
 #: source modules without a test module of their own -> the test modules that cover them

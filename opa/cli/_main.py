@@ -155,7 +155,10 @@ def _run(args, system, opts):
     ds = simulate_mc(system, samples=args.samples, sampler=args.sampler, seed=args.seed,
                      periods=args.periods, per_period=args.per_period, options=opts,
                      execution=execution_from(args, checkpoint=checkpoint_for(args.out)))
-    return ds, (f"E[x] = {float(ds.x_mean[-1]):.8g} ± {float(ds.x_sem[-1]):.2g} (SE), "
+    # a Gauss quadrature has no sampling error: its standard errors are NaN by design
+    error = ("(Gauss quadrature)" if ds.attrs.get("sampler") == "gauss" else
+             f"± {float(ds.x_sem[-1]):.2g} (SE)")
+    return ds, (f"E[x] = {float(ds.x_mean[-1]):.8g} {error}, "
                 f"Var[x] = {float(ds.x_var[-1]):.4g}; impacts per sample "
                 f"{int(ds.n_impacts.min())}..{int(ds.n_impacts.max())}")
 

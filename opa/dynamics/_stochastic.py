@@ -983,6 +983,13 @@ def _slices(checked: DiagramInputs, store, client) -> list[dict]:
         results[i] = piece
         _log(run.log, i, len(tasks), parameter, piece, reused=False)
 
+    if todo and run.log is not None:
+        # a value can take minutes: say at once what is being computed (issue 45, item 5)
+        where = ("on the Dask cluster" if client is not None else
+                 f"on {min(run.workers, len(todo))} worker process"
+                 f"{'es' if min(run.workers, len(todo)) > 1 else ''}")
+        run.log(f"computing {len(todo)} of {len(tasks)} values of {parameter} "
+                f"({checked.samples} samples each) {where}; a line as each is done")
     if client is not None and todo:
         _run_slices_dask(tasks, todo, finish, client, run)
     else:
