@@ -378,3 +378,18 @@ def test_long_work_shows_progress_within_seconds(command, tmp_path):
     assert seconds is not None, f"opa-mc {command}: nothing on stderr within 30 s"
     assert "Traceback" not in text and "error" not in text, text
     assert seconds < PROGRESS_LIMIT, f"opa-mc {command}: first output after {seconds:.1f} s"
+
+
+def test_the_stochastic_diagram_says_what_it_computes_before_the_first_value():
+    """The quick check of the fix above: the first log line comes before any value is
+    done (it used to be the first value's line, after its whole computation)."""
+    from opa import Execution, preset
+    from opa.dynamics._stochastic import stochastic_diagram
+
+    lines = []
+    stochastic_diagram(preset("3.1", F0=0.0), "c", [0.04, 0.05], sigma=0.03, samples=8,
+                       extra_states=0, transient=100, record=16,
+                       execution=Execution(log=lines.append))
+    assert lines[0] == ("computing 2 of 2 values of c (8 samples each) on 1 worker "
+                        "process; a line as each is done"), lines
+    assert [line[:4] for line in lines[1:]] == ["1/2 ", "2/2 "], lines
