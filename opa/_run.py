@@ -616,7 +616,8 @@ class Batch:
     def message(self, b: int) -> str:
         """What became of run b, in words ("ok" when it finished)."""
         status = int(self.status[b])
-        if status == kernel.MAX_STEPS and self._guarded is not None and self._guarded[b] > 0:
+        if status == kernel.MAX_STEPS and self._guarded is not None and \
+                0 < self._guarded[b] < DEFAULT_MAX_STEPS:  # at the cap: the plain limit
             return (f"the runaway guard ended it after {int(self.steps[b])} steps "
                     f"{_GUARD_LIMITS}. {_GUARD_ADVICE}")
         return status_message(status)
@@ -769,7 +770,8 @@ def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
     """The message of a run that stopped: what happened, where, and what to try."""
     reached = np.isfinite(out[:, 0])
     t_last = times[reached][-1] if reached.any() else times[0]
-    if status == kernel.MAX_STEPS and limit is not None:
+    # a guard at the default cap did not end the run early: it needed more than max_steps
+    if status == kernel.MAX_STEPS and limit is not None and limit < DEFAULT_MAX_STEPS:
         size = float(np.max(np.abs(z))) if np.isfinite(z).all() else float("inf")
         return (f"{label} stopped by the runaway guard: {n_steps} steps by t = {t_last:.6g} "
                 f"of {times[-1]:.6g} {_GUARD_LIMITS}, the state's largest component "

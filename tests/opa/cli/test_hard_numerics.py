@@ -41,6 +41,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 TIME_LIMIT = 60  # seconds per case on a loaded two-core machine (as in test_bad_inputs.py)
@@ -393,3 +394,23 @@ def test_the_stochastic_diagram_says_what_it_computes_before_the_first_value():
     assert lines[0] == ("computing 2 of 2 values of c (8 samples each) on 1 worker "
                         "process; a line as each is done"), lines
     assert [line[:4] for line in lines[1:]] == ["1/2 ", "2/2 "], lines
+
+
+def test_a_run_stopped_at_the_default_step_cap_is_not_called_a_runaway():
+    """One forcing period at omega = 1e-6 (6.3e6 time units) needs more than the 50
+    million default steps: the runaway guard's allowance is the cap itself there, so the
+    run did not stop early and its state did not run away. It used to be told so ("the
+    step size collapsed ... check the signs of a and c"); a guard below the cap still
+    is."""
+    from opa import _kernel as kernel
+    from opa._run import DEFAULT_MAX_STEPS, _failure
+
+    times = np.array([0.0, 6.3e6])
+    out = np.array([[-1.0, 0.0], [np.nan, np.nan]])
+    z = np.array([0.5, 0.1])
+    at_cap = _failure("DMR trajectory", kernel.MAX_STEPS, out, times, z, DEFAULT_MAX_STEPS,
+                      12_878_382, DEFAULT_MAX_STEPS)
+    assert "runaway" not in at_cap and "maximum number of steps" in at_cap, at_cap
+    guarded = _failure("DMR trajectory", kernel.MAX_STEPS, out, times, z, 200_000, 3,
+                       200_000)
+    assert "runaway guard" in guarded, guarded
