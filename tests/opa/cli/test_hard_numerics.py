@@ -23,8 +23,15 @@ others, so the cases of one test session run two at a time (threads, each waitin
 own process).
 
 Run as a script, the module prints the count per category over all cases:
-``python -m tests.opa.cli.test_hard_numerics``. Before the fixes of issue 45 the corpus
-of 38 cases had 5 cases that were not clean (see :data:`BEFORE`).
+``python -m tests.opa.cli.test_hard_numerics [NAME ...]``. Of the 68 cases, before the
+fixes of issue 45, 61 were clean, 1 hung and 6 were silent NaN: ``simulate mc --sampler
+gauss`` printed "± nan (SE)" (fixed: the summary says "Gauss quadrature"); five sweeps
+and stability runs write a min_gap, impact_rate or min_impact_velocity that
+docs/datasets.md does not say may be NaN or inf. Those five and the hang (one forcing
+period at omega = 1e-6) remain, marked xfail with what happens.
+
+The last tests check that long work shows progress on stderr within seconds (the
+stochastic diagram used to say nothing until its first control value was done).
 """
 
 from __future__ import annotations
@@ -110,6 +117,10 @@ NO_GAP = (
     "flight ends in an impact): NaN in the bifurcation sweep, inf in stability; neither is "
     "documented in docs/datasets.md or docs/stability.md, and NaN or inf for 'none' is a "
     "decision to make and document")
+NO_RATE = (
+    "silent NaN: the bifurcation sweep of the MC mean writes impact_rate and "
+    "min_impact_velocity NaN at every value (the mean has no impacts of its own); "
+    "opa.dynamics._sections.Motion says so, docs/datasets.md does not")
 
 #: the quick part (the rest is marked long): about 30 s on two cores, two at a time
 QUICK = {"dmr c<0", "mc F0 huge", "opa F0 huge", "dmr eta 1", "opa eta 1 saltation",
@@ -190,6 +201,15 @@ CASES = [    # runaways
     # a certificate on a hard case
     case("opa verify chatter", OPA, "--verify 64 --verify-max 64 --eta 0.05 --f 20 "
          "--sigma 0.3", "verify eta"),
+    case("opa verify chatter, doubling", OPA, "--verify 64 --eta 0.05 --f 20 --sigma 0.3",
+         "verify verify-max eta"),
+    case("opa adaptive chatter", OPA, "--elements adaptive --eta 0.01 --f 20 --sigma 0.3",
+         "elements eta"),
+    case("mc gauss chatter", MC, "--sampler gauss --eta 0.01 --f 20 --sigma 0.3",
+         "sampler eta"),
+    case("opa N 500 sigma max", OPA, "--order 500 --sigma 0.8 --periods 1", "order sigma"),
+    case("mc sigma max mu beta", MC, "--sigma 0.8 --distribution beta:0.5,0.5",
+         "sigma distribution"),
     # the stochastic diagram where the motion is chaotic, a sweep across a grazing
     case("stochastic chaotic", ("stochastic", "--out", "run.nc"),
          "--preset 3.1 --F0 0 --sweep c=0.02 --samples 32 --transient 200 --record 32 "
@@ -208,6 +228,11 @@ CASES = [    # runaways
     case("bifurcation opa grazing", ("bifurcation", "opa", "--out", "run.nc"),
          "--preset 3.3 --F0 0 --sigma 0.1 --sweep omega=5.69:5.72:3 --transient 100 "
          "--record 20 --workers 2", "omega sigma", xfail=NO_GAP),
+    case("stability opa chaotic", ("stability", "opa", "--out", "run.nc"),
+         "--preset 3.1 --F0 0 --c 0.02 --sigma 0.03 --lyapunov", "c sigma", xfail=NO_GAP),
+    case("bifurcation mc grazing", ("bifurcation", "mc", "--out", "run.nc"),
+         "--preset 3.3 --F0 0 --sigma 0.1 --samples 16 --sweep omega=5.69:5.72:3 "
+         "--transient 100 --record 20 --workers 2", "omega sigma", xfail=NO_RATE),
     case("bifurcation grazing", ("bifurcation", "dmr", "--out", "run.nc"),
          "--preset 3.3 --F0 0 --sweep omega=5.69:5.72:4 --transient 100 --record 20 "
          "--workers 2", "omega"),
