@@ -953,6 +953,14 @@ def _doubled_seed(o_pd: PeriodicOrbit, parameter: str, amplitude: float, tol: fl
     return None
 
 
+def _none_as_nan(values) -> np.ndarray:
+    """An orbit's minimum over no event (inf inside, where comparisons need it) as NaN,
+    the datasets' one word for "none"."""
+    out = np.array(values, dtype=float)
+    out[np.isinf(out)] = np.nan
+    return out
+
+
 def branch_dataset(system: ImpactSystem, parameter: str, branches: list, bifurcations: list,
                    *, t0: float = 0.0, settings: dict | None = None) -> xr.Dataset:
     """Labelled dataset of the branches (one ``point`` per orbit) and bifurcations.
@@ -1000,13 +1008,14 @@ def branch_dataset(system: ImpactSystem, parameter: str, branches: list, bifurca
                         **one}),
             "spectral_radius": ("point", np.array([o.spectral_radius for *_, o in rows]),
                                 {"long_name": "largest Floquet multiplier modulus", **one}),
-            "min_impact_velocity": ("point",
-                                    np.array([o.min_impact_velocity for *_, o in rows]),
-                                    {"long_name": "smallest pre-impact velocity on the orbit",
-                                     **one}),
-            "min_gap": ("point", np.array([o.min_gap for *_, o in rows]),
+            "min_impact_velocity": ("point", _none_as_nan(
+                                    [o.min_impact_velocity for *_, o in rows]),
+                                    {"long_name": "smallest pre-impact velocity on the orbit "
+                                                  "(NaN: no impact)", **one}),
+            "min_gap": ("point", _none_as_nan([o.min_gap for *_, o in rows]),
                         {"long_name": "smallest distance of a free-flight maximum of x_0 "
-                                      "below the wall", **one}),
+                                      "below the wall (NaN: no free-flight maximum, every "
+                                      "flight ends at the wall)", **one}),
             "section_x": (("point", "strobe"), sx,
                           {"long_name": "x_0 at t0 + j 2 pi/omega (stroboscopic points)", **one}),
             "section_v": (("point", "strobe"), sv,

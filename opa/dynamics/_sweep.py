@@ -871,9 +871,13 @@ _SCALARS = {
     "residual": ("float64", ("relative stroboscopic repeat distance at the period "
                             "(or at nearest_period)")),
     "nearest_period": ("int32", "repeat with the smallest stroboscopic distance"),
-    "impact_rate": ("float64", "impacts per forcing period in the record"),
-    "min_impact_velocity": ("float64", "slowest impact velocity in the record"),
-    "min_gap": ("float64", "delta minus the highest free-flight maximum of x"),
+    "impact_rate": ("float64", "impacts per forcing period in the record (NaN: no impact "
+                               "record, the Monte Carlo mean's)"),
+    "min_impact_velocity": ("float64", "slowest impact velocity in the record (NaN: no "
+                                       "impact)"),
+    "min_gap": ("float64", "delta minus the highest free-flight maximum of x (NaN: no "
+                           "free-flight maximum, every flight ends at the wall, or too few "
+                           "outputs to see one)"),
     "grazing": ("int8", ("1 where an impact is slower than graze_velocity or a free "
                         "flight comes within graze_gap of the wall")),
     "failed": ("int8", "1 where the trajectory could not be completed"),
