@@ -344,7 +344,8 @@ def run_all(cases, parallel: int = PARALLEL) -> dict[str, Outcome]:
 def outcomes(request):
     """The outcomes of the cases this session selected, run together (two at a time)."""
     names = {item.callspec.params["c"].name for item in request.session.items
-             if item.module.__name__ == __name__ and hasattr(item, "callspec")
+             if getattr(getattr(item, "module", None), "__name__", None) == __name__
+             and hasattr(item, "callspec")
              and "c" in item.callspec.params}
     return run_all([c for c in CASES if c.name in names])
 
