@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from opa._lazy import lazy
-from opa._model import Oscillator, SolverOptions
+from opa._model import Oscillator, SolverOptions, check_instance
 from opa._run import SimulationError
 from opa._system import System
 from opa.dynamics._orbits import (
@@ -698,12 +698,7 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
 
 
 def _check_continuation(continuation, default: ContinuationOptions) -> ContinuationOptions:
-    if continuation is None:
-        return default
-    if not isinstance(continuation, ContinuationOptions):
-        raise ValueError(f"continuation must be ContinuationOptions or None, got "
-                         f"{continuation!r:.60}")
-    return continuation
+    return check_instance("continuation", continuation, ContinuationOptions, default)
 
 
 class _Tracer:

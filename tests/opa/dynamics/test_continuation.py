@@ -289,7 +289,7 @@ def test_the_continuation_options_reach_the_branch():
                     for s in (0.05, 0.1))
     assert short.c.values[-1] == long_.c.values[-1] == 0.085
     assert long_.sizes["point"] < short.sizes["point"]
-    with pytest.raises(ValueError, match="continuation must be ContinuationOptions"):
+    with pytest.raises(ValueError, match="continuation must be a ContinuationOptions"):
         continue_orbits(system, "c", 0.095, 0.085, continuation={"max_points": 5})
 
 
