@@ -4,6 +4,7 @@ import ast
 from pathlib import Path
 
 import opa.engine
+from tests.parsed import tree
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -23,7 +24,7 @@ def test_the_names_mc_and_compare_take_are_exported_and_nothing_more():
     taken = set()
     for package in ("mc", "compare", "opa/cli"):
         for path in (ROOT / package).rglob("*.py"):
-            for node in ast.walk(ast.parse(path.read_text())):
+            for node in ast.walk(tree(path)):
                 if isinstance(node, ast.ImportFrom) and node.module == "opa.engine":
                     taken |= {a.name for a in node.names}
     assert taken == set(opa.engine.__all__)

@@ -22,6 +22,7 @@ from opa import _kernel as kernel
 from opa._run import run
 from tests.conftest import kernel_inputs, rule
 from tests.opa.test_solver import HARMONIC, kernel_step
+from tests.parsed import tree
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("opa", "mc", "compare")
@@ -49,19 +50,18 @@ def numba_uses(tree: ast.AST) -> list[str]:
 def test_jitted_code_lives_only_in_the_kernel_module():
     offenders = {}
     for path in package_modules():
-        uses = numba_uses(ast.parse(path.read_text(), filename=str(path)))
+        uses = numba_uses(tree(path))
         if uses and path != ROOT / "opa" / "_kernel.py":
             offenders[str(path.relative_to(ROOT))] = uses
     assert not offenders, f"jitted code outside opa/_kernel.py: {offenders}"
-    assert numba_uses(ast.parse((ROOT / "opa" / "_kernel.py").read_text()))
+    assert numba_uses(tree(ROOT / "opa" / "_kernel.py"))
 
 
 def test_the_kernel_imports_nothing_from_the_package():
     """numba's cache bakes imported globals into compiled code without tracking the
     file they came from: the kernel may import only numpy and numba."""
-    tree = ast.parse((ROOT / "opa" / "_kernel.py").read_text())
     imported = set()
-    for node in ast.walk(tree):
+    for node in ast.walk(tree(ROOT / "opa" / "_kernel.py")):
         if isinstance(node, ast.Import):
             imported |= {a.name.split(".")[0] for a in node.names}
         elif isinstance(node, ast.ImportFrom):
@@ -75,7 +75,7 @@ def test_cuda_kernels_live_only_in_the_gpu_module():
     is the kernel module's own (``integrate_with``), compiled again for the device."""
     users = []
     for path in package_modules():
-        for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        for node in ast.walk(tree(path)):
             if isinstance(node, ast.Attribute) and node.attr == "jit" and \
                     isinstance(node.value, ast.Name) and node.value.id == "cuda":
                 users.append(str(path.relative_to(ROOT)))
