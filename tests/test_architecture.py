@@ -54,6 +54,15 @@ MODULES = modules()
 # recursion depth mismatch" while threads of an earlier test (a Dask cluster shutting
 # down) still compile code
 TREES = {m: ast.parse(path.read_text(), filename=str(path)) for m, path in MODULES.items()}
+#: the planted imports the checks must see, parsed at collection too
+PLANTED = {
+    "application": ast.parse(
+        "from opa._run import run\nfrom opa import _kernel\nimport compare._findings\n"
+        "from opa.dynamics._sweep import sweep\nfrom opa.cli._flags import say\n"
+        "from . import _args\nfrom .._dataset import COMMAND\n"),
+    "private": ast.parse("from opa._run import run\nfrom opa import _kernel\n"),
+    "upward": ast.parse("from compare import _figures\n"),
+}
 
 
 def layer(module: str) -> int:
@@ -240,10 +249,7 @@ def test_the_application_imports_public_names_only():
     assert len(found) > 5
     assert {m: f for m, f in found.items() if f} == {}
     # the check sees planted private imports of every form, and passes the application's own
-    TREES["opa.cli._planted"] = ast.parse(
-        "from opa._run import run\nfrom opa import _kernel\nimport compare._findings\n"
-        "from opa.dynamics._sweep import sweep\nfrom opa.cli._flags import say\n"
-        "from . import _args\nfrom .._dataset import COMMAND\n")
+    TREES["opa.cli._planted"] = PLANTED["application"]
     try:
         assert _application_reaches("opa.cli._planted") == [
             "from opa._run import ...", "opa._kernel", "import compare._findings",
@@ -258,7 +264,7 @@ def test_packages_import_only_each_others_public_names():
     found = {m: _private_imports(m) for m in MODULES if not m.startswith("opa")}
     assert {m: f for m, f in found.items() if f} == {}
     # the check sees a planted private import
-    TREES["planted"] = ast.parse("from opa._run import run\nfrom opa import _kernel\n")
+    TREES["planted"] = PLANTED["private"]
     try:
         assert _private_imports("planted") == ["from opa._run import ...", "opa._kernel"]
     finally:
@@ -274,7 +280,7 @@ def test_no_import_cycles():
 def test_the_checks_see_a_planted_cycle_and_a_planted_upward_import():
     graph = {"a": ["b"], "b": ["c"], "c": ["a"], "d": ["a"]}
     assert strongly_connected(graph) == [["a", "b", "c"]]
-    tree = ast.parse("from compare import _figures\n")
+    tree = PLANTED["upward"]
     targets = _resolve("opa._kernel", False, tree.body[0])
     assert targets == ["compare._figures"]
     assert layer(targets[0]) > layer("opa._kernel")
