@@ -20,14 +20,15 @@ def timeline(cfg, workers: int) -> list[tuple]:
     from compare._mapflow import MapFlow
     from compare._scaleout import run_flow
     from compare._scaleout import MAP_PRELOAD
-    from opa.engine import Store
+    from opa.engine import Execution, Store
 
     flow = MapFlow(cfg, Store(f"{cfg.outdir}/parts", "trust map"))
     start = time.perf_counter()
     rows = []
-    for key, result in run_flow(flow.first(), flow.follow, workers=workers,
-                                preload=MAP_PRELOAD):
-        cpu = sum(cpu for _, _, cpu, _ in result["work"]["phases"])
+    for key, result in run_flow(flow.first(), flow.follow, preload=MAP_PRELOAD,
+                                execution=Execution(workers=workers)):
+        # each task returns its ledger: phase -> (wall s, CPU s, calls)
+        cpu = sum(row[1] for row in result["ledger"].phases.values())
         rows.append((key, time.perf_counter() - start, cpu))
     return rows
 
