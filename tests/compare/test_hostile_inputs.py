@@ -45,17 +45,9 @@ def runs():
 
 
 @pytest.fixture(scope="module")
-def trust_map(tmp_path_factory):
-    """The smallest trust map (docs/datasets.md's example), read back into memory."""
-    from compare import load_config, run_validation
-
-    out = tmp_path_factory.mktemp("map")
-    cfg = load_config(None, values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1),
-                      horizons=(2,), samples=64, max_samples=64, per_period=4,
-                      frontier=False, plots=False, outdir=str(out))
-    run_validation(cfg, progress=False, log=lambda *a: None)
-    with xr.open_dataset(out / "validate.nc") as ds:
-        return ds.load()
+def trust_map(smallest_trust_map):
+    """The smallest trust map (tests/compare/conftest.py), a copy of its own."""
+    return smallest_trust_map.copy(deep=True)
 
 
 def spoil(ds: xr.Dataset, name: str, value, index: int = 1) -> xr.Dataset:

@@ -28,18 +28,9 @@ CELL = re.compile(r"(\S+) at σ = (\S+) \(MC SE (\S+)\)")
 
 
 @pytest.fixture(scope="module")
-def tiny_map(tmp_path_factory) -> xr.Dataset:
-    """The smallest trust map: one omega, sigma 0.01 and 0.03, N = 0 and 1, 2 periods at
-    4 outputs per period (t = 0, 0.25, ..., 2)."""
-    from compare import load_config, run_validation
-
-    out = tmp_path_factory.mktemp("map")
-    cfg = load_config(None, values=(3.98,), sigmas=(0.01, 0.03), orders=(0, 1),
-                      horizons=(2,), samples=64, max_samples=64, per_period=4,
-                      frontier=False, plots=False, outdir=str(out))
-    run_validation(cfg, progress=False, log=lambda *a: None)
-    with xr.open_dataset(out / "validate.nc") as ds:
-        ds = ds.load()
+def tiny_map(smallest_trust_map) -> xr.Dataset:
+    """The smallest trust map (tests/compare/conftest.py): t = 0, 0.25, ..., 2."""
+    ds = smallest_trust_map.copy(deep=True)
     assert np.allclose(ds.time.values, np.arange(9) / 4)
     return ds
 
