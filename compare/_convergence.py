@@ -573,7 +573,8 @@ def _convergence_run(execution, legacy: dict) -> tuple[Execution, Callable]:
     if execution is not None and log is not None:
         raise ValueError("run_convergence: give log inside execution=Execution(...), not "
                          "beside it")
-    run = take_execution(execution, legacy, "run_convergence")
+    run = take_execution(execution, legacy, "run_convergence").only(
+        "run_convergence", "workers", "scheduler", "connect_timeout", "worker_timeout")
     if execution is not None:
         return run, run.log or (lambda line: None)
     return run, print if log is None else log

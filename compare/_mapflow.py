@@ -332,6 +332,7 @@ def _validation_run(cfg: ValidateConfig, execution, legacy: dict):
     if legacy:
         raise ValueError(f"run_validation: give {', '.join(sorted(legacy))} inside "
                          f"execution=Execution(...), not beside it")
+    execution.only("run_validation", "workers", "scheduler")
     if cfg.workers or cfg.scheduler is not None:
         raise ValueError("run_validation: the configuration's workers or scheduler beside "
                          "execution=: say where the map runs in one place")

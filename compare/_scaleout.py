@@ -129,7 +129,8 @@ def _execution(execution, legacy: dict, where: str) -> Execution:
     unknown = sorted(set(legacy) - {"workers", "scheduler"})
     if unknown:
         raise TypeError(f"{where}() got an unexpected keyword argument {unknown[0]!r}")
-    return take_execution(execution, legacy, where)
+    return take_execution(execution, legacy, where).only(
+        where, "workers", "scheduler", "connect_timeout", "worker_timeout")
 
 
 def run_flow(tasks: list[tuple[object, Callable, tuple]],

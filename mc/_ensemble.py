@@ -296,7 +296,9 @@ def simulate_mc(
         The Dask cluster lost all its workers (or never had any) for ``worker_timeout``
         seconds, a chunk killed the workers that ran it, or the scheduler went away.
     """
-    run = take_execution(execution, fields, "simulate_mc")
+    run = take_execution(execution, fields, "simulate_mc").only(
+        "simulate_mc", "scheduler", "device", "checkpoint", "chunk_size", "connect_timeout",
+        "worker_timeout")
     options = check_instance("options", options, SolverOptions, SolverOptions())
     system = as_system(system, options, allowed=MC_FIELDS, where="simulate_mc", **fields)
     if keep_paths not in (True, False) or isinstance(keep_paths, str):

@@ -151,6 +151,19 @@ class Execution:
             raise ValueError(f"executor must be a concurrent.futures executor, got "
                              f"{self.executor!r:.60}")
 
+    def only(self, where: str, *used: str) -> Execution:
+        """This record, refusing a field set away from its default that ``where`` does
+        not use (``progress`` and ``log`` are always taken: they only show)."""
+        default = Execution()
+        for f in dataclasses.fields(self):
+            if f.name in (*used, "progress", "log"):
+                continue
+            value = getattr(self, f.name)
+            if value != getattr(default, f.name):
+                raise ValueError(f"{where} does not use the execution's {f.name} "
+                                 f"({value!r:.40}); it takes {', '.join(used)}")
+        return self
+
     def replace(self, **changes) -> Execution:
         """A copy with ``changes`` (checked like a new one)."""
         return dataclasses.replace(self, **changes)

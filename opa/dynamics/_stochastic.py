@@ -729,6 +729,7 @@ def _execution_keywords(execution, legacy: dict) -> tuple:
     if legacy:
         raise DiagramInputError("{execution}: give " + ", ".join(sorted(legacy)) +
                                 " inside it, not beside it")
+    execution.only("stochastic_diagram", "workers", "scheduler", "checkpoint")
     return execution.workers, execution.scheduler, execution.checkpoint, execution.log
 
 

@@ -538,7 +538,9 @@ def _setup(model, param, values, system, window, continuation, mc, options, moti
     """Check every input of :func:`sweep` before any work, and make its points."""
     keep_parts = fields.pop("keep_parts", False)
     run = take_execution(execution, fields, "sweep",
-                         {"workers": DEFAULT_WORKERS} if execution is None else {})
+                         {"workers": DEFAULT_WORKERS} if execution is None else {}).only(
+        "sweep", "workers", "scheduler", "executor", "checkpoint", "connect_timeout",
+        "worker_timeout")
     window = _record("window", window, Window, fields)
     mc = _record("mc", mc, MonteCarlo, fields)
     motion = _record("motion", motion, MotionTolerances, fields)

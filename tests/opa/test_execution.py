@@ -159,3 +159,29 @@ def test_dask_errors_are_failed_runs(cls):
     import opa
 
     assert issubclass(cls, opa.SimulationError)
+
+
+def test_a_field_the_function_does_not_use_is_refused_by_name():
+    """A record set away from its defaults where the function has no use for it (a GPU
+    for a sweep, a chunk size for the stochastic diagram, a checkpoint for the map) is
+    refused naming the field and the function, never silently ignored."""
+    import mc
+    from compare import load_config, run_validation
+    from opa import preset, sweep
+    from opa.dynamics import stochastic_diagram
+
+    osc = preset("3.1", F0=0.0)
+    with pytest.raises(ValueError, match=r"sweep does not use the execution's device"):
+        sweep("dmr", "c", [0.05], osc, execution=Execution(device="cuda"))
+    with pytest.raises(ValueError, match=r"stochastic_diagram does not use the execution's "
+                                         r"chunk_size"):
+        stochastic_diagram(osc, "c", [0.05], sigma=0.03, execution=Execution(chunk_size=8))
+    with pytest.raises(ValueError, match=r"simulate_mc does not use the execution's workers"):
+        mc.simulate_mc(osc, samples=16, periods=1, execution=Execution(workers=2))
+    with pytest.raises(ValueError, match=r"run_validation does not use the execution's "
+                                         r"checkpoint"):
+        run_validation(load_config(None, values=(3.98,), sigmas=(0.01,), orders=(0,),
+                                   horizons=(2,), samples=64, max_samples=64),
+                       execution=Execution(checkpoint="elsewhere"))
+    # display fields are always taken, and an unused field at its default passes
+    assert Execution(progress=False, log=print).only("f", "workers").workers == 1
