@@ -18,6 +18,7 @@ from opa._model import (
 )
 from opa._run import output_times, run, run_batch, stack
 from opa._system import IMPULSE_FIELDS, System, as_system
+from opa._work import check_steps
 
 xr = lazy("xarray")
 
@@ -60,6 +61,9 @@ def simulate_dmr(
                        **impulse_model).deterministic()
     oscillator = system.oscillator
     times = output_times(oscillator, periods, per_period, times)
+    check_steps("this DMR run", float(times[-1] - times[0]), options.max_steps,
+                [("omega", f"{oscillator.omega:g}"),
+                 ("periods", f"{float(times[-1] - times[0]) / oscillator.forcing_period:g}")])
     rec = run(system.kernel_inputs(options), system.initial_state(), times,
               rtol=options.rtol, atol=options.atol, label="DMR trajectory")
     ds = xr.Dataset(
@@ -75,14 +79,19 @@ def simulate_dmr(
     return ds
 
 
-def check_opa_work(system: System, times: np.ndarray, elements, max_elements: int) -> None:
+def check_opa_work(system: System, times: np.ndarray, elements, max_elements: int,
+                   max_steps: int | None = None) -> None:
     """Refuse an OPA run beyond the work budget (:mod:`opa._work`): its systems of 2 (N + 1)
     states over the run, per element, and for adaptive elements the split scan that places
-    them (up to ``SPLIT_BUDGET`` splits, each bisected over the whole run)."""
+    them (up to ``SPLIT_BUDGET`` splits, each bisected over the whole run); and one whose
+    trajectory would need more than ``max_steps`` steps (slow forcing)."""
     from opa._elements import SPLIT_BUDGET
-    from opa._work import check_work
+    from opa._work import check_steps, check_work
 
     periods = float(times[-1] - times[0]) / system.oscillator.forcing_period
+    if max_steps is not None:
+        check_steps("this OPA run", float(times[-1] - times[0]), max_steps,
+                    [("omega", f"{system.oscillator.omega:g}"), ("periods", f"{periods:g}")])
     order = int(system.order)
     adaptive = isinstance(elements, str) and elements == "adaptive"
     try:  # elements are checked later, where they are used; here only counted
@@ -99,7 +108,7 @@ def check_opa_work(system: System, times: np.ndarray, elements, max_elements: in
         drivers.append(("elements", f"adaptive (its split scan: up to {SPLIT_BUDGET} splits)"))
     elif count > 1:
         drivers.append(("elements", count))
-    check_work("this OPA run", work, drivers)
+    check_work("this OPA run", work, drivers, oscillator=system.oscillator)
 
 
 def simulate_opa(
@@ -181,7 +190,7 @@ def simulate_opa(
     system.check_samples()
     oscillator, order = system.oscillator, system.order
     check_opa_work(system, output_times(oscillator, periods, per_period, times), elements,
-                   max_elements)
+                   max_elements, options.max_steps)
     if system.distribution is not None or elements is not None:
         from opa._elements import simulate_elements
 

@@ -394,7 +394,7 @@ WORK_FLAGS = {"samples": "--samples", "periods": "--periods", "order": "--order"
               "elements": "--elements", "values": "--sweep values", "transient": "--transient",
               "record": "--record", "sigmas": "--sigmas", "max_samples": "--max-samples",
               "horizons": "--horizons", "states": "--extra-states",
-              "transient + record": "--transient + --record"}
+              "transient + record": "--transient + --record", "omega": "--omega"}
 
 
 def _one_line(err: BaseException) -> str:
