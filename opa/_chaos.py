@@ -69,7 +69,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import reduce
-from numbers import Integral, Real
+from numbers import Real
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -426,6 +426,15 @@ class ChaosBasis:
         ------
         ValueError
             Bad arguments, or more than :data:`MAX_RULE_NODES` nodes.
+
+        Notes
+        -----
+        Gauss rules are not nested, so the Smolyak grids share few nodes (only the middle
+        node of the odd rules of a symmetric law). For total degree 7 in uniform laws:
+        d = 3, 69 nodes against the tensor rule's 64; d = 4, 137 against 256; d = 5, 241
+        against 1024; degree 3 takes 2d + 1 nodes against 2^d. Hence ``"auto"`` compares
+        the two counts. The combination's coefficients grow with d, and so does the
+        round-off of its sums (weights sum to 1 within 1e-11 at d = 10, degree 11).
 
         Examples
         --------
