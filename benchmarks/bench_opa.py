@@ -52,7 +52,7 @@ def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, work):
 def _rhs_inputs(order):
     oscillator = opa.preset("3.2")
     inputs = System(oscillator, sigma=0.01, order=order).kernel_inputs(opa.SolverOptions())
-    p, cfg, nodes, weights, basis = (inputs.p, inputs.cfg, inputs.nodes, inputs.weights,
+    p, cfg, nodes, weights, basis = (inputs.p, inputs.cfg, inputs.table, inputs.weights,
                                      inputs.basis)
     y = np.random.default_rng(order).normal(scale=0.3, size=2 * (order + 1))
     out = np.empty_like(y)

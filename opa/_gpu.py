@@ -100,7 +100,7 @@ def _kernels():
                   else kernel.integrate_with)
 
     @cuda.jit
-    def ensemble(Y0, include_start, t_out, P, cfgs, nodes, weights, U, rtol, atol, out, logs,
+    def ensemble(Y0, include_start, t_out, P, cfgs, table, weights, U, rtol, atol, out, logs,
                  counters):
         b = cuda.grid(1)
         if b >= P.shape[0]:
@@ -120,7 +120,7 @@ def _kernels():
         none2 = cuda.local.array((1, _STATS), float64)
         none1 = cuda.local.array(1, float64)
         res = _integrate(z, np.int64(0), t_out, include_start, np.bool_(False), P[b],
-                         cfgs[b], nodes[b], weights[b], U[b], rtol, atol, out[b], none2[:0],
+                         cfgs[b], table[b], weights[b], U[b], rtol, atol, out[b], none2[:0],
                          none1[:0], logs[b], k1, k2, f, z_new, ztmp, z_top, f_minus, f_plus,
                          work)
         for j in range(5):
@@ -154,17 +154,17 @@ def _kernels():
     return cuda, ensemble, shifted_sums
 
 
-def _launch(Y0, include_start, times, P, cfgs, nodes, weights, U, rtol, atol, capacity):
+def _launch(Y0, include_start, times, P, cfgs, table, weights, U, rtol, atol, capacity):
     """The ensemble on the device: (device states (B, n_out, 2), logs, counters)."""
     cuda, ensemble, _ = _kernels()
     B = P.shape[0]
     with warnings.catch_warnings():  # a small ensemble is a small grid, and that is fine
         warnings.filterwarnings("ignore", message=".*under-utilization")
-        return _launch_ensemble(cuda, ensemble, B, Y0, include_start, times, P, cfgs, nodes,
+        return _launch_ensemble(cuda, ensemble, B, Y0, include_start, times, P, cfgs, table,
                                 weights, U, rtol, atol, capacity)
 
 
-def _launch_ensemble(cuda, ensemble, B, Y0, include_start, times, P, cfgs, nodes, weights, U,
+def _launch_ensemble(cuda, ensemble, B, Y0, include_start, times, P, cfgs, table, weights, U,
                      rtol, atol, capacity):
     d_out = cuda.device_array((B, len(times), 2))
     d_logs = cuda.device_array((B, max(capacity, 1), 3))
@@ -173,32 +173,32 @@ def _launch_ensemble(cuda, ensemble, B, Y0, include_start, times, P, cfgs, nodes
         cuda.to_device(np.ascontiguousarray(Y0, dtype=float)), np.bool_(include_start),
         cuda.to_device(times), cuda.to_device(np.ascontiguousarray(P, dtype=float)),
         cuda.to_device(np.ascontiguousarray(cfgs, dtype=np.int64)),
-        *(cuda.to_device(np.ascontiguousarray(a, dtype=float)) for a in (nodes, weights, U)),
+        *(cuda.to_device(np.ascontiguousarray(a, dtype=float)) for a in (table, weights, U)),
         float(rtol), float(atol), d_out, d_logs, d_counters)
     return d_out, d_logs, d_counters
 
 
-def _check_inputs(P, cfgs, nodes, U):
+def _check_inputs(P, cfgs, table, U):
     """Only the 2-D true systems: N = 0 and one node (``opa._run.sampled``)."""
-    if nodes.shape[1] != 1 or U.shape[1:] != (1, 2) or np.any(cfgs[:, kernel.C_NCOEF] != 1):
+    if table.shape[1] != 1 or U.shape[1:] != (1, 2) or np.any(cfgs[:, kernel.C_NCOEF] != 1):
         raise ValueError('device="cuda" runs ensembles of the true (sampled) systems only: '
                          "state dimension 2, one node")
 
 
-def run_batch(Y0, include_start, times, P, cfgs, nodes, weights, U, rtol, atol, capacity):
+def run_batch(Y0, include_start, times, P, cfgs, table, weights, U, rtol, atol, capacity):
     """B plain runs of the 2-D true systems on the GPU, as ``opa._kernel.run_batch_from``
     on the CPU: run b from ``Y0[b]`` with ``P[b], cfgs[b]``. Returns (states (B, n_out,
     2), logs (B, capacity, 3), counters (B, 5)) on the host. Every run is made (no run is
     skipped after a failure)."""
     require()
-    _check_inputs(P, cfgs, nodes, U)
-    d_out, d_logs, d_counters = _launch(Y0, include_start, times, P, cfgs, nodes, weights, U,
+    _check_inputs(P, cfgs, table, U)
+    d_out, d_logs, d_counters = _launch(Y0, include_start, times, P, cfgs, table, weights, U,
                                         rtol, atol, capacity)
     logs = d_logs.copy_to_host()[:, :capacity]
     return d_out.copy_to_host(), np.ascontiguousarray(logs), d_counters.copy_to_host()
 
 
-def moments(Y0, include_start, times, P, cfgs, nodes, weights, U, rtol, atol):
+def moments(Y0, include_start, times, P, cfgs, table, weights, U, rtol, atol):
     """The ensemble's mean and variance (ddof 1) of x and v at each output time, reduced
     on the device: only the moments and the counters cross back. Returns (mean (n_out,
     2), var (n_out, 2), finite counts (n_out, 2), counters (B, 5)).
@@ -207,9 +207,9 @@ def moments(Y0, include_start, times, P, cfgs, nodes, weights, U, rtol, atol):
     not cancel), accumulated per block in float64 and added across blocks atomically, so
     the last digits may differ between launches; the states themselves do not."""
     require()
-    _check_inputs(P, cfgs, nodes, U)
+    _check_inputs(P, cfgs, table, U)
     cuda, _, shifted_sums = _kernels()
-    d_out, _, d_counters = _launch(Y0, include_start, times, P, cfgs, nodes, weights, U, rtol,
+    d_out, _, d_counters = _launch(Y0, include_start, times, P, cfgs, table, weights, U, rtol,
                                    atol, 0)
     B, n_out = P.shape[0], len(times)
     ref = d_out[0].copy_to_host()

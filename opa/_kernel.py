@@ -24,9 +24,14 @@ Right-hand side (Galerkin projection on Q Gauss nodes, pseudo-spectral form)::
     v_i' = sum_k w_k U_i(xi_k) g(x_k, v_k; p_k) + [i = 0] (f cos(omega t) + force)
     g(x, v; p) = mu (1 - v^2) v - a x - c x^3,    x_k = sum_j x_j U_j(xi_k)
 
-exact for Q >= 2N + 1 nodes of the semicircle density; the ``paper`` truncation (eq. (27))
+with ``p_k = (mu_k, a_k, c_k)`` the row k of the parameter table: the coefficients at
+node xi_k (xi in d dimensions; the kernel sees only the table, the ``n = N + 1`` basis
+values of each node and the weights, so one code serves every number of uncertain
+parameters and every multi-index set). Exact for Q >= 2N + 1 nodes of the semicircle
+density in one dimension; the ``paper`` truncation (eq. (27), one uncertain parameter)
 adds back ``sigma/2 * Y_{N+1}`` (``X_{N+1}`` for uncertain c) to the last equation.
-The basis is node-major: ``U[k, i] = U_i(xi_k)``, shape (Q, N + 2).
+The basis is node-major: ``U[k, i] = U_i(xi_k)``, shape (Q, n + 1) (the last column,
+U_{N+1}, is read by the paper's closure only).
 
 Steppers: Dormand-Prince 5(4) with Shampine's quartic dense output (``METHOD_DP5``) and
 Dormand-Prince 8(5,3) with its seventh-order dense output (``METHOD_DOP853``, the
@@ -70,12 +75,20 @@ P_F0, P_A1, P_OMEGA1, P_N, P_TAU, P_SIGMA = 7, 8, 9, 10, 11, 12
 P_CHATTER_V, P_HMAX = 13, 14
 N_PARAMS = 15
 
-C_NCOEF, C_UNCERTAIN, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD = range(8)
-N_CFG = 8
+C_NCOEF, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD = range(7)
+N_CFG = 7
 
-UNCERTAIN_MU, UNCERTAIN_A, UNCERTAIN_C = 0, 1, 2
+# Columns of the per-node parameter table ``table`` (Q, N_TABLE): the coefficients of the
+# force law at each quadrature node (or sample). The kernel never learns which parameter
+# is uncertain, nor how many: the Python layer (``opa._problem``) fills the table.
+T_MU, T_A, T_C = 0, 1, 2
+N_TABLE = 3
+
 IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
-TRUNC_GALERKIN, TRUNC_PAPER = 0, 1
+# The paper's closure (eq. (27)) adds back sigma/2 times the projection on U_{N+1} of the
+# cube of the velocities (uncertain mu: PAPER_V) or of the positions (uncertain c: PAPER_X);
+# it exists for one uncertain parameter only.
+TRUNC_GALERKIN, TRUNC_PAPER_V, TRUNC_PAPER_X = 0, 1, 2
 LAW_MEAN, LAW_ENSEMBLE, LAW_SALTATION = 0, 1, 2
 METHOD_DP5, METHOD_DOP853 = 0, 1
 
@@ -365,14 +378,16 @@ def _f2(x, v, mu, a, c, drive, sticking):
 
 
 @njit(cache=True)
-def is_deterministic(m, cfg, nodes):
+def is_deterministic(m, cfg, table, p):
     """The plain two-dimensional system (the DMR or one sample): N = 0, no tangents and
-    the one-node rule at xi = 0."""
-    return m == 0 and cfg[C_NCOEF] == 1 and nodes.shape[0] == 1 and nodes[0] == 0.0
+    a one-node table holding the parameter vector's own coefficients."""
+    return (m == 0 and cfg[C_NCOEF] == 1 and table.shape[0] == 1
+            and table[0, T_MU] == p[P_MU] and table[0, T_A] == p[P_A]
+            and table[0, T_C] == p[P_C])
 
 
 @njit(cache=True)
-def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
+def vector_field(z, m, p, cfg, table, weights, U, drive, sticking, out, work):
     """Write f(t, y) and, for m > 0, J(t, y) W into ``out`` (layout of ``z``).
 
     ``drive`` is the external force at t (``forcing``: harmonic plus pulse). With
@@ -382,14 +397,15 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
     """
     n = cfg[C_NCOEF]
     # is_deterministic written out: a call would count references of three arrays
-    if m == 0 and n == 1 and nodes.shape[0] == 1 and nodes[0] == 0.0:
+    if (m == 0 and n == 1 and table.shape[0] == 1 and table[0, T_MU] == p[P_MU]
+            and table[0, T_A] == p[P_A] and table[0, T_C] == p[P_C]):
         dx, dv = _f2(z[0], z[1], p[P_MU], p[P_A], p[P_C], drive, False)
         out[0] = 0.0 if sticking else dx
         out[1] = 0.0 if sticking else dv
         return dv
     dim = 2 * n
-    q = nodes.shape[0]
-    unc = cfg[C_UNCERTAIN]
+    q = table.shape[0]
+    closure = cfg[C_TRUNC]
     sigma = p[P_SIGMA]
     # work rows 0-5: x and v at the nodes, the Jacobian weights (of x and of v), and one
     # tangent column's x and v at the nodes, indexed in place (a row view counts references)
@@ -414,15 +430,9 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
         out[n + i] = 0.0
     out[n] = g0
     for k in range(q):
-        mu_k = p[P_MU]
-        a_k = p[P_A]
-        c_k = p[P_C]
-        if unc == UNCERTAIN_MU:
-            mu_k = mu_k + sigma * nodes[k]
-        elif unc == UNCERTAIN_A:
-            a_k = a_k + sigma * nodes[k]
-        else:
-            c_k = c_k + sigma * nodes[k]
+        mu_k = table[k, T_MU]
+        a_k = table[k, T_A]
+        c_k = table[k, T_C]
         x = work[0, k]
         v = work[1, k]
         w = weights[k]
@@ -433,12 +443,12 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
         if g != 0.0:
             for i in range(n):
                 out[n + i] += g * U[k, i]
-    paper = cfg[C_TRUNC] == TRUNC_PAPER and sigma != 0.0 and unc != UNCERTAIN_A
+    paper = closure != TRUNC_GALERKIN and sigma != 0.0
     if paper:
         # eq. (27) drops the projection of the xi * cubic term on U_{N+1}: add it back
         extra = 0.0
         for k in range(q):
-            if unc == UNCERTAIN_MU:
+            if closure == TRUNC_PAPER_V:
                 extra += weights[k] * U[k, n] * work[1, k] ** 3
             else:
                 extra += weights[k] * U[k, n] * work[0, k] ** 3
@@ -466,7 +476,7 @@ def vector_field(z, m, p, cfg, nodes, weights, U, drive, sticking, out, work):
         if paper:
             extra = 0.0
             for k in range(q):
-                if unc == UNCERTAIN_MU:
+                if closure == TRUNC_PAPER_V:
                     extra += weights[k] * U[k, n] * 3.0 * work[1, k] ** 2 * work[5, k]
                 else:
                     extra += weights[k] * U[k, n] * 3.0 * work[0, k] ** 2 * work[4, k]
@@ -672,7 +682,7 @@ def store_stages2(K, kx, kv):
 
 
 @njit(cache=True)
-def _stage_rows(t, z, h, K, ztmp, A, C, first, stop, m, p, cfg, nodes, weights, U, force,
+def _stage_rows(t, z, h, K, ztmp, A, C, first, stop, m, p, cfg, table, weights, U, force,
                 sticking, work):
     """Rows first..stop-1 of K: the stages z + h sum_r A[s, r] K[r] at t + C[s] h.
     Returns (cos(omega t), sin(omega t)) for ``stage_forcing`` at the step's end."""
@@ -686,12 +696,12 @@ def _stage_rows(t, z, h, K, ztmp, A, C, first, stop, m, p, cfg, nodes, weights, 
                 acc += A[s, r] * K[r, j]
             ztmp[j] = z[j] + h * acc
         drive = stage_drive(t, C[s], h, p[P_F], p[P_OMEGA], cw, sw, force)
-        vector_field(ztmp, m, p, cfg, nodes, weights, U, drive, sticking, K[s], work)
+        vector_field(ztmp, m, p, cfg, table, weights, U, drive, sticking, K[s], work)
     return cw, sw
 
 
 @njit(cache=True)
-def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force, sticking,
+def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, table, weights, U, force, sticking,
             work):
     """One step of size h from (t, z); K[0] must hold f(t, z).
 
@@ -703,10 +713,10 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force
     A = DP_A if method == METHOD_DP5 else D8_A
     C = DP_C if method == METHOD_DP5 else D8_C
     B = DP_B if method == METHOD_DP5 else D8_B
-    if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes):
+    if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p):
         step2(t, z, h, K, z_new, p, force, sticking, 1.0, 1.0)
         return last
-    cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, np.int64(1), last, m, p, cfg, nodes,
+    cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, np.int64(1), last, m, p, cfg, table,
                          weights, U, force, sticking, work)
     for j in range(size):
         acc = 0.0
@@ -714,7 +724,7 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, nodes, weights, U, force
             acc += B[r] * K[r, j]
         z_new[j] = z[j] + h * acc
     drive = stage_drive(t, 1.0, h, p[P_F], p[P_OMEGA], cw, sw, force)
-    vector_field(z_new, m, p, cfg, nodes, weights, U, drive, sticking, K[last], work)
+    vector_field(z_new, m, p, cfg, table, weights, U, drive, sticking, K[last], work)
     return last
 
 
@@ -779,7 +789,7 @@ def error_norm(method, z, z_new, K, h, rtol, atol):
 # ---------------------------------------------------------------------------
 # Dense output
 @njit(cache=True)
-def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U, force,
+def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights, U, force,
                   sticking, work):
     """Fill F with the dense-output coefficients of the step (t, z) -> (t + h, z_new).
 
@@ -797,9 +807,9 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights,
                     acc += K[s, j] * DP_P[s, d]
                 F[d, j] = h * acc
         return 0
-    if size == 2 and is_deterministic(m, cfg, nodes):
+    if size == 2 and is_deterministic(m, cfg, table, p):
         return dense_prepare2(t, z, z_new, h, K, F, p, force, sticking)
-    _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, np.int64(13), np.int64(16), m, p, cfg, nodes,
+    _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, np.int64(13), np.int64(16), m, p, cfg, table,
                 weights, U, force, sticking, work)
     _dop853_coefficients(z, z_new, h, K, F)
     return 3
@@ -817,14 +827,14 @@ def dense_prepare2(t, z, z_new, h, K, F, p, force, sticking):
 
 
 @njit(cache=True)
-def step_dense(two_d, kx, kv, method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U,
+def step_dense(two_d, kx, kv, method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights, U,
                force, sticking, work):
     """``dense_prepare`` for the step the driver just took (once per step at most): on the
     2-D register path (``two_d``) the stages kx, kv, until now only in registers, are
     stored in K first; ``dense_prepare`` itself picks the 2-D path."""
     if two_d:
         store_stages2(K, kx, kv)
-    return dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, nodes, weights, U,
+    return dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights, U,
                          force, sticking, work)
 
 
@@ -1028,7 +1038,7 @@ IMPACT_ROOT, MAXIMUM_ROOT = 0, 1
 
 
 @njit(cache=True)
-def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes, weights, U,
+def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, table, weights, U,
               force, work):
     """Refine an event found on the dense output by re-stepping exactly to it: Newton on
     g(t + hh) = 0 from hh = theta h, each iterate a fresh Runge-Kutta step from (t, z), so
@@ -1048,7 +1058,7 @@ def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, nodes
     hh = theta * h
     evals = 0
     for _ in range(4):
-        evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, nodes, weights, U, force,
+        evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, table, weights, U, force,
                          off, work)
         if kind == IMPACT_ROOT:
             g = z_new[0] - delta
@@ -1083,7 +1093,7 @@ def _reflect(z, m, n, eta, all_velocities):
 
 
 @njit(cache=True)
-def _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work):
+def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
     """Apply the impact law at x_0 = delta to y and its saltation matrix to W.
 
     Laws: ``mean`` reflects v_0 (eq. (28)); ``ensemble`` every v_i; ``saltation`` applies
@@ -1107,10 +1117,10 @@ def _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work):
     v_minus = z[n]
     evals = 0
     if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
-        a_minus = vector_field(z, m0, p, cfg, nodes, weights, U, forcing(t, p, force), off,
+        a_minus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
                                f_minus, work)
         z[n] = -eta * z[n]
-        a_plus = vector_field(z, m0, p, cfg, nodes, weights, U, forcing(t, p, force), off,
+        a_plus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
                               f_plus, work)
         evals += 2
         k = (a_plus + eta * a_minus) / v_minus
@@ -1121,13 +1131,13 @@ def _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work):
         return v_minus, evals
     ensemble = law != LAW_MEAN
     if m > 0:
-        vector_field(z, m0, p, cfg, nodes, weights, U, forcing(t, p, force), off, f_minus, work)
+        vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off, f_minus, work)
         evals += 1
     top = n if ensemble else 1
     for i in range(top):
         z[n + i] = -eta * z[n + i]
     if m > 0:
-        vector_field(z, m0, p, cfg, nodes, weights, U, forcing(t, p, force), off, f_plus, work)
+        vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off, f_plus, work)
         evals += 1
         for c in range(m):
             w0 = z[dim + c] / v_minus  # e_0^T W / (e_0^T f-)
@@ -1403,7 +1413,7 @@ def contact_changes(sticking, acc, x0, v0, delta):
 
 
 @njit(cache=True, inline="always")
-def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, nodes, weights, U, K,
+def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, table, weights, U, K,
                      work, stats, log):
     """Phase "resume", where ``contact_changes``: sticking ends at t (EV_RELEASE) or
     begins there (EV_STICK: the mean held at rest on the wall by ``_hold``), and f(t, z)
@@ -1418,7 +1428,7 @@ def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, nodes, wei
         n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK))
         if stats.shape[0] > 0:
             stats[seg, S_STICKS] += 1.0
-    vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0], work)
+    vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), sticking, K[0], work)
     return sticking, n_events
 
 
@@ -1462,7 +1472,7 @@ def next_step_size(method, err, h_try, h, is_last):
 
 
 @njit(cache=True, inline="always")
-def chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U, f_minus, work):
+def chatter(t, z, m, v_minus, force, p, cfg, table, weights, U, f_minus, work):
     """Phase "chatter -> stick", after an impact slower than the chatter velocity
     (eta < 1): with the net force into the wall (acceleration g > 0 at rest there) the
     bounces that would follow, of speeds eta^k v-, accumulate after
@@ -1473,7 +1483,7 @@ def chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U, f_minus, work):
     n = cfg[C_NCOEF]
     eta = p[P_ETA]
     z[n] = 0.0
-    acc = vector_field(z, np.int64(0), p, cfg, nodes, weights, U, forcing(t, p, force),
+    acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, forcing(t, p, force),
                        np.bool_(False), f_minus, work)
     if acc > 0.0:
         _hold(z, m, n, cfg[C_LAW])
@@ -1484,7 +1494,7 @@ def chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U, f_minus, work):
 
 @njit(cache=True, inline="always")
 def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impacts, p, cfg,
-                 nodes, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log, escape):
+                 table, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log, escape):
     """Phase "impact": x_0 reaches the wall at theta h into the accepted step from t
     (``wall_crossing`` on its dense output). The state there is a re-step exactly to it
     (``restep_to``: Newton on full Runge-Kutta steps, into z_new); it takes the impact
@@ -1496,11 +1506,11 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
 
     Returns (t, status, sticking, n_events, n_impacts, evaluations), t the impact time."""
     hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h, theta, K, K2, z_new, ztmp,
-                          m, p, cfg, nodes, weights, U, force, work)
+                          m, p, cfg, table, weights, U, force, work)
     t = t + hh
     for j in range(z.shape[0]):
         z[j] = z_new[j]
-    v_minus, e = _impact(t, z, m, p, cfg, nodes, weights, U, force, f_minus, f_plus, work)
+    v_minus, e = _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work)
     evals += e
     n_impacts += 1
     kind = np.int64(EV_GRAZE if v_minus < EVENT_GRAZE_VELOCITY else EV_IMPACT)
@@ -1512,7 +1522,7 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
             stats[seg, S_MIN_VELOCITY] = v_minus
     sticking = False
     if p[P_ETA] < 1.0 and v_minus < p[P_CHATTER_V]:
-        sticking, t_stick = chatter(t, z, m, v_minus, force, p, cfg, nodes, weights, U,
+        sticking, t_stick = chatter(t, z, m, v_minus, force, p, cfg, table, weights, U,
                                     f_minus, work)
         evals += 1
         if sticking:
@@ -1521,23 +1531,23 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
                 stats[seg, S_STICKS] += 1.0
     status = state_status(z, 2 * cfg[C_NCOEF], escape)
     if status == OK:
-        vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
+        vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), sticking, K[0],
                      work)
         evals += 1
     return t, status, sticking, n_events, n_impacts, evals
 
 
 @njit(cache=True, inline="always")
-def pulls_off(t, z, force, p, cfg, nodes, weights, U, f_plus, work):
+def pulls_off(t, z, force, p, cfg, table, weights, U, f_plus, work):
     """Whether the unconstrained acceleration of the mean at rest on the wall turns away
     from it at the state z at t (the release condition of sticking); one evaluation."""
-    acc = vector_field(z, np.int64(0), p, cfg, nodes, weights, U, forcing(t, p, force),
+    acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, forcing(t, p, force),
                        np.bool_(False), f_plus, work)
     return acc < 0.0
 
 
 @njit(cache=True, inline="always")
-def release_event(method, t, h, z, m, force, n_events, p, cfg, nodes, weights, U, K, F, ztmp,
+def release_event(method, t, h, z, m, force, n_events, p, cfg, table, weights, U, K, F, ztmp,
             f_plus, work, log, escape):
     """Phase "release": sticking ends inside the accepted step from t (its dense output F
     ready), where the unconstrained acceleration at rest on the wall turns away from it
@@ -1556,7 +1566,7 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, nodes, weights, U
         ztmp[0] = delta
         ztmp[n] = 0.0
         evals += 1
-        if pulls_off(t + mid * h, ztmp, force, p, cfg, nodes, weights, U, f_plus, work):
+        if pulls_off(t + mid * h, ztmp, force, p, cfg, table, weights, U, f_plus, work):
             hi = mid
         else:
             lo = mid
@@ -1571,14 +1581,14 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, nodes, weights, U
     n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
     status = state_status(z, 2 * n, escape)
     if status == OK:
-        vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), np.bool_(False),
+        vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), np.bool_(False),
                      K[0], work)
         evals += 1
     return t, status, n_events, evals
 
 
 @njit(cache=True, inline="always")
-def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, nodes, weights,
+def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, table, weights,
                     U, force, work, stats):
     """Phase "gap statistics": the highest maximum of x_0 inside the accepted step (dense
     output F ready; ``free_flight_maximum``), refined by re-stepping exactly to it
@@ -1587,7 +1597,7 @@ def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, node
     gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)), p[P_DELTA])
     if gap < stats[seg, S_GAP]:
         _, evals = restep_to(method, np.int64(MAXIMUM_ROOT), t, z, h, theta, K, K2, z_top,
-                             ztmp, m, p, cfg, nodes, weights, U, force, work)
+                             ztmp, m, p, cfg, table, weights, U, force, work)
         stats[seg, S_GAP] = p[P_DELTA] - z_top[0]
         return evals
     return 0
@@ -1596,19 +1606,19 @@ def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, node
 # ---------------------------------------------------------------------------
 # The driver
 @njit(cache=True)
-def integrate(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U, rtol, atol,
+def integrate(z, m, t_out, include_start, renormalise, p, cfg, table, weights, U, rtol, atol,
               out, stats, log_growth, log):
     """Integrate the augmented state ``z`` in place through the output times ``t_out``:
     ``integrate_with`` on freshly allocated work arrays (``allocate_scratch``)."""
     K, K2, F, z_new, ztmp, z_top, f_minus, f_plus, work = allocate_scratch(
-        z.shape[0], 2 * cfg[C_NCOEF], nodes.shape[0])
-    return integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U,
+        z.shape[0], 2 * cfg[C_NCOEF], table.shape[0])
+    return integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weights, U,
                           rtol, atol, out, stats, log_growth, log, K, K2, F, z_new, ztmp, z_top,
                           f_minus, f_plus, work)
 
 
 @njit(cache=True, inline="always")
-def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weights, U, rtol,
+def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weights, U, rtol,
                    atol, out, stats, log_growth, log, K, K2, F, z_new, ztmp, z_top, f_minus,
                    f_plus, work):
     """Integrate the augmented state ``z`` in place through the output times ``t_out``,
@@ -1630,7 +1640,8 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
         collapsed it; W then restarts from equal entries): Benettin's loop with the
         exact tangent map.
     p, cfg : parameter and configuration vectors (the ``P_*`` and ``C_*`` indices).
-    nodes, weights : (Q,) Gauss rule; U : (Q, N + 2) node-major basis values.
+    table : (Q, N_TABLE) the coefficients of the force law at each node; weights : (Q,)
+        the rule's weights; U : (Q, n + 1) node-major basis values.
     out : (n_out, D) the states at ``t_out`` (W is not stored); rows not reached are NaN.
     stats : (n_out - 1, N_STATS) per-interval statistics (impacts, smallest pre-impact
         velocity, sticking episodes, steps, sticking at the end, smallest free-flight
@@ -1664,7 +1675,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
     # the 2-D register path, decided once: its trial step takes and returns scalars only
-    two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, nodes)
+    two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p)
     mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
     kx = kv = _NO_STAGES
     off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
@@ -1706,12 +1717,12 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
             seg = k_out - 1
         t_break = next_breakpoint(t_out[k_out], t_imp, force_end, snap)
         # ---- resume: f(t, z) for the next step; sticking may end or begin at t itself
-        acc = vector_field(z, m, p, cfg, nodes, weights, U, forcing(t, p, force), sticking, K[0],
+        acc = vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), sticking, K[0],
                            work)
         n_rhs += 1
         if contact_changes(sticking, acc, z[0], z[n], delta):
             sticking, n_events = stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg,
-                                                  nodes, weights, U, K, work, stats, log)
+                                                  table, weights, U, K, work, stats, log)
             n_rhs += 1
         if h == 0.0:  # the first step: a fraction of the interval, then the controller's
             h = min(1e-3, 0.01 * (t_break - t) + 1e-12)
@@ -1735,7 +1746,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
                     sticking, rtol, atol)
                 n_rhs += last
             else:
-                n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, nodes, weights,
+                n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, table, weights,
                                  U, force, sticking, work)
                 err = error_norm(method, z, z_new, K, h_try, rtol, atol)
                 margin = wall_margin(K, last, n, h_try)
@@ -1756,7 +1767,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
             # ---- events inside the accepted step, on its dense output
             if sticking:  # sticking ends inside the step?
                 n_rhs += 1
-                jump = pulls_off(t + h_try, z_new, force, p, cfg, nodes, weights, U, f_plus, work)
+                jump = pulls_off(t + h_try, z_new, force, p, cfg, table, weights, U, f_plus, work)
                 near_wall = near_top = off
             else:  # an impact, or a free-flight maximum closer than the smallest gap so far?
                 jump = off
@@ -1765,10 +1776,10 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
                     z[0], z_new[0], margin, delta - stats[seg, S_GAP])
             if jump or near_wall or near_top:
                 n_rhs += step_dense(two_d, kx, kv, method, t, z, z_new, h_try, K, F, ztmp, m, p,
-                                    cfg, nodes, weights, U, force, sticking, work)
+                                    cfg, table, weights, U, force, sticking, work)
             if jump:
                 t, status, n_events, evals = release_event(method, t, h_try, z, m, force,
-                                                           n_events, p, cfg, nodes, weights, U,
+                                                           n_events, p, cfg, table, weights, U,
                                                            K, F, ztmp, f_plus, work, log, escape)
                 n_rhs += evals
                 sticking = off
@@ -1778,7 +1789,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
                 if jump:
                     t, status, sticking, n_events, n_impacts, evals = impact_event(
                         method, t, h_try, theta, z, z_new, m, force, seg, n_events, n_impacts, p,
-                        cfg, nodes, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log,
+                        cfg, table, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log,
                         escape)
                     n_rhs += evals
                     h_next = max(h_next * 0.5, 1e-10)
@@ -1792,7 +1803,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
                 continue
             if near_top:
                 n_rhs += free_flight_gap(method, t, z, h_try, seg, K, K2, F, z_top, ztmp, m, p,
-                                         cfg, nodes, weights, U, force, work, stats)
+                                         cfg, table, weights, U, force, work, stats)
             # ---- accept: advance to the step's end (held on the wall while sticking)
             t = t_break if is_last else t + h_try
             if two_d:
@@ -1821,19 +1832,19 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, nodes, weigh
 # samples of an ensemble, the elements of a multi-element system, the configurations of
 # one OPA system, the event logs of sampled systems), so that it is compiled once.
 @njit(cache=True)
-def run_one(y0, t_out, p, cfg, nodes, weights, U, rtol, atol, out, log):
+def run_one(y0, t_out, p, cfg, table, weights, U, rtol, atol, out, log):
     """One plain trajectory from y0 (not modified) with the impulse at t_out[0] applied:
     the DMR, one Monte Carlo sample or one OPA system. Returns what ``integrate`` does."""
     z = y0.copy()
     # typed arguments: the signature of a call from Python, so integrate compiles once
-    return integrate(z, np.int64(0), t_out, np.bool_(True), np.bool_(False), p, cfg, nodes,
+    return integrate(z, np.int64(0), t_out, np.bool_(True), np.bool_(False), p, cfg, table,
                      weights, U, rtol, atol, out, np.empty((0, N_STATS)), np.empty(0), log)
 
 
 @njit(cache=True, parallel=True)
-def run_batch(y0, t_out, P, cfgs, nodes, weights, U, rtol, atol, out, logs, counters, abort):
+def run_batch(y0, t_out, P, cfgs, table, weights, U, rtol, atol, out, logs, counters, abort):
     """B plain runs in parallel: run b starts from y0 with parameters ``P[b]``,
-    configuration ``cfgs[b]`` and rule ``nodes[b], weights[b], U[b]`` (node-major).
+    configuration ``cfgs[b]`` and rule ``table[b], weights[b], U[b]`` (node-major).
 
     out : (B, n_out, dim); logs : (B, cap, 3) (cap may be 0); counters : (B, 5) with the
     status, events, impacts, steps and right-hand sides of each run.
@@ -1847,7 +1858,7 @@ def run_batch(y0, t_out, P, cfgs, nodes, weights, U, rtol, atol, out, logs, coun
         if abort[0] > 0:
             counters[b, 0] = SKIPPED
             continue
-        res = run_one(y0, t_out, P[b], cfgs[b], nodes[b], weights[b], U[b], rtol, atol, out[b],
+        res = run_one(y0, t_out, P[b], cfgs[b], table[b], weights[b], U[b], rtol, atol, out[b],
                       logs[b])
         for j in range(5):
             counters[b, j] = res[j]
@@ -1856,7 +1867,7 @@ def run_batch(y0, t_out, P, cfgs, nodes, weights, U, rtol, atol, out, logs, coun
 
 
 @njit(cache=True, parallel=True)
-def run_batch_from(Y0, include_start, t_out, P, cfgs, nodes, weights, U, rtol, atol, out,
+def run_batch_from(Y0, include_start, t_out, P, cfgs, table, weights, U, rtol, atol, out,
                    logs, counters):
     """B plain runs in parallel, as ``run_batch`` but each from its own state ``Y0[b]``
     (B, dim), with the impulse at ``t_out[0]`` applied only if ``include_start`` (runs
@@ -1865,7 +1876,7 @@ def run_batch_from(Y0, include_start, t_out, P, cfgs, nodes, weights, U, rtol, a
     for b in prange(B):
         z = Y0[b].copy()
         res = integrate(z, np.int64(0), t_out, include_start, np.bool_(False), P[b], cfgs[b],
-                        nodes[b], weights[b], U[b], rtol, atol, out[b],
+                        table[b], weights[b], U[b], rtol, atol, out[b],
                         np.empty((0, N_STATS)), np.empty(0), logs[b])
         for j in range(5):
             counters[b, j] = res[j]

@@ -116,13 +116,13 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     f8, i8, b1 = nt.float64, nt.int64, nt.boolean
     v, m, iv = nt.float64[::1], nt.float64[:, ::1], nt.int64[::1]
     table_v, table_m = nt.Array(f8, 1, "C", readonly=True), nt.Array(f8, 2, "C", readonly=True)
-    system = (v, iv, v, v, m)  # p, cfg, nodes, weights, U
+    system = (v, iv, m, v, m)  # p, cfg, table, weights, U
     column = nt.UniTuple(f8, 7)  # a component's dense-output coefficients
     stages = nt.UniTuple(f8, 12)  # one component's stages of a 2-D DOP853 step
     helper = {  # leaves and the 2-D stepper: nothing here calls the vector field; what
         # the main group calls first comes first (the main group's leaves give the
         # helper the time to finish the 2-D step before rk_step needs it)
-        "is_deterministic": (i8, iv, v),
+        "is_deterministic": (i8, iv, m, v),
         "last_stage": (i8,),
         "_stages2_dop853": (f8,) * 14 + (b1,),
         "_error2": (f8,) * 7 + (stages, stages, f8, f8),
@@ -404,9 +404,11 @@ PARAMETER_SLOTS = {
 }
 #: the kernel's codes of each named choice
 CHOICE_CODES = {
-    "uncertain": {"mu": kernel.UNCERTAIN_MU, "a": kernel.UNCERTAIN_A, "c": kernel.UNCERTAIN_C},
     "impulse": {"dirac": kernel.IMPULSE_DIRAC, "pulse": kernel.IMPULSE_PULSE},
-    "truncation": {"galerkin": kernel.TRUNC_GALERKIN, "paper": kernel.TRUNC_PAPER},
+    # the truncation's closure term: none (Galerkin), or the paper's on the velocities
+    # (uncertain mu) or the positions (uncertain c)
+    "closure": {"none": kernel.TRUNC_GALERKIN, "velocity": kernel.TRUNC_PAPER_V,
+                "position": kernel.TRUNC_PAPER_X},
     "impact_law": {"mean": kernel.LAW_MEAN, "ensemble": kernel.LAW_ENSEMBLE,
                    "saltation": kernel.LAW_SALTATION},
     "method": {"dop853": kernel.METHOD_DOP853, "dp5": kernel.METHOD_DP5},
@@ -415,23 +417,26 @@ CHOICE_CODES = {
 
 @dataclass(frozen=True)
 class Inputs:
-    """What the kernel integrates: the parameter vector ``p``, the configuration ``cfg``
-    and the Gauss rule (nodes, weights, basis node-major (Q, N + 2)) of one system, or
-    of B systems with a leading axis on each (:func:`stack`). Built by
-    ``opa.System.kernel_inputs`` and :func:`sampled`, read only here."""
+    """What the kernel integrates: the parameter vector ``p``, the configuration ``cfg``,
+    the parameter table (the coefficients mu, a, c at each node, shape (Q, N_TABLE)) and
+    the rule's weights and basis node-major (Q, n + 1) of one system, or of B systems
+    with a leading axis on each (:func:`stack`). Built by ``opa.System.kernel_inputs``
+    and :func:`sampled`, read only here."""
 
     p: np.ndarray
     cfg: np.ndarray
-    nodes: np.ndarray
+    table: np.ndarray
     weights: np.ndarray
     basis: np.ndarray
 
 
 def pack(values: dict, *, order: int, max_steps: int, impulse_at_zero: bool,
-         rule, **choices) -> Inputs:
+         rule, table, **choices) -> Inputs:
     """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
-    order N, the step limit, the impulse train's start, the named choices of
-    :data:`CHOICE_CODES` and ``rule``, :func:`quadrature`'s (nodes, weights, basis)."""
+    number of coefficients ``order + 1``, the step limit, the impulse train's start, the
+    named choices of :data:`CHOICE_CODES`, ``rule`` (:func:`quadrature`'s nodes, weights
+    and basis degree-major) and ``table``, the coefficients of the force law at each of
+    its nodes (Q, N_TABLE)."""
     p = np.zeros(kernel.N_PARAMS)
     for name, value in values.items():
         p[PARAMETER_SLOTS[name]] = value
@@ -439,32 +444,42 @@ def pack(values: dict, *, order: int, max_steps: int, impulse_at_zero: bool,
     cfg[kernel.C_NCOEF] = order + 1
     cfg[kernel.C_AT_ZERO] = int(impulse_at_zero)
     cfg[kernel.C_MAXSTEPS] = int(max_steps)
-    slots = {"uncertain": kernel.C_UNCERTAIN, "impulse": kernel.C_IMPULSE,
-             "truncation": kernel.C_TRUNC, "impact_law": kernel.C_LAW,
-             "method": kernel.C_METHOD}
+    slots = {"impulse": kernel.C_IMPULSE, "closure": kernel.C_TRUNC,
+             "impact_law": kernel.C_LAW, "method": kernel.C_METHOD}
     for name, value in choices.items():
         cfg[slots[name]] = CHOICE_CODES[name][value]
-    nodes, weights, basis = kernel_quadrature(rule)
-    return Inputs(p, cfg, nodes, weights, basis)
+    _, weights, basis = kernel_quadrature(rule)
+    table = np.ascontiguousarray(table, dtype=float)
+    if table.shape != (len(weights), kernel.N_TABLE):
+        raise ValueError(f"the parameter table must have shape ({len(weights)}, "
+                         f"{kernel.N_TABLE}), got {table.shape}")
+    return Inputs(p, cfg, table, weights, basis)
 
 
 def stack(inputs) -> Inputs:
     """B systems' inputs as one batch (each must have the same rule size)."""
     return Inputs(*(np.ascontiguousarray(np.stack([getattr(i, f) for i in inputs]))
-                    for f in ("p", "cfg", "nodes", "weights", "basis")))
+                    for f in ("p", "cfg", "table", "weights", "basis")))
 
 
-def sampled(inputs: Inputs, parameter: str, values) -> Inputs:
-    """B sampled deterministic systems (N = 0, the one-node rule at xi = 0) that are
-    ``inputs`` (a deterministic system's) with ``parameter`` at each of ``values``."""
-    values = np.asarray(values, dtype=float)
-    B = len(values)
+#: the parameter vector's slots of the table's columns
+TABLE_SLOTS = (kernel.P_MU, kernel.P_A, kernel.P_C)
+
+
+def sampled(inputs: Inputs, columns: dict) -> Inputs:
+    """B sampled deterministic systems (N = 0, a one-node table of their own
+    coefficients) that are ``inputs`` (a deterministic system's) with each named
+    parameter of ``columns`` at its B values."""
+    columns = {name: np.asarray(values, dtype=float) for name, values in columns.items()}
+    B = len(next(iter(columns.values())))
     P = np.repeat(np.asarray(inputs.p)[None, :], B, axis=0)
-    P[:, PARAMETER_SLOTS[parameter]] = values
+    for name, values in columns.items():
+        P[:, PARAMETER_SLOTS[name]] = values
     cfgs = np.repeat(np.asarray(inputs.cfg)[None, :], B, axis=0)
     U = np.zeros((B, 1, 2))
     U[:, 0, 0] = 1.0
-    return Inputs(P, cfgs, np.zeros((B, 1)), np.ones((B, 1)), U)
+    table = np.ascontiguousarray(P[:, None, list(TABLE_SLOTS)])
+    return Inputs(P, cfgs, table, np.ones((B, 1)), U)
 
 
 # ---------------------------------------------------------------------------- the record
@@ -743,7 +758,7 @@ def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "tr
         z = np.concatenate([y0, W.ravel()])
         prepare_kernels(kernel.integrate)
         status, n_events, n_impacts, n_steps, n_rhs = kernel.integrate(
-            z, m, times, include_start, renormalise, inputs.p, cfg, inputs.nodes,
+            z, m, times, include_start, renormalise, inputs.p, cfg, inputs.table,
             inputs.weights, inputs.basis, rtol, atol, out, stats, growth, log)
         if not events or n_events <= capacity:
             break
@@ -810,7 +825,7 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
 
         out, logs, counters = _gpu.run_batch(
             np.broadcast_to(y0, (B, dim)), include_start, times, inputs.p, cfgs,
-            inputs.nodes, inputs.weights, inputs.basis, rtol, atol, capacity)
+            inputs.table, inputs.weights, inputs.basis, rtol, atol, capacity)
         return Batch(out, logs, counters, guarded)
     quiet_threads()
     apply_thread_grant()
@@ -819,14 +834,14 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
         kernel.run_batch_from(np.ascontiguousarray(np.broadcast_to(y0, (B, dim))),
                               bool(include_start), times, np.ascontiguousarray(inputs.p), cfgs,
                               *(np.ascontiguousarray(a, dtype=float)
-                                for a in (inputs.nodes, inputs.weights, inputs.basis)),
+                                for a in (inputs.table, inputs.weights, inputs.basis)),
                               rtol, atol, out, logs, counters)
         return Batch(out, logs, counters, guarded)
     abort = np.array([0 if stop_on_failure else -1], dtype=np.int64)
     prepare_kernels(kernel.run_batch)
     kernel.run_batch(y0, times, np.ascontiguousarray(inputs.p), cfgs,
                      *(np.ascontiguousarray(a, dtype=float)
-                       for a in (inputs.nodes, inputs.weights, inputs.basis)),
+                       for a in (inputs.table, inputs.weights, inputs.basis)),
                      rtol, atol, out, logs, counters, abort)
     return Batch(out, logs, counters, guarded)
 
@@ -845,4 +860,4 @@ def gpu_moments(inputs: Inputs, y0, times, *, rtol: float, atol: float,
     B = len(inputs.p)
     _count(y0.shape[-1], inputs.p, times, True)
     return _gpu.moments(np.broadcast_to(y0, (B, y0.shape[-1])), True, times, inputs.p, cfgs,
-                        inputs.nodes, inputs.weights, inputs.basis, rtol, atol)
+                        inputs.table, inputs.weights, inputs.basis, rtol, atol)

@@ -28,6 +28,7 @@ from opa._model import (
     check_flag,
     check_order,
 )
+from opa._problem import Problem
 from opa._run import Inputs, pack, quadrature, sampled
 
 #: the intensity of the uncertain parameter when none is given (every entry point)
@@ -114,9 +115,25 @@ class System:
     def __post_init__(self):
         if not isinstance(self.oscillator, Oscillator):
             raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r:.80}")
-        unc = Uncertainty(self.sigma, self.uncertain, self.allow_negative)
-        object.__setattr__(self, "sigma", unc.sigma)
-        object.__setattr__(self, "allow_negative", bool(self.allow_negative))
+        if isinstance(self.uncertain, Problem):
+            problem = self.uncertain
+        else:
+            problem = Problem(self.uncertain, self.sigma, self.distribution,
+                              self.allow_negative)
+        if problem.dimension == 1:  # the fields as they always were
+            unc = Uncertainty(problem.scales[0], problem.names[0], problem.allow_negative)
+            object.__setattr__(self, "uncertain", unc.parameter)
+            object.__setattr__(self, "sigma", unc.sigma)
+            object.__setattr__(self, "distribution", problem.laws[0])
+        else:
+            object.__setattr__(self, "uncertain", problem.names)
+            object.__setattr__(self, "sigma", problem.scales)
+            object.__setattr__(self, "distribution", problem.laws)
+            if self.truncation == "paper":
+                raise ValueError("truncation 'paper' (eq. (27)) closes the system of one "
+                                 f"uncertain parameter; this system has {problem.dimension} "
+                                 f"({','.join(problem.names)}): use truncation 'galerkin'")
+        object.__setattr__(self, "allow_negative", problem.allow_negative)
         object.__setattr__(self, "order", check_order(self.order))
         _choice("truncation", self.truncation, TRUNCATIONS)
         _choice("impact_law", self.impact_law, IMPACT_LAWS)
@@ -131,24 +148,39 @@ class System:
                 f"pulse_width must be shorter than the impulse period 2 pi/omega1 = "
                 f"{self.impulse_period:.6g}, got {tau}")
         object.__setattr__(self, "pulse_width", tau)
-        if self.distribution is not None:
-            self.measure  # noqa: B018 -- parses (and so checks) the distribution
 
     # ------------------------------------------------------------------ the uncertainty
     @property
+    def problem(self) -> Problem:
+        """The uncertain parameters, their scales and joint law (:class:`opa.Problem`)."""
+        return Problem(self.uncertain, self.sigma, self.distribution, self.allow_negative)
+
+    @property
+    def dimension(self) -> int:
+        """d, the number of uncertain parameters."""
+        return 1 if isinstance(self.uncertain, str) else len(self.uncertain)
+
+    def one_dimensional(self, where: str) -> System:
+        """This system, when it has one uncertain parameter; else one line saying that
+        ``where`` takes one."""
+        if self.dimension > 1:
+            raise ValueError(f"{where} takes one uncertain parameter; this system has "
+                             f"{self.dimension} ({','.join(self.uncertain)})")
+        return self
+
+    @property
     def measure(self):
-        """The law of xi as an ``opa._measure.Measure``."""
+        """The law of xi as an ``opa._measure.Measure`` (one uncertain parameter)."""
         from opa._measure import parse
 
+        self.one_dimensional("the law of xi as one Measure")
         return parse(self.distribution)
 
     @property
     def semicircle(self) -> bool:
         """Whether xi has the paper's law, the semicircle on [-1, 1]."""
-        if self.distribution is None:
-            return True
-        measure = self.measure
-        return measure.name == "semicircle" and measure.is_whole
+        problem = self.problem
+        return all(problem.is_semicircle(j) for j in range(problem.dimension))
 
     @property
     def support(self) -> tuple[float, float]:
@@ -159,20 +191,15 @@ class System:
 
     def check_samples(self) -> None:
         """Refuse samples ``p_bar + sigma xi < 0`` over xi's support unless allowed."""
-        mean = getattr(self.oscillator, self.uncertain)
-        lo = self.support[0]
-        lowest = mean + self.sigma * lo
-        if not self.allow_negative and lowest < 0.0 <= mean:
-            raise ValueError(
-                f"sigma = {self.sigma} with xi down to {lo:g} makes {self.uncertain} = "
-                f"{mean:g} + sigma xi = {lowest:.6g} negative for some samples; pass "
-                f"allow_negative=True (--allow-negative) if that is intended")
+        self.problem.check(self.oscillator)
 
     def deterministic(self) -> System:
         """The same oscillator and impulse model without uncertainty: the DMR (N = 0,
         sigma = 0, the default closures)."""
-        return dataclasses.replace(self, sigma=0.0, order=0, distribution=None,
-                                   truncation="galerkin", impact_law="mean")
+        first = self.uncertain if self.dimension == 1 else self.uncertain[0]
+        return dataclasses.replace(self, uncertain=first, sigma=0.0, order=0,
+                                   distribution=None, truncation="galerkin",
+                                   impact_law="mean")
 
     def replace(self, **changes) -> System:
         """A copy with some fields changed (validated again); the oscillator's parameters
@@ -243,20 +270,31 @@ class System:
                       F0=o.F0, a1=o.a1, omega1=o.omega1, n=o.n, pulse_width=self.pulse_width,
                       sigma=self.sigma, chatter_velocity=options.chatter_velocity,
                       max_step=options.max_step)
+        rule = quadrature(self.order) if rule is None else rule
         return pack(values, order=self.order, max_steps=options.max_steps,
-                    impulse_at_zero=self.impulse_at_zero,
-                    rule=quadrature(self.order) if rule is None else rule,
-                    uncertain=self.uncertain, impulse=self.impulse,
-                    truncation=self.truncation, impact_law=self.impact_law,
+                    impulse_at_zero=self.impulse_at_zero, rule=rule,
+                    table=self.problem.table(rule[0], o), impulse=self.impulse,
+                    closure=self.closure, impact_law=self.impact_law,
                     method=options.method)
+
+    @property
+    def closure(self) -> str:
+        """The truncation's closure term in the kernel's words: ``none`` (Galerkin), or
+        the paper's (eq. (27)) on the velocities (uncertain mu) or positions (uncertain
+        c); the paper's has no such term for an uncertain a."""
+        if self.truncation != "paper" or self.uncertain == "a":
+            return "none"
+        return "velocity" if self.uncertain == "mu" else "position"
 
     def sampled_inputs(self, options: SolverOptions, *, xi=None, values=None) -> Inputs:
         """The kernel's inputs of the sampled deterministic systems: the uncertain
-        parameter at ``values`` (absolute) or at ``p_bar + sigma xi``."""
+        parameters at ``p_bar + sigma xi`` (``xi`` (M,) or (M, d)), or the one uncertain
+        parameter at ``values`` (absolute)."""
         if values is None:
-            mean = float(getattr(self.oscillator, self.uncertain))
-            values = mean + self.sigma * np.asarray(xi, dtype=float)
-        return sampled(self.deterministic().kernel_inputs(options), self.uncertain, values)
+            columns = self.problem.values(xi, self.oscillator)
+        else:
+            columns = {self.one_dimensional("values=").uncertain: values}
+        return sampled(self.deterministic().kernel_inputs(options), columns)
 
     def initial_state(self, initial=None) -> np.ndarray:
         """The start of a run: x_0 = x0, v_0 = v0 and the higher coefficients 0, or
@@ -278,7 +316,14 @@ class System:
         return y
 
     def dataset_attrs(self) -> dict:
-        """The system's dataset attributes (docs/datasets.md; netCDF-safe types)."""
+        """The system's dataset attributes (docs/datasets.md; netCDF-safe types): with
+        several uncertain parameters ``uncertain`` is their comma-separated names and
+        ``sigma`` the vector of their scales."""
+        if self.dimension > 1:
+            return dict(self.problem.attrs(), N=int(self.order), impulse=self.impulse,
+                        pulse_width=float(self.pulse_width),
+                        impulse_at_zero=int(self.impulse_at_zero),
+                        truncation=self.truncation, impact_law=self.impact_law)
         return dict(sigma=float(self.sigma), N=int(self.order), uncertain=self.uncertain,
                     impulse=self.impulse, pulse_width=float(self.pulse_width),
                     impulse_at_zero=int(self.impulse_at_zero), truncation=self.truncation,

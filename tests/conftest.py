@@ -13,4 +13,4 @@ def kernel_inputs(oscillator, options, **fields):
 
 def rule(inputs):
     """The node-major Gauss rule of ``inputs``: (nodes, weights, basis)."""
-    return inputs.nodes, inputs.weights, inputs.basis
+    return inputs.table, inputs.weights, inputs.basis

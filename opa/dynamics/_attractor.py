@@ -132,7 +132,7 @@ def sample_inputs(system: System, options: SolverOptions, values) -> Inputs:
 
 def row(inputs: Inputs, b: int) -> Inputs:
     """System b of stacked inputs."""
-    return Inputs(inputs.p[b], inputs.cfg[b], inputs.nodes[b], inputs.weights[b],
+    return Inputs(inputs.p[b], inputs.cfg[b], inputs.table[b], inputs.weights[b],
                   inputs.basis[b])
 
 
@@ -140,7 +140,7 @@ def settle(system: System, inputs: Inputs, state, *, options: SolverOptions,
            settings: Settings = Settings()) -> Attractor:
     """The attractor of one system (``inputs`` one row of ``sample_inputs``) from
     ``state`` (x, v) at t = 0: :func:`settle_batch` of one."""
-    stacked = Inputs(*(np.asarray(a)[None] for a in (inputs.p, inputs.cfg, inputs.nodes,
+    stacked = Inputs(*(np.asarray(a)[None] for a in (inputs.p, inputs.cfg, inputs.table,
                                                       inputs.weights, inputs.basis)))
     return settle_batch(system, stacked, np.asarray(state, dtype=float)[None],
                         options=options, settings=settings)[0]
@@ -189,7 +189,7 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
             times = system.snap_to_impulses(times, 1e-9 * T)
         twins = active[twin_on[active]]
         rows = np.concatenate([active, twins])
-        sub = Inputs(*(np.asarray(a)[rows] for a in (inputs.p, inputs.cfg, inputs.nodes,
+        sub = Inputs(*(np.asarray(a)[rows] for a in (inputs.p, inputs.cfg, inputs.table,
                                                      inputs.weights, inputs.basis)))
         batch = run_batch(sub, np.concatenate([y[active], twin[twins]]), times,
                           rtol=options.rtol, atol=options.atol, capacity=16 * n + 64,

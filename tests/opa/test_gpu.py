@@ -69,7 +69,7 @@ def test_the_gpu_runs_only_true_systems():
     inputs = system.kernel_inputs(opa.SolverOptions())
     P, cfg = inputs.p[None, :], inputs.cfg[None, :]
     with pytest.raises(ValueError, match="true \\(sampled\\) systems only"):
-        _gpu._check_inputs(P, cfg, inputs.nodes[None, :], inputs.basis[None, :])
+        _gpu._check_inputs(P, cfg, inputs.table[None, :], inputs.basis[None, :])
 
 
 def test_the_simulated_gpu_gives_the_cpu_kernel_result():

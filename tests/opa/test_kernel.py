@@ -112,9 +112,9 @@ def test_the_packer_puts_every_model_field_in_its_slot():
     assert len(want) == kernel.N_PARAMS
     for slot, value in want.items():
         assert p[slot] == value, slot
-    want_cfg = {kernel.C_NCOEF: 8, kernel.C_UNCERTAIN: kernel.UNCERTAIN_C,
+    want_cfg = {kernel.C_NCOEF: 8,
                 kernel.C_IMPULSE: kernel.IMPULSE_PULSE, kernel.C_AT_ZERO: 0,
-                kernel.C_TRUNC: kernel.TRUNC_PAPER, kernel.C_LAW: kernel.LAW_SALTATION,
+                kernel.C_TRUNC: kernel.TRUNC_PAPER_X, kernel.C_LAW: kernel.LAW_SALTATION,
                 kernel.C_MAXSTEPS: 12345, kernel.C_METHOD: kernel.METHOD_DP5}
     assert len(want_cfg) == kernel.N_CFG
     for slot, value in want_cfg.items():
@@ -125,8 +125,18 @@ def test_the_packer_puts_every_model_field_in_its_slot():
                         uncertain="a", truncation="galerkin", impact_law="ensemble").cfg
     assert (cfg[kernel.C_IMPULSE], cfg[kernel.C_METHOD], cfg[kernel.C_AT_ZERO]) == (
         kernel.IMPULSE_DIRAC, kernel.METHOD_DOP853, 1)
-    assert (cfg[kernel.C_UNCERTAIN], cfg[kernel.C_TRUNC], cfg[kernel.C_LAW]) == (
-        kernel.UNCERTAIN_A, kernel.TRUNC_GALERKIN, kernel.LAW_ENSEMBLE)
+    assert (cfg[kernel.C_TRUNC], cfg[kernel.C_LAW]) == (kernel.TRUNC_GALERKIN,
+                                                        kernel.LAW_ENSEMBLE)
+    # the paper's closure: on the velocities for an uncertain mu, none for an uncertain a
+    for uncertain, closure in (("mu", kernel.TRUNC_PAPER_V), ("a", kernel.TRUNC_GALERKIN)):
+        cfg = kernel_inputs(osc, opts, sigma=0.061, order=7, uncertain=uncertain,
+                            truncation="paper").cfg
+        assert cfg[kernel.C_TRUNC] == closure, uncertain
+    # the table: the force law's coefficients at each node, the uncertain one c + sigma xi
+    nodes = opa.gauss_nodes(15)[0]
+    assert np.array_equal(inputs.table[:, kernel.T_C], 0.17 + 0.061 * nodes)
+    assert np.all(inputs.table[:, kernel.T_MU] == 0.11)
+    assert np.all(inputs.table[:, kernel.T_A] == 1.13)
     # the x0, v0 fields are the initial state, not parameters
     assert osc.x0 not in p and osc.v0 not in p
 
@@ -283,24 +293,34 @@ def test_the_unrolled_steps_are_generated_from_the_tableaux():
     assert kernel_steps_source() in source
 
 
+def two_node_rule(inputs):
+    """The DMR's rule written with two nodes, the second of weight 0: the same system,
+    but not the kernel's one-node deterministic case, so its general loop runs (each
+    node's deviation from the force at the mean state is exactly 0)."""
+    table, weights, U = rule(inputs)
+    return (np.ascontiguousarray(np.repeat(table, 2, axis=0)), np.array([1.0, 0.0]),
+            np.ascontiguousarray(np.repeat(U, 2, axis=0)))
+
+
 @pytest.mark.parametrize("method", [kernel.METHOD_DOP853, kernel.METHOD_DP5])
 @pytest.mark.parametrize("h, force, sticking", [(0.07, 0.0, False), (0.3, 0.8, False),
                                                 (1.0, 0.0, False), (0.07, 0.5, True)])
 def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h, force,
                                                                        sticking):
     """The same step and dense output by the unrolled 2-D path and by the general loop
-    (forced by a one-node rule at a node that is not exactly 0, with sigma = 0): every
-    stage, the new state and every dense-output coefficient equal."""
+    (forced by :func:`two_node_rule`): every stage, the new state and every dense-output
+    coefficient equal."""
     osc = opa.preset("3.2")
     inputs = kernel_inputs(osc, opa.SolverOptions())
     p, cfg = inputs.p, inputs.cfg
     nodes, weights, U = rule(inputs)
-    general_nodes = np.array([1e-300])
+    general_nodes, general_weights, general_U = two_node_rule(inputs)
     z = np.array([-0.37, 0.81])
     stages, results = [], []
-    for rule_nodes in (nodes, general_nodes):
+    for rule_nodes, weights, U in ((nodes, weights, U),
+                                   (general_nodes, general_weights, general_U)):
         Ks = np.zeros((kernel.K_ROWS, 2))
-        work = np.empty((6, 1))
+        work = np.empty((6, 2))
         drive = kernel.forcing(2.3, p, force)
         kernel.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, sticking, Ks[0], work)
         z_new = np.empty(2)
@@ -311,8 +331,11 @@ def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h,
                              weights, U, force, sticking, work)
         stages.append(Ks)
         results.append(np.concatenate([z_new, F.ravel()]))
-    assert kernel.is_deterministic(0, cfg, nodes)
-    assert not kernel.is_deterministic(0, cfg, general_nodes)
+    assert kernel.is_deterministic(0, cfg, nodes, p)
+    assert not kernel.is_deterministic(0, cfg, general_nodes, p)
+    shifted = nodes.copy()
+    shifted[0, kernel.T_MU] += 1e-12  # a sample's own table is not the parameter vector's
+    assert not kernel.is_deterministic(0, cfg, shifted, p)
     np.testing.assert_array_equal(stages[0], stages[1])
     np.testing.assert_array_equal(results[0], results[1])
 
@@ -334,8 +357,8 @@ REGISTER_CASES = {
 @pytest.mark.parametrize("with_stats", [False, True])
 def test_the_register_path_of_the_driver_is_the_general_loop_bit_for_bit(case, with_stats):
     """A whole DOP853 trajectory by the driver's 2-D register path (stages in scalars,
-    stored for the dense output only when needed) and by its general loop (forced by the
-    one-node rule at 1e-300): every output, event, statistic and counter equal."""
+    stored for the dense output only when needed) and by its general loop (forced by
+    :func:`two_node_rule`): every output, event, statistic and counter equal."""
     osc, fields, tol = REGISTER_CASES[case]
     options = opa.SolverOptions(rtol=tol, atol=tol, chatter_velocity=0.05)
     inputs = kernel_inputs(osc, options, **fields)
@@ -343,7 +366,7 @@ def test_the_register_path_of_the_driver_is_the_general_loop_bit_for_bit(case, w
     nodes, weights, U = rule(inputs)
     times = np.linspace(0.0, 80.0, 161)
     runs = []
-    for rule_nodes in (nodes, np.array([1e-300])):
+    for rule_nodes, weights, U in ((nodes, weights, U), two_node_rule(inputs)):
         out, log = np.empty((len(times), 2)), np.empty((4000, 3))
         stats = np.empty((len(times) - 1 if with_stats else 0, kernel.N_STATS))
         counters = kernel.integrate(np.array([osc.x0, osc.v0]), 0, times, True, False, p, cfg,

@@ -31,7 +31,7 @@ def one(oscillator, mu=None, state=None, **settings):
     system = System(osc, sigma=0.0, order=0)
     inputs = sample_inputs(system, OPTIONS, [osc.mu])
     start = (osc.x0, osc.v0) if state is None else state
-    row = type(inputs)(*(np.asarray(a)[0] for a in (inputs.p, inputs.cfg, inputs.nodes,
+    row = type(inputs)(*(np.asarray(a)[0] for a in (inputs.p, inputs.cfg, inputs.table,
                                                     inputs.weights, inputs.basis)))
     return settle(system, row, start, options=OPTIONS, settings=Settings(**settings))
 

@@ -1,0 +1,238 @@
+r"""The uncertain parameters of a study: their names, scales and joint law.
+
+A study with d uncertain parameters writes each one as
+
+.. math::
+
+    p_j = \bar p_j + \sigma_j \xi_j, \qquad j = 1 \dots d,
+
+with :math:`\xi = (\xi_1, \dots, \xi_d)` distributed as the product of d one-dimensional
+laws (the marginals of :mod:`opa._measure`: the paper's semicircle, uniform, Beta, a
+truncated normal or a bounded chaospy law). A :class:`Problem` holds the names, the
+scales :math:`\sigma_j` and the marginals, and it is the one place that turns points
+:math:`\xi` of shape (M, d) into parameter values: the kernel receives a table of the
+force law's coefficients at each quadrature node or sample (:meth:`Problem.table`) and
+never learns which parameters are uncertain, nor how many.
+
+With d = 1 it is exactly the single uncertain parameter of the paper (``System(sigma=,
+uncertain=, distribution=)``): the values :math:`\bar p + \sigma \xi` are computed by
+the same floating-point operations, so every one-dimensional result is unchanged bit for
+bit.
+
+Which coefficients may be uncertain: those of the force law the kernel evaluates at
+each node, :math:`\mu`, :math:`a` and :math:`c` (``UNCERTAIN_PARAMETERS``). The forcing
+amplitude f, the impulse height F0 and the frequency :math:`\omega` enter the equivalent
+system through the drive and the impulse train, which are one function of time for the
+whole ensemble in today's kernel; they are refused with a message saying so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from opa._model import UNCERTAIN_PARAMETERS, _finite, check_flag
+
+#: the columns of the kernel's parameter table (``opa._kernel.T_MU, T_A, T_C``), by name
+TABLE_COLUMNS = ("mu", "a", "c")
+#: coefficients that are parameters of the model but cannot be uncertain (yet), and why
+NOT_UNCERTAIN = {
+    "f": "the forcing f cos(omega t) is one drive for every node of the equivalent system",
+    "F0": "the impulse train is one train for every node of the equivalent system",
+    "omega": "the output grid and the forcing phase are shared by every node",
+}
+
+
+def split_list(text: str) -> tuple[str, ...]:
+    """A comma-separated list, where a bare number joins the item before it as one more
+    argument of a law (``"beta:2,3,uniform"`` is two laws).
+
+    >>> split_list("mu, c")
+    ('mu', 'c')
+    >>> split_list("beta:2,3,uniform")
+    ('beta:2,3', 'uniform')
+    """
+    items: list[str] = []
+    for part in (p.strip() for p in text.split(",")):
+        try:
+            float(part)
+            number = True
+        except ValueError:
+            number = False
+        if number and items and ":" in items[-1]:
+            items[-1] += "," + part
+        else:
+            items.append(part)
+    return tuple(items)
+
+
+def _as_tuple(name: str, value, d: int | None) -> tuple:
+    """``value`` as a tuple: one value (applies to all ``d``), or a sequence of ``d``."""
+    if isinstance(value, str) and "," in value:
+        value = split_list(value)
+    if isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1):
+        value = tuple(value)
+        if d is not None and len(value) == 1:
+            return value * d
+        if d is not None and len(value) != d:
+            raise ValueError(f"{name} must give one value, or one per uncertain parameter "
+                             f"({d}), got {len(value)}")
+        return value
+    return (value,) * (1 if d is None else d)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """d uncertain parameters ``p_j = p_bar_j + scale_j xi_j`` with a product law of xi.
+
+    Parameters
+    ----------
+    names : one name (``"mu"``), a comma-separated list (``"mu,c"``) or a sequence, of
+        ``UNCERTAIN_PARAMETERS``, each at most once.
+    scales : sigma_j >= 0: one value (applies to all) or one per name.
+    laws : the law of each xi_j: None (the paper's semicircle), a name of
+        ``opa._measure`` (``uniform``, ``beta:2,3``, ``normal-trunc:3``), a bounded chaospy
+        distribution or a ``Measure``; one (applies to all) or one per name.
+    allow_negative : permit values ``p_bar + sigma xi < 0`` over the support.
+
+    Examples
+    --------
+    >>> from opa import Oscillator
+    >>> problem = Problem("mu,c", scales=(0.02, 0.005), laws="uniform")
+    >>> problem.dimension, problem.names, problem.scales
+    (2, ('mu', 'c'), (0.02, 0.005))
+    >>> xi = np.array([[0.0, 0.0], [1.0, -1.0]])
+    >>> problem.table(xi, Oscillator(mu=0.1, a=1.0, c=0.05)).round(4).tolist()
+    [[0.1, 1.0, 0.05], [0.12, 1.0, 0.045]]
+    """
+
+    names: tuple = ("mu",)
+    scales: tuple = (0.01,)
+    laws: tuple = (None,)
+    allow_negative: bool = False
+
+    def __post_init__(self):
+        names = _as_tuple("uncertain", self.names, None)
+        for name in names:
+            if name in NOT_UNCERTAIN:
+                raise ValueError(f"uncertain: {name} cannot be uncertain yet: "
+                                 f"{NOT_UNCERTAIN[name]} (uncertain parameters: "
+                                 f"{', '.join(UNCERTAIN_PARAMETERS)})")
+            if name not in UNCERTAIN_PARAMETERS:
+                raise ValueError(f"uncertain must name parameters among "
+                                 f"{', '.join(UNCERTAIN_PARAMETERS)}, got {name!r:.40}")
+        if len(set(names)) != len(names):
+            raise ValueError(f"uncertain names a parameter twice: {','.join(names)}")
+        d = len(names)
+        scales = tuple(_finite("sigma", s) for s in _as_tuple("sigma", self.scales, d))
+        for s in scales:
+            if s < 0.0:
+                raise ValueError(f"sigma must be >= 0, got {s}")
+        laws = _as_tuple("distribution", self.laws, d)
+        check_flag("allow_negative", self.allow_negative)
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "scales", scales)
+        object.__setattr__(self, "laws", laws)
+        object.__setattr__(self, "allow_negative", bool(self.allow_negative))
+        self.measures  # noqa: B018 -- parses (and so checks) every law
+
+    # ------------------------------------------------------------------ the law
+    @property
+    def dimension(self) -> int:
+        """d, the number of uncertain parameters."""
+        return len(self.names)
+
+    @property
+    def measures(self) -> tuple:
+        """The marginal law of each xi_j as an ``opa._measure.Measure``."""
+        from opa._measure import parse
+
+        return tuple(parse(law) for law in self.laws)
+
+    @property
+    def support(self) -> np.ndarray:
+        """The box xi lies in: shape (d, 2), rows (lo, hi)."""
+        return np.array([(m.lo, m.hi) for m in self.measures], dtype=float)
+
+    def is_semicircle(self, j: int = 0) -> bool:
+        """Whether xi_j has the paper's law, the whole semicircle on [-1, 1]."""
+        if self.laws[j] is None:
+            return True
+        measure = self.measures[j]
+        return measure.name == "semicircle" and measure.is_whole
+
+    # ------------------------------------------------------------------ xi -> values
+    def _points(self, xi) -> np.ndarray:
+        xi = np.asarray(xi, dtype=float)
+        if xi.ndim == 1 and self.dimension == 1:
+            xi = xi[:, None]
+        if xi.ndim != 2 or xi.shape[1] != self.dimension:
+            raise ValueError(f"xi must have shape (M, {self.dimension}), got {xi.shape}")
+        return xi
+
+    def values(self, xi, oscillator) -> dict:
+        """Each uncertain parameter's values ``p_bar_j + sigma_j xi_j`` at the points
+        ``xi`` (M, d) (or (M,) when d = 1), by name."""
+        xi = self._points(xi)
+        return {name: float(getattr(oscillator, name)) + scale * xi[:, j]
+                for j, (name, scale) in enumerate(zip(self.names, self.scales))}
+
+    def table(self, xi, oscillator) -> np.ndarray:
+        """The kernel's parameter table at the points ``xi``: shape (M, 3), the columns
+        mu, a, c (``TABLE_COLUMNS``), the oscillator's own value where a column is not
+        uncertain."""
+        xi = self._points(xi)
+        table = np.empty((len(xi), len(TABLE_COLUMNS)))
+        for col, name in enumerate(TABLE_COLUMNS):
+            table[:, col] = float(getattr(oscillator, name))
+        for name, values in self.values(xi, oscillator).items():
+            table[:, TABLE_COLUMNS.index(name)] = values
+        return table
+
+    def check(self, oscillator) -> None:
+        """Refuse values ``p_bar + sigma xi < 0`` over the support unless allowed (a
+        parameter whose mean is already negative is the user's choice)."""
+        if self.allow_negative:
+            return
+        for (name, scale), (lo, _) in zip(zip(self.names, self.scales), self.support):
+            mean = float(getattr(oscillator, name))
+            lowest = mean + scale * lo
+            if lowest < 0.0 <= mean:
+                raise ValueError(
+                    f"sigma = {scale} with xi down to {lo:g} makes {name} = {mean:g} + sigma "
+                    f"xi = {lowest:.6g} negative for some samples; pass allow_negative=True "
+                    f"(--allow-negative) if that is intended")
+
+    # ------------------------------------------------------------------ sampling
+    def sample(self, samples: int, sampler: str = "sobol", seed: int | None = 0) -> np.ndarray:
+        """``samples`` points of xi, shape (M, d): ``sobol`` (scrambled Sobol' in d
+        dimensions; a power of two keeps its balance), ``lhs`` (Latin hypercube) or
+        ``random``, each uniform point sent through the marginals' quantile functions.
+        The same seed gives the same points."""
+        from scipy.stats import qmc
+
+        from opa._model import check_count
+
+        samples = check_count("samples", samples)
+        d = self.dimension
+        rng = np.random.default_rng(seed)
+        if sampler == "sobol":
+            engine = qmc.Sobol(d=d, scramble=True, seed=rng)
+            u = engine.random_base2(int(math.ceil(math.log2(samples))))[:samples]
+        elif sampler == "lhs":
+            u = qmc.LatinHypercube(d=d, seed=rng).random(samples)
+        elif sampler == "random":
+            u = rng.random((samples, d))
+        else:
+            raise ValueError(f"sampler must be one of sobol, lhs, random, got {sampler!r:.40}")
+        return np.column_stack([m.ppf(u[:, j]) for j, m in enumerate(self.measures)])
+
+    def attrs(self) -> dict:
+        """The problem as netCDF-safe dataset attributes (docs/datasets.md)."""
+        return dict(uncertain=",".join(self.names),
+                    sigma=np.asarray(self.scales, dtype=float),
+                    distribution=",".join("semicircle" if law is None else str(law)
+                                          for law in self.laws),
+                    allow_negative=int(self.allow_negative))
