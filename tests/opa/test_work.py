@@ -6,9 +6,11 @@ import time
 
 import pytest
 
-from opa import Oscillator, simulate_opa
-from opa._work import (WORK_BUDGET_ENV, WorkBudgetError, budget, check_work, parse_duration,
-                       work_budget)
+from opa import Oscillator, preset, simulate_dmr, simulate_opa
+from opa._run import DEFAULT_MAX_STEPS
+from opa._work import (PERIODS_PER_SECOND, WORK_BUDGET_ENV, StepLimitError, WorkBudgetError,
+                       _cores, budget, check_steps, check_work, estimate_seconds,
+                       oscillator_period, parse_duration, work_budget)
 from opa.cli._main import main
 
 
@@ -59,6 +61,8 @@ def test_an_adaptive_opa_run_of_100000_periods_is_refused_at_once():
 @pytest.mark.parametrize("argv, flags", [
     (["simulate", "opa", "--periods", "100000", "--elements", "adaptive"],
      ("--periods 100000", "--elements adaptive")),
+    (["simulate", "opa", "--omega", "1e-6", "--periods", "1", "--out", "OUT.nc"],
+     ("--omega 1e-06", "--periods 1", "step limit of 50000000")),
     (["simulate", "mc", "--periods", "100000", "--samples", "100000"],
      ("--samples 100000", "--periods 100000")),
     (["validate", "--sweep", "omega=3.9:4.3:1000", "--outdir", "OUT"],
@@ -101,3 +105,55 @@ def test_process_started_reads_the_start_of_the_process_not_now():
     age = float(subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                                check=True).stdout)
     assert 0.5 - 0.02 <= age < 60
+
+
+# ------------------------------------------------------------ slow forcing: time, not periods
+def test_below_the_oscillators_frequency_the_estimate_grows_like_one_over_omega():
+    """One forcing period at omega = 1e-6 is 6.3e6 time units, each with steps of the
+    oscillator's own scale: the estimate of a fixed number of periods grows like 1/omega
+    below the oscillator's frequency (sqrt(a) = 0.71 in section 3.2), and is the count of
+    periods at the paper's frequencies, as before."""
+    seconds = {w: estimate_seconds(1.0, preset("3.2", omega=w)) for w in (1e-4, 1e-5, 1e-6)}
+    assert seconds[1e-5] / seconds[1e-4] == pytest.approx(10, rel=1e-3)
+    assert seconds[1e-6] / seconds[1e-5] == pytest.approx(10, rel=1e-4)
+    assert seconds[1e-6] > 100 * estimate_seconds(1.0)  # the count of periods said 1
+    paper = preset("3.2")
+    assert 2 * math.pi / paper.omega < oscillator_period(paper)
+    assert estimate_seconds(1000.0, paper) == estimate_seconds(1000.0) == pytest.approx(
+        1000.0 / PERIODS_PER_SECOND / _cores())
+
+
+def test_one_slow_dmr_period_at_omega_1e_5_stays_within_the_defaults(monkeypatch):
+    """``opa-mc simulate dmr --omega 1e-5 --periods 1`` (about 11 s) is not refused."""
+    monkeypatch.delenv(WORK_BUDGET_ENV, raising=False)
+    dmr = preset("3.2", omega=1e-5)
+    assert check_work("one DMR period", 1.0, [("periods", 1)], oscillator=dmr) < 60
+    assert check_steps("one DMR period", dmr.forcing_period, DEFAULT_MAX_STEPS,
+                       [("periods", 1)]) < DEFAULT_MAX_STEPS / 5
+
+
+def test_a_budget_past_its_hours_under_slow_forcing_names_the_time(monkeypatch):
+    monkeypatch.setattr("opa._work.os.cpu_count", lambda: 1)
+    with budget(60.0), pytest.raises(WorkBudgetError, match=r"about 6.3e\+06 time units "
+                                     r"of slow forcing .*\(omega 1e-06 x periods 1\)"):
+        check_work("a job", 1.0, [("omega", "1e-06"), ("periods", 1)],
+                   oscillator=preset("3.2", omega=1e-6))
+
+
+def test_a_trajectory_past_the_step_limit_is_refused_at_once_by_the_api(monkeypatch):
+    """At omega = 1e-6 one forcing period takes more steps than the default step limit:
+    the kernel would stop there after minutes (OPA of N = 4: about 9), so both models
+    refuse it before any work; more steps, or the budget inf, let it through."""
+    monkeypatch.delenv(WORK_BUDGET_ENV, raising=False)
+    slow = preset("3.2", omega=1e-6)
+    start = time.perf_counter()
+    for simulate in (simulate_opa, simulate_dmr):
+        with pytest.raises(StepLimitError, match=r"omega 1e-06 x periods 1: 6.3e\+06 time "
+                           r"units.*more than the step limit of 50000000.*max_steps"
+                           rf".*\${WORK_BUDGET_ENV} inf"):
+            simulate(slow, periods=1)
+    assert time.perf_counter() - start < 5
+    span = slow.forcing_period
+    assert check_steps("a run", span, 10 * DEFAULT_MAX_STEPS, []) > DEFAULT_MAX_STEPS
+    with budget(math.inf):
+        assert check_steps("a run", span, DEFAULT_MAX_STEPS, []) > DEFAULT_MAX_STEPS

@@ -29,7 +29,9 @@ gauss`` printed "± nan (SE)" (fixed: the summary says "Gauss quadrature"); five
 and stability runs wrote a min_gap, impact_rate or min_impact_velocity that
 docs/datasets.md did not say may be NaN, stability's min_gap as inf (fixed: "none" is
 NaN everywhere and each variable's long_name says when, ``NONE`` below). The hang (one
-forcing period at omega = 1e-6) remains, marked xfail with what happens.
+forcing period at omega = 1e-6: 6.3e6 time units, more steps than the solver's limit,
+reached after minutes) is refused up front now (exit 2 naming --omega and --periods: the
+work budget counts time under slow forcing and the steps of a trajectory, opa._work).
 
 The last tests check that long work shows progress on stderr within seconds (the
 stochastic diagram used to say nothing until its first control value was done).
@@ -108,16 +110,11 @@ def case(name, base, flags, culprits, **kw) -> Case:
     return Case(name, tuple(base) + flags, tuple(culprits.split()), **kw)
 
 
-HANG_TINY_OMEGA = (
-    "hang: one forcing period at omega = 1e-6 is 6.3e6 time units, which needs more than the "
-    "default 50 million steps; the run is not refused up front (the work budget counts "
-    "forcing periods, not time units) and the OPA system takes minutes to reach the step "
-    "limit (the DMR about 65 s, exit 3 'runaway guard'); a refusal needs a step estimate "
-    "per time unit: a design decision on opa._work")
 #: the quick part (the rest is marked long): about 30 s on two cores, two at a time
 QUICK = {"dmr c<0", "mc F0 huge", "opa F0 huge", "dmr eta 1", "opa eta 1 saltation",
          "mc eta 1e-300", "opa start on the wall", "dmr start far", "dmr chatter",
          "opa saltation grazing start", "dmr max-step 1e-300", "opa tightest tolerances",
+         "opa omega tiny",
          "mc loosest tolerances", "opa N 500 semicircle", "mc gauss N 500",
          "opa sigma max mu", "opa 256 elements", "stochastic chaotic", "bifurcation grazing"}
 
@@ -129,8 +126,7 @@ CASES = [    # runaways
     case("opa f huge", OPA, "--f 1e6", "f"),
     case("mc F0 huge", MC, "--F0 1e6", "F0"),
     case("dmr omega tiny", DMR, "--omega 1e-5 --periods 1", "omega periods"),
-    case("opa omega tiny", OPA, "--omega 1e-6 --periods 1", "omega periods",
-         xfail=HANG_TINY_OMEGA),
+    case("opa omega tiny", OPA, "--omega 1e-6 --periods 1", "omega periods"),
     case("dmr omega huge", DMR, "--omega 6e6 --periods 4", "omega"),
     case("opa omega1 huge", OPA, "--omega1 6e6 --periods 1", "omega1"),
     case("opa F0 huge", OPA, "--F0 1e6", "F0"),
