@@ -61,9 +61,9 @@ def simulate_dmr(
                        **impulse_model).deterministic()
     oscillator = system.oscillator
     times = output_times(oscillator, periods, per_period, times)
-    check_steps("this DMR run", float(times[-1] - times[0]), options.max_steps,
-                [("omega", f"{oscillator.omega:g}"),
-                 ("periods", f"{float(times[-1] - times[0]) / oscillator.forcing_period:g}")])
+    span = float(times[-1] - times[0]) / oscillator.forcing_period
+    check_steps("this DMR run", span, oscillator, options.max_steps,
+                [("omega", f"{oscillator.omega:g}"), ("periods", f"{span:g}")])
     rec = run(system.kernel_inputs(options), system.initial_state(), times,
               rtol=options.rtol, atol=options.atol, label="DMR trajectory")
     ds = xr.Dataset(
@@ -90,7 +90,7 @@ def check_opa_work(system: System, times: np.ndarray, elements, max_elements: in
 
     periods = float(times[-1] - times[0]) / system.oscillator.forcing_period
     if max_steps is not None:
-        check_steps("this OPA run", float(times[-1] - times[0]), max_steps,
+        check_steps("this OPA run", periods, system.oscillator, max_steps,
                     [("omega", f"{system.oscillator.omega:g}"), ("periods", f"{periods:g}")])
     order = int(system.order)
     adaptive = isinstance(elements, str) and elements == "adaptive"

@@ -13,9 +13,9 @@ forcing holds it on) takes about 9 steps and 9 impacts per time unit there, a co
 periods said "1". A job that names its oscillator (``check_work(..., oscillator=)``) is
 also counted in time: the time units beyond one oscillator period
 (:func:`oscillator_period`, 2 pi / sqrt|a|) per forcing period, at
-``TIME_UNITS_PER_SECOND``; the estimate is the larger of the two. One trajectory that
-would take more steps (``STEPS_PER_TIME_UNIT`` per time unit, the fewest measured) than
-the solver's step limit (``SolverOptions.max_steps``) could not be completed: the kernel
+``TIME_UNITS_PER_SECOND``; the estimate is the larger of the two. One trajectory whose
+time under slow forcing would take more steps (``STEPS_PER_TIME_UNIT`` per time unit, the
+fewest measured) than the solver's step limit (``SolverOptions.max_steps``) could not be completed: the kernel
 would stop it there with a SimulationError, after minutes (one forcing period at
 omega = 1e-6: about 3 min for the DMR, 9 for the OPA system of N = 4), so
 :func:`check_steps` refuses it up front instead, as a :class:`StepLimitError` naming the
@@ -147,7 +147,8 @@ class StepLimitError(WorkBudgetError):
     def message(self, names: dict[str, str] | None = None) -> str:
         more = "" if names else ", or give SolverOptions(max_steps=...) more"
         return (f"{self.what} would take about {self.steps:.2g} solver steps in one "
-                f"trajectory ({_drivers(self.drivers, names)}: {self.span:.2g} time units "
+                f"trajectory ({_drivers(self.drivers, names)}: {self.span:.2g} time units of slow "
+                f"forcing "
                 f"at about {STEPS_PER_TIME_UNIT:g} steps each), more than the step limit of "
                 f"{self.max_steps} where the solver would stop it after minutes of work; "
                 f"shorten the run (fewer periods or a larger omega){more}, or lift the check "
@@ -221,18 +222,22 @@ def check_work(what: str, periods: float, drivers: list[tuple[str, object]], *,
     return seconds
 
 
-def check_steps(what: str, span: float, max_steps: int,
+def check_steps(what: str, periods: float, oscillator, max_steps: int,
                 drivers: list[tuple[str, object]]) -> float:
-    """Refuse (:class:`StepLimitError`) one trajectory of ``span`` time units that would
-    take more than ``max_steps`` steps at ``STEPS_PER_TIME_UNIT`` (not with the budget
-    ``inf``); returns the estimated steps.
+    """Refuse (:class:`StepLimitError`) one trajectory of ``periods`` forcing periods of
+    ``oscillator`` whose time under slow forcing (:func:`slow_time`, where the steps were
+    measured) would take more than ``max_steps`` steps at ``STEPS_PER_TIME_UNIT`` (not
+    with the budget ``inf``); returns the estimated steps. At the paper's frequencies the
+    forcing bounds the steps and the kernel's own limit is left to stop a run.
 
-    >>> check_steps("a run", 1e3, 50_000_000, [("periods", 10)])
-    9000.0
+    >>> from opa import preset
+    >>> check_steps("a run", 1e6, preset("3.2"), 100, [("periods", 10)])
+    0.0
     """
-    steps = abs(float(span)) * STEPS_PER_TIME_UNIT
+    span = slow_time(periods, oscillator)
+    steps = span * STEPS_PER_TIME_UNIT
     if steps > max_steps and work_budget() < math.inf:
-        raise StepLimitError(what, steps, max_steps, drivers, float(span))
+        raise StepLimitError(what, steps, max_steps, drivers, span)
     return steps
 
 

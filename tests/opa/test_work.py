@@ -128,7 +128,7 @@ def test_one_slow_dmr_period_at_omega_1e_5_stays_within_the_defaults(monkeypatch
     monkeypatch.delenv(WORK_BUDGET_ENV, raising=False)
     dmr = preset("3.2", omega=1e-5)
     assert check_work("one DMR period", 1.0, [("periods", 1)], oscillator=dmr) < 60
-    assert check_steps("one DMR period", dmr.forcing_period, DEFAULT_MAX_STEPS,
+    assert check_steps("one DMR period", 1.0, dmr, DEFAULT_MAX_STEPS,
                        [("periods", 1)]) < DEFAULT_MAX_STEPS / 5
 
 
@@ -153,7 +153,8 @@ def test_a_trajectory_past_the_step_limit_is_refused_at_once_by_the_api(monkeypa
                            rf".*\${WORK_BUDGET_ENV} inf"):
             simulate(slow, periods=1)
     assert time.perf_counter() - start < 5
-    span = slow.forcing_period
-    assert check_steps("a run", span, 10 * DEFAULT_MAX_STEPS, []) > DEFAULT_MAX_STEPS
+    assert check_steps("a run", 1.0, slow, 10 * DEFAULT_MAX_STEPS, []) > DEFAULT_MAX_STEPS
     with budget(math.inf):
-        assert check_steps("a run", span, DEFAULT_MAX_STEPS, []) > DEFAULT_MAX_STEPS
+        assert check_steps("a run", 1.0, slow, DEFAULT_MAX_STEPS, []) > DEFAULT_MAX_STEPS
+    # at the paper's frequencies the forcing bounds the steps: the kernel's limit stops a run
+    assert check_steps("a run", 1e6, preset("3.2"), 100, []) == 0.0
