@@ -101,9 +101,13 @@ class ChunkStats:
             rep_weight[r] = w[sel].sum()
         xm = _weighted_sum(w, x) / W
         vm = _weighted_sum(w, v) / W
-        # (N+1, M): Chebyshev U for the semicircle, else the law's orthonormal polynomials
-        basis = chebyshev_u(order, xi) if recurrence is None else orthonormal(order, xi,
-                                                                               *recurrence)
+        # (N+1, M): Chebyshev U for the semicircle, else the law's orthonormal polynomials;
+        # with several parameters (P, M), the product basis over the multi-index set
+        if hasattr(recurrence, "evaluate"):
+            basis = recurrence.evaluate(xi).T
+        else:
+            basis = chebyshev_u(order, xi) if recurrence is None else orthonormal(
+                order, xi, *recurrence)
         moments = np.empty((len(basis), x.shape[1]))
         moments_m2 = np.empty_like(moments)
         for i, u in enumerate(basis):
@@ -315,7 +319,7 @@ def simulate_mc(
         finally:
             results.close()  # a Dask run cancels the tasks left now, not at collection
     ds = _dataset(total, plan.xi, plan.w, n_impacts, paths, plan.times, system, options,
-                  sampler, seed, plan.replicates, plan.law)
+                  sampler, seed, plan.replicates, plan.law, plan.chaos)
     if control is not None:
         ds = controlled(ds, total.x_rep, total.x2_rep, total.rep_weight, plan.xi,
                         plan.replicates, control)
@@ -353,7 +357,14 @@ class _Plan:
     recurrence: object
 
     @property
+    def chaos(self):
+        """The product basis of several uncertain parameters' coefficients, else None."""
+        return self.recurrence if self.system.dimension > 1 else None
+
+    @property
     def law(self) -> str:
+        if self.system.dimension > 1:
+            return "product of " + ", ".join(m.name for m in self.system.problem.measures)
         return "semicircle" if self.measure is None else self.measure.name
 
     @property
@@ -389,19 +400,42 @@ def _plan(system, options, samples, sampler, seed, replicates, control, times, k
     check_memory("a chunk of paths", size * T * 2 * 8 * 3,
                  f"chunk_size {size} x {T} outputs x 2 states, with the statistics' "
                  f"temporaries and the next chunk's paths")
-    check_memory("x_coef", (order + 1) * T * 8 * 2,
-                 f"order + 1 = {order + 1} coefficients x {T} outputs, running sum and "
-                 f"a chunk's")
-    measure = None if system.semicircle else system.measure
-    xi, w = sample_xi(sampler, samples, seed, replicates, distribution=measure)
+    if system.dimension > 1:
+        xi, w, basis = _sample_problem(system, sampler, samples, seed, replicates)
+        terms, measure = basis.size, None
+    else:
+        measure = None if system.semicircle else system.measure
+        xi, w = sample_xi(sampler, samples, seed, replicates, distribution=measure)
+        terms = order + 1
     check_memory("the replicate sums", 3 * replicates * T * 8 * 2,
                  f"3 x replicates {replicates} x {T} outputs, running sums and a chunk's")
-    check_memory("x_coef_sem", (replicates + 1) * (order + 1) * T * 8 * 2,
-                 f"(replicates {replicates} + 1) x order + 1 = {order + 1} coefficients x "
-                 f"{T} outputs, running sums and a chunk's")
-    recurrence = None if measure is None else measure.recurrence(order + 1)
+    count = (f"order + 1 = {terms}" if system.dimension == 1
+             else f"the multi-index set's {terms}")
+    check_memory("x_coef", terms * T * 8 * 2,
+                 f"{count} coefficients x {T} outputs, running sum and a chunk's")
+    check_memory("x_coef_sem", (replicates + 1) * terms * T * 8 * 2,
+                 f"(replicates {replicates} + 1) x {count} coefficients x {T} outputs, "
+                 f"running sums and a chunk's")
+    if system.dimension > 1:
+        recurrence = basis
+    else:
+        recurrence = None if measure is None else measure.recurrence(order + 1)
     return _Plan(system, options, sampler, samples, seed, replicates, times, keep_paths,
                  size, measure, xi, w, recurrence)
+
+
+def _sample_problem(system, sampler, samples, seed, replicates):
+    """Points (M, d) and weights of several uncertain parameters' law, and the product
+    basis of order N their coefficients E[x Psi_alpha] are estimated in."""
+    from opa.engine import ChaosBasis
+
+    if sampler == "gauss":
+        raise ValueError("sampler 'gauss' (collocation nodes) takes one uncertain parameter; "
+                         "with several use 'sobol' or 'random'")
+    problem = system.problem
+    xi = problem.sample(samples, sampler, seed, replicates)
+    basis = ChaosBasis.from_order(problem.measures, system.order)
+    return xi, np.full(samples, 1.0 / samples), basis
 
 
 def _merged(results, plan: _Plan):
@@ -414,10 +448,12 @@ def _merged(results, plan: _Plan):
     for (lo, hi), (stats, imp, status, extra) in results:
         if stats is None:
             m, xi_m, why = extra
-            value = getattr(system.oscillator, system.uncertain) + system.sigma * xi_m
-            raise SimulationError(
-                f"Monte Carlo sample {lo + m} (xi = {xi_m:.6g}, {system.uncertain} = "
-                f"{value:.6g}) stopped: {why}")
+            values = system.problem.values(np.reshape(xi_m, (1, -1)), system.oscillator)
+            where = ", ".join(f"{name} = {v[0]:.6g}" for name, v in values.items())
+            point = (f"{xi_m:.6g}" if np.ndim(xi_m) == 0
+                     else "(" + ", ".join(f"{x:.6g}" for x in xi_m) + ")")
+            raise SimulationError(f"Monte Carlo sample {lo + m} (xi = {point}, {where}) "
+                                  f"stopped: {why}")
         n_impacts[lo:hi] = imp
         if plan.keep_paths:
             paths[lo:hi] = extra
@@ -429,7 +465,10 @@ def _manifest(system, options, sampler, samples, seed, replicates, times, measur
               recurrence, xi, w, bounds, keep_paths, device="cpu") -> dict:
     """Everything that determines the result of a run, for its checkpoint (the device
     only when it is a GPU, so that CPU checkpoints of earlier versions still resume)."""
-    if measure is None:
+    if system.dimension > 1:  # recurrence: the product basis
+        law = {"laws": [str(law) for law in system.problem.laws],
+               "indices": digest(np.ascontiguousarray(recurrence.indices))}
+    elif measure is None:
         law = "semicircle"
     else:
         law = {key: getattr(measure, key) for key in ("name", "lo", "hi", "alpha", "beta",
@@ -440,8 +479,8 @@ def _manifest(system, options, sampler, samples, seed, replicates, times, measur
         "oscillator": system.oscillator.as_dict(),
         "options": dataclasses.asdict(options),
         "impulse": {k: getattr(system, k) for k in IMPULSE_FIELDS},
-        "sigma": system.sigma,
-        "uncertain": system.uncertain,
+        "sigma": system.sigma if system.dimension == 1 else list(system.sigma),
+        "uncertain": system.uncertain if system.dimension == 1 else list(system.uncertain),
         "distribution": law,
         "sampler": sampler,
         "samples": samples,
@@ -683,8 +722,10 @@ def _samples(bound) -> str:
 
 
 def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, seed,
-             replicates, distribution="semicircle"):
+             replicates, distribution="semicircle", chaos=None):
     M = total.count
+    # several parameters: the coefficients run over the multi-index set's terms
+    term, basis = ("order", "U_i") if chaos is None else ("term", "Psi_alpha")
     if sampler == "gauss":
         x_var = total.x_m2 / total.weight
         v_var = total.v_m2 / total.weight
@@ -730,14 +771,14 @@ def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, se
         "v_sem": ("time", v_sem, {"long_name": "standard error of the mean of x'", "units": "1"}),
         "x_var_sem": ("time", x_var_sem, {"long_name": "standard error of the variance of x",
                                           "units": "1"}),
-        "x_coef": (("order", "time"), total.x_moment / total.weight,
-                   {"long_name": "Monte Carlo estimate of E[x U_i(xi)]", "units": "1"}),
-        "x_coef_sem": (("order", "time"), x_coef_sem,
-                       {"long_name": "standard error of the estimate of E[x U_i(xi)]",
+        "x_coef": ((term, "time"), total.x_moment / total.weight,
+                   {"long_name": f"Monte Carlo estimate of E[x {basis}(xi)]", "units": "1"}),
+        "x_coef_sem": ((term, "time"), x_coef_sem,
+                       {"long_name": f"standard error of the estimate of E[x {basis}(xi)]",
                         "units": "1"}),
         "n_impacts": ("sample", n_impacts, {"long_name": "impacts of each sample", "units": "1"}),
-        "xi": ("sample", xi, {"long_name": f"uncertain variable xi ({distribution} law)",
-                              "units": "1"}),
+        "xi": (("sample",) + (() if xi.ndim == 1 else ("parameter",)), xi,
+               {"long_name": f"uncertain variable xi ({distribution} law)", "units": "1"}),
         "weight": ("sample", w, {"long_name": "sample weight", "units": "1"}),
     }
     if paths is not None:
@@ -745,11 +786,17 @@ def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, se
                                                           "units": "1"})
         data["v"] = (("sample", "time"), paths[:, :, 1], {"long_name": "sample path x'",
                                                           "units": "1"})
+    coords = {**time_coord(times, system.oscillator.omega), "sample": ("sample", np.arange(M))}
+    if chaos is None:
+        coords["order"] = ("order", np.arange(system.order + 1))
+    else:
+        coords.update(term=("term", np.arange(chaos.size)),
+                      parameter=("parameter", list(system.problem.names)))
+        data["multi_index"] = (("term", "parameter"), chaos.indices.astype(np.int64), {
+            "long_name": "degree of each parameter's polynomial in Psi_alpha", "units": "1"})
     ds = xr.Dataset(
         data,
-        coords={**time_coord(times, system.oscillator.omega),
-                "order": ("order", np.arange(system.order + 1)),
-                "sample": ("sample", np.arange(M))},
+        coords=coords,
         attrs=provenance_attrs("mc", system, options, sampler=sampler,
                                seed=-1 if seed is None else int(seed)),
     )

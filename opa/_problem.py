@@ -28,6 +28,7 @@ whole ensemble in today's kernel; they are refused with a message saying so.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -136,7 +137,8 @@ class Problem:
         object.__setattr__(self, "scales", scales)
         object.__setattr__(self, "laws", laws)
         object.__setattr__(self, "allow_negative", bool(self.allow_negative))
-        self.measures  # noqa: B018 -- parses (and so checks) every law
+        if any(law is not None for law in laws):
+            self.measures  # noqa: B018 -- parses (and so checks) every law given
 
     # ------------------------------------------------------------------ the law
     @property
@@ -144,16 +146,23 @@ class Problem:
         """d, the number of uncertain parameters."""
         return len(self.names)
 
-    @property
+    @functools.cached_property
     def measures(self) -> tuple:
-        """The marginal law of each xi_j as an ``opa._measure.Measure``."""
+        """The marginal law of each xi_j as an ``opa._measure.Measure`` (parsed once: a
+        law's scipy distribution is costly to build)."""
         from opa._measure import parse
 
         return tuple(parse(law) for law in self.laws)
 
+    def __getstate__(self):
+        # the parsed laws may hold closures; a copy in another process parses again
+        return {k: v for k, v in self.__dict__.items() if k != "measures"}
+
     @property
     def support(self) -> np.ndarray:
         """The box xi lies in: shape (d, 2), rows (lo, hi)."""
+        if all(law is None for law in self.laws):  # the paper's semicircle, unparsed
+            return np.tile([-1.0, 1.0], (self.dimension, 1))
         return np.array([(m.lo, m.hi) for m in self.measures], dtype=float)
 
     def is_semicircle(self, j: int = 0) -> bool:
@@ -206,9 +215,11 @@ class Problem:
                     f"(--allow-negative) if that is intended")
 
     # ------------------------------------------------------------------ sampling
-    def sample(self, samples: int, sampler: str = "sobol", seed: int | None = 0) -> np.ndarray:
+    def sample(self, samples: int, sampler: str = "sobol", seed: int | None = 0,
+               replicates: int = 1) -> np.ndarray:
         """``samples`` points of xi, shape (M, d): ``sobol`` (scrambled Sobol' in d
-        dimensions; a power of two keeps its balance), ``lhs`` (Latin hypercube) or
+        dimensions; a power of two keeps its balance; ``replicates`` R independent
+        scramblings of M/R points each, concatenated), ``lhs`` (Latin hypercube) or
         ``random``, each uniform point sent through the marginals' quantile functions.
         The same seed gives the same points."""
         from scipy.stats import qmc
@@ -216,11 +227,20 @@ class Problem:
         from opa._model import check_count
 
         samples = check_count("samples", samples)
+        replicates = check_count("replicates", replicates)
         d = self.dimension
         rng = np.random.default_rng(seed)
         if sampler == "sobol":
-            engine = qmc.Sobol(d=d, scramble=True, seed=rng)
-            u = engine.random_base2(int(math.ceil(math.log2(samples))))[:samples]
+            if samples % replicates:
+                raise ValueError(f"samples must be a multiple of replicates = {replicates}, "
+                                 f"got {samples}")
+            per = samples // replicates
+            streams = ([rng] if replicates == 1 else
+                       [np.random.default_rng(c)
+                        for c in np.random.SeedSequence(seed).spawn(replicates)])
+            u = np.concatenate([
+                qmc.Sobol(d=d, scramble=True, seed=r).random_base2(
+                    int(math.ceil(math.log2(per))))[:per] for r in streams])
         elif sampler == "lhs":
             u = qmc.LatinHypercube(d=d, seed=rng).random(samples)
         elif sampler == "random":

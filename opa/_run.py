@@ -430,18 +430,18 @@ class Inputs:
     basis: np.ndarray
 
 
-def pack(values: dict, *, order: int, max_steps: int, impulse_at_zero: bool,
-         rule, table, **choices) -> Inputs:
+def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
+         **choices) -> Inputs:
     """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
-    number of coefficients ``order + 1``, the step limit, the impulse train's start, the
-    named choices of :data:`CHOICE_CODES`, ``rule`` (:func:`quadrature`'s nodes, weights
-    and basis degree-major) and ``table``, the coefficients of the force law at each of
-    its nodes (Q, N_TABLE)."""
+    step limit, the impulse train's start, the named choices of :data:`CHOICE_CODES`,
+    ``rule`` (:func:`quadrature`'s nodes, weights and basis degree-major: its n + 1 rows
+    are the n coefficients' basis functions and the closure's U_{N+1}) and ``table``, the
+    coefficients of the force law at each of its nodes (Q, N_TABLE)."""
     p = np.zeros(kernel.N_PARAMS)
     for name, value in values.items():
         p[PARAMETER_SLOTS[name]] = value
     cfg = np.zeros(kernel.N_CFG, dtype=np.int64)
-    cfg[kernel.C_NCOEF] = order + 1
+    cfg[kernel.C_NCOEF] = len(rule[2]) - 1
     cfg[kernel.C_AT_ZERO] = int(impulse_at_zero)
     cfg[kernel.C_MAXSTEPS] = int(max_steps)
     slots = {"impulse": kernel.C_IMPULSE, "closure": kernel.C_TRUNC,

@@ -123,6 +123,7 @@ def simulate_opa(
     tolerance: float | None = None,
     max_elements: int | None = None,
     partial: bool = False,
+    basis: str = "total",
     **fields,
 ) -> xr.Dataset:
     """The OPA equivalent system of order N (the EMR, eqs. (24)-(28)).
@@ -170,6 +171,15 @@ def simulate_opa(
     returns the outputs reached, NaN after, with the reason in ``attrs["failure"]``,
     instead of raising :class:`SimulationError`.
 
+    Several uncertain parameters (``uncertain="mu,c"``, ``sigma=(0.02, 0.005)``,
+    ``distribution=("semicircle", "uniform")``, or an :class:`opa.Problem` as
+    ``uncertain``): the Galerkin system on the multi-index set ``basis`` (``total``
+    degree <= N, ``tensor`` or ``hyperbolic:Q``; :mod:`opa._galerkin`), one element; the
+    dataset's coefficients run over ``term`` with their ``multi_index`` (term,
+    parameter), and the Sobol indices of x and v from the coefficients come with them
+    (``x_sobol_first``, ``x_sobol_total``, ...). ``basis`` is refused with one
+    parameter, where the basis is the law's own polynomials up to N.
+
     Returns
     -------
     xarray.Dataset with ``x_coef(order, time)``, ``v_coef(order, time)``,
@@ -191,6 +201,19 @@ def simulate_opa(
     oscillator, order = system.oscillator, system.order
     check_opa_work(system, output_times(oscillator, periods, per_period, times), elements,
                    max_elements, options.max_steps)
+    if system.dimension > 1:
+        from opa._galerkin import simulate_chaos
+
+        for name, value in (("elements", elements), ("initial", initial)):
+            if value is not None:
+                raise ValueError(f"{name} is not available with several uncertain "
+                                 f"parameters yet (one element, the deterministic start)")
+        return simulate_chaos(system, options, output_times(oscillator, periods, per_period,
+                                                            times),
+                              basis=basis, partial=partial)
+    if basis != "total":
+        raise ValueError(f"basis = {basis!r:.40} applies with several uncertain parameters; "
+                         f"with one the basis is the law's polynomials up to N")
     if system.distribution is not None or elements is not None:
         from opa._elements import simulate_elements
 

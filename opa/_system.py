@@ -10,6 +10,7 @@ Every entry point (``simulate_dmr``, ``simulate_opa``, ``simulate_mc``, ``sweep`
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -150,10 +151,15 @@ class System:
         object.__setattr__(self, "pulse_width", tau)
 
     # ------------------------------------------------------------------ the uncertainty
-    @property
+    @functools.cached_property
     def problem(self) -> Problem:
-        """The uncertain parameters, their scales and joint law (:class:`opa.Problem`)."""
+        """The uncertain parameters, their scales and joint law (:class:`opa.Problem`),
+        made once per System (every chunk of samples asks for it)."""
         return Problem(self.uncertain, self.sigma, self.distribution, self.allow_negative)
+
+    def __getstate__(self):
+        # the problem's parsed laws may hold closures; a copy in another process rebuilds it
+        return {k: v for k, v in self.__dict__.items() if k != "problem"}
 
     @property
     def dimension(self) -> int:
@@ -268,10 +274,12 @@ class System:
         o = self.oscillator
         values = dict(mu=o.mu, a=o.a, c=o.c, f=o.f, omega=o.omega, eta=o.eta, delta=o.delta,
                       F0=o.F0, a1=o.a1, omega1=o.omega1, n=o.n, pulse_width=self.pulse_width,
-                      sigma=self.sigma, chatter_velocity=options.chatter_velocity,
+                      # the paper's closure's sigma (one uncertain parameter)
+                      sigma=self.sigma if self.dimension == 1 else 0.0,
+                      chatter_velocity=options.chatter_velocity,
                       max_step=options.max_step)
         rule = quadrature(self.order) if rule is None else rule
-        return pack(values, order=self.order, max_steps=options.max_steps,
+        return pack(values, max_steps=options.max_steps,
                     impulse_at_zero=self.impulse_at_zero, rule=rule,
                     table=self.problem.table(rule[0], o), impulse=self.impulse,
                     closure=self.closure, impact_law=self.impact_law,
