@@ -135,7 +135,9 @@ def check_opa_layout(ds, name: str = "the opa dataset") -> None:
 
 #: variables whose NaN or inf is documented (docs/datasets.md), not a failure: the
 #: refinement history of adaptive elements
-_MAY_BE_NON_FINITE = ("refinement_mean_change", "refinement_share")
+_MAY_BE_NON_FINITE = ("refinement_mean_change", "refinement_share",
+                      # NaN where the variance is 0 (a deterministic start)
+                      "x_sobol_first", "x_sobol_total", "v_sobol_first", "v_sobol_total")
 
 
 def first_non_finite(ds) -> tuple[str, int] | None:
@@ -144,9 +146,9 @@ def first_non_finite(ds) -> tuple[str, int] | None:
 
     A run with such a value could not be completed (its result is not to be written).
     The documented non-finite values do not count: the standard errors (``*_sem``) of a
-    Gauss quadrature (``attrs["sampler"] == "gauss"``: it has no sampling error) and the
+    Gauss quadrature (``attrs["sampler"] == "gauss"``: it has no sampling error), the
     refinement history of adaptive elements (``refinement_share``,
-    ``refinement_mean_change``).
+    ``refinement_mean_change``) and the Sobol indices of an output without variance.
     """
     gauss = ds.attrs.get("sampler") == "gauss"
     for name, var in ds.data_vars.items():

@@ -54,18 +54,53 @@ def _model_flags(parser: argparse.ArgumentParser) -> None:
                            help=f"{PARAMETER_DOCS[name]} (default {getattr(defaults, name):g})")
 
 
+def uncertain_names(text: str):
+    """``--uncertain``: one name of ``UNCERTAIN_PARAMETERS`` or a comma-separated list."""
+    names = [part.strip() for part in str(text).split(",")]
+    for name in names:
+        if name not in UNCERTAIN_PARAMETERS:
+            raise argparse.ArgumentTypeError(
+                f"each uncertain parameter must be one of {', '.join(UNCERTAIN_PARAMETERS)}, "
+                f"got {name!r:.40}")
+    if len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(f"a parameter is named twice: {text!r:.60}")
+    return names[0] if len(names) == 1 else tuple(names)
+
+
+def scales(text: str):
+    """``--sigma``: one number, or a comma-separated list (one per uncertain parameter)."""
+    try:
+        values = [float(part) for part in str(text).split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number or a comma-separated list of "
+                                         f"numbers, got {text!r:.60}") from None
+    return values[0] if len(values) == 1 else tuple(values)
+
+
 def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS,
-                  closures: bool = True) -> None:
+                  closures: bool = True, several: bool = False) -> None:
     """The uncertainty, the OPA order and its closures (not with ``closures=False``: a
     Monte Carlo ensemble integrates the true systems), and the impulse model: the fields
-    of ``opa.System`` (defaults from there)."""
+    of ``opa.System`` (defaults from there). ``several``: ``--uncertain`` and ``--sigma``
+    take comma-separated lists (several uncertain parameters)."""
     g = parser.add_argument_group("system: uncertainty, OPA order and closures" if closures
                                   else "system: uncertainty and Chebyshev coefficients")
-    g.add_argument("--sigma", type=float, default=DEFAULT_SIGMA, metavar="S",
-                   help=f"intensity of the uncertain parameter p = p_bar + S xi "
-                        f"(default {DEFAULT_SIGMA:g})")
-    g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
-                   help="which parameter is uncertain (default mu)")
+    if several:
+        g.add_argument("--sigma", type=scales, default=DEFAULT_SIGMA, metavar="S[,S...]",
+                       help=f"scale of each uncertain parameter p = p_bar + S xi: one value "
+                            f"(applies to all) or one per --uncertain name "
+                            f"(default {DEFAULT_SIGMA:g})")
+        g.add_argument("--uncertain", type=uncertain_names, default="mu",
+                       metavar="P[,P...]",
+                       help=f"which parameters are uncertain, among "
+                            f"{', '.join(UNCERTAIN_PARAMETERS)}: one, or several such as "
+                            f"mu,c (default mu)")
+    else:
+        g.add_argument("--sigma", type=float, default=DEFAULT_SIGMA, metavar="S",
+                       help=f"intensity of the uncertain parameter p = p_bar + S xi "
+                            f"(default {DEFAULT_SIGMA:g})")
+        g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
+                       help="which parameter is uncertain (default mu)")
     g.add_argument("--allow-negative", action="store_true",
                    help="allow p_bar - sigma < 0 for the uncertain parameter")
     g.add_argument("--order", type=whole_number, default=DEFAULT_ORDER, metavar="N",
@@ -75,6 +110,11 @@ def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS,
     if not closures:
         _impulse_flags(parser)
         return
+    if several:
+        g.add_argument("--basis", default="total", metavar="total|tensor|hyperbolic:Q",
+                       help="with several uncertain parameters, the multi-index set of the "
+                            "OPA expansion: total degree <= N, tensor (each degree <= N) or "
+                            "hyperbolic q-norm <= N (default total)")
     g.add_argument("--truncation", choices=TRUNCATIONS, default="galerkin",
                    help="galerkin: exact projection; paper: eq. (27), drops sigma/2 Y_{N+1} "
                         "(default galerkin)")
@@ -155,9 +195,11 @@ def _law_flag(parser: argparse.ArgumentParser, *, elements: bool = True) -> None
     (simulate opa)."""
     g = parser.add_argument_group("law of xi and multi-element OPA" if elements
                                   else "law of xi")
-    g.add_argument("--distribution", default=None, metavar="LAW",
+    g.add_argument("--distribution", default=None, metavar="LAW[,LAW...]",
                    help="law of xi: semicircle (the paper's), uniform, beta:A,B or "
-                        "normal-trunc:K, all on [-1, 1] (default semicircle)")
+                        "normal-trunc:K, all on [-1, 1] (default semicircle); with several "
+                        "uncertain parameters one law for all or one per parameter, "
+                        "comma-separated (semicircle,beta:2,3)")
     if not elements:
         return
     g.add_argument("--elements", type=_elements_arg, default=None, metavar="K|adaptive",
@@ -296,7 +338,20 @@ def system_from(args, **changes) -> System:
     parameter flags) and every System field the subcommand has a flag for."""
     fields = {name: getattr(args, name) for name in SYSTEM_FIELDS
               if name != "oscillator" and getattr(args, name, None) is not None}
-    return System(oscillator_from(args), **{**fields, **changes})
+    try:
+        return System(oscillator_from(args), **{**fields, **changes})
+    except ValueError as err:
+        raise CliError(flagged(err, ("sigma", "distribution", "uncertain"))) from None
+
+
+def flagged(err: Exception, names) -> str:
+    """The library's message ``"name ..."`` as the flag the user typed (``"--name ..."``)
+    when it starts with one of ``names``."""
+    text = str(err)
+    for name in names:
+        if text.startswith((f"{name} ", f"{name}:")):
+            return "--" + name.replace("_", "-") + text[len(name):]
+    return text
 
 
 def _summary_events(ds) -> str:

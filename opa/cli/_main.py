@@ -35,6 +35,7 @@ from opa.cli._flags import (
     _summary_events,
     check_outputs,
     execution_from,
+    flagged,
     refuse_given,
     options_from,
     say,
@@ -116,6 +117,30 @@ def _simulate(args) -> int:
     return 0
 
 
+def _several(args, system, opts):
+    """``simulate opa`` with several uncertain parameters: the Galerkin system on the
+    multi-index basis, its moments and the Sobol indices of x at the last output."""
+    from opa import simulate_opa
+
+    for flag, value in (("--elements", args.elements), ("--verify", args.verify)):
+        if value is not None:
+            raise CliError(f"{flag} takes one uncertain parameter for now; --uncertain names "
+                           f"{len(system.uncertain)} ({','.join(system.uncertain)})")
+    try:
+        ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
+                          options=opts, basis=args.basis)
+    except ValueError as err:
+        raise CliError(flagged(err, ("basis",))) from None
+    indices = ", ".join(
+        f"{name} {float(ds.x_sobol_first.sel(parameter=name)[-1]):.3g}/"
+        f"{float(ds.x_sobol_total.sel(parameter=name)[-1]):.3g}"
+        for name in ds.parameter.values)
+    final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = {float(ds.x_var[-1]):.4g} "
+             f"({ds.sizes['term']} terms, {ds.attrs['nodes']} nodes); Sobol indices of x "
+             f"(first/total): {indices}")
+    return ds, final
+
+
 def _verify_max(args) -> int:
     return args.verify_max if args.verify_max is not None else max(args.verify,
                                                                    DEFAULT_VERIFY_MAX)
@@ -133,10 +158,12 @@ def _run(args, system, opts):
         from opa import simulate_opa
         from opa.engine import ElementBudgetWarning
 
+        if system.dimension > 1:
+            return _several(args, system, opts)
         with warnings.catch_warnings():  # the budget warning is said in the summary
             warnings.simplefilter("ignore", ElementBudgetWarning)
             ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
-                              options=opts, elements=args.elements,
+                              options=opts, elements=args.elements, basis=args.basis,
                               **({"tolerance": args.element_tolerance,
                                   "max_elements": args.max_elements}
                                  if args.elements == "adaptive" else {}))
@@ -271,7 +298,7 @@ _ONLY = {
     "--order": ("opa", "mc"), "--distribution": ("opa", "mc"),
     "--truncation": ("opa",), "--impact-law": ("opa",), "--elements": ("opa",),
     "--element-tolerance": ("opa",), "--max-elements": ("opa",), "--verify": ("opa",),
-    "--verify-max": ("opa",), "--strict": ("opa",),
+    "--verify-max": ("opa",), "--strict": ("opa",), "--basis": ("opa",),
     "--samples": ("mc",), "--sampler": ("mc",), "--scheduler": ("mc",),
     "--connect-timeout": ("mc",), "--keep-parts": ("mc",), "--device": ("mc",),
     "--seed": ("opa", "mc"),
@@ -328,7 +355,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "dmr":
             _impulse_flags(p)
         else:
-            _system_flags(p, closures=name == "opa")
+            _system_flags(p, closures=name == "opa", several=True)
             if name == "mc":
                 _mc_flags(p, connect_timeout=True, device=True)
         _solver_flags(p)

@@ -49,10 +49,13 @@ def _state(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray, str]:
 
 
 def _extra_panel(ds: xr.Dataset) -> str | None:
-    """The third panel a run deserves: the elements of a multi-element OPA run, the
-    impacts per sample of a Monte Carlo ensemble; None for the others."""
+    """The third panel a run deserves: the elements of a multi-element OPA run, the Sobol
+    indices over time of an OPA run with several uncertain parameters, the impacts per
+    sample of a Monte Carlo ensemble; None for the others."""
     if ds.attrs.get("model") == "opa" and ds.sizes.get("element", 1) > 1:
         return "elements"
+    if "x_sobol_first" in ds:
+        return "sobol"
     if ds.attrs.get("model") == "mc" and "n_impacts" in ds and ds.sizes.get("sample", 0):
         return "impacts"
     return None
@@ -70,6 +73,9 @@ def _draw_extra(ax, ds: xr.Dataset, kind: str) -> None:
         ax.set_title(f"{len(P)} elements ({ds.attrs.get('element_mode', '')})")
         ax.legend(loc="upper right", fontsize=8)
         return
+    if kind == "sobol":
+        _draw_sobol(ax, ds)
+        return
     counts = ds.n_impacts.values.astype(int)
     weights = ds.weight.values if "weight" in ds else np.ones(len(counts))
     values = np.arange(counts.min(), counts.max() + 1)
@@ -79,6 +85,23 @@ def _draw_extra(ax, ds: xr.Dataset, kind: str) -> None:
     ax.set_xlabel("impacts of a sample over the run")
     ax.set_ylabel("share of the samples")
     ax.set_title("impacts per sample")
+
+
+def _draw_sobol(ax, ds: xr.Dataset) -> None:
+    """First-order (solid) and total (dashed) Sobol indices of x over time, one colour a
+    parameter; gaps where x has no variance (the indices are undefined there)."""
+    periods = ds.time.values * ds.attrs["omega"] / (2 * np.pi)
+    for k, name in enumerate(ds.parameter.values):
+        colour = f"C{k}"
+        ax.plot(periods, ds.x_sobol_first.sel(parameter=name).values, color=colour, lw=1,
+                label=f"{name}: first order")
+        ax.plot(periods, ds.x_sobol_total.sel(parameter=name).values, color=colour, lw=1,
+                ls="--", label=f"{name}: total")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("t [forcing periods]")
+    ax.set_ylabel("Sobol index of x")
+    ax.set_title("Sobol indices from the OPA coefficients")
+    ax.legend(loc="best", fontsize=8)
 
 
 #: colour of each verdict of a certificate (``compare.verify``); any other word is grey
@@ -189,8 +212,9 @@ def draw_run(ds: xr.Dataset, *, per_period: int | None = None):
     if certified:
         _draw_certificate(axes[-1], ds, periods)
     uncertain = ds.attrs.get("uncertain", "mu")
+    sigma = ", ".join(f"{s:g}" for s in np.atleast_1d(ds.attrs["sigma"]))
     fig.suptitle(
-        f"{label}: ω = {ds.attrs['omega']:g}, c = {ds.attrs['c']:g}, σ = {ds.attrs['sigma']:g}"
+        f"{label}: ω = {ds.attrs['omega']:g}, c = {ds.attrs['c']:g}, σ = {sigma}"
         f"{'' if label == 'DMR' else f' ({uncertain} uncertain)'}, F0 = {ds.attrs['F0']:g}, "
         f"impulse = {ds.attrs['impulse']}"
     )

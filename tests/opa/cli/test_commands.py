@@ -22,6 +22,7 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from scipy.integrate import solve_ivp  # noqa: E402
 import xarray as xr  # noqa: E402
 
 from opa.cli._main import build_parser, main  # noqa: E402
@@ -638,3 +639,73 @@ def test_the_api_sweeps_the_monte_carlo_mean_with_mcs_source(sections_33):
     ds = opa.sweep("mc", "omega", [4.8, 5.1], system, source=mc.sweep_source, **kwargs)
     assert ds.label.values.tolist() == ["1/?", "2/?"]
     _sweep_matches(ds, sections_33, atol=1e-5)
+
+
+# --------------------------------------------------------------------------- several parameters
+
+FREE_FLAGS = ["--mu", 0.3, "--a", 1.0, "--c", 0.5, "--f", 0.4, "--omega", 1.3, "--delta", 50.0,
+              "--F0", 0.0, "--x0", 0.5, "--v0", 0.0, "--periods", 3, "--per-period", 8,
+              "--rtol", 1e-12, "--atol", 1e-12, "--quiet"]
+
+
+def test_simulate_opa_with_two_uncertain_parameters_is_the_tensor_reference(tmp_path):
+    """--uncertain mu,c on a case without impacts: the moments and Sobol indices of the
+    scipy runs at a 14 x 14 tensor Gauss rule (tests/opa/test_galerkin.py)."""
+    from tests.opa.test_galerkin import reference
+
+    out = tmp_path / "two.nc"
+    run(["simulate", "opa", "--uncertain", "mu,c", "--sigma", "0.06,0.2", "--distribution",
+         "semicircle,uniform", "--order", 6, *FREE_FLAGS, "--out", out])
+    ds = load(out)
+    mean, var, first, total = reference(("semicircle", "uniform"))
+    np.testing.assert_allclose(ds.x_mean, mean, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(ds.x_var, var, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(ds.x_sobol_first[:, 1:], first[:, 1:], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(ds.x_sobol_total[:, 1:], total[:, 1:], rtol=0, atol=1e-6)
+    assert ds.attrs["uncertain"] == "mu,c" and ds.multi_index.shape == (28, 2)
+
+
+def test_simulate_mc_with_three_uncertain_parameters_is_the_mean_of_its_samples(tmp_path):
+    """The ensemble's mean and variance are those of scipy runs at the points it wrote
+    (sample, parameter), with each parameter at p_bar + sigma xi."""
+    out = tmp_path / "mc3.nc"
+    run(["simulate", "mc", "--uncertain", "mu,a,c", "--sigma", "0.06,0.1,0.2",
+         "--distribution", "uniform", "--samples", 32, "--sampler", "random", *FREE_FLAGS,
+         "--out", out])
+    ds = load(out)
+    assert ds.xi.dims == ("sample", "parameter") and ds.sizes["parameter"] == 3
+    assert np.all(np.abs(ds.xi.values) <= 1.0)
+    t = ds.time.values
+    paths = []
+    for mu, a, c in np.array([0.3, 1.0, 0.5]) + np.array([0.06, 0.1, 0.2]) * ds.xi.values:
+        def rhs(s, y, mu=mu, a=a, c=c):
+            return [y[1], mu * (1 - y[1] ** 2) * y[1] - a * y[0] - c * y[0] ** 3
+                    + 0.4 * np.cos(1.3 * s)]
+        paths.append(solve_ivp(rhs, (0, t[-1]), [0.5, 0.0], method="DOP853", t_eval=t,
+                               rtol=1e-12, atol=1e-12).y[0])
+    paths = np.array(paths)
+    np.testing.assert_allclose(ds.x_mean, paths.mean(axis=0), rtol=0, atol=1e-8)
+    np.testing.assert_allclose(ds.x_var, paths.var(axis=0, ddof=1), rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--uncertain", "mu,x"], "argument --uncertain: each uncertain parameter must be one of"),
+    (["--uncertain", "mu,mu"], "argument --uncertain: a parameter is named twice"),
+    (["--uncertain", "mu,c", "--sigma", "0.1,0.2,0.3"], "--sigma must give one value, or one"),
+    (["--uncertain", "mu,c", "--distribution", "uniform,uniform,beta:2,3"],
+     "--distribution must give one value, or one"),
+    (["--uncertain", "mu,c", "--basis", "sparse"], "--basis must be one of"),
+    (["--uncertain", "mu,c", "--elements", "4"], "--elements takes one uncertain parameter"),
+    (["--uncertain", "mu,c", "--verify", "64"], "--verify takes one uncertain parameter"),
+    (["--uncertain", "f,c"], "argument --uncertain: each uncertain parameter must be one of"),
+])
+def test_several_parameters_refused_in_one_line_naming_the_flag(argv, words, capsys):
+    argv = ["simulate", "opa", *argv, "--periods", "1", "--quiet"]
+    if words.startswith("argument"):  # refused by the parser
+        with pytest.raises(SystemExit) as exit_:
+            main(argv)
+        assert exit_.value.code == 2
+    else:
+        assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert words in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

@@ -181,3 +181,25 @@ def test_a_portrait_marks_its_poincare_points_as_asked():
         P.PoincareMarks("")
     with pytest.raises(ValueError, match="size must be a finite number > 0 or None, got 0"):
         P.PoincareMarks(size=0)
+
+
+def test_a_run_of_several_parameters_draws_its_sobol_indices_over_time():
+    """The third panel holds each parameter's first-order and total index of x, the
+    dataset's own values (NaN at the deterministic start left as a gap), on [0, 1]."""
+    import opa
+
+    ds = opa.simulate_opa(opa.System(preset("3.2"), uncertain="mu,c", sigma=(0.016, 0.005),
+                                     order=2), periods=2, per_period=8)
+    fig = P.draw_run(ds, per_period=8)
+    try:
+        panel = fig.axes[2]
+        lines = {line.get_label(): line.get_ydata() for line in panel.get_lines()}
+        for name in ("mu", "c"):
+            np.testing.assert_array_equal(lines[f"{name}: first order"],
+                                          ds.x_sobol_first.sel(parameter=name).values)
+            np.testing.assert_array_equal(lines[f"{name}: total"],
+                                          ds.x_sobol_total.sel(parameter=name).values)
+        assert panel.get_ylim() == (-0.02, 1.02)
+        assert "0.016, 0.005" in fig._suptitle.get_text()
+    finally:
+        plt.close(fig)
