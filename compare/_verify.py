@@ -97,6 +97,7 @@ def system_of(run: xr.Dataset, options: SolverOptions | None = None
     """The System and solver options an OPA run was computed with, from its attributes
     (``options``: the solver options to use instead, e.g. with a ``max_step``)."""
     attrs = run.attrs
+    one_parameter(run)
     needed = PARAMETER_NAMES + ("sigma", "uncertain", "impulse", "pulse_width",
                                 "impulse_at_zero") + (() if options else ("rtol", "atol"))
     missing = [name for name in needed if name not in attrs]
@@ -139,6 +140,16 @@ def check_counts(samples, max_samples, *, flags: bool = False) -> tuple[int, int
     first, most = ("--verify", "--verify-max") if flags else ("samples", "max_samples")
     samples = _check_count(first, samples, MIN_SAMPLES)
     return samples, _check_count(most, max_samples, samples)
+
+
+def one_parameter(run: xr.Dataset) -> None:
+    """Refuse in one line a run of several uncertain parameters: certificates take one
+    for now."""
+    if "," in str(run.attrs.get("uncertain", "")):
+        raise ValueError(f"the run has several uncertain parameters "
+                         f"({run.attrs['uncertain']}); its certificate takes one for now "
+                         f"(compare.certify_sobol checks the Sobol indices of such a run "
+                         f"against the true systems)")
 
 
 def check_reported(run: xr.Dataset, measure) -> None:
@@ -422,6 +433,7 @@ def _check_arguments(run, samples, max_samples, tolerance, var_tolerance, alpha,
     """``verify``'s keywords checked, and the run checked to be an OPA dataset that ran to
     its end: (samples, max_samples, tolerance, var_tolerance, alpha)."""
     check_dataset(run, "the run", "an OPA run")
+    one_parameter(run)
     check_opa_layout(run, "the run")
     require_time(run, "the run")
     samples, max_samples = check_counts(samples, max_samples)

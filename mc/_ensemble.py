@@ -304,7 +304,8 @@ def simulate_mc(
         "simulate_mc", "scheduler", "device", "checkpoint", "chunk_size", "connect_timeout",
         "worker_timeout")
     options = check_instance("options", options, SolverOptions, SolverOptions())
-    system = as_system(system, options, allowed=MC_FIELDS, where="simulate_mc", **fields)
+    system = as_system(system, options, allowed=MC_FIELDS, where="simulate_mc",
+                       several=True, **fields)
     if keep_paths not in (True, False) or isinstance(keep_paths, str):
         raise ValueError(f"keep_paths must be True or False, got {keep_paths!r}")
     plan = _plan(system, options, samples, sampler, seed, replicates, control,

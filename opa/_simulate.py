@@ -58,7 +58,7 @@ def simulate_dmr(
     """
     options = check_instance("options", options, SolverOptions, SolverOptions())
     system = as_system(system, options, allowed=IMPULSE_FIELDS, where="simulate_dmr",
-                       **impulse_model).deterministic()
+                       several=True, **impulse_model).deterministic()
     oscillator = system.oscillator
     times = output_times(oscillator, periods, per_period, times)
     span = float(times[-1] - times[0]) / oscillator.forcing_period
@@ -196,7 +196,7 @@ def simulate_opa(
     tolerance, max_elements = _refinement(elements, tolerance, max_elements)
     if not isinstance(system, System) and fields.get("impact_law") is None:
         fields["impact_law"] = default_impact_law(elements)
-    system = as_system(system, options, where="simulate_opa", **fields)
+    system = as_system(system, options, where="simulate_opa", several=True, **fields)
     system.check_samples()
     oscillator, order = system.oscillator, system.order
     check_opa_work(system, output_times(oscillator, periods, per_period, times), elements,

@@ -166,7 +166,7 @@ class EventSequence:
 def event_sequence(system: System | Oscillator, options: SolverOptions,
                    t_end: float) -> EventSequence:
     """Run the deterministic system to ``t_end`` and return its events."""
-    system = as_system(system, options).deterministic()
+    system = as_system(system, options, several=True).deterministic()
     rec = run(system.kernel_inputs(options), system.initial_state(), np.array([0.0, t_end]),
               rtol=options.rtol, atol=options.atol, label="sampled system")
     return _sequence(system, rec.events)
@@ -176,7 +176,7 @@ def event_sequences(system: System | Oscillator, options: SolverOptions, paramet
                     values, t_end: float) -> list[EventSequence]:
     """The event sequences of the sampled systems with ``parameter`` at each of ``values``
     (absolute values), run in parallel by the compiled kernel."""
-    system = as_system(system, options).deterministic()
+    system = as_system(system, options, several=True).deterministic()
     values = np.asarray(values, dtype=float)
     if parameter not in ("mu", "a", "c"):  # not a kernel-side uncertain parameter
         return [event_sequence(system.replace(**{parameter: float(v)}), options, t_end)
@@ -382,7 +382,7 @@ class SampledRuns:
 
     def __init__(self, system: System | Oscillator, options: SolverOptions, parameter: str,
                  t_end: float):
-        self.system = as_system(system, options).deterministic()
+        self.system = as_system(system, options, several=True).deterministic()
         self.options = options
         self.parameter = parameter
         self.t_end = _end_time(t_end)
@@ -850,7 +850,7 @@ def scan_splits(
         raise ValueError(f"need finite lo < hi, got [{lo}, {hi}]")
     if not isinstance(settings, ScanOptions):
         raise TypeError(f"settings must be a ScanOptions, got {type(settings).__name__}")
-    system = as_system(system, options).deterministic()
+    system = as_system(system, options, several=True).deterministic()
     # a bracket cannot shrink below a few ulps of its ends: such a tol would bisect for
     # ever; above it the bisection takes at most log2((hi - lo) / tol) < 53 halvings
     reach = 4.0 * np.finfo(float).eps * max(abs(lo), abs(hi))

@@ -343,13 +343,14 @@ IMPULSE_FIELDS = ("impulse", "pulse_width", "impulse_at_zero")
 
 
 def as_system(system=None, options: SolverOptions | None = None, *, allowed=SYSTEM_FIELDS,
-              where: str = "", **fields) -> System:
+              where: str = "", several: bool = False, **fields) -> System:
     """The System an entry point works on.
 
     ``system`` is a :class:`System` (then no ``fields`` may be given), or an
     :class:`Oscillator` or None (the paper's defaults) from which a System is built with
     ``fields``, the keywords of :class:`System` (``allowed`` of them; None values count as
-    not given). A ``SolverOptions`` that still carries the deprecated impulse model
+    not given). A system of several uncertain parameters is refused in one line unless
+    the entry point takes them (``several``). A ``SolverOptions`` that still carries the deprecated impulse model
     (``SolverOptions(impulse=...)``) passes it on when the fields do not set it.
 
     Examples
@@ -378,10 +379,11 @@ def as_system(system=None, options: SolverOptions | None = None, *, allowed=SYST
         if clash:
             raise ValueError(f"SolverOptions and the System disagree on {', '.join(clash)}: "
                              f"the impulse model belongs to the System (System(impulse=...))")
-        return system
-    if system is not None and not isinstance(system, Oscillator):
-        raise ValueError(f"oscillator must be an opa.Oscillator (or the system an "
-                         f"opa.System), got {system!r:.80}")
-    for name, value in legacy.items():
-        given.setdefault(name, value)
-    return System(system if system is not None else Oscillator(), **given)
+    else:
+        if system is not None and not isinstance(system, Oscillator):
+            raise ValueError(f"oscillator must be an opa.Oscillator (or the system an "
+                             f"opa.System), got {system!r:.80}")
+        for name, value in legacy.items():
+            given.setdefault(name, value)
+        system = System(system if system is not None else Oscillator(), **given)
+    return system if several else system.one_dimensional(f"{where or 'this analysis'}()")

@@ -170,3 +170,20 @@ def test_replace_takes_the_oscillators_parameters_by_name():
         s.replace(eta=2.0)
     d = s.deterministic()
     assert (d.sigma, d.order, d.impulse) == (0.0, 0, s.impulse)
+
+
+def test_analyses_of_one_parameter_refuse_several_in_one_line():
+    """Sweeps and certificates take one uncertain parameter for now: a system (or run) of
+    several is refused by name; the runs that take several (simulate_opa, simulate_mc,
+    the DMR, the deterministic split scans) accept it."""
+    import compare
+
+    two = System(uncertain="mu,c", sigma=0.01, order=1)
+    with pytest.raises(ValueError, match=r"sweep\(\) takes one uncertain parameter; this "
+                                         r"system has 2 \(mu,c\)"):
+        opa.sweep("opa", "omega", [3.9, 4.0], two)
+    run = opa.simulate_opa(two, periods=1)
+    with pytest.raises(ValueError, match=r"the run has several uncertain parameters \(mu,c\)"):
+        compare.verify(run, samples=16)
+    assert as_system(two, several=True) is two
+    assert opa.simulate_dmr(two, periods=1).sizes["time"] == 2
