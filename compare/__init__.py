@@ -19,6 +19,8 @@ _HOMES = {
     "convergence_lines": "compare._convergence:summary_lines",
     "write_convergence_report": "compare._convergence:write_report",
     "plot_frontier": "compare._mapfigures",
+    # Sobol indices of the true systems, certified (opa-mc sobol)
+    "certify_sobol": "compare._certify_sobol",
     # the paper's figures: matplotlib only when they are asked for
     "reproduce": "compare._figures", "FIGURES": "compare._figures",
 }
@@ -41,6 +43,7 @@ __all__ = [
     "FIGURES",
     "bullet",
     "cause",
+    "certify_sobol",
     "check_counts",
     "convergence_lines",
     "first_screen",

@@ -2,6 +2,7 @@
 (``import opa`` does not import matplotlib)."""
 
 from opa.plots._branches import plot_branches
+from opa.plots._sensitivity import plot_sensitivity
 from opa.plots._stochastic import plot_stochastic
 from opa.plots._diagrams import (
     COLORS,
@@ -20,7 +21,7 @@ from opa.plots._diagrams import (
 )
 
 __all__ = [
-    "plot_bifurcation", "plot_branches", "plot_run", "plot_stochastic",
+    "plot_bifurcation", "plot_branches", "plot_run", "plot_sensitivity", "plot_stochastic",
     # the drawing blocks of the paper's figures (``compare._figures``)
     "COLORS", "PoincareMarks", "SECTION_LABELS", "describe_marks", "diagram", "draw_marks",
     "history", "located_marks", "portrait", "section_bars", "window",
