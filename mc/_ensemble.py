@@ -48,6 +48,9 @@ from opa.engine import (
 MC_FIELDS = ("sigma", "uncertain", "distribution", "allow_negative", "order",
              *IMPULSE_FIELDS)
 
+#: how simulate_mc takes its System (as_system's keywords)
+_MC_ENTRY = dict(allowed=MC_FIELDS, where="simulate_mc")
+
 CHUNK_BYTES = 32 * 2**20
 GPU_CHUNK, GPU_CHUNK_BYTES = 2**18, 2**30  # device="cuda": samples a launch, paths' bytes
 # Memory a sample takes outside the paths: xi, its weight, replicate index and impact
@@ -304,8 +307,7 @@ def simulate_mc(
         "simulate_mc", "scheduler", "device", "checkpoint", "chunk_size", "connect_timeout",
         "worker_timeout")
     options = check_instance("options", options, SolverOptions, SolverOptions())
-    system = as_system(system, options, allowed=MC_FIELDS, where="simulate_mc",
-                       several=True, **fields)
+    system = as_system(system, options, several=True, **_MC_ENTRY, **fields)
     if keep_paths not in (True, False) or isinstance(keep_paths, str):
         raise ValueError(f"keep_paths must be True or False, got {keep_paths!r}")
     plan = _plan(system, options, samples, sampler, seed, replicates, control,

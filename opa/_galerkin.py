@@ -23,8 +23,8 @@ they act on the coefficients, not on xi.
 The first-order and total Sobol indices of x(t) and v(t) come with the run, from the
 coefficients (Sudret 2008, :func:`opa._sensitivity.sobol_indices`).
 
-One element only: multi-element OPA with boxes, and the paper's closure (eq. (27), one
-uncertain parameter), are not available in d > 1 and are refused by name.
+Several elements are boxes (:mod:`opa._boxes`). The paper's closure (eq. (27), one
+uncertain parameter) is not available in d > 1 and is refused by name.
 """
 
 from __future__ import annotations
@@ -43,10 +43,11 @@ from opa._system import System
 BASIS_KINDS = ("total", "tensor", "hyperbolic")
 
 
-def chaos_basis(system: System, basis: str = "total") -> ChaosBasis:
-    """The multi-index basis of order N over the marginals of ``system``'s problem:
-    ``basis`` is ``total`` (total degree <= N), ``tensor`` (each degree <= N) or
-    ``hyperbolic:Q`` (q-norm <= N, 0 < Q <= 1).
+def chaos_basis(system: System, basis: str = "total", measures=None) -> ChaosBasis:
+    """The multi-index basis of order N over the marginals of ``system``'s problem (or
+    over ``measures``, an element's conditional marginals): ``basis`` is ``total`` (total
+    degree <= N), ``tensor`` (each degree <= N) or ``hyperbolic:Q`` (q-norm <= N,
+    0 < Q <= 1).
 
     >>> from opa import System
     >>> chaos_basis(System(uncertain="mu,c", sigma=0.01, order=2)).indices.tolist()
@@ -61,7 +62,8 @@ def chaos_basis(system: System, basis: str = "total") -> ChaosBasis:
     except ValueError:
         raise ValueError(f"basis hyperbolic:Q takes a number 0 < Q <= 1, got "
                          f"{basis!r:.40}") from None
-    return ChaosBasis.from_order(system.problem.measures, system.order, kind, q)
+    return ChaosBasis.from_order(system.problem.measures if measures is None else measures,
+                                 system.order, kind, q)
 
 
 def chaos_rule(basis: ChaosBasis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

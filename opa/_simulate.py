@@ -202,15 +202,8 @@ def simulate_opa(
     check_opa_work(system, output_times(oscillator, periods, per_period, times), elements,
                    max_elements, options.max_steps)
     if system.dimension > 1:
-        from opa._galerkin import simulate_chaos
-
-        for name, value in (("elements", elements), ("initial", initial)):
-            if value is not None:
-                raise ValueError(f"{name} is not available with several uncertain "
-                                 f"parameters yet (one element, the deterministic start)")
-        return simulate_chaos(system, options, output_times(oscillator, periods, per_period,
-                                                            times),
-                              basis=basis, partial=partial)
+        return _several(system, options, output_times(oscillator, periods, per_period, times),
+                        elements, initial, partial, basis, tolerance, max_elements)
     if basis != "total":
         raise ValueError(f"basis = {basis!r:.40} applies with several uncertain parameters; "
                          f"with one the basis is the law's polynomials up to N")
@@ -229,6 +222,25 @@ def simulate_opa(
               rtol=options.rtol, atol=options.atol, label=f"OPA (N={order}) trajectory",
               partial=partial)
     return _single_element(system, options, times, rec)
+
+
+def _several(system, options, times, elements, initial, partial, basis, tolerance,
+             max_elements) -> xr.Dataset:
+    """:func:`simulate_opa` with several uncertain parameters: one element
+    (:mod:`opa._galerkin`) or boxes (:mod:`opa._boxes`)."""
+    if initial is not None:
+        raise ValueError("initial is not available with several uncertain parameters yet "
+                         "(the deterministic start)")
+    if elements is None:
+        from opa._galerkin import simulate_chaos
+
+        return simulate_chaos(system, options, times, basis=basis, partial=partial)
+    from opa._boxes import simulate_boxes
+
+    if partial:
+        raise ValueError("partial is not available with elements")
+    return simulate_boxes(system, options, times, elements, basis=basis,
+                          tolerance=tolerance, max_elements=max_elements)
 
 
 def default_impact_law(elements) -> str:
