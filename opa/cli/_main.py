@@ -122,22 +122,32 @@ def _several(args, system, opts):
     multi-index basis, its moments and the Sobol indices of x at the last output."""
     from opa import simulate_opa
 
-    for flag, value in (("--elements", args.elements), ("--verify", args.verify)):
-        if value is not None:
-            raise CliError(f"{flag} takes one uncertain parameter for now; --uncertain names "
-                           f"{len(system.uncertain)} ({','.join(system.uncertain)})")
+    from opa.engine import ElementBudgetWarning
+
+    if args.verify is not None:
+        raise CliError(f"--verify takes one uncertain parameter for now; --uncertain names "
+                       f"{len(system.uncertain)} ({','.join(system.uncertain)}): `opa-mc "
+                       f"sobol` certifies the Sobol indices of such a system")
+    adaptive = args.elements == "adaptive"
     try:
-        ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
-                          options=opts, basis=args.basis)
+        with warnings.catch_warnings():  # the budget warning is said in the summary
+            warnings.simplefilter("ignore", ElementBudgetWarning)
+            ds = simulate_opa(system, periods=args.periods, per_period=args.per_period,
+                              options=opts, basis=args.basis, elements=args.elements,
+                              **({"tolerance": args.element_tolerance,
+                                  "max_elements": args.max_elements} if adaptive else {}))
     except ValueError as err:
         raise CliError(flagged(err, ("basis",))) from None
     indices = ", ".join(
         f"{name} {float(ds.x_sobol_first.sel(parameter=name)[-1]):.3g}/"
         f"{float(ds.x_sobol_total.sel(parameter=name)[-1]):.3g}"
         for name in ds.parameter.values)
+    boxes = (f", {ds.sizes['element']} boxes ({ds.attrs['element_mode']}"
+             + (f", stopped by {ds.attrs['stopped_by']}" if adaptive else "") + ")"
+             if "element" in ds.dims else "")
     final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = {float(ds.x_var[-1]):.4g} "
-             f"({ds.sizes['term']} terms, {ds.attrs['nodes']} nodes); Sobol indices of x "
-             f"(first/total): {indices}")
+             f"({ds.sizes['term']} terms, {ds.attrs['nodes']} nodes{boxes}); Sobol indices "
+             f"of x (first/total): {indices}")
     return ds, final
 
 
