@@ -32,6 +32,7 @@ from opa._model import (  # the vocabulary (module docstring)
 )
 from opa._run import SimulationError
 from opa._simulate import simulate_dmr, simulate_opa
+from opa._problem import Problem
 from opa._system import System
 from opa._system import (  # the vocabulary (module docstring)
     DEFAULT_ORDER as DEFAULT_ORDER,
@@ -54,6 +55,7 @@ def __getattr__(name: str):
 __all__ = [
     "Execution",
     "Oscillator",
+    "Problem",
     "System",
     "SolverOptions",
     "Uncertainty",
