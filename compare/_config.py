@@ -8,14 +8,14 @@ import dataclasses
 import math
 import numbers
 import os
-import tomllib
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from opa.engine import (
     IMPULSE_FIELDS, MAX_ELEMENTS, MAX_GRID, PARAMETER_NAMES, check_memory, check_order,
-    check_span, Measure, Oscillator, parse as parse_law, preset, SolverOptions, System,
+    check_span, Measure, Oscillator, parse as parse_law, preset, read_toml, SolverOptions,
+    System,
 )
 
 # The single-element variants (impact law, truncation) under the semicircle law. Under
@@ -363,56 +363,6 @@ class ValidateConfig:
 MAX_SAMPLES = 2**20
 
 
-#: the largest config file read (a validate config is a few hundred bytes)
-MAX_CONFIG_BYTES = 1 << 20
-#: the deepest nesting of arrays and tables a config may have ([model] holds numbers)
-MAX_CONFIG_DEPTH = 4
-
-
-def _read_toml(path) -> dict:
-    """A config file's TOML: a regular file (not a FIFO, device or folder) of at most
-    MAX_CONFIG_BYTES, nested at most MAX_CONFIG_DEPTH deep."""
-    import stat
-
-    try:
-        info = os.stat(path)
-    except OSError as err:
-        raise ValueError(f"config file {path}: {err.strerror}") from None
-    if not stat.S_ISREG(info.st_mode):
-        raise ValueError(f"config file {path}: not a regular file")
-    if info.st_size > MAX_CONFIG_BYTES:
-        raise ValueError(f"config file {path}: {info.st_size} bytes, more than the "
-                         f"{MAX_CONFIG_BYTES} a config may have")
-    try:
-        with open(path, "rb") as fh:
-            blob = fh.read(MAX_CONFIG_BYTES + 1)
-    except OSError as err:
-        raise ValueError(f"config file {path}: {err.strerror}") from None
-    if len(blob) > MAX_CONFIG_BYTES:
-        raise ValueError(f"config file {path}: more than the {MAX_CONFIG_BYTES} bytes a "
-                         f"config may have")
-    try:
-        data = tomllib.loads(blob.decode("utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ValueError(f"config file {path} is not valid TOML: {err}") from None
-    except RecursionError:
-        raise ValueError(f"config file {path}: arrays or tables nested too deeply (at most "
-                         f"{MAX_CONFIG_DEPTH} levels)") from None
-
-    def depth(value) -> int:
-        if isinstance(value, dict):
-            return 1 + max(map(depth, value.values()), default=0)
-        if isinstance(value, list):
-            return 1 + max(map(depth, value), default=0)
-        return 0
-
-    for key, value in data.items():
-        if depth(value) > MAX_CONFIG_DEPTH - 1:
-            raise ValueError(f"config file {path}: key {key!r} is nested too deeply (at most "
-                             f"{MAX_CONFIG_DEPTH} levels)")
-    return data
-
-
 def load_config(path: str | None, **overrides) -> ValidateConfig:
     """A configuration from a TOML file (all keys optional) and keyword overrides.
 
@@ -430,7 +380,7 @@ def load_config(path: str | None, **overrides) -> ValidateConfig:
     """
     data: dict = {}
     if path is not None:
-        data = _read_toml(path)
+        data = read_toml(path)
     model = data.pop("model", {})
     solver = data.pop("solver", {})
     for name, table in (("model", model), ("solver", solver)):

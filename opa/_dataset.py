@@ -12,6 +12,7 @@ import hashlib
 import json
 import os
 import re
+import tomllib
 import sys
 import tempfile
 import time
@@ -159,6 +160,60 @@ def first_non_finite(ds) -> tuple[str, int] | None:
         if bad:
             return name, bad
     return None
+
+
+# --------------------------------------------------------------------------- TOML files
+
+#: the largest TOML file read (a validate config or a problem table is a few hundred
+#: bytes)
+MAX_CONFIG_BYTES = 1 << 20
+#: the deepest nesting of arrays and tables a TOML file may have ([model] holds numbers)
+MAX_CONFIG_DEPTH = 4
+
+
+def read_toml(path, what: str = "config file") -> dict:
+    """A TOML file (``what``: how messages name it): a regular file (not a FIFO, device
+    or folder) of at most MAX_CONFIG_BYTES, nested at most MAX_CONFIG_DEPTH deep; one
+    line naming the path and the fault otherwise."""
+    import stat
+
+    try:
+        info = os.stat(path)
+    except OSError as err:
+        raise ValueError(f"{what} {path}: {err.strerror}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise ValueError(f"{what} {path}: not a regular file")
+    if info.st_size > MAX_CONFIG_BYTES:
+        raise ValueError(f"{what} {path}: {info.st_size} bytes, more than the "
+                         f"{MAX_CONFIG_BYTES} a {what} may have")
+    try:
+        with open(path, "rb") as fh:
+            blob = fh.read(MAX_CONFIG_BYTES + 1)
+    except OSError as err:
+        raise ValueError(f"{what} {path}: {err.strerror}") from None
+    if len(blob) > MAX_CONFIG_BYTES:
+        raise ValueError(f"{what} {path}: more than the {MAX_CONFIG_BYTES} bytes a "
+                         f"{what} may have")
+    try:
+        data = tomllib.loads(blob.decode("utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{what} {path} is not valid TOML: {err}") from None
+    except RecursionError:
+        raise ValueError(f"{what} {path}: arrays or tables nested too deeply (at most "
+                         f"{MAX_CONFIG_DEPTH} levels)") from None
+
+    def depth(value) -> int:
+        if isinstance(value, dict):
+            return 1 + max(map(depth, value.values()), default=0)
+        if isinstance(value, list):
+            return 1 + max(map(depth, value), default=0)
+        return 0
+
+    for key, value in data.items():
+        if depth(value) > MAX_CONFIG_DEPTH - 1:
+            raise ValueError(f"{what} {path}: key {key!r} is nested too deeply (at most "
+                             f"{MAX_CONFIG_DEPTH} levels)")
+    return data
 
 
 # --------------------------------------------------------------------------- atomic files

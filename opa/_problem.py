@@ -140,6 +140,48 @@ class Problem:
         if any(law is not None for law in laws):
             self.measures  # noqa: B018 -- parses (and so checks) every law given
 
+    # ------------------------------------------------------------------ from a table
+    @classmethod
+    def from_table(cls, table: dict, where: str = "the problem") -> Problem:
+        """The problem of a TOML-style table: one sub-table per uncertain parameter, in
+        order, each with ``sigma`` and optionally ``distribution``; optionally
+        ``allow_negative`` at the top.
+
+        >>> Problem.from_table({"mu": {"sigma": 0.016},
+        ...                     "c": {"sigma": 0.005, "distribution": "uniform"}}).laws
+        (None, 'uniform')
+        """
+        if not isinstance(table, dict):
+            raise ValueError(f"{where} must be a table, got {type(table).__name__}")
+        allow = table.get("allow_negative", False)
+        names, scales, laws = [], [], []
+        for name, entry in table.items():
+            if name == "allow_negative":
+                continue
+            if not isinstance(entry, dict):
+                raise ValueError(f"{where}: {name!r:.40} must be a table [{name}] with sigma "
+                                 f"and distribution (or allow_negative at the top)")
+            unknown = sorted(set(entry) - {"sigma", "distribution"})
+            if unknown:
+                raise ValueError(f"{where}: [{name}] has unknown key(s) "
+                                 f"{', '.join(map(repr, unknown))} (it takes sigma and "
+                                 f"distribution)")
+            if "sigma" not in entry:
+                raise ValueError(f"{where}: [{name}] needs sigma")
+            names.append(name)
+            scales.append(entry["sigma"])
+            laws.append(entry.get("distribution"))
+        if not names:
+            raise ValueError(f"{where} names no uncertain parameter (one table [name] each)")
+        return cls(tuple(names), tuple(scales), tuple(laws), allow)
+
+    @classmethod
+    def from_toml(cls, path) -> Problem:
+        """The problem of a TOML file (:meth:`from_table`)."""
+        from opa._dataset import read_toml
+
+        return cls.from_table(read_toml(path, "problem file"), f"problem file {path}")
+
     # ------------------------------------------------------------------ the law
     @property
     def dimension(self) -> int:

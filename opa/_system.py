@@ -117,6 +117,10 @@ class System:
         if not isinstance(self.oscillator, Oscillator):
             raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r:.80}")
         if isinstance(self.uncertain, Problem):
+            if (self.sigma, self.distribution, self.allow_negative) != (DEFAULT_SIGMA, None,
+                                                                       False):
+                raise ValueError("give the uncertain parameters as a Problem or as sigma, "
+                                 "distribution and allow_negative, not both")
             problem = self.uncertain
         else:
             problem = Problem(self.uncertain, self.sigma, self.distribution,

@@ -28,6 +28,7 @@ from opa import (
     UNCERTAIN_PARAMETERS,
     Execution,
     Oscillator,
+    Problem,
     SolverOptions,
     System,
 )
@@ -86,11 +87,17 @@ def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS,
     g = parser.add_argument_group("system: uncertainty, OPA order and closures" if closures
                                   else "system: uncertainty and Chebyshev coefficients")
     if several:
-        g.add_argument("--sigma", type=scales, default=DEFAULT_SIGMA, metavar="S[,S...]",
+        g.add_argument("--problem", default=None, metavar="FILE.toml",
+                       help="the uncertain parameters as a TOML file: one table [name] each "
+                            "with sigma and optionally distribution, in order, and "
+                            "optionally allow_negative at the top (instead of --uncertain, "
+                            "--sigma, --distribution and --allow-negative)")
+        # None when not given: --problem may not be mixed with them
+        g.add_argument("--sigma", type=scales, default=None, metavar="S[,S...]",
                        help=f"scale of each uncertain parameter p = p_bar + S xi: one value "
                             f"(applies to all) or one per --uncertain name "
                             f"(default {DEFAULT_SIGMA:g})")
-        g.add_argument("--uncertain", type=uncertain_names, default="mu",
+        g.add_argument("--uncertain", type=uncertain_names, default=None,
                        metavar="P[,P...]",
                        help=f"which parameters are uncertain, among "
                             f"{', '.join(UNCERTAIN_PARAMETERS)}: one, or several such as "
@@ -338,6 +345,18 @@ def system_from(args, **changes) -> System:
     parameter flags) and every System field the subcommand has a flag for."""
     fields = {name: getattr(args, name) for name in SYSTEM_FIELDS
               if name != "oscillator" and getattr(args, name, None) is not None}
+    if getattr(args, "problem", None) is not None:
+        mixed = [flag for flag, name in (("--uncertain", "uncertain"), ("--sigma", "sigma"),
+                                         ("--distribution", "distribution"))
+                 if name in fields] + (["--allow-negative"] if args.allow_negative else [])
+        if mixed:
+            raise CliError(f"--problem {args.problem} names the uncertain parameters; "
+                           f"{', '.join(mixed)} may not be given with it")
+        fields.pop("allow_negative", None)
+        try:
+            fields["uncertain"] = Problem.from_toml(args.problem)
+        except ValueError as err:
+            raise CliError(f"--problem: {err}") from None
     try:
         return System(oscillator_from(args), **{**fields, **changes})
     except ValueError as err:

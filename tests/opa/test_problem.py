@@ -112,3 +112,35 @@ def test_a_system_of_several_parameters():
         opa.System(uncertain="mu,c", sigma=0.01, truncation="paper")
     one = opa.System(uncertain=Problem("c", 0.03))
     assert (one.uncertain, one.sigma, one.dimension) == ("c", 0.03, 1)
+
+
+def test_a_toml_table_names_the_parameters_in_order(tmp_path):
+    path = tmp_path / "problem.toml"
+    path.write_text('allow_negative = true\n[c]\nsigma = 0.005\ndistribution = "beta:2,3"\n'
+                    '[mu]\nsigma = 0.016\n')
+    problem = Problem.from_toml(path)
+    assert problem == Problem(("c", "mu"), (0.005, 0.016), ("beta:2,3", None), True)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("[mu]\nsigma = 0.01\nlaw = 'uniform'\n", "[mu] has unknown key(s) 'law'"),
+    ("[mu]\ndistribution = 'uniform'\n", "[mu] needs sigma"),
+    ("mu = 0.01\n", "'mu' must be a table [mu]"),
+    ("allow_negative = true\n", "names no uncertain parameter"),
+    ("[mu]\nsigma = 'big'\n", "sigma must be a real number"),
+    ("[x]\nsigma = 0.1\n", "uncertain must name parameters"),
+    ("[mu\n", "is not valid TOML"),
+])
+def test_a_bad_problem_file_gets_one_line_naming_it(tmp_path, text, words):
+    path = tmp_path / "problem.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as err:
+        Problem.from_toml(path)
+    assert words in str(err.value)
+    with pytest.raises(ValueError, match="problem file .*: not a regular file"):
+        Problem.from_toml(tmp_path)
+
+
+def test_a_problem_and_its_fields_are_not_given_together():
+    with pytest.raises(ValueError, match="as a Problem or as sigma"):
+        opa.System(uncertain=Problem("mu,c", 0.01), sigma=0.02)

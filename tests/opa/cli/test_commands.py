@@ -725,3 +725,39 @@ def test_several_parameters_refused_in_one_line_naming_the_flag(argv, words, cap
         assert main(argv) == 2
     err = capsys.readouterr().err
     assert words in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+# --------------------------------------------------------------------------- sobol
+
+
+def test_sobol_certifies_the_indices_of_scipy_s_tensor_rule(tmp_path, capsys):
+    """The no-impact case of tests/opa/cli/test_sobol.py: the certified intervals of x at
+    the last output hold the indices scipy gives at a 10 x 10 Gauss rule."""
+    from tests.opa.cli.test_sobol import flags, truth_at_the_end
+
+    out = tmp_path / "sobol.nc"
+    run(["sobol", *flags(), "--out", out, "--quiet"])
+    assert "S_i certified" in capsys.readouterr().out
+    ds = load(out)
+    for kind, exact in zip(("first", "total"), truth_at_the_end()):
+        low = ds[f"x_sobol_{kind}_lower"].values[:, -1]
+        high = ds[f"x_sobol_{kind}_upper"].values[:, -1]
+        assert np.all((low <= exact) & (exact <= high)), (kind, low, exact, high)
+
+
+def test_a_problem_file_is_the_same_as_its_flags(tmp_path, capsys):
+    """--problem FILE.toml gives the run the flags --uncertain/--sigma/--distribution
+    give; mixing them is refused naming the flags."""
+    problem = tmp_path / "problem.toml"
+    problem.write_text('[mu]\nsigma = 0.06\n[c]\nsigma = 0.2\ndistribution = "uniform"\n')
+    run(["simulate", "opa", "--problem", problem, "--order", 2, *FREE_FLAGS,
+         "--out", tmp_path / "a.nc"])
+    run(["simulate", "opa", "--uncertain", "mu,c", "--sigma", "0.06,0.2", "--distribution",
+         "semicircle,uniform", "--order", 2, *FREE_FLAGS, "--out", tmp_path / "b.nc"])
+    a, b = load(tmp_path / "a.nc"), load(tmp_path / "b.nc")
+    for ds in (a, b):
+        del ds.attrs["history"]
+    xr.testing.assert_identical(a, b)
+    assert main(["simulate", "opa", "--problem", str(problem), "--sigma", "0.1",
+                 "--quiet"]) == 2
+    assert "--sigma may not be given with it" in capsys.readouterr().err
