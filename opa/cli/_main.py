@@ -379,6 +379,7 @@ def build_parser() -> argparse.ArgumentParser:
     from opa.cli._validate import register_converge, register_validate
     from opa.cli._bifurcation import register as register_bifurcation
 
+    from opa.cli._sobol import register_sobol
     from opa.cli._stability import register_stability
     from opa.cli._stochastic import register_stochastic
 
@@ -387,6 +388,7 @@ def build_parser() -> argparse.ArgumentParser:
     register_bifurcation(sub)
     register_stability(sub)
     register_stochastic(sub)
+    register_sobol(sub)
     for leaf in _leaves(sub):
         for action in leaf._actions:  # one rule for every command's --scheduler
             if "--scheduler" in action.option_strings:
