@@ -142,14 +142,16 @@ def check_counts(samples, max_samples, *, flags: bool = False) -> tuple[int, int
     return samples, _check_count(most, max_samples, samples)
 
 
+def several(run: xr.Dataset) -> bool:
+    """Whether the run has several uncertain parameters (``uncertain`` = "mu,c")."""
+    return "," in str(run.attrs.get("uncertain", ""))
+
+
 def one_parameter(run: xr.Dataset) -> None:
-    """Refuse in one line a run of several uncertain parameters: certificates take one
-    for now."""
-    if "," in str(run.attrs.get("uncertain", "")):
+    """Refuse in one line a run of several uncertain parameters where one is needed."""
+    if several(run):
         raise ValueError(f"the run has several uncertain parameters "
-                         f"({run.attrs['uncertain']}); its certificate takes one for now "
-                         f"(compare.certify_sobol checks the Sobol indices of such a run "
-                         f"against the true systems)")
+                         f"({run.attrs['uncertain']}); this takes one")
 
 
 def check_reported(run: xr.Dataset, measure) -> None:
@@ -386,6 +388,10 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     ``verify_splits``, ``verify_sampling`` (in words), ``verify_rounds``,
     ``verify_alpha``, ``variance_reduction`` and ``verify_rhs_evaluations``.
 
+    A run of several uncertain parameters is certified by :mod:`compare._verify_several`
+    (the same variables and verdicts; replicated Sobol' points instead of strata, and its
+    own rules for the changes of the impact sequence it cannot locate).
+
     A verdict is never read off a non-finite estimate: if any estimate a round forms (the
     errors, the control-variate estimates, their standard errors or degrees of freedom)
     holds NaN or inf, the verdict is ``undecided`` and ``verify_undecided_because`` names
@@ -402,6 +408,12 @@ def verify(run: xr.Dataset, *, samples: int = 256, max_samples: int = 4096, seed
     """
     samples, max_samples, tolerance, var_tolerance, alpha = _check_arguments(
         run, samples, max_samples, tolerance, var_tolerance, alpha, seed, sequential, options)
+    if several(run):
+        from compare._verify_several import verify_several
+
+        return verify_several(run, samples=samples, max_samples=max_samples, seed=seed,
+                              tolerance=tolerance, var_tolerance=var_tolerance, alpha=alpha,
+                              sequential=sequential, options=options, log=log)
     system, options = system_of(run, options)
     measure = run_measure(run)
     _check_certifiable(run, system, measure)
@@ -433,8 +445,8 @@ def _check_arguments(run, samples, max_samples, tolerance, var_tolerance, alpha,
     """``verify``'s keywords checked, and the run checked to be an OPA dataset that ran to
     its end: (samples, max_samples, tolerance, var_tolerance, alpha)."""
     check_dataset(run, "the run", "an OPA run")
-    one_parameter(run)
-    check_opa_layout(run, "the run")
+    if not several(run):  # several parameters: the layout of opa._galerkin / opa._boxes
+        check_opa_layout(run, "the run")
     require_time(run, "the run")
     samples, max_samples = check_counts(samples, max_samples)
     tolerance = _check_rate("tolerance", tolerance, 0.0, math.inf)

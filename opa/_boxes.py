@@ -19,7 +19,9 @@ boxes with the largest share of the variance, :math:`\eta_e = P_e \max_t v_e(t)`
 criterion of the one-parameter elements, :mod:`opa._elements`), are halved at their
 conditional median along the parameter whose terms carry most of the box's variance,
 until every share is below ``tolerance`` or ``max_elements`` is reached (an
-``ElementBudgetWarning`` says so). A box whose corners give the true sampled systems
+``ElementBudgetWarning`` says so). As in one dimension, ``error_estimate`` is the RMS
+change of E[x] over time in the last refinement step (NaN: none was made) and
+``largest_share`` the largest share left. A box whose corners give the true sampled systems
 different numbers of impacts holds a change of the impact sequence, where the expansion
 is not smooth: those boxes are flagged (``element_split_inside``) and, at equal share,
 halved first. (In one dimension the elements' edges are put on the splits themselves;
@@ -175,7 +177,7 @@ def refine(system, options, times, basis, tolerance, max_elements):
     boxes = [Box(tuple(m.lo for m in whole), tuple(m.hi for m in whole))]
     runs, chaos, nodes = run_boxes(system, options, boxes, times, basis)
     flags = split_inside(system, options, boxes, times)
-    steps = 0
+    steps, change, mean = 0, float("nan"), runs[0].x_coef[0]
     while True:
         scored = [indicator(r, chaos) for r in runs]
         share = np.array([s[0] for s in scored])
@@ -190,8 +192,8 @@ def refine(system, options, times, basis, tolerance, max_elements):
                     f"max_elements (now {max_elements}) or the tolerance",
                     ElementBudgetWarning, stacklevel=4)
             return runs, chaos, nodes, flags, dict(
-                stopped_by="tolerance" if met else "element budget", error_estimate=top,
-                tolerance_met=int(met), tolerance=float(tolerance),
+                stopped_by="tolerance" if met else "element budget", error_estimate=change,
+                largest_share=top, tolerance_met=int(met), tolerance=float(tolerance),
                 max_elements=int(max_elements), refinement_steps=steps)
         pick = sorted((e for e in range(len(runs)) if share[e] >= max(tolerance, 0.25 * top)),
                       key=lambda e: (-share[e], not flags[e]))[:room]
@@ -202,6 +204,8 @@ def refine(system, options, times, basis, tolerance, max_elements):
         runs = [runs[e] for e in keep] + new
         flags = np.concatenate([flags[keep], new_flags])
         steps += 1
+        new_mean, _ = moments([(r.probability, r.x_coef) for r in runs])
+        change, mean = float(np.sqrt(np.mean((new_mean - mean) ** 2))), new_mean
 
 
 def sobol_from_boxes(runs, chaos: ChaosBasis, whole, coef: str = "x_coef"):

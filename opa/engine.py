@@ -8,6 +8,7 @@ test forbids them ``from opa._x import``), so each name here is a commitment.
 
 from opa._basis import chebyshev_u, gauss_nodes, orthonormal, quadrature_order
 from opa._chaos import ChaosBasis
+from opa._problem import split_list
 from opa._dataset import (
     COMMAND,
     Store,
@@ -107,6 +108,7 @@ __all__ = [
     "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",
     "package_version", "parse", "phase_section", "pool_shared", "preset", "provenance_attrs",
     "quadrature_order", "read_toml", "remove_store", "require_gpu", "run_batch",
+    "split_list",
     "run_elements", "run_measure",
     "true_system_work",
     "usable_cores",

@@ -124,10 +124,6 @@ def _several(args, system, opts):
 
     from opa.engine import ElementBudgetWarning
 
-    if args.verify is not None:
-        raise CliError(f"--verify takes one uncertain parameter for now; --uncertain names "
-                       f"{len(system.uncertain)} ({','.join(system.uncertain)}): `opa-mc "
-                       f"sobol` certifies the Sobol indices of such a system")
     adaptive = args.elements == "adaptive"
     try:
         with warnings.catch_warnings():  # the budget warning is said in the summary
@@ -148,6 +144,11 @@ def _several(args, system, opts):
     final = (f"E[x] = {float(ds.x_mean[-1]):.10g}, Var[x] = {float(ds.x_var[-1]):.4g} "
              f"({ds.sizes['term']} terms, {ds.attrs['nodes']} nodes{boxes}); Sobol indices "
              f"of x (first/total): {indices}")
+    if args.verify is not None:
+        from compare import verify
+
+        ds = verify(ds, samples=args.verify, max_samples=_verify_max(args), seed=args.seed,
+                    options=opts, log=None if args.quiet else say)
     return ds, final
 
 

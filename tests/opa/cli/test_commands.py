@@ -712,7 +712,6 @@ def test_simulate_mc_with_three_uncertain_parameters_is_the_mean_of_its_samples(
     (["--uncertain", "mu,c", "--distribution", "uniform,uniform,beta:2,3"],
      "--distribution must give one value, or one"),
     (["--uncertain", "mu,c", "--basis", "sparse"], "--basis must be one of"),
-    (["--uncertain", "mu,c", "--verify", "64"], "--verify takes one uncertain parameter"),
     (["--uncertain", "f,c"], "argument --uncertain: each uncertain parameter must be one of"),
 ])
 def test_several_parameters_refused_in_one_line_naming_the_flag(argv, words, capsys):
@@ -761,3 +760,16 @@ def test_a_problem_file_is_the_same_as_its_flags(tmp_path, capsys):
     assert main(["simulate", "opa", "--problem", str(problem), "--sigma", "0.1",
                  "--quiet"]) == 2
     assert "--sigma may not be given with it" in capsys.readouterr().err
+
+
+def test_simulate_opa_with_two_uncertain_parameters_certified(tmp_path, capsys):
+    """--verify with two parameters: a converged run (N = 6, no impacts) agrees with its
+    certificate and --strict exits 0; the single element on the impact system of section
+    3.2 (its error of E[x] is 0.2 of the spread, tests/compare/test_verify_several.py)
+    disagrees and exits 4."""
+    argv = ["simulate", "opa", "--uncertain", "mu,c", "--verify", 64, "--strict"]
+    assert main([str(a) for a in [*argv, "--sigma", "0.06,0.2", *FREE_FLAGS, "--order", 6]]) == 0
+    assert main([str(a) for a in [*argv, "--sigma", "0.016,0.005", "--omega", 3.98, "--periods",
+                                  10, "--per-period", 8, "--impact-law", "saltation",
+                                  "--quiet"]]) == 4
+    assert "disagrees with its Monte Carlo certificate" in capsys.readouterr().err
