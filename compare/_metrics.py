@@ -46,7 +46,9 @@ def _check_same_system(a: xr.Dataset, b: xr.Dataset) -> None:
     semicircle, as in every run before it was recorded. A field one run lacks (an older
     or partial dataset) cannot be compared: refused, naming the run that lacks it."""
     def shown(value):
-        return repr(value) if isinstance(value, str) else f"{float(value):g}"
+        if isinstance(value, str):
+            return repr(value)
+        return ",".join(f"{float(v):g}" for v in np.atleast_1d(value))
 
     for name in SYSTEM_ATTRS:
         default = "semicircle" if name == "distribution" else None
@@ -59,11 +61,17 @@ def _check_same_system(a: xr.Dataset, b: xr.Dataset) -> None:
             raise ValueError(f"the {lacking} dataset lacks the attribute {name} "
                              f"({shown(value)} in the {other} dataset): the runs cannot be "
                              f"told to be of one system")
-        if name not in _WORDS:
-            for side, ds in (("opa", a), ("mc", b)):
-                check_attribute_number(ds, f"the {side} dataset", name)
-        same = (va == vb if name in _WORDS
-                else np.isclose(float(va), float(vb), rtol=1e-12, atol=0.0))
+        vector = name == "sigma" and (np.ndim(va) > 0 or np.ndim(vb) > 0)
+        if vector:  # several uncertain parameters: one scale each
+            va, vb = (np.atleast_1d(np.asarray(v, dtype=float)) for v in (va, vb))
+            same = va.shape == vb.shape and bool(np.isclose(va, vb, rtol=1e-12,
+                                                            atol=0.0).all())
+        else:
+            if name not in _WORDS:
+                for side, ds in (("opa", a), ("mc", b)):
+                    check_attribute_number(ds, f"the {side} dataset", name)
+            same = (va == vb if name in _WORDS
+                    else np.isclose(float(va), float(vb), rtol=1e-12, atol=0.0))
         if not same:
             raise ValueError(f"the runs are of different systems: {name} = {shown(va)} in "
                              f"the opa dataset, {shown(vb)} in the mc dataset")
@@ -94,11 +102,14 @@ def _check_contents(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
                        "forcing period of error_metrics' windows)")
     check_attribute_number(opa_ds, opa, "omega", positive=True)
     require_variables(opa_ds, opa, ("x_mean", "x_var"))
-    coefficients = ("x_coef",) if "x_coef" in opa_ds else _ELEMENTS
-    for needed in ((("x_coef", "element_x_coef"),), coefficients):
-        require_variables(opa_ds, opa, needed, hint=" (its coefficients: x_coef, or the "
-                          "element layout element_x_coef, element_edges, "
-                          "element_probability)")
+    if _several(opa_ds):  # coefficients compared only when both have one basis
+        coefficients = ("x_coef",) if "x_coef" in opa_ds else ()
+    else:
+        coefficients = ("x_coef",) if "x_coef" in opa_ds else _ELEMENTS
+        for needed in ((("x_coef", "element_x_coef"),), coefficients):
+            require_variables(opa_ds, opa, needed, hint=" (its coefficients: x_coef, or "
+                              "the element layout element_x_coef, element_edges, "
+                              "element_probability)")
     require_variables(mc_ds, mc, ("x_mean", "x_var", "x_coef"))
     missing = [name for name in ("x_sem", "x_var_sem", "x_coef_sem") if name not in mc_ds]
     if missing:
@@ -121,6 +132,24 @@ def _check_contents(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
     quadrature = mc_ds.attrs.get("sampler") == "gauss"
     for name in ("x_sem", "x_var_sem", "x_coef_sem"):
         check_standard_error(mc_ds, mc, name, nan=quadrature)
+
+
+def _several(ds: xr.Dataset) -> bool:
+    """Whether a run has several uncertain parameters (coefficients over ``term``)."""
+    return "," in str(ds.attrs.get("uncertain", ""))
+
+
+def _several_coefficients(opa_ds: xr.Dataset, mc_ds: xr.Dataset):
+    """The terms both runs of several parameters carry in one basis (the OPA run's single
+    element and the ensemble's multi-index set agree on their first rows): (n, OPA
+    coefficients (n, T)), or (0, None) when they cannot be compared (boxes)."""
+    if "x_coef" not in opa_ds or "multi_index" not in opa_ds or "multi_index" not in mc_ds:
+        return 0, None
+    a, b = opa_ds.multi_index.values, mc_ds.multi_index.values
+    n = min(len(a), len(b))
+    if a.shape[1] != b.shape[1] or not np.array_equal(a[:n], b[:n]):
+        return 0, None
+    return n, opa_ds.x_coef.values[:n]
 
 
 def _opa_coefficients(opa_ds: xr.Dataset, order: int):
@@ -184,6 +213,10 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     xarray.Dataset with, for the mean, ``err_mean(time)`` = x_0 - E_MC[x],
     ``mc_sem(time)`` and ``within_noise(time)``; for the variance ``err_var(time)`` =
     OPA variance - MC variance, ``var_sem(time)`` and ``var_within_noise(time)``; for
+    With several uncertain parameters the moments are compared the same way, and the
+    coefficients over ``term`` where both runs carry them in one basis (a single-element
+    run and the ensemble's multi-index set); a run on boxes gives no coefficient rows.
+    In one dimension,
     the coefficients of the orders both carry ``err_coef(order, time)`` = x_i -
     E_MC[x U_i], ``coef_sem(order, time)`` and ``coef_within_noise(order, time)``.
 
@@ -216,9 +249,14 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     _check_contents(opa_ds, mc_ds)
     _check_same_system(opa_ds, mc_ds)
     _check_same_grid(opa_ds, mc_ds)
-    n = min(opa_ds.sizes["order"], mc_ds.sizes["order"])
-    coef = _opa_coefficients(opa_ds, n - 1)
-    if coef is None:
+    if _several(opa_ds):
+        n, coef = _several_coefficients(opa_ds, mc_ds)
+        dim = "term"
+    else:
+        n = min(opa_ds.sizes["order"], mc_ds.sizes["order"])
+        coef = _opa_coefficients(opa_ds, n - 1)
+        dim = "order"
+    if coef is None and not _several(opa_ds):
         raise ValueError(f"the opa dataset's coefficients cannot be compared: its law of xi "
                          f"{opa_ds.attrs.get('distribution')!r} is not one opa-mc can "
                          f"rebuild from its name")
@@ -226,8 +264,9 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     sem = mc_ds.x_sem.values
     err_var = opa_ds.x_var.values - mc_ds.x_var.values
     var_sem = mc_ds.x_var_sem.values
-    err_coef = coef - mc_ds.x_coef.values[:n]
-    coef_sem = mc_ds.x_coef_sem.values[:n]
+    T = len(err)
+    err_coef = (coef - mc_ds.x_coef.values[:n]) if n else np.zeros((0, T))
+    coef_sem = mc_ds.x_coef_sem.values[:n] if n else np.zeros((0, T))
     band = f"{z} SE + {floor}"
     ds = xr.Dataset(
         {
@@ -237,20 +276,20 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
                         {"long_name": "OPA variance - MC variance", "units": "1"}),
             "var_sem": ("time", var_sem,
                         {"long_name": "MC standard error of Var[x]", "units": "1"}),
-            "err_coef": (("order", "time"), err_coef,
+            "err_coef": ((dim, "time"), err_coef,
                          {"long_name": "x_i - E_MC[x U_i]", "units": "1"}),
-            "coef_sem": (("order", "time"), coef_sem,
+            "coef_sem": ((dim, "time"), coef_sem,
                          {"long_name": "MC standard error of E[x U_i]", "units": "1"}),
             "within_noise": ("time", _within(err, sem, z, floor),
                              {"long_name": f"1 where |err_mean| <= {band}", "units": "1"}),
             "var_within_noise": ("time", _within(err_var, var_sem, z, floor),
                                  {"long_name": f"1 where |err_var| <= {band}",
                                   "units": "1"}),
-            "coef_within_noise": (("order", "time"), _within(err_coef, coef_sem, z, floor),
+            "coef_within_noise": ((dim, "time"), _within(err_coef, coef_sem, z, floor),
                                   {"long_name": f"1 where |err_coef| <= {band}",
                                    "units": "1"}),
         },
-        coords={"time": opa_ds.time, "order": np.arange(n)},
+        coords={"time": opa_ds.time, dim: np.arange(n)},
         attrs={"z": float(z), "floor": float(floor), "omega": float(opa_ds.attrs["omega"])},
     )
     return ds

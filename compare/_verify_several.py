@@ -48,8 +48,8 @@ import xarray as xr
 from compare._inputs import check_dataset, require_time
 from compare._trust import band_multiplier, bounded_verdict
 from opa.engine import (
-    PARAMETER_NAMES, ChaosBasis, Oscillator, SolverOptions, System, check_work, run_batch,
-    split_list,
+    PARAMETER_NAMES, Oscillator, SolverOptions, System, check_work, run_batch, split_list,
+    surrogate_several,
 )
 
 #: independent scramblings whose spread is the standard error (15 degrees of freedom)
@@ -83,27 +83,6 @@ def several_system_of(run: xr.Dataset, options: SolverOptions | None = None):
                                 method=str(attrs.get("method", "dop853")),
                                 chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))
     return system, options
-
-
-def surrogate(run: xr.Dataset, system: System, xi: np.ndarray) -> np.ndarray:
-    """x_hat (M, T) at the points ``xi`` (M, d): the run's expansion, on each box its
-    own conditional basis."""
-    whole = system.problem.measures
-    indices = run.multi_index.values
-    if "element_lower" not in run:
-        return ChaosBasis(whole, indices).evaluate(xi) @ run.x_coef.values
-    out = np.full((len(xi), run.sizes["time"]), np.nan)
-    lower, upper = run.element_lower.values, run.element_upper.values
-    taken = np.zeros(len(xi), dtype=bool)
-    for e in range(run.sizes["element"]):
-        inside = ~taken & np.all((xi >= lower[e]) & (xi <= upper[e]), axis=1)
-        if inside.any():
-            measures = tuple(m if (lo, hi) == (m.lo, m.hi) else m.restrict(lo, hi)
-                             for m, lo, hi in zip(whole, lower[e], upper[e]))
-            out[inside] = ChaosBasis(measures, indices).evaluate(xi[inside]) \
-                @ run.element_x_coef.values[e]
-            taken |= inside
-    return out
 
 
 def replicate_estimates(x: np.ndarray, g: np.ndarray, exact_mean: np.ndarray,
@@ -189,7 +168,7 @@ def verify_several(run: xr.Dataset, *, samples: int, max_samples: int, seed: int
             raise ValueError(f"the true system at xi = {np.round(xi[m], 6).tolist()} could "
                              f"not be completed: {batch.message(m)}")
         drawn, rhs = drawn + M, rhs + int(batch.rhs_evaluations.sum())
-        est = replicate_estimates(batch.states[:, :, 0], surrogate(run, system, xi),
+        est = replicate_estimates(batch.states[:, :, 0], surrogate_several(run, system.problem.measures, xi),
                                   exact_mean, exact_second)
         err_mean, err_var = -est["d"], run.x_var.values - est["var"]
         verdicts, firsts = _judge(est, err_mean, err_var, spent, tolerance, var_tolerance,

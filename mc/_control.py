@@ -22,7 +22,7 @@ import numpy as np
 import xarray as xr
 
 from opa.engine import (PARAMETER_NAMES, check_opa_layout, run_measure, surrogate,
-                        surrogate_moments)
+                        surrogate_moments, surrogate_several)
 
 #: points whose surrogate values are formed at once (memory: this many x T doubles)
 CHUNK = 4096
@@ -59,20 +59,24 @@ def check_control(control, system, times: np.ndarray | None) -> np.ndarray:
     if not isinstance(control, xr.Dataset):
         raise ValueError(f"control must be an OPA run (an xarray Dataset of simulate_opa), "
                          f"got {type(control).__name__}")
-    check_opa_layout(control, "control")
+    if system.dimension > 1:
+        _check_several(control, system)
+    else:
+        check_opa_layout(control, "control")
     if "failure" in control.attrs:
         raise ValueError(f"control: the run did not complete ({control.attrs['failure']})")
     attrs = control.attrs
     ours = {name: float(getattr(system.oscillator, name)) for name in PARAMETER_NAMES}
-    ours.update(sigma=float(system.sigma))
+    if system.dimension == 1:
+        ours.update(sigma=float(system.sigma))
     for name, value in ours.items():
         if name in attrs and not math.isclose(float(attrs[name]), value, rel_tol=0.0,
                                               abs_tol=1e-15 * max(1.0, abs(value))):
             raise ValueError(f"control: {name} = {float(attrs[name]):g} in the run, "
                              f"{value:g} in the ensemble")
-    for name, value in (("uncertain", system.uncertain),
-                        ("distribution", "semicircle" if system.semicircle
-                         else system.measure.name)):
+    for name, value in (() if system.dimension > 1 else (
+            ("uncertain", system.uncertain),
+            ("distribution", "semicircle" if system.semicircle else system.measure.name))):
         if str(attrs.get(name, "semicircle" if name == "distribution" else "")) != value:
             raise ValueError(f"control: {name} = {attrs.get(name)!r} in the run, {value!r} "
                              f"in the ensemble")
@@ -86,8 +90,28 @@ def check_control(control, system, times: np.ndarray | None) -> np.ndarray:
     return own
 
 
+def _check_several(control: xr.Dataset, system) -> None:
+    """A control run of several uncertain parameters: the same names, scales and laws."""
+    attrs, problem = control.attrs, system.problem
+    for name in ("multi_index", "x_mean", "x_var"):
+        if name not in control:
+            raise ValueError(f"control lacks {name}: it is not an OPA run of several "
+                             f"uncertain parameters")
+    ours = problem.attrs()
+    if str(attrs.get("uncertain")) != ours["uncertain"] or \
+            str(attrs.get("distribution")) != ours["distribution"]:
+        raise ValueError(f"control: uncertain = {attrs.get('uncertain')!r} with laws "
+                         f"{attrs.get('distribution')!r} in the run, {ours['uncertain']!r} "
+                         f"with {ours['distribution']!r} in the ensemble")
+    sigma = np.atleast_1d(np.asarray(attrs.get("sigma", np.nan), dtype=float))
+    if sigma.shape != ours["sigma"].shape or not np.allclose(sigma, ours["sigma"], rtol=0.0,
+                                                             atol=1e-15):
+        raise ValueError(f"control: sigma = {sigma.tolist()} in the run, "
+                         f"{ours['sigma'].tolist()} in the ensemble")
+
+
 def controlled(ds: xr.Dataset, x_rep, x2_rep, rep_weight, xi: np.ndarray, replicates: int,
-               control: xr.Dataset) -> xr.Dataset:
+               control: xr.Dataset, problem=None) -> xr.Dataset:
     """``ds`` (the ensemble) with the control-variate estimates ``cv_x_mean``,
     ``cv_x_var`` and their standard errors, and the attributes ``variance_reduction``
     (the squared standard error of E[x] without the control over that with it, summed
@@ -97,17 +121,21 @@ def controlled(ds: xr.Dataset, x_rep, x2_rep, rep_weight, xi: np.ndarray, replic
     n = len(xi) // R
     weight = np.asarray(rep_weight, float)[:, None]
     x1, x2 = x_rep / weight, x2_rep / weight
-    measure = run_measure(control)
+    several = problem is not None and problem.dimension > 1
+    measure = None if several else run_measure(control)
     T = x1.shape[1]
     h1, h2 = np.zeros((R, T)), np.zeros((R, T))
     for r in range(R):
         for lo in range(r * n, (r + 1) * n, CHUNK):
             hi = min(lo + CHUNK, (r + 1) * n)
-            x_hat = surrogate(control, xi[lo:hi], measure=measure)[0]
+            x_hat = (surrogate_several(control, problem.measures, xi[lo:hi]) if several
+                     else surrogate(control, xi[lo:hi], measure=measure)[0])
             h1[r] += x_hat.sum(axis=0)
             h2[r] += (x_hat**2).sum(axis=0)
     h1, h2 = h1 / n, h2 / n
-    moments = surrogate_moments(control)
+    moments = (surrogate_moments(control) if not several else
+               {"x_mean": control.x_mean.values,
+                "x_second": control.x_var.values + control.x_mean.values ** 2})
     est = cv_estimates(x1, x2, moments["x_mean"], moments["x_second"], h1, h2)
     one = {"units": "1"}
     out = ds.copy()
@@ -125,7 +153,7 @@ def controlled(ds: xr.Dataset, x_rep, x2_rep, rep_weight, xi: np.ndarray, replic
     elements = int(control.sizes.get("element", 1))
     out.attrs.update(
         variance_reduction=plain / paired if paired > 0 else math.inf,
-        control=(f"OPA N = {int(control.sizes['order']) - 1}, "
+        control=(f"OPA N = {int(control.attrs.get('N', control.sizes.get('order', 0) - 1))}, "
                  f"{control.attrs.get('impact_law', '?')} law, {elements} element(s)"))
     return out
 

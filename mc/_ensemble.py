@@ -325,7 +325,7 @@ def simulate_mc(
                   sampler, seed, plan.replicates, plan.law, plan.chaos)
     if control is not None:
         ds = controlled(ds, total.x_rep, total.x2_rep, total.rep_weight, plan.xi,
-                        plan.replicates, control)
+                        plan.replicates, control, system.problem)
     return ds
 
 
@@ -811,5 +811,6 @@ def _dataset(total, xi, w, n_impacts, paths, times, system, options, sampler, se
         else "sqrt(Var/M)"
     )
     ds.attrs["rhs_evaluations"] = int(total.rhs_evaluations)
-    ds.attrs["distribution"] = distribution
+    if chaos is None:  # several parameters keep the problem's own attribute
+        ds.attrs["distribution"] = distribution
     return ds

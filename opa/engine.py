@@ -76,7 +76,13 @@ from opa._splits import (
     event_sequence,
     scan_splits,
 )
-from opa._surrogate import run_measure, surrogate, surrogate_moments, surrogate_values
+from opa._surrogate import (
+    run_measure,
+    surrogate,
+    surrogate_moments,
+    surrogate_several,
+    surrogate_values,
+)
 from opa._system import IMPULSE_FIELDS, System, as_system
 from opa._work import WorkBudgetError, budget, check_work, parse_duration, process_started
 from opa.dynamics._orbits import MAX_CYCLE, impulse_cycle
@@ -113,6 +119,7 @@ __all__ = [
     "true_system_work",
     "usable_cores",
     "scan_splits", "simulate_dmr", "simulate_opa", "summary_lines", "surrogate",
-    "surrogate_moments", "surrogate_values", "sweep", "sweep_times", "time_coord",
+    "surrogate_moments", "surrogate_several", "surrogate_values", "sweep", "sweep_times",
+    "time_coord",
     "time_grid", "true_runs", "uniform_edges", "write_netcdf",
 ]

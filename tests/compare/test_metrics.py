@@ -126,3 +126,23 @@ def test_coefficient_errors_at_t0_are_mc_noise():
     assert np.all(start.coef_within_noise.values[1:] == 1)
     assert np.all(np.abs(start.err_coef.values[1:]) > cmp.attrs["floor"])  # floor alone: out
     assert start.coef_within_noise.values[0] == 1 and start.within_noise.values == 1
+
+
+def test_runs_of_several_parameters_are_compared_on_moments_and_shared_terms():
+    """A single-element run of (mu, c) against its ensemble: err_mean is x_mean minus the
+    ensemble's, and the coefficients are compared over the terms both carry (the run's
+    order-2 set is the first 6 rows of the ensemble's order-4 set); a run on boxes is
+    compared on its moments only."""
+    system = opa_package.System(opa_package.preset("3.2"), uncertain="mu,c", sigma=(0.016, 0.005), order=2)
+    run = opa_package.simulate_opa(system, periods=4, per_period=4)
+    ens = mc_package.simulate_mc(system.replace(order=4), samples=256, periods=4, per_period=4)
+    cmp = compare_runs(run, ens)
+    np.testing.assert_array_equal(cmp.err_mean.values, run.x_mean.values - ens.x_mean.values)
+    assert cmp.err_coef.dims == ("term", "time") and cmp.sizes["term"] == 6
+    np.testing.assert_array_equal(cmp.err_coef.values,
+                                  run.x_coef.values - ens.x_coef.values[:6])
+    boxes = opa_package.simulate_opa(system, periods=4, per_period=4, elements=2)
+    assert compare_runs(boxes, ens).sizes["term"] == 0
+    with pytest.raises(ValueError, match="sigma = 0.016,0.005 in the opa dataset"):
+        compare_runs(run, mc_package.simulate_mc(system.replace(sigma=(0.016, 0.004)), samples=64,
+                                         periods=4, per_period=4))
