@@ -1,7 +1,7 @@
 """Several uncertain parameters: OPA against a Monte Carlo reference and against chaospy's
 non-intrusive polynomial chaos on the same oscillator, and the d = 1 kernel speed held.
 
-    python -m benchmarks.bench_several [--smoke] [--base /tmp/w974] [--out FILE]
+    python -m benchmarks.bench_several [--smoke] [--base TREE [--head TREE]] [--out FILE]
 
 Problem: section 3.2 set at omega = 3.98 (``opa.preset("3.2", omega=3.98)``), 10 forcing
 periods, 8 outputs per period, rtol = atol = 1e-10 (``SolverOptions()``), semicircle laws.
@@ -37,8 +37,9 @@ density vanishes: a 2^10-point Sobol MC sees no split until s = 1.5 in either ca
    solver alone (DMR 1000 periods at rtol 1e-10; MC 512 samples x 100 periods [full
    case: 4000 x 200] at rtol 1e-8 on 2 threads; OPA N = 8, 200 periods at rtol 1e-8), in
    a fresh process per tree (``PYTHONPATH=TREE``, numba cache warmed by one run of each
-   tree first), trees alternated A/B/A/B, each case's best of 3 calls per process;
-   medians over the pairs and the ratio HEAD / base.
+   tree first), trees alternated A/B/A/B for 7 pairs, each case's best of 5 calls per
+   process in wall and in process CPU seconds; medians over the pairs and the ratio
+   HEAD / base.
 
 Costs. *True-system-equivalent RHS evaluations* count right-hand sides of the 2-state true
 system: a sampled run or a peer's node contributes its own ``rhs_evaluations``; an OPA
@@ -112,18 +113,21 @@ def cost_at(errors, costs, target: float = TARGET) -> tuple[float | None, str]:
     -------
     (cost, note): ``note`` is ``""`` when interpolated, ``"<="`` when the cheapest run is
     already at or below the target (its cost, an upper bound), ``"not reached"`` (cost
-    None) when no run gets there.
+    None) when no run gets there; ``"!"`` is appended when a costlier run is above the
+    target again (the error does not fall steadily).
     """
     pairs = sorted((float(c), float(e)) for c, e in zip(costs, errors)
                    if np.isfinite(e) and c > 0)
     for i, (c1, e1) in enumerate(pairs):
         if e1 > target:
             continue
+        unsteady = "!" if any(e > target for _, e in pairs[i + 1:]) else ""
         if i == 0:
-            return c1, "<="
+            return c1, "<=" + unsteady
         c0, e0 = pairs[i - 1]
         slope = (math.log(c1) - math.log(c0)) / (math.log(e1) - math.log(e0))
-        return math.exp(math.log(c0) + slope * (math.log(target) - math.log(e0))), ""
+        return (math.exp(math.log(c0) + slope * (math.log(target) - math.log(e0))),
+                unsteady)
     return None, "not reached"
 
 
@@ -320,7 +324,7 @@ def equal_error_lines(rows) -> tuple[list[str], list[dict]]:
     lines.append(f"{'d':>2} {'scale':>5} {'method':<18} {'RHS at 1e-4':>14} {'s at 1e-4':>10}"
                  f"   ratio opa/chaospy (RHS; s)")
     for c in out:
-        cost = (f"{c['note']:>2}{c['rhs']:12.3g}" if c["rhs"] is not None
+        cost = (f"{c['note']:>3}{c['rhs']:11.3g}" if c["rhs"] is not None
                 else f"{'not reached':>14}")
         secs = f"{c['seconds']:10.3g}" if c["seconds"] is not None else f"{'-':>10}"
         ratios = []
@@ -344,7 +348,8 @@ def _ratio(a: dict, b: dict) -> str:
 # --------------------------------------------------------------------------- 3. speed held
 
 #: one process of the speed check: ours alone on the bench_peers d = 1 cases, each case's
-#: best of 3 calls after a warm-up call, printed as JSON (argv: MC samples, MC periods)
+#: best of 5 calls after a warm-up call, wall and process CPU seconds (all threads), printed
+#: as JSON (argv: MC samples, MC periods)
 SPEED_SCRIPT = r"""
 import json, sys, time
 import numba
@@ -365,12 +370,13 @@ cases = {
 out = {"module": opa.__file__}
 for name, (periods, fn) in cases.items():
     fn(2)
-    best = float("inf")
-    for _ in range(3):
-        start = time.perf_counter()
+    wall = cpu = float("inf")
+    for _ in range(5):
+        start, start_cpu = time.perf_counter(), time.process_time()
         fn(periods)
-        best = min(best, time.perf_counter() - start)
-    out[name] = best
+        wall = min(wall, time.perf_counter() - start)
+        cpu = min(cpu, time.process_time() - start_cpu)
+    out[name], out[name + " cpu"] = wall, cpu
 print(json.dumps(out))
 """
 
@@ -385,11 +391,13 @@ def _speed_once(tree: Path, samples: int, periods: int) -> dict:
     return out
 
 
-def speed_held(base: Path, head: Path = ROOT, pairs: int = 5, samples: int = 512,
+def speed_held(base: Path, head: Path = ROOT, pairs: int = 7, samples: int = 512,
                periods: int = 100) -> dict:
-    """Median best-of-3 seconds of the bench_peers d = 1 cases in this tree and in
-    ``base``, alternated base/HEAD for ``pairs`` pairs after one run of each (numba's
-    cache), with the load average before each run; ratio HEAD / base per case."""
+    """Median best-of-5 seconds (wall and process CPU) of the bench_peers d = 1 cases in
+    ``head`` and in ``base``, alternated base/head for ``pairs`` pairs after one run of
+    each (numba's cache), with the load average before each run; ratio head / base per
+    case. Under load the CPU seconds of the single-threaded cases (dmr, opa) wait for no
+    one and are the steadier figure."""
     trees = {"base": Path(base), "head": Path(head)}
     for tree in trees.values():
         _speed_once(tree, 64, 2)  # each tree's numba cache
@@ -398,11 +406,12 @@ def speed_held(base: Path, head: Path = ROOT, pairs: int = 5, samples: int = 512
         for name, tree in trees.items():
             load = os.getloadavg()[0]
             runs[name].append(dict(_speed_once(tree, samples, periods), load=load))
-    medians = {name: {case: float(np.median([r[case] for r in rs]))
-                      for case in ("dmr", "mc", "opa")} for name, rs in runs.items()}
-    return dict(runs=runs, medians=medians, sizes=dict(mc_samples=samples, mc_periods=periods),
-                ratio={case: medians["head"][case] / medians["base"][case]
-                       for case in ("dmr", "mc", "opa")})
+    keys = [f"{case}{kind}" for case in ("dmr", "mc", "opa") for kind in ("", " cpu")]
+    medians = {name: {key: float(np.median([r[key] for r in rs])) for key in keys}
+               for name, rs in runs.items()}
+    return dict(runs=runs, medians=medians, trees={k: str(v) for k, v in trees.items()},
+                sizes=dict(mc_samples=samples, mc_periods=periods),
+                ratio={key: medians["head"][key] / medians["base"][key] for key in keys})
 
 
 # --------------------------------------------------------------------------- report
@@ -434,17 +443,18 @@ def reference_lines(refs) -> list[str]:
 
 
 def speed_lines(speed) -> list[str]:
-    lines = [f"{'case':<5} {'base s':>9} {'HEAD s':>9} {'HEAD/base':>9}   (median of "
-             f"{len(speed['runs']['head'])} alternated pairs; MC {speed['sizes']})"]
-    for case, ratio in speed["ratio"].items():
-        lines.append(f"{case:<5} {speed['medians']['base'][case]:9.4f} "
-                     f"{speed['medians']['head'][case]:9.4f} {ratio:9.3f}")
+    lines = [f"{'case':<8} {'base s':>9} {'HEAD s':>9} {'HEAD/base':>9}   (medians over "
+             f"{len(speed['runs']['head'])} alternated pairs of each process's best of 5; "
+             f"wall and CPU seconds; MC {speed['sizes']})"]
+    for key, ratio in speed["ratio"].items():
+        lines.append(f"{key:<8} {speed['medians']['base'][key]:9.4f} "
+                     f"{speed['medians']['head'][key]:9.4f} {ratio:9.3f}")
     loads = [r["load"] for rs in speed["runs"].values() for r in rs]
     lines.append(f"load average before the runs: {min(loads):.2f} to {max(loads):.2f}")
     return lines
 
 
-def run(sizes: dict, base: Path | None = None) -> dict:
+def run(sizes: dict, base: Path | None = None, head: Path = ROOT) -> dict:
     """Every part of the benchmark at ``sizes`` (``FULL`` or ``SMOKE``): the rows, the
     references, the costs at equal error and (with ``base``) the speed check."""
     refs, rows, agreed = {}, [], {}
@@ -454,7 +464,7 @@ def run(sizes: dict, base: Path | None = None) -> dict:
             rows += opa_rows(d, scale, ref, sizes["orders"], sizes["elements"])
             rows += peer_rows(d, scale, ref, sizes, agreed)
     lines, costs = equal_error_lines(rows)
-    speed = speed_held(base) if base is not None else None
+    speed = speed_held(base, head) if base is not None else None
     return dict(refs=refs, rows=rows, costs=costs, cost_lines=lines, speed=speed,
                 agree=sizes["agree"], agreed={f"d={d} {k}": v for (d, k), v in agreed.items()})
 
@@ -488,18 +498,22 @@ def main(argv=None) -> int:
     parser.add_argument("--smoke", action="store_true", help="tiny sizes (CI)")
     parser.add_argument("--base", type=Path, default=None,
                         help="a worktree of the commit to hold the d = 1 speed against")
+    parser.add_argument("--head", type=Path, default=ROOT,
+                        help="the tree held against --base (default: this one; a clean "
+                             "worktree of HEAD leaves uncommitted edits out)")
     parser.add_argument("--out", type=Path, default=RESULTS_FILE)
     args = parser.parse_args(argv)
     load = os.getloadavg()
     print(f"bench_several: {'smoke' if args.smoke else 'full'} mode; load average "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores; "
           f"commit {_commit()}; s_below {S_BELOW}, s_above {S_ABOVE}", flush=True)
-    result = run(SMOKE if args.smoke else FULL, args.base)
+    result = run(SMOKE if args.smoke else FULL, args.base, args.head)
     print("\n-- reference (scrambled Sobol MC)\n" + "\n".join(reference_lines(result["refs"])))
     print("\n-- moments: RMS errors against the reference\n"
           + "\n".join(row_lines(result["rows"])))
-    print("\n-- cost at RMS error of E[x] = 1e-4 (true-system-equivalent RHS evaluations)\n"
-          + "\n".join(result["cost_lines"]))
+    print("\n-- cost at RMS error of E[x] = 1e-4 (true-system-equivalent RHS evaluations; "
+          "<=: the cheapest run is already below, its cost; !: a costlier run is above "
+          "1e-4 again)\n" + "\n".join(result["cost_lines"]))
     print(f"\npeer agreement below the split (RMS err E[x], needs <= {result['agree']:g}): "
           + ", ".join(f"{k} {v:.2g}" for k, v in result["agreed"].items()))
     if result["speed"]:
@@ -523,6 +537,8 @@ def test_cost_at_interpolates_on_log_log():
     assert note == "" and math.isclose(cost, 1e3, rel_tol=1e-12)
     assert cost_at([1e-5, 1e-6], [7.0, 70.0]) == (7.0, "<=")
     assert cost_at([1e-2, 2e-3], [1.0, 2.0]) == (None, "not reached")
+    cost, note = cost_at([1e-3, 1e-5, 2e-4], [1.0, 100.0, 1e3])
+    assert note == "!" and math.isclose(cost, 10.0, rel_tol=1e-12)
     # runs given out of order are taken by cost; NaN errors are left out
     cost, _ = cost_at([1e-5, float("nan"), 1e-3], [1e4, 50.0, 100.0])
     assert math.isclose(cost, 1e3, rel_tol=1e-12)
