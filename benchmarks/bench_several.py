@@ -2,6 +2,7 @@
 non-intrusive polynomial chaos on the same oscillator, and the d = 1 kernel speed held.
 
     python -m benchmarks.bench_several [--smoke] [--base TREE [--head TREE]] [--out FILE]
+    python -m benchmarks.bench_several --split      # where the first split is (seconds)
 
 Problem: section 3.2 set at omega = 3.98 (``opa.preset("3.2", omega=3.98)``), 10 forcing
 periods, 8 outputs per period, rtol = atol = 1e-10 (``SolverOptions()``), semicircle laws.
@@ -502,7 +503,15 @@ def main(argv=None) -> int:
                         help="the tree held against --base (default: this one; a clean "
                              "worktree of HEAD leaves uncommitted edits out)")
     parser.add_argument("--out", type=Path, default=RESULTS_FILE)
+    parser.add_argument("--split", action="store_true",
+                        help="only locate the first split's scale s* of each d, and print it")
     args = parser.parse_args(argv)
+    if args.split:
+        for d in CASES:
+            s_star = split_scale(d)  # bisection of [0.25, 2] in 8 steps
+            print(f"d = {d}: first split at s* in ({s_star - 1.75 / 2 ** 8:.4f}, "
+                  f"{s_star:.4f}]; SPLIT_SCALE says {SPLIT_SCALE[d]}", flush=True)
+        return 0
     load = os.getloadavg()
     print(f"bench_several: {'smoke' if args.smoke else 'full'} mode; load average "
           f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores; "
