@@ -500,14 +500,14 @@ def _manifest(system, options, sampler, samples, seed, replicates, times, measur
     }
 
 
-def _chunk_check(T: int, order: int, replicates: int, keep_paths: bool):
+def _chunk_check(T: int, terms: int, replicates: int, keep_paths: bool):
     """check(arrays, lo, hi): None when a loaded chunk has every field with its shape and
-    kind, else what is wrong."""
+    kind (``terms`` coefficients: N + 1, or the multi-index set's), else what is wrong."""
     R = replicates
     fields = {"weight": ((), "f"), "count": ((), "i"), "x_mean": ((T,), "f"),
               "x_m2": ((T,), "f"), "v_mean": ((T,), "f"), "v_m2": ((T,), "f"),
-              "x_moment": ((order + 1, T), "f"), "x_moment_m2": ((order + 1, T), "f"),
-              "x_moment_rep": ((R, order + 1, T), "f"), "x_rep": ((R, T), "f"),
+              "x_moment": ((terms, T), "f"), "x_moment_m2": ((terms, T), "f"),
+              "x_moment_rep": ((R, terms, T), "f"), "x_rep": ((R, T), "f"),
               "v_rep": ((R, T), "f"), "x2_rep": ((R, T), "f"), "rep_weight": ((R,), "f"),
               "rhs_evaluations": ((), "i")}
 
@@ -563,7 +563,8 @@ class _Chunks:
         """The chunks of ``plan``, with the finished ones of ``run``'s checkpoint."""
         order, T, replicates = int(plan.system.order), len(plan.times), plan.replicates
         bounds = plan.bounds
-        check = _chunk_check(T, order, replicates, plan.keep_paths)
+        terms = order + 1 if plan.chaos is None else plan.chaos.size
+        check = _chunk_check(T, terms, replicates, plan.keep_paths)
         store, finished = None, set()
         if run.checkpoint is not None:
             store = Checkpoint(run.checkpoint, _manifest(

@@ -117,7 +117,7 @@ def test_a_parameter_of_zero_scale_gives_the_one_dimensional_opa():
 
 
 @pytest.mark.parametrize("kwargs, words", [
-    (dict(elements=4), "elements is not available with several"),
+    (dict(initial=[[0.0] * 6, [0.0] * 6]), "initial is not available with several"),
     (dict(basis="sparse"), "basis must be one of total, tensor, hyperbolic:Q"),
     (dict(basis="hyperbolic:x"), "basis hyperbolic:Q takes a number"),
 ])
