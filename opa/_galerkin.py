@@ -66,6 +66,36 @@ def chaos_basis(system: System, basis: str = "total", measures=None) -> ChaosBas
                                  system.order, kind, q)
 
 
+#: most products of nodes and terms (Q x P) the equivalent system may hold: its basis
+#: table and each right-hand side cost that many operations (the one-parameter system
+#: at its largest order, N = 500, holds 1001 x 501 = 5e5)
+MAX_NODE_TERMS = 20_000_000
+
+
+def check_chaos_size(system: System, basis: str = "total") -> tuple[int, int]:
+    """(P, Q): the terms of the multi-index set and the nodes of the tensor rule (an upper
+    bound of the rule's), before any of them is built; refuse in one line naming the
+    order, the basis and the parameters where Q x P exceeds ``MAX_NODE_TERMS`` or the
+    basis table exceeds the memory budget."""
+    from math import comb
+
+    from opa._memory import check_memory
+
+    kind = str(basis).partition(":")[0]
+    d, N = system.problem.dimension, int(system.order)
+    P = (N + 1) ** d if kind == "tensor" else comb(N + d, d)  # hyperbolic: at most total
+    Q = (2 * N + 1) ** d
+    what = (f"order {N} with {d} uncertain parameters ({','.join(system.problem.names)}) "
+            f"and the {kind} basis")
+    if P * Q > MAX_NODE_TERMS:
+        raise ValueError(f"{what} makes {P} terms on up to {Q} nodes: {P * Q:.3g} products "
+                         f"per right-hand side, more than {MAX_NODE_TERMS:.0e}; lower the "
+                         f"order, use a sparser basis (hyperbolic:Q) or fewer parameters")
+    check_memory("the OPA system's basis table", Q * (P + 1) * 8,
+                 f"{what}: up to {Q} nodes x {P + 1} values")
+    return P, Q
+
+
 def chaos_rule(basis: ChaosBasis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The kernel's rule of ``basis``: nodes (Q, d), weights (Q,) exact for products of
     four basis functions, and the basis degree-major (P + 1, Q), its last row (the

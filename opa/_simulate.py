@@ -80,11 +80,14 @@ def simulate_dmr(
 
 
 def check_opa_work(system: System, times: np.ndarray, elements, max_elements: int,
-                   max_steps: int | None = None) -> None:
+                   max_steps: int | None = None, basis: str = "total") -> None:
     """Refuse an OPA run beyond the work budget (:mod:`opa._work`): its systems of 2 (N + 1)
     states over the run, per element, and for adaptive elements the split scan that places
     them (up to ``SPLIT_BUDGET`` splits, each bisected over the whole run); and one whose
-    trajectory would need more than ``max_steps`` steps (slow forcing)."""
+    trajectory would need more than ``max_steps`` steps (slow forcing). With several
+    uncertain parameters a system counts as the larger of its terms and its nodes
+    (:func:`opa._galerkin.check_chaos_size`, which refuses sizes past its bounds), per
+    box."""
     from opa._elements import SPLIT_BUDGET
     from opa._work import check_steps, check_work
 
@@ -93,6 +96,11 @@ def check_opa_work(system: System, times: np.ndarray, elements, max_elements: in
         check_steps("this OPA run", periods, system.oscillator, max_steps,
                     [("omega", f"{system.oscillator.omega:g}"), ("periods", f"{periods:g}")])
     order = int(system.order)
+    size = order + 1
+    if system.dimension > 1:  # the terms, or the nodes the right-hand side visits
+        from opa._galerkin import check_chaos_size
+
+        size = max(check_chaos_size(system, basis))
     adaptive = isinstance(elements, str) and elements == "adaptive"
     try:  # elements are checked later, where they are used; here only counted
         count = max_elements if adaptive else (1 if elements is None else
@@ -101,9 +109,11 @@ def check_opa_work(system: System, times: np.ndarray, elements, max_elements: in
         count = max(int(count), 1)
     except (TypeError, ValueError, OverflowError):
         count = 1
-    work = (order + 1) * max(count, 1) * periods
+    work = size * max(count, 1) * periods
     drivers = [("periods", f"{periods:g}"), ("order", order)]
-    if adaptive:
+    if adaptive and system.dimension > 1:
+        drivers.append(("elements", f"adaptive (up to {count} boxes)"))
+    elif adaptive:
         work += SPLIT_BUDGET * 60 * periods  # ~60 bisection runs to 1e-6 in xi per split
         drivers.append(("elements", f"adaptive (its split scan: up to {SPLIT_BUDGET} splits)"))
     elif count > 1:
@@ -200,7 +210,7 @@ def simulate_opa(
     system.check_samples()
     oscillator, order = system.oscillator, system.order
     check_opa_work(system, output_times(oscillator, periods, per_period, times), elements,
-                   max_elements, options.max_steps)
+                   max_elements, options.max_steps, basis)
     if system.dimension > 1:
         return _several(system, options, output_times(oscillator, periods, per_period, times),
                         elements, initial, partial, basis, tolerance, max_elements)
@@ -235,8 +245,10 @@ def _several(system, options, times, elements, initial, partial, basis, toleranc
         from opa._galerkin import simulate_chaos
 
         return simulate_chaos(system, options, times, basis=basis, partial=partial)
-    from opa._boxes import simulate_boxes
+    from opa._boxes import MAX_BOXES, simulate_boxes
 
+    if isinstance(elements, str) and not 2 <= max_elements <= MAX_BOXES:
+        raise ValueError(f"max_elements must be 2 to {MAX_BOXES} boxes, got {max_elements}")
     if partial:
         raise ValueError("partial is not available with elements")
     return simulate_boxes(system, options, times, elements, basis=basis,

@@ -133,7 +133,7 @@ def _several(args, system, opts):
                               **({"tolerance": args.element_tolerance,
                                   "max_elements": args.max_elements} if adaptive else {}))
     except ValueError as err:
-        raise CliError(flagged(err, ("basis",))) from None
+        raise CliError(flagged(err, ("basis", "order", "max_elements"))) from None
     indices = ", ".join(
         f"{name} {float(ds.x_sobol_first.sel(parameter=name)[-1]):.3g}/"
         f"{float(ds.x_sobol_total.sel(parameter=name)[-1]):.3g}"

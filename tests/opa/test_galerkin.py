@@ -130,3 +130,18 @@ def test_what_several_parameters_do_not_take_yet_is_refused_by_name(kwargs, word
 def test_a_basis_with_one_parameter_is_refused():
     with pytest.raises(ValueError, match="applies with several uncertain parameters"):
         opa.simulate_opa(opa.System(order=2), periods=1, basis="tensor")
+
+
+def test_sizes_past_the_bounds_are_refused_before_any_work():
+    """P = C(N + d, d) terms on up to (2N + 1)^d nodes, counted before anything is built;
+    Q x P past MAX_NODE_TERMS refused naming the order, the basis and the parameters."""
+    from opa._galerkin import MAX_NODE_TERMS, check_chaos_size
+
+    system = opa.System(uncertain="mu,a,c", sigma=0.01, order=6)
+    assert check_chaos_size(system) == (84, 13**3)
+    assert check_chaos_size(system, "tensor") == (7**3, 13**3)
+    big = system.replace(order=40)
+    assert 12341 * 81**3 > MAX_NODE_TERMS
+    with pytest.raises(ValueError, match=r"order 40 with 3 uncertain parameters \(mu,a,c\) "
+                                         r"and the total basis makes 12341 terms"):
+        opa.simulate_opa(big, periods=1)

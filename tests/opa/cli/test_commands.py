@@ -712,6 +712,10 @@ def test_simulate_mc_with_three_uncertain_parameters_is_the_mean_of_its_samples(
     (["--uncertain", "mu,c", "--distribution", "uniform,uniform,beta:2,3"],
      "--distribution must give one value, or one"),
     (["--uncertain", "mu,c", "--basis", "sparse"], "--basis must be one of"),
+    (["--uncertain", "mu,a,c", "--order", "40"], "--order 40 with 3 uncertain parameters"),
+    (["--uncertain", "mu,c", "--elements", "adaptive", "--max-elements", "100000"],
+     "--max-elements must be 2 to 4096 boxes"),
+    (["--uncertain", "mu,a,c", "--elements", "20"], "elements = 20 makes 20^3 boxes"),
     (["--uncertain", "f,c"], "argument --uncertain: each uncertain parameter must be one of"),
 ])
 def test_several_parameters_refused_in_one_line_naming_the_flag(argv, words, capsys):
