@@ -435,7 +435,16 @@ def _sample_problem(system, sampler, samples, seed, replicates):
     if sampler == "gauss":
         raise ValueError("sampler 'gauss' (collocation nodes) takes one uncertain parameter; "
                          "with several use 'sobol' or 'random'")
+    from math import comb
+
+    from opa.engine import MAX_CHAOS_TERMS
+
     problem = system.problem
+    terms = comb(system.order + problem.dimension, problem.dimension)
+    if terms > MAX_CHAOS_TERMS:
+        raise ValueError(f"order {system.order} with {problem.dimension} uncertain parameters "
+                         f"makes {terms} coefficients E[x Psi_alpha] to estimate, more than "
+                         f"{MAX_CHAOS_TERMS}; lower the order")
     xi = problem.sample(samples, sampler, seed, replicates)
     basis = ChaosBasis.from_order(problem.measures, system.order)
     return xi, np.full(samples, 1.0 / samples), basis

@@ -7,7 +7,7 @@ test forbids them ``from opa._x import``), so each name here is a commitment.
 """
 
 from opa._basis import chebyshev_u, gauss_nodes, orthonormal, quadrature_order
-from opa._chaos import ChaosBasis
+from opa._chaos import MAX_CHAOS_TERMS, ChaosBasis
 from opa._problem import split_list
 from opa._dataset import (
     COMMAND,
@@ -97,7 +97,7 @@ __all__ = [
     "budget", "first_non_finite", "parse_duration", "process_started", "start_fork_server",
     "DaskError", "Execution", "connect_scheduler",
     "take_execution", "set_threads", "thread_count",
-    "ChaosBasis", "sobol_indices",
+    "ChaosBasis", "MAX_CHAOS_TERMS", "sobol_indices",
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",

@@ -631,3 +631,13 @@ def test_the_sobol_variance_has_no_bessel_bias():
     spread = estimates.std(ddof=1) / np.sqrt(len(estimates))
     assert abs(estimates.mean() - truth) <= 4 * spread + 1e-12 * truth
     assert truth / 64 > 4 * spread  # the old bias would have shown
+
+
+def test_an_ensemble_of_several_parameters_bounds_its_coefficients_up_front():
+    """C(N + d, d) coefficients E[x Psi_alpha] counted before any sample is drawn."""
+    system = opa.System(uncertain="mu,a,c", sigma=0.01, order=100)
+    with pytest.raises(ValueError, match="order 100 with 3 uncertain parameters makes 176851 "
+                                         "coefficients"):
+        mc.simulate_mc(system, samples=64, periods=1)
+    with pytest.raises(ValueError, match="sampler 'gauss' .* takes one uncertain parameter"):
+        mc.simulate_mc(system.replace(order=2), samples=8, sampler="gauss", periods=1)
