@@ -126,3 +126,23 @@ def check_number(name: str, value, *, least: float = 0.0, strict: bool = False,
 __all__ = ["check_attribute_number", "check_dataset", "check_finite", "check_number",
            "check_standard_error", "require_attributes", "require_time",
            "require_variables"]
+
+
+def run_fields(attrs) -> dict:
+    """The System fields a run records besides its oscillator and uncertainty: the
+    impulse model and whether negative samples were allowed."""
+    return dict(allow_negative=bool(attrs.get("allow_negative", 0)),
+                impulse=str(attrs["impulse"]), pulse_width=float(attrs["pulse_width"]),
+                impulse_at_zero=bool(attrs["impulse_at_zero"]))
+
+
+def run_options(attrs, options=None):
+    """The solver options a run was computed with, from its attributes (``options``
+    instead, when given)."""
+    if options is not None:
+        return options
+    from opa import SolverOptions
+
+    return SolverOptions(rtol=float(attrs["rtol"]), atol=float(attrs["atol"]),
+                         method=str(attrs.get("method", "dop853")),
+                         chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))

@@ -64,7 +64,9 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from compare._inputs import check_attribute_number, check_dataset, require_time
+from compare._inputs import (
+    check_attribute_number, check_dataset, require_time, run_fields, run_options,
+)
 from compare._strata import (
     build_strata, group_allocation, least_samples, neyman_allocation, slices, split_values,
 )
@@ -114,14 +116,8 @@ def system_of(run: xr.Dataset, options: SolverOptions | None = None
     system = System(oscillator, sigma=float(attrs["sigma"]), order=0,
                     uncertain=str(attrs["uncertain"]),
                     distribution=None if distribution == "semicircle" else distribution,
-                    allow_negative=bool(attrs.get("allow_negative", 0)),
-                    impulse=str(attrs["impulse"]), pulse_width=float(attrs["pulse_width"]),
-                    impulse_at_zero=bool(attrs["impulse_at_zero"]))
-    if options is None:
-        options = SolverOptions(rtol=float(attrs["rtol"]), atol=float(attrs["atol"]),
-                                method=str(attrs.get("method", "dop853")),
-                                chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))
-    return system, options
+                    **run_fields(attrs))
+    return system, run_options(attrs, options)
 
 
 def _check_count(name: str, value, least: int) -> int:

@@ -45,7 +45,7 @@ import math
 import numpy as np
 import xarray as xr
 
-from compare._inputs import check_dataset, require_time
+from compare._inputs import check_dataset, require_time, run_fields, run_options
 from compare._trust import band_multiplier, bounded_verdict
 from opa.engine import (
     PARAMETER_NAMES, Oscillator, SolverOptions, System, check_work, run_batch, split_list,
@@ -75,14 +75,8 @@ def several_system_of(run: xr.Dataset, options: SolverOptions | None = None):
     system = System(Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES}),
                     uncertain=str(attrs["uncertain"]),
                     sigma=tuple(float(s) for s in np.atleast_1d(attrs["sigma"])),
-                    distribution=laws, allow_negative=bool(attrs.get("allow_negative", 0)),
-                    impulse=str(attrs["impulse"]), pulse_width=float(attrs["pulse_width"]),
-                    impulse_at_zero=bool(attrs["impulse_at_zero"]))
-    if options is None:
-        options = SolverOptions(rtol=float(attrs["rtol"]), atol=float(attrs["atol"]),
-                                method=str(attrs.get("method", "dop853")),
-                                chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))
-    return system, options
+                    distribution=laws, **run_fields(attrs))
+    return system, run_options(attrs, options)
 
 
 def replicate_estimates(x: np.ndarray, g: np.ndarray, exact_mean: np.ndarray,
@@ -168,7 +162,8 @@ def verify_several(run: xr.Dataset, *, samples: int, max_samples: int, seed: int
             raise ValueError(f"the true system at xi = {np.round(xi[m], 6).tolist()} could "
                              f"not be completed: {batch.message(m)}")
         drawn, rhs = drawn + M, rhs + int(batch.rhs_evaluations.sum())
-        est = replicate_estimates(batch.states[:, :, 0], surrogate_several(run, system.problem.measures, xi),
+        x_hat = surrogate_several(run, system.problem.measures, xi)
+        est = replicate_estimates(batch.states[:, :, 0], x_hat,
                                   exact_mean, exact_second)
         err_mean, err_var = -est["d"], run.x_var.values - est["var"]
         verdicts, firsts = _judge(est, err_mean, err_var, spent, tolerance, var_tolerance,

@@ -354,8 +354,9 @@ def as_system(system=None, options: SolverOptions | None = None, *, allowed=SYST
     :class:`Oscillator` or None (the paper's defaults) from which a System is built with
     ``fields``, the keywords of :class:`System` (``allowed`` of them; None values count as
     not given). A system of several uncertain parameters is refused in one line unless
-    the entry point takes them (``several``). A ``SolverOptions`` that still carries the deprecated impulse model
-    (``SolverOptions(impulse=...)``) passes it on when the fields do not set it.
+    the entry point takes them (``several``). A ``SolverOptions`` that still carries the
+    deprecated impulse model (``SolverOptions(impulse=...)``) passes it on when the
+    fields do not set it.
 
     Examples
     --------

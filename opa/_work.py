@@ -15,9 +15,9 @@ also counted in time: the time units beyond one oscillator period
 (:func:`oscillator_period`, 2 pi / sqrt|a|) per forcing period, at
 ``TIME_UNITS_PER_SECOND``; the estimate is the larger of the two. One trajectory whose
 time under slow forcing would take more steps (``STEPS_PER_TIME_UNIT`` per time unit, the
-fewest measured) than the solver's step limit (``SolverOptions.max_steps``) could not be completed: the kernel
-would stop it there with a SimulationError, after minutes (one forcing period at
-omega = 1e-6: about 3 min for the DMR, 9 for the OPA system of N = 4), so
+fewest measured) than the solver's step limit (``SolverOptions.max_steps``) could not be
+completed: the kernel would stop it there with a SimulationError, after minutes (one
+forcing period at omega = 1e-6: about 3 min for the DMR, 9 for the OPA system of N = 4), so
 :func:`check_steps` refuses it up front instead, as a :class:`StepLimitError` naming the
 inputs of its length. Runs that stick on the wall most of their time take fewer steps;
 the budget ``inf`` lifts this check as it does the others.

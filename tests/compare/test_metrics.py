@@ -133,7 +133,8 @@ def test_runs_of_several_parameters_are_compared_on_moments_and_shared_terms():
     ensemble's, and the coefficients are compared over the terms both carry (the run's
     order-2 set is the first 6 rows of the ensemble's order-4 set); a run on boxes is
     compared on its moments only."""
-    system = opa_package.System(opa_package.preset("3.2"), uncertain="mu,c", sigma=(0.016, 0.005), order=2)
+    system = opa_package.System(opa_package.preset("3.2"), uncertain="mu,c",
+                                sigma=(0.016, 0.005), order=2)
     run = opa_package.simulate_opa(system, periods=4, per_period=4)
     ens = mc_package.simulate_mc(system.replace(order=4), samples=256, periods=4, per_period=4)
     cmp = compare_runs(run, ens)
