@@ -36,6 +36,7 @@ integrates the conditional moments of the piecewise polynomial exactly.
 from __future__ import annotations
 
 import itertools
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -109,12 +110,16 @@ class BoxRun:
     v_coef: np.ndarray
     rhs_evaluations: int
     impacts: int
+    failure: str = ""
 
 
-def run_boxes(system: System, options: SolverOptions, boxes, times, basis: str
-              ) -> tuple[list[BoxRun], ChaosBasis, int]:
+def run_boxes(system: System, options: SolverOptions, boxes, times, basis: str, *,
+              partial: bool = False) -> tuple[list[BoxRun], ChaosBasis, int]:
     """Each box's Galerkin system over ``times``, in parallel: the runs, the basis of the
-    first (every box has the same multi-index set) and the rule's node count."""
+    first (every box has the same multi-index set) and the rule's node count. A box whose
+    system cannot be completed raises :class:`SimulationError`, or with ``partial`` comes
+    back with its ``failure`` said and NaN coefficients (the adaptive refinement halves
+    it)."""
     whole = system.problem.measures
     inputs, chaos, nodes = [], None, 0
     for box in boxes:
@@ -125,14 +130,20 @@ def run_boxes(system: System, options: SolverOptions, boxes, times, basis: str
     P = chaos.size
     batch = run_batch(stack(inputs), initial_coefficients(system, P), times,
                       rtol=options.rtol, atol=options.atol)
+    failures = []
     for e, box in enumerate(boxes):
+        failure = ""
         if not batch.ok[e] or not np.isfinite(batch.states[e]).all():
             why = batch.message(e) if not batch.ok[e] else "the state became non-finite"
-            raise SimulationError(f"box {_box_text(box)} of the OPA (N={system.order}) system "
-                                  f"stopped: {why}")
+            failure = f"box {_box_text(box)} of the OPA (N={system.order}) system stopped: {why}"
+            if not partial:
+                raise SimulationError(failure)
+            batch.states[e] = np.nan
+        failures.append(failure)
     return [BoxRun(box, box.probability(whole), batch.states[e, :, :P].T.copy(),
                    batch.states[e, :, P:].T.copy(), int(batch.rhs_evaluations[e]),
-                   int(batch.impacts[e])) for e, box in enumerate(boxes)], chaos, nodes
+                   int(batch.impacts[e]), failures[e])
+            for e, box in enumerate(boxes)], chaos, nodes
 
 
 def _box_text(box: Box) -> str:
@@ -162,6 +173,9 @@ def indicator(run: BoxRun, chaos: ChaosBasis) -> tuple[float, int]:
     """(eta_e, the parameter to split along): the box's share of the variance
     ``P_e max_t v_e(t)``, and the parameter whose terms carry most of the box's variance
     (the direction along which it varies most)."""
+    if run.failure:  # a box whose system diverged is halved first, along its widest side
+        widths = np.subtract(run.box.upper, run.box.lower)
+        return math.inf, int(np.argmax(widths))
     power = (run.x_coef[1:] ** 2).max(axis=1)  # each term's largest square over time
     eta = run.probability * float((run.x_coef[1:] ** 2).sum(axis=0).max())
     share = [power[chaos.indices[1:, j] > 0].sum() for j in range(chaos.dimension)]
@@ -175,7 +189,7 @@ def refine(system, options, times, basis, tolerance, max_elements):
     share), within the budget; it stops when every share is below the tolerance."""
     whole = system.problem.measures
     boxes = [Box(tuple(m.lo for m in whole), tuple(m.hi for m in whole))]
-    runs, chaos, nodes = run_boxes(system, options, boxes, times, basis)
+    runs, chaos, nodes = run_boxes(system, options, boxes, times, basis, partial=True)
     flags = split_inside(system, options, boxes, times)
     steps, change, mean = 0, float("nan"), runs[0].x_coef[0]
     while True:
@@ -184,6 +198,10 @@ def refine(system, options, times, basis, tolerance, max_elements):
         top = float(share.max())
         room = max_elements - len(runs)
         if top < tolerance or room <= 0:
+            failed = [r.failure for r in runs if r.failure]
+            if failed:
+                raise SimulationError(f"{failed[0]}; the element budget (max_elements "
+                                      f"{max_elements}) ran out before halving it mended it")
             met = top < tolerance
             if not met:
                 warnings.warn(
@@ -195,17 +213,20 @@ def refine(system, options, times, basis, tolerance, max_elements):
                 stopped_by="tolerance" if met else "element budget", error_estimate=change,
                 largest_share=top, tolerance_met=int(met), tolerance=float(tolerance),
                 max_elements=int(max_elements), refinement_steps=steps)
-        pick = sorted((e for e in range(len(runs)) if share[e] >= max(tolerance, 0.25 * top)),
+        finite = share[np.isfinite(share)]
+        bar = max(tolerance, 0.25 * (finite.max() if len(finite) else 0.0))
+        pick = sorted((e for e in range(len(runs)) if share[e] >= bar),
                       key=lambda e: (-share[e], not flags[e]))[:room]
         halves = [h for e in pick for h in runs[e].box.halves(scored[e][1], whole)]
-        new, _, _ = run_boxes(system, options, halves, times, basis)
+        new, _, _ = run_boxes(system, options, halves, times, basis, partial=True)
         new_flags = split_inside(system, options, halves, times)
         keep = [e for e in range(len(runs)) if e not in set(pick)]
         runs = [runs[e] for e in keep] + new
         flags = np.concatenate([flags[keep], new_flags])
         steps += 1
         new_mean, _ = moments([(r.probability, r.x_coef) for r in runs])
-        change, mean = float(np.sqrt(np.mean((new_mean - mean) ** 2))), new_mean
+        change, mean = float(np.sqrt(np.mean((new_mean - mean) ** 2))), new_mean  # NaN
+        # while a box has failed
 
 
 def sobol_from_boxes(runs, chaos: ChaosBasis, whole, coef: str = "x_coef"):

@@ -102,3 +102,21 @@ def test_the_budget_and_the_box_count_are_bounded():
         free_run(65, order=1)
     with pytest.warns(ElementBudgetWarning, match="adaptive boxes stopped at"):
         free_run("adaptive", order=1, max_elements=3, tolerance=1e-12)
+
+
+def test_a_box_whose_system_diverges_is_halved_first_and_named_if_it_stays():
+    """(mu, c, a) at twice the issue's scales: near grazing a box's OPA system escapes.
+    Uniform boxes stop there naming the box; the adaptive refinement halves such boxes
+    first, and when its budget runs out with one still failing it names that box."""
+    from opa import SimulationError
+
+    osc = IMPACTING
+    system = opa.System(osc, uncertain="mu,c,a", order=2, impact_law="saltation",
+                        sigma=(2 * 0.02 * osc.mu, 2 * 0.1 * osc.c, 2 * 0.02 * osc.a))
+    with pytest.raises(SimulationError, match=r"box \[.*\] x \[.*\] x \[.*\] of the OPA "
+                                              r"\(N=2\) system stopped: the trajectory"):
+        opa.simulate_opa(system, periods=10, per_period=8, elements=4)
+    with pytest.raises(SimulationError, match=r"the element budget \(max_elements 128\) "
+                                              r"ran out before halving it mended it"):
+        opa.simulate_opa(system, periods=10, per_period=8, elements="adaptive",
+                         max_elements=128)
