@@ -80,9 +80,12 @@ def _runs():
     from compare import verify
     from compare._convergence import ConvergenceConfig, run_convergence
     from mc import simulate_mc
-    from opa import Oscillator, preset, simulate_dmr, simulate_opa, stochastic_diagram, sweep
+    from opa import (Oscillator, System, preset, simulate_dmr, simulate_opa,
+                     stochastic_diagram, sweep)
 
     osc = Oscillator()
+    several = System(osc, uncertain="mu,c", sigma=(0.016, 0.005),
+                     distribution="semicircle,uniform", order=2)
     return [
         ("dmr", "simulate_dmr(Oscillator(), periods=2)", simulate_dmr(osc, periods=2)),
         ("opa", "simulate_opa(Oscillator(), sigma=0.01, order=2, periods=2)",
@@ -102,6 +105,14 @@ def _runs():
                 sequential=False)),
         ("mc", "simulate_mc(Oscillator(), sigma=0.01, samples=64, order=2, periods=2)",
          simulate_mc(osc, sigma=0.01, samples=64, order=2, periods=2, progress=False)),
+        ("opa, several uncertain parameters", f"simulate_opa({SEVERAL_SYSTEM}, periods=2)",
+         simulate_opa(several, periods=2)),
+        ("opa, several uncertain parameters, adaptive boxes",
+         f'simulate_opa({SEVERAL_SYSTEM}, periods=2, elements="adaptive", max_elements=4)',
+         simulate_opa(several, periods=2, elements="adaptive", max_elements=4)),
+        ("mc, several uncertain parameters",
+         f"simulate_mc({SEVERAL_SYSTEM}, samples=64, periods=2)",
+         simulate_mc(several, samples=64, periods=2, progress=False)),
         ("stochastic bifurcation diagram",
          'stochastic_diagram(preset("3.1", F0=0.0), "c", [0.0396996668, 0.05], sigma=0.03, '
          'samples=8, transient=200)',
@@ -155,6 +166,75 @@ assert "sigma" not in ds.attrs and "N" not in ds.attrs
 """
 
 
+SEVERAL_SYSTEM = ('System(Oscillator(), uncertain="mu,c", sigma=(0.016, 0.005), '
+                  'distribution="semicircle,uniform", order=2)')
+
+
+def _several(single, boxes, ens) -> str:
+    """The section on several uncertain parameters, every statement read off (and asserted
+    on) the three runs whose tables follow it."""
+    import numpy as np
+
+    terms, d = single.sizes["term"], single.sizes["parameter"]
+    names = [str(n) for n in single.parameter.values]
+    sigma = [float(s) for s in single.attrs["sigma"]]
+    first_index = single.multi_index.values[0].tolist()
+    assert single.x_coef.dims == ("term", "time") and "order" not in single.dims
+    assert single.multi_index.dims == ("term", "parameter") and first_index == [0] * d
+    assert all(single[f"{s}_sobol_{k}"].dims == ("parameter", "time")
+               for s in "xv" for k in ("first", "total"))
+    assert float(single.x_var[0]) == 0 and np.isnan(single.x_sobol_first[:, 0]).all()
+    assert "element" not in single.dims and "element" in boxes.dims
+    assert boxes.element_lower.dims == boxes.element_upper.dims == ("element", "parameter")
+    assert boxes.element_x_coef.dims == ("element", "term", "time")
+    assert "element_edges" not in boxes and "element_straddles" not in boxes
+    assert "element_split_inside" in boxes
+    assert ens.xi.dims == ("sample", "parameter") and ens.x_coef.dims == ("term", "time")
+    assert "multi_index" in ens and "basis" not in ens.attrs
+    assert single.attrs["uncertain"] == boxes.attrs["uncertain"] == ens.attrs["uncertain"]
+    laws = f'"{single.attrs["distribution"]}"'
+    if ens.attrs["distribution"] != single.attrs["distribution"]:
+        laws += f' in OPA runs; Monte Carlo writes "{ens.attrs["distribution"]}"'
+    return f"""## Several uncertain parameters
+
+With d ≥ 2 uncertain parameters (`{SEVERAL_SYSTEM}`;
+[several uncertain parameters](several.md)) the layout differs in these places, read off
+the three runs below:
+
+- the expansion's index is the dimension `term`, not `order`: `x_coef`, `v_coef` (term,
+  time) hold {terms} terms here (total degree ≤ N = {single.attrs["N"]} in {d}
+  parameters), and `multi_index` (term, parameter) is the degree of each parameter's
+  polynomial in each term (term 0 is {first_index}, the mean);
+- the dimension `parameter`, its coordinate the names ({", ".join(f"`{n}`" for n in names)}),
+  carries the Sobol indices `x_sobol_first`, `x_sobol_total`, `v_sobol_first`,
+  `v_sobol_total` (parameter, time), NaN where the variance is 0 (here at t = 0);
+- a single-element run has no `element` dimension; with `elements=` the elements are
+  boxes in ξ: `element_lower`, `element_upper` (element, parameter) stand for
+  `element_edges`, `element_split_inside` (element) for `element_straddles`, and
+  `element_x_coef` is (element, term, time);
+- a Monte Carlo run adds `xi` (sample, parameter) and `multi_index` beside its `x_coef`
+  (term, time);
+- attributes: `uncertain` is the names, comma-separated ("{single.attrs["uncertain"]}"),
+  `sigma` a vector of one scale per parameter ({sigma}), `distribution` the laws
+  ({laws}); OPA runs add `basis` (the multi-index set:
+  "{single.attrs["basis"]}") and `nodes` (the points of the cubature rule in ξ at which
+  the force law is evaluated: {single.attrs["nodes"]} at N = {single.attrs["N"]}).
+
+```python
+import opa
+
+system = opa.System(opa.Oscillator(), uncertain="mu,c", sigma=(0.016, 0.005),
+                    distribution="semicircle,uniform", order=2)
+ds = opa.simulate_opa(system, periods=2)
+assert list(ds.parameter.values) == ["mu", "c"] and ds.attrs["uncertain"] == "mu,c"
+assert list(ds.attrs["sigma"]) == [0.016, 0.005]
+assert abs((ds.x_coef[1:] ** 2).sum("term") - ds.x_var).max() < 1e-15  # Var = sum of squares
+s = ds.x_sobol_first.sel(parameter="c")                            # S_c(t), NaN at t = 0
+assert ((ds.x_sobol_first <= ds.x_sobol_total + 1e-12) | s.isnull()).all()
+```
+"""
+
+
 def _table(ds) -> list[str]:
     lines = ["| variable | dimensions | long_name | units |", "|---|---|---|---|"]
     for name in [*ds.coords, *ds.data_vars]:
@@ -193,6 +273,10 @@ def render() -> str:
             continue
         if title == "opa":
             out.append(OPA_LAYOUT)
+        if title == "opa, several uncertain parameters":
+            found = {t: d for t, _, d in runs}
+            out.append(_several(ds, found["opa, several uncertain parameters, adaptive boxes"],
+                                found["mc, several uncertain parameters"]))
         out.append(f"## {title}\n")
         source = "compare" if title == "converge" else "opa` and `mc"
         out.append(f"`{call}` (from `{source}`):\n")
