@@ -43,9 +43,9 @@ from compare._sobol import (
     READINGS, pick_freeze_design, pick_freeze_indices, surrogate_agreement,
 )
 from opa.engine import (
-    PARAMETER_NAMES, ChaosBasis, SimulationError, SolverOptions, System, check_count,
+    PARAMETER_NAMES, SimulationError, SobolIndices, SolverOptions, System, check_count,
     check_memory, check_work, provenance_attrs, run_batch, simulate_opa, sobol_indices,
-    time_coord,
+    surrogate_several, time_coord,
 )
 
 #: true-system states (runs x outputs x 2) in one ``run_batch`` call of the certificate
@@ -145,14 +145,12 @@ def certify_sobol(system: System, *, opa: xr.Dataset | None = None, samples: int
     a, b = _independent_blocks(system, samples, seed, sampler)
     points = np.concatenate([a[None], b[None], pick_freeze_design(a, b)])  # (d + 2, M, d)
     paths = _true_paths(system, options, points, times)                   # (d + 2, M, T, 2)
-    chaos = ChaosBasis(system.problem.measures, run.multi_index.values)
-    psi = chaos.evaluate(points.reshape(-1, d))
     data, agreement, ratios = {}, {}, []
     for k, state in enumerate(("x", "v")):
-        coef = run[f"{state}_coef"].values
-        exact = sobol_indices(coef, chaos.indices)
+        exact = _surrogate_indices(run, state)
         f = paths[..., k]
-        g = (psi @ coef).reshape(f.shape)
+        g = surrogate_several(run, system.problem.measures, points.reshape(-1, d),
+                              state).reshape(f.shape)
         with np.errstate(all="ignore"):
             plain = pick_freeze_indices(f[0], f[1], f[2:], z=z)
             cv = pick_freeze_indices(f[0], f[1], f[2:], surrogate=(g[0], g[1], g[2:]),
@@ -195,6 +193,16 @@ def _check_keywords(system, samples, seed, control, z, sampler) -> tuple[int, in
     return samples, int(seed), float(z)
 
 
+def _surrogate_indices(run: xr.Dataset, state: str) -> SobolIndices:
+    """The surrogate's exact indices of ``state``: from its coefficients (one element,
+    Sudret 2008), or as the run computed them on its boxes (exact quadrature of the
+    piecewise expansion, :mod:`opa._boxes`)."""
+    if "element_lower" not in run:
+        return sobol_indices(run[f"{state}_coef"].values, run.multi_index.values)
+    return SobolIndices(run[f"{state}_sobol_first"].values, run[f"{state}_sobol_total"].values,
+                        run[f"{state}_var"].values)
+
+
 def _opa_run(system, opa, periods, per_period, basis, options) -> xr.Dataset:
     """The OPA run: made here, or the given one checked to be a complete d-dimensional
     run of ``system`` from its deterministic start."""
@@ -207,7 +215,11 @@ def _opa_run(system, opa, periods, per_period, basis, options) -> xr.Dataset:
             raise ValueError(f"{name} is the given opa run's own: leave it out with opa "
                              f"(got {name}={value!r:.40})")
     check_dataset(opa, "opa", "an OPA run with several uncertain parameters")
-    require_variables(opa, "opa", ("x_coef", "v_coef", "multi_index", "time", "parameter"),
+    boxes = "element_lower" in opa
+    coefficients = (("element_x_coef", "element_v_coef", "element_upper", "x_sobol_first",
+                     "x_sobol_total", "v_sobol_first", "v_sobol_total", "x_var", "v_var")
+                    if boxes else ("x_coef", "v_coef"))
+    require_variables(opa, "opa", (*coefficients, "multi_index", "time", "parameter"),
                       hint=" (an OPA run with several uncertain parameters, "
                            "simulate_opa(System(uncertain='mu,c', ...)))")
     if "failure" in opa.attrs:
@@ -225,14 +237,17 @@ def _opa_run(system, opa, periods, per_period, basis, options) -> xr.Dataset:
                                                 system.problem.scales, rtol=0, atol=0):
         raise ValueError(f"opa was run with sigma = {opa.attrs['sigma']}, the system has "
                          f"{system.problem.scales}")
-    for name in ("x_coef", "v_coef"):
+    for name in coefficients[:2]:
         if not np.all(np.isfinite(opa[name].values)):
             raise ValueError(f"opa's {name} holds non-finite values")
     start = np.zeros(opa.sizes["term"])
     start[0] = system.oscillator.x0
+    x_first, v_first = ((opa.element_x_coef.values[..., 0], opa.element_v_coef.values[..., 0])
+                        if boxes else (opa.x_coef.values[None, :, 0],
+                                       opa.v_coef.values[None, :, 0]))
     if float(opa.time[0]) == 0.0 and not (
-            np.allclose(opa.x_coef.values[:, 0], start, rtol=0, atol=1e-12)
-            and np.allclose(opa.v_coef.values[1:, 0], 0.0, rtol=0, atol=1e-12)):
+            np.allclose(x_first, start, rtol=0, atol=1e-12)
+            and np.allclose(v_first[:, 1:], 0.0, rtol=0, atol=1e-12)):
         raise ValueError("opa does not start from the system's x0, v0 (a run continued with "
                          "initial=...): its true systems are not known")
     return opa

@@ -289,7 +289,8 @@ def _anova(values: np.ndarray, weights) -> tuple[np.ndarray, np.ndarray]:
         rest = mean_over(values, others)  # E[x | xi_~j]
         total[j] = var - mean_over((rest - mean) ** 2, ()).reshape(-1)
     with np.errstate(all="ignore"):
-        live = var > 0
+        # a deterministic output (the start) has no variance but round-off's, ~eps^2 x^2
+        live = var > 1e-20 * np.max(np.abs(values)) ** 2
         return (np.where(live, first / np.where(live, var, 1.0), np.nan),
                 np.where(live, total / np.where(live, var, 1.0), np.nan))
 

@@ -113,11 +113,11 @@ def surrogate_moments(ds) -> dict[str, np.ndarray]:
     return out
 
 
-def surrogate_several(ds, measures, xi) -> np.ndarray:
+def surrogate_several(ds, measures, xi, state: str = "x") -> np.ndarray:
     """x_hat (M, T) of an OPA run of several uncertain parameters (:mod:`opa._galerkin`,
     :mod:`opa._boxes`) at the points ``xi`` (M, d), ``measures`` the marginals of xi: the
     expansion over ``multi_index``, on each box in its own conditional basis (a point on
-    a shared side belongs to the first box listed).
+    a shared side belongs to the first box listed); ``state`` "v": v_hat.
 
     >>> import opa
     >>> system = opa.System(uncertain="mu,c", sigma=0.01, order=2)
@@ -133,7 +133,7 @@ def surrogate_several(ds, measures, xi) -> np.ndarray:
         raise ValueError(f"xi must be a finite array of shape (M, {len(measures)})")
     indices = ds.multi_index.values
     if "element_lower" not in ds:
-        return ChaosBasis(tuple(measures), indices).evaluate(xi) @ ds.x_coef.values
+        return ChaosBasis(tuple(measures), indices).evaluate(xi) @ ds[f"{state}_coef"].values
     out = np.full((len(xi), ds.sizes["time"]), np.nan)
     lower, upper = ds.element_lower.values, ds.element_upper.values
     taken = np.zeros(len(xi), dtype=bool)
@@ -143,7 +143,7 @@ def surrogate_several(ds, measures, xi) -> np.ndarray:
             box = tuple(m if (lo, hi) == (m.lo, m.hi) else m.restrict(lo, hi)
                         for m, lo, hi in zip(measures, lower[e], upper[e]))
             out[inside] = ChaosBasis(box, indices).evaluate(xi[inside]) \
-                @ ds.element_x_coef.values[e]
+                @ ds[f"element_{state}_coef"].values[e]
             taken |= inside
     return out
 

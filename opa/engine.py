@@ -57,7 +57,7 @@ from opa._model import (
     preset,
     time_grid,
 )
-from opa._sensitivity import sobol_indices
+from opa._sensitivity import SobolIndices, sobol_indices
 from opa._run import STATUS_NAMES, SimulationError, add_true_system_work, \
     announce_compilation, \
     follow_thread_grant, output_times, run_batch, set_threads, thread_count, \
@@ -97,7 +97,7 @@ __all__ = [
     "budget", "first_non_finite", "parse_duration", "process_started", "start_fork_server",
     "DaskError", "Execution", "connect_scheduler",
     "take_execution", "set_threads", "thread_count",
-    "ChaosBasis", "MAX_CHAOS_TERMS", "sobol_indices",
+    "ChaosBasis", "MAX_CHAOS_TERMS", "SobolIndices", "sobol_indices",
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
     "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",

@@ -52,10 +52,10 @@ def _extra_panel(ds: xr.Dataset) -> str | None:
     """The third panel a run deserves: the elements of a multi-element OPA run, the Sobol
     indices over time of an OPA run with several uncertain parameters, the impacts per
     sample of a Monte Carlo ensemble; None for the others."""
+    if "x_sobol_first" in ds:  # several parameters (on one element or on boxes)
+        return "sobol"
     if ds.attrs.get("model") == "opa" and ds.sizes.get("element", 1) > 1:
         return "elements"
-    if "x_sobol_first" in ds:
-        return "sobol"
     if ds.attrs.get("model") == "mc" and "n_impacts" in ds and ds.sizes.get("sample", 0):
         return "impacts"
     return None

@@ -36,6 +36,7 @@ def test_boxes_give_the_moments_and_sobol_indices_of_the_reference(truth):
     mean, var, first, total = truth
     ds = free_run(2)
     assert ds.sizes["element"] == 4
+    assert np.isnan(ds.x_sobol_first.values[:, 0]).all()  # the deterministic start
     np.testing.assert_allclose(ds.element_probability.sum(), 1.0, rtol=1e-12)
     np.testing.assert_allclose(ds.x_mean, mean, rtol=0, atol=1e-7)
     np.testing.assert_allclose(ds.x_var, var, rtol=0, atol=1e-7)

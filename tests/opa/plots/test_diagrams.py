@@ -188,8 +188,12 @@ def test_a_run_of_several_parameters_draws_its_sobol_indices_over_time():
     dataset's own values (NaN at the deterministic start left as a gap), on [0, 1]."""
     import opa
 
-    ds = opa.simulate_opa(opa.System(preset("3.2"), uncertain="mu,c", sigma=(0.016, 0.005),
-                                     order=2), periods=2, per_period=8)
+    system = opa.System(preset("3.2"), uncertain="mu,c", sigma=(0.016, 0.005), order=2)
+    boxes = P.draw_run(opa.simulate_opa(system, periods=2, per_period=8, elements=2),
+                       per_period=8)  # on boxes too (it drew the 1-D elements' panel)
+    assert boxes.axes[2].get_title() == "Sobol indices from the OPA coefficients"
+    plt.close(boxes)
+    ds = opa.simulate_opa(system, periods=2, per_period=8)
     fig = P.draw_run(ds, per_period=8)
     try:
         panel = fig.axes[2]
