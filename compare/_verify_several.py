@@ -13,11 +13,11 @@ variate:
     E_{cv}[x] = E[\hat x] + \overline{x - \hat x}, \qquad
     Var_{cv}[x] = E[\hat x^2] + \overline{x^2 - \hat x^2} - E_{cv}[x]^2 .
 
-**The points** are ``REPLICATES`` = 16 independent scramblings of a Sobol' sequence in d
-dimensions (:meth:`opa.Problem.sample`), M/16 points each. Each replicate gives its own
-estimates; their spread over the 16 is the standard error, with 15 degrees of freedom
-for Student's t intervals (randomised QMC: the replicates are independent and
-identically distributed whatever the integrand).
+**The points** are ``REPLICATES`` = 16 (:mod:`compare._pairs`'s) independent scramblings
+of a Sobol' sequence in d dimensions (:meth:`opa.Problem.sample`), M/16 points each.
+Each replicate gives its own estimates; their spread over the 16 is the standard error,
+with 15 degrees of freedom for Student's t intervals (randomised QMC: the replicates are
+independent and identically distributed whatever the integrand).
 
 **The verdict** is the one-dimensional certificate's (:func:`compare._trust.
 bounded_verdict`): round r spends ``alpha / 2^r`` of the error rate on a Bonferroni band
@@ -46,14 +46,13 @@ import numpy as np
 import xarray as xr
 
 from compare._inputs import check_dataset, require_time, run_fields, run_options
+from compare._pairs import REPLICATES
 from compare._trust import band_multiplier, bounded_verdict
 from opa.engine import (
     PARAMETER_NAMES, Oscillator, SolverOptions, System, check_work, run_batch, split_list,
     surrogate_several,
 )
 
-#: independent scramblings whose spread is the standard error (15 degrees of freedom)
-REPLICATES = 16
 #: fewest points a rarer number of impacts must be seen at before a verdict is given
 MIN_RARE = 64
 

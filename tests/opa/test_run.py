@@ -99,7 +99,7 @@ def test_a_stale_table_entry_is_skipped_not_raised(monkeypatch):
         "is_deterministic": (nt.int64,), "last_stage": (nt.float64,)}})
     assert (nt.float64,) not in _run.kernel.last_stage.signatures
     _run.compile_group("main")
-    assert all(len(sig) == 3 for sig in _run.kernel.is_deterministic.signatures)
+    assert all(len(sig) == 4 for sig in _run.kernel.is_deterministic.signatures)
     assert (nt.float64,) in _run.kernel.last_stage.signatures
 
 
