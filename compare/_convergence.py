@@ -20,6 +20,17 @@ its right-hand-side evaluations (for OPA also times the Q nodes each one evaluat
 its wall time. Slopes are fitted to log error against log K. The errors are meaningful
 down to the reference's own standard error, which is stored beside them.
 
+With several uncertain parameters (``uncertain="mu,c"``, ``sigma`` one scale per
+parameter) the study runs what is sound in d dimensions: single-element OPA over the
+orders (the multi-index basis), uniform boxes with K pieces per parameter (the K of
+``uniform`` whose K^d boxes stay within ``MAX_BOXES``), adaptive boxes over the budgets,
+the plain and Sobol' ladders (points of the product law in d dimensions) and the
+reference. The parts built on the one-dimensional law of xi (the collocation twins on
+element edges; the control-variate ladder, stratified at the splits along xi) are left
+out, and :func:`skipped_parts` says why (in the log, the dataset's ``skipped`` and the
+report). An OPA row's node right-hand sides are its right-hand sides times the nodes of
+its cubature rule (``attrs["nodes"]``) in d dimensions, times Q = 2N + 1 in one.
+
 The MC, Sobol and control-variate ladders are nested: each is one ensemble of its
 largest M, run rung by rung, each rung's points held by the next (every replicate's, or
 every stratum's, Sobol' sequence goes on). A rung's points are those of a separate
@@ -44,8 +55,8 @@ import xarray as xr
 
 from mc import cv_estimates, sample_xi, simulate_mc
 from opa.engine import (
-    collocation, ElementBudgetWarning, Execution, take_execution, Oscillator, parse, preset,
-    provenance_attrs,
+    collocation, ElementBudgetWarning, Execution, take_execution, MAX_BOXES, Oscillator, parse,
+    preset, provenance_attrs,
     quadrature_order, run_measure, simulate_opa, SimulationError, SolverOptions, surrogate,
     surrogate_moments, System, time_grid, true_runs, uniform_edges, write_netcdf,
 )
@@ -60,11 +71,15 @@ PLAIN_REFERENCE = 32768
 
 @dataclass(frozen=True)
 class ConvergenceConfig:
-    """The section 3.2 set at omega = 3.98, sigma = 0.05, 10 periods, 2^16 Sobol samples."""
+    """The section 3.2 set at omega = 3.98, sigma = 0.05, 10 periods, 2^16 Sobol samples.
+
+    ``uncertain`` may name several parameters (``"mu,c"``), with ``sigma`` one scale or one
+    per parameter and ``distribution`` one law or one per parameter (``"semicircle,uniform"``),
+    as :class:`opa.System` takes them (and checks them)."""
 
     oscillator: Oscillator = field(default_factory=lambda: preset("3.2"))
     options: SolverOptions = field(default_factory=lambda: SolverOptions(rtol=1e-9, atol=1e-9))
-    sigma: float = 0.05
+    sigma: float | tuple[float, ...] = 0.05
     uncertain: str = "mu"
     distribution: str = "semicircle"
     periods: float = 10.0
@@ -97,10 +112,17 @@ class ConvergenceConfig:
                       order=self.order, impulse=self.impulse, pulse_width=self.pulse_width,
                       impulse_at_zero=self.impulse_at_zero)
 
+    @property
+    def dimension(self) -> int:
+        """The number of uncertain parameters d."""
+        return self.system.dimension
+
     def __post_init__(self):
-        if not (self.sigma > 0):
+        if isinstance(self.sigma, list):  # a frozen dataclass: JSON gives lists
+            object.__setattr__(self, "sigma", tuple(self.sigma))
+        self.system  # noqa: B018 -- validates the system's fields (sigma's count, laws)
+        if not all(s > 0 for s in np.atleast_1d(self.sigma)):
             raise ValueError(f"sigma must be > 0, got {self.sigma}")
-        self.system  # noqa: B018 -- validates the system's fields
         for name in ("uniform", "budgets", "mc_samples", "orders", "single_nodes"):
             seq = getattr(self, name)
             if any(int(v) != v or v < 0 for v in seq):
@@ -110,12 +132,14 @@ class ConvergenceConfig:
         from opa.engine import MAX_ELEMENTS
 
         # the element rules of simulate_opa: counts 1..MAX_ELEMENTS, budgets 2..MAX_ELEMENTS
+        # (boxes: K per parameter, K^d within MAX_BOXES, else left out; budgets 2..MAX_BOXES)
+        most = MAX_ELEMENTS if self.dimension == 1 else MAX_BOXES
         for name, least, what in (("uniform", 1, "element counts of the uniform runs"),
                                   ("budgets", 2, "element budgets of the adaptive runs")):
-            bad = [int(v) for v in getattr(self, name) if not least <= v <= MAX_ELEMENTS]
+            bad = [int(v) for v in getattr(self, name) if not least <= v <= most]
             if bad:
                 raise ValueError(f"{name} ({what}) must be integers in {least}.."
-                                 f"{MAX_ELEMENTS}, got {bad[0]}")
+                                 f"{most}, got {bad[0]}")
         if self.reference < 1024:
             raise ValueError(f"reference must be >= 1024 samples, got {self.reference}")
         if self.reference_method not in ("sobol", "control"):
@@ -153,10 +177,13 @@ class _Setting:
 
 
 def _setting(cfg: ConvergenceConfig) -> _Setting:
-    measure = parse(cfg.distribution)
+    several = cfg.dimension > 1
+    # several parameters: the System's product law (opa.Problem) is the law of xi
+    measure = cfg.system.problem if several else parse(cfg.distribution)
     osc, opts = cfg.oscillator, cfg.options
     # what every run depends on; the errors also depend on the reference (samples, seed)
-    settings = {"oscillator": osc.as_dict(), "options": asdict(opts), "sigma": cfg.sigma,
+    sigma = list(np.atleast_1d(cfg.sigma).astype(float)) if several else cfg.sigma
+    settings = {"oscillator": osc.as_dict(), "options": asdict(opts), "sigma": sigma,
                 "uncertain": cfg.uncertain, "distribution": cfg.distribution,
                 "periods": cfg.periods, "per_period": cfg.per_period,
                 "allow_negative": cfg.allow_negative, "reference": cfg.reference,
@@ -168,8 +195,31 @@ def _setting(cfg: ConvergenceConfig) -> _Setting:
                                          "order": int(cfg.order), "certificate": 2}
     if (cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero) != ("dirac", 0.1, True):
         settings["impulse"] = [cfg.impulse, cfg.pulse_width, cfg.impulse_at_zero]
-    return _Setting(measure, cfg.system.replace(distribution=measure),
-                    time_grid(osc.omega, cfg.periods, cfg.per_period), settings)
+    base = cfg.system if several else cfg.system.replace(distribution=measure)
+    return _Setting(measure, base, time_grid(osc.omega, cfg.periods, cfg.per_period), settings)
+
+
+def uniform_counts(cfg: ConvergenceConfig) -> list[int]:
+    """The K of ``uniform`` the study runs: all in one dimension; with d parameters those
+    whose K^d boxes stay within ``MAX_BOXES``."""
+    return [int(k) for k in cfg.uniform if int(k) ** cfg.dimension <= MAX_BOXES]
+
+
+def skipped_parts(cfg: ConvergenceConfig) -> list[str]:
+    """The parts of the study left out, each with why (none in one dimension)."""
+    d = cfg.dimension
+    if d == 1:
+        return []
+    out = [f"collocation (multi-element and one element) skipped: its Gauss nodes on "
+           f"element edges are a rule of one uncertain parameter; this study has {d} "
+           f"({','.join(cfg.system.uncertain)})",
+           f"control-variate ladder skipped: its strata are cut at the splits along xi, "
+           f"which exist for one uncertain parameter; this study has {d}"]
+    big = [int(k) for k in cfg.uniform if int(k) ** d > MAX_BOXES]
+    if big:
+        out.append(f"uniform boxes K = {', '.join(map(str, big))} skipped: K^{d} boxes is "
+                   f"more than {MAX_BOXES}")
+    return out
 
 
 def _run(setting: _Setting, name: str, spec: dict, compute, *args) -> StudyRun:
@@ -249,7 +299,8 @@ def _opa(cfg: ConvergenceConfig, ref: dict, law: str, order: int, kw: dict) -> d
     sec = time.perf_counter() - t
     e, s = _errors(ref, ds.x_mean.values, ds.x_var.values)
     out = {"error": e, "sd_error": s, "rhs": int(ds.attrs["rhs_evaluations"]),
-           "elements": int(ds.attrs["elements"]), "seconds": sec}
+           "elements": int(ds.attrs["elements"]), "nodes": int(ds.attrs.get("nodes", 1)),
+           "seconds": sec}
     if "element_edges" in ds:
         out["edges"] = ds.element_edges.values
     return out
@@ -298,8 +349,11 @@ def _ladder_paths(cfg: ConvergenceConfig, sampler: str, replicates: int):
     seconds of every true system it holds."""
     setting = _setting(cfg)
     sizes = ladder_sizes(cfg)
-    xi, _ = sample_xi(sampler, sizes[-1], cfg.seed + 1, replicates=replicates,
-                      distribution=setting.measure)
+    if cfg.dimension > 1:  # the points simulate_mc draws in d dimensions (M, d)
+        xi = cfg.system.problem.sample(sizes[-1], sampler, cfg.seed + 1, replicates)
+    else:
+        xi, _ = sample_xi(sampler, sizes[-1], cfg.seed + 1, replicates=replicates,
+                          distribution=setting.measure)
     rows = ladder_rows(sizes, replicates)
     x = np.empty((len(xi), len(setting.times)))
     system = setting.base.replace(order=0)
@@ -437,7 +491,7 @@ def _opa_specs(cfg: ConvergenceConfig) -> list[tuple]:
     adaptive = dict(elements="adaptive", tolerance=1e-14)
     for law in STUDY_LAWS:
         specs += [("ME-OPA uniform", law, int(k), cfg.order, dict(elements=int(k)))
-                  for k in cfg.uniform]
+                  for k in uniform_counts(cfg)]
         specs += [("ME-OPA adaptive", law, None, cfg.order, {**adaptive,
                                                              "max_elements": int(b)})
                   for b in cfg.budgets]
@@ -455,7 +509,9 @@ def _opa_name(method: str, law: str, order: int, kw: dict) -> str:
 def _collocation_specs(cfg: ConvergenceConfig, known: dict) -> list[tuple]:
     """(method, edges, nodes) of every collocation row whose edges are known, in row
     order: the adaptive rows take the edges the adaptive ME-OPA (saltation law) of the
-    same budget chose, once that run is ``known``."""
+    same budget chose, once that run is ``known``. None with several parameters."""
+    if cfg.dimension > 1:
+        return []
     measure = parse(cfg.distribution)
     specs = [("ME-collocation uniform", uniform_edges(measure, int(k)), cfg.nodes)
              for k in cfg.uniform]
@@ -474,10 +530,12 @@ def _collocation_name(method: str, edges, nodes: int) -> str:
     return _slug(f"{method}-K{len(edges) - 1}-Q{nodes}")
 
 
-def _ladder_names(cfg: ConvergenceConfig) -> tuple[str, str, str]:
+def _ladder_names(cfg: ConvergenceConfig) -> tuple[str, ...]:
+    """The ladders' run names: MC, Sobol and (one parameter only) control variates."""
     most = ladder_sizes(cfg)[-1]
-    return (_slug(f"MC ladder-M{most}"), _slug(f"QMC (Sobol) ladder-M{most}"),
-            _slug(f"CV-K{cfg.order_budget} ladder-M{most}"))
+    names = (_slug(f"MC ladder-M{most}"), _slug(f"QMC (Sobol) ladder-M{most}"),
+             _slug(f"CV-K{cfg.order_budget} ladder-M{most}"))
+    return names if cfg.dimension == 1 else names[:2]
 
 
 def study_runs(cfg: ConvergenceConfig, known: dict) -> list[StudyRun]:
@@ -499,18 +557,18 @@ def study_runs(cfg: ConvergenceConfig, known: dict) -> list[StudyRun]:
         runs.append(_run(setting, _collocation_name(method, edges, nodes),
                          {"method": method, "edges": edges.tolist(), "nodes": int(nodes)},
                          _collocation, cfg, ref, edges, int(nodes)))
-    mc, sobol, cv = _ladder_names(cfg)
+    mc, sobol, *cv = _ladder_names(cfg)
     ladder = {"samples": ladder_sizes(cfg), "ladder_seed": cfg.seed + 1, "nested": 1}
     runs.append(_run(setting, mc, {**ladder, "sampler": "random"}, _mc_ladder, cfg, ref))
     runs.append(_run(setting, sobol, {**ladder, "sampler": "sobol",
                                       "replicates": ladder_replicates(cfg)},
                      _sobol_ladder, cfg, ref))
-    runs.append(_run(setting, cv, {**ladder, "samples": cv_sizes(cfg),
+    runs += [_run(setting, name, {**ladder, "samples": cv_sizes(cfg),
                                    "sampler": "stratified sobol at the splits",
                                    "replicates": REPLICATES,
                                    "control": {"budget": int(cfg.order_budget),
                                                "order": int(cfg.order)}},
-                     _cv_ladder, cfg, ref))
+                  _cv_ladder, cfg, ref) for name in cv]
     unique = {run.name: run for run in runs}  # two budgets may stop at the same edges
     return list(unique.values())
 
@@ -594,7 +652,9 @@ def _rows(cfg: ConvergenceConfig, known: dict, log) -> tuple[list, list[str]]:
                             f"{result['failure']}")
             continue
         rhs = int(result["rhs"])
-        q = 1 if order == 0 else quadrature_order(order)
+        # the nodes each right-hand side evaluates: Q = 2N + 1, or the cubature's in d dims
+        q = (int(result["nodes"]) if cfg.dimension > 1
+             else 1 if order == 0 else quadrature_order(order))
         rows.append((method, law, size if size is not None else int(result["elements"]),
                      order, float(result["error"]), float(result["sd_error"]), rhs, rhs * q,
                      float(result["seconds"])))
@@ -619,8 +679,14 @@ def assemble_study(cfg: ConvergenceConfig, known: dict, *, log=print) -> xr.Data
     ref = known["reference"]
     if "note" in ref:
         log(str(ref["note"]))
-    log("multi-element OPA, collocation, the Monte Carlo and Sobol ladders and control "
-        "variates on the adaptive ME-OPA (saltation law) ...")
+    skipped = skipped_parts(cfg)
+    if skipped:
+        log("multi-element OPA (boxes) and the Monte Carlo and Sobol ladders ...")
+        for line in skipped:
+            log(f"  {line}")
+    else:
+        log("multi-element OPA, collocation, the Monte Carlo and Sobol ladders and control "
+            "variates on the adaptive ME-OPA (saltation law) ...")
     rows, failures = _rows(cfg, known, log)
     setting = _setting(cfg)
     cols = list(zip(*rows))
@@ -653,7 +719,9 @@ def assemble_study(cfg: ConvergenceConfig, known: dict, *, log=print) -> xr.Data
     )
     ds.attrs.update(
         periods=float(cfg.periods), per_period=int(cfg.per_period),
-        distribution=setting.measure.name,
+        distribution=(setting.measure.name if cfg.dimension == 1
+                      else str(cfg.system.problem.attrs()["distribution"])),
+        skipped=" | ".join(skipped) if skipped else "none",
         reference_samples=int(ref.get("samples", cfg.reference)),
         reference_method="sobol" if "samples" in ref else cfg.reference_method,
         reference_text=str(ref.get("text", reference_text(cfg.reference, cfg.reference_method,
@@ -730,6 +798,8 @@ def summary_lines(ds) -> list[str]:
                f"searches was of the same problem with the same split budget.")
     if a.get("failures", 0):
         out.append(f"{a['failures']} OPA runs diverged and are left out: {a['failure_text']}")
+    if a.get("skipped", "none") != "none":
+        out += [f"{part[0].upper()}{part[1:]}." for part in str(a["skipped"]).split(" | ")]
     for law in STUDY_LAWS:
         for method in ("ME-OPA uniform", "ME-OPA adaptive"):
             idx = _select(ds, method, law)
@@ -779,5 +849,6 @@ def write_report(ds, outdir, *, draw, command="opa-mc converge") -> list[str]:
 
 
 __all__ = ["ConvergenceConfig", "StudyRun", "assemble_study", "cheapest_reaching", "cv_sizes",
-           "ladder_rows", "pending_runs", "run_convergence", "slope", "stratified_rows",
-           "study_runs", "summary_lines", "table", "write_report"]
+           "ladder_rows", "pending_runs", "run_convergence", "skipped_parts", "slope",
+           "stratified_rows", "study_runs", "summary_lines", "table", "uniform_counts",
+           "write_report"]

@@ -530,7 +530,11 @@ def plot_frontier(conv, path, *, size=None):
                    label="reference's standard error")
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=1,
                   frameon=False)
-    fig.suptitle(f"σ = {conv.attrs['sigma']:g}, ω = {conv.attrs['omega']:g}, "
+    # several uncertain parameters: one sigma each (uncertain "mu,c", sigma [s1, s2])
+    sigma = ", ".join(f"{s:g}" for s in np.atleast_1d(conv.attrs["sigma"]))
+    if np.ndim(conv.attrs["sigma"]):
+        sigma = f"({sigma}) of {conv.attrs.get('uncertain', '')}"
+    fig.suptitle(f"σ = {sigma}, ω = {conv.attrs['omega']:g}, "
                  f"{conv.attrs['periods']:g} periods: error against K, N and cost", fontsize=10)
     fig.savefig(path, dpi=120)
     plt.close(fig)

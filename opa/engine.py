@@ -7,6 +7,7 @@ test forbids them ``from opa._x import``), so each name here is a commitment.
 """
 
 from opa._basis import chebyshev_u, gauss_nodes, orthonormal, quadrature_order
+from opa._boxes import MAX_BOXES
 from opa._chaos import MAX_CHAOS_TERMS, ChaosBasis
 from opa._problem import split_list
 from opa._dataset import (
@@ -100,7 +101,7 @@ __all__ = [
     "ChaosBasis", "MAX_CHAOS_TERMS", "SobolIndices", "sobol_indices",
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
-    "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
+    "MAX_BOXES", "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
     "OutputLock", "check_work", "check_scheduler_address",
     "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SampledRuns", "ScanOptions",

@@ -246,6 +246,8 @@ def cmd_validate(args) -> int:
 
 
 def register_converge(sub) -> None:
+    from opa.cli._flags import scales, uncertain_names
+
     p = sub.add_parser(
         "converge",
         help="multi-element OPA against Monte Carlo: error against elements, N and cost",
@@ -253,16 +255,22 @@ def register_converge(sub) -> None:
         "and saltation impact laws) and multi-element collocation against a Sobol "
         "reference, beside single-element OPA, collocation, MC and QMC, with right-hand "
         "sides and wall times. Default: section 3.2 set, omega = 3.98, sigma = 0.05, 10 "
-        "forcing periods, 2^16 reference samples.",
+        "forcing periods, 2^16 reference samples. With several uncertain parameters "
+        "(--uncertain mu,c) the elements are boxes, and collocation and the control-variate "
+        "ladder (one parameter only) are left out.",
     )
     _model_flags(p)
     g = p.add_argument_group("study")
-    g.add_argument("--sigma", type=float, default=0.05, metavar="S",
-                   help="intensity of the uncertain parameter (default 0.05)")
-    g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
-                   help="the uncertain parameter p = p_bar + sigma xi (default mu)")
-    g.add_argument("--distribution", default="semicircle", metavar="LAW",
-                   help="law of xi: semicircle, uniform, beta:A,B, normal-trunc:K")
+    g.add_argument("--sigma", type=scales, default=0.05, metavar="S[,S...]",
+                   help="scale of each uncertain parameter: one value, or one per --uncertain "
+                        "name (default 0.05)")
+    g.add_argument("--uncertain", type=uncertain_names, default="mu", metavar="P[,P...]",
+                   help=f"the uncertain parameters p = p_bar + sigma xi, among "
+                        f"{', '.join(UNCERTAIN_PARAMETERS)}: one, or several such as mu,c "
+                        f"(default mu)")
+    g.add_argument("--distribution", default="semicircle", metavar="LAW[,LAW...]",
+                   help="law of xi: semicircle, uniform, beta:A,B, normal-trunc:K; one, or "
+                        "one per --uncertain name")
     g.add_argument("--periods", type=float, default=10.0, metavar="P",
                    help="window in forcing periods (default 10)")
     g.add_argument("--order", type=whole_number, default=1, metavar="N",
@@ -290,7 +298,8 @@ def register_converge(sub) -> None:
 def cmd_converge(args) -> int:
     from compare import (ConvergenceConfig, convergence_lines, run_convergence,
                          write_convergence_report)
-    from opa.cli._flags import MAX_WORKERS, oscillator_from, options_from
+    from opa.cli._flags import (MAX_WORKERS, CliError, flagged, oscillator_from,
+                                options_from)
 
     if args.workers > MAX_WORKERS:
         raise ValueError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got "
@@ -298,13 +307,19 @@ def cmd_converge(args) -> int:
     _check_outdir(args.outdir)
     kw = {k: v for k, v in (("budgets", args.budgets), ("uniform", args.uniform))
           if v is not None}
-    cfg = ConvergenceConfig(oscillator=oscillator_from(args), options=options_from(args),
-                            sigma=args.sigma, uncertain=args.uncertain,
-                            distribution=args.distribution,
-                            periods=args.periods, order=args.order, reference=args.reference,
-                            outdir=args.outdir, impulse=args.impulse,
-                            pulse_width=args.pulse_width, impulse_at_zero=args.impulse_at_zero,
-                            **kw)
+    uncertain = (",".join(args.uncertain) if isinstance(args.uncertain, tuple)
+                 else args.uncertain)
+    try:
+        cfg = ConvergenceConfig(oscillator=oscillator_from(args), options=options_from(args),
+                                sigma=args.sigma, uncertain=uncertain,
+                                distribution=args.distribution, periods=args.periods,
+                                order=args.order, reference=args.reference,
+                                outdir=args.outdir, impulse=args.impulse,
+                                pulse_width=args.pulse_width,
+                                impulse_at_zero=args.impulse_at_zero, **kw)
+    except ValueError as err:  # the library's "sigma ..." as the flag typed, "--sigma ..."
+        raise CliError(flagged(err, ("sigma", "distribution", "uncertain", "budgets",
+                                     "uniform", "reference"))) from None
     log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, file=sys.stderr))
     ds = run_convergence(cfg, log=log, workers=args.workers, scheduler=args.scheduler)
     from compare import plot_frontier  # matplotlib, once the study's workers are done
