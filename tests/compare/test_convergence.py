@@ -9,8 +9,10 @@ from compare._convergence import (
     ConvergenceConfig,
     cheapest_reaching,
     run_convergence,
+    skipped_parts,
     slope,
     summary_lines,
+    uniform_counts,
     write_report,
 )
 from mc import simulate_mc
@@ -318,3 +320,91 @@ def test_the_log_goes_inside_the_execution_record(tmp_path):
         run_convergence(cfg, execution=Execution(), workers=2)
     with pytest.raises(TypeError, match=r"unexpected keyword argument 'progress'"):
         run_convergence(cfg, progress=False)
+
+
+# --------------------------------------------------------------- several uncertain parameters
+TWO = dict(uncertain="mu,c", sigma=(0.016, 0.005), distribution="semicircle,uniform",
+           periods=4, per_period=8, orders=(0, 1, 2), uniform=(1, 2), budgets=(4, 8),
+           order_budget=8, mc_samples=(256, 1024), reference=4096)
+#: the rows a study of several parameters has (docs/several.md, "Convergence")
+SEVERAL_METHODS = {"ME-OPA uniform", "ME-OPA adaptive", "ME-OPA adaptive, N",
+                   "OPA (one element), N", "MC", "QMC (Sobol)"}
+
+
+@pytest.fixture(scope="module")
+def study_two(tmp_path_factory):
+    cfg = ConvergenceConfig(outdir=str(tmp_path_factory.mktemp("conv2")), **TWO)
+    lines = []
+    return cfg, run_convergence(cfg, log=lines.append, write=False), lines
+
+
+def test_two_parameters_rows_names_and_costs(study_two):
+    """d = 2 (mu semicircle, c uniform): the rows are those documented, collocation and
+    the control-variate ladder are left out and said so (log, dataset, report); the
+    costs grow with K, the budget, N (node right-hand sides) and M; an OPA row's node
+    right-hand sides are its right-hand sides times its cubature's nodes."""
+    cfg, ds, lines = study_two
+    assert set(ds.method.values) == SEVERAL_METHODS
+    assert ds.attrs["uncertain"] == "mu,c" and ds.attrs["distribution"] == "semicircle,uniform"
+    for said in (ds.attrs["skipped"], "\n".join(lines), "\n".join(summary_lines(ds))):
+        said = said.lower()
+        assert "collocation" in said and "control-variate ladder" in said
+        assert "one uncertain parameter" in said
+    assert np.isfinite(ds.error.values).all() and ds.attrs["failures"] == 0
+    for method in ("ME-OPA uniform", "ME-OPA adaptive", "MC", "QMC (Sobol)"):
+        for law in ("mean", "saltation", "true system"):
+            idx = np.flatnonzero((ds.method.values == method) & (ds.law.values == law))
+            assert np.all(np.diff(ds["size"].values[idx]) > 0)
+            assert np.all(np.diff(ds.rhs_evaluations.values[idx]) > 0), (method, law)
+    one = np.flatnonzero(ds.method.values == "OPA (one element), N")
+    assert np.all(np.diff(ds.node_rhs_evaluations.values[one][:3]) > 0)  # N = 0, 1, 2
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    i = int(np.flatnonzero((ds.method.values == "ME-OPA uniform")
+                           & (ds.law.values == "saltation") & (ds["size"].values == 2))[0])
+    boxes = simulate_opa(cfg.system.replace(impact_law="saltation"), elements=2, times=times,
+                         options=cfg.options)
+    assert boxes.attrs["elements"] == 4  # K = 2 per parameter: 2^2 boxes
+    assert ds.rhs_evaluations.values[i] == boxes.attrs["rhs_evaluations"]
+    assert ds.node_rhs_evaluations.values[i] == (boxes.attrs["rhs_evaluations"]
+                                                 * boxes.attrs["nodes"])
+
+
+def test_two_parameters_box_errors_fall_with_k(study_two):
+    """The uniform boxes' errors fall from K = 1 to K = 2 against the study's reference,
+    and so do those computed here against an independent plain simulate_mc (2^14 Sobol
+    samples, another seed); both references give the rows' errors within their
+    difference."""
+    cfg, ds, _ = study_two
+    times = time_grid(cfg.oscillator.omega, cfg.periods, cfg.per_period)
+    alone = simulate_mc(cfg.system.replace(order=0), samples=2**14, sampler="sobol",
+                        seed=7, times=times, options=cfg.options, progress=False)
+    for law in ("mean", "saltation"):
+        idx = np.flatnonzero((ds.method.values == "ME-OPA uniform") & (ds.law.values == law))
+        assert list(ds["size"].values[idx]) == [1, 2]
+        assert ds.error.values[idx[1]] < 0.7 * ds.error.values[idx[0]], law
+        mine = []
+        for k in (1, 2):
+            run = simulate_opa(cfg.system.replace(impact_law=law), elements=k, times=times,
+                               options=cfg.options)
+            mine.append(float(np.sqrt(np.mean((run.x_mean.values - alone.x_mean.values)
+                                              ** 2))))
+        assert mine[1] < 0.7 * mine[0], law
+        np.testing.assert_allclose(ds.error.values[idx], mine, atol=2e-5)
+
+
+def test_two_parameters_refusals_and_the_boxes_left_out():
+    """The System's checks refuse sigma or laws of the wrong count; a K whose K^d boxes
+    pass MAX_BOXES (4096) is left out and said, without running anything."""
+    with pytest.raises(ValueError, match=r"sigma must give one value, or one per uncertain "
+                                         r"parameter \(2\), got 3"):
+        ConvergenceConfig(uncertain="mu,c", sigma=(0.1, 0.2, 0.3))
+    with pytest.raises(ValueError, match=r"distribution must give one value"):
+        ConvergenceConfig(uncertain="mu,c", sigma=(0.01, 0.005),
+                          distribution="semicircle,uniform,uniform")
+    with pytest.raises(ValueError, match=r"sigma must be > 0"):
+        ConvergenceConfig(uncertain="mu,c", sigma=(0.01, 0.0))
+    cfg = ConvergenceConfig(uncertain="mu,c", sigma=(0.016, 0.005), uniform=(1, 64, 65))
+    assert uniform_counts(cfg) == [1, 64]
+    assert any("K = 65 skipped: K^2 boxes is more than 4096" in line
+               for line in skipped_parts(cfg))
+    assert skipped_parts(ConvergenceConfig()) == []  # one parameter: the whole study

@@ -440,6 +440,29 @@ def test_converge_uncertain_c(tmp_path):
     assert np.isfinite(rows.error).all()
 
 
+def test_converge_two_uncertain_parameters(tmp_path, capsys):
+    """``converge --uncertain mu,c --sigma 0.016,0.005 --distribution semicircle,uniform``
+    at tiny sizes: boxes and ladders, the parts of one parameter said to be left out, the
+    report and figure written; a --sigma of the wrong count exits 2 naming --sigma."""
+    out = tmp_path / "two"
+    run(["converge", "--uncertain", "mu,c", "--sigma", "0.016,0.005", "--distribution",
+         "semicircle,uniform", "--periods", 2, "--order", 1, "--budgets", 4, "--uniform",
+         "1,2", "--reference", 1024, "--outdir", out])
+    printed = capsys.readouterr()
+    assert "collocation (multi-element and one element) skipped" in printed.err
+    assert "Control-variate ladder skipped" in printed.out
+    ds = load(out / "convergence.nc")
+    assert ds.attrs["uncertain"] == "mu,c" and list(ds.attrs["sigma"]) == [0.016, 0.005]
+    assert set(ds.method.values) >= {"ME-OPA uniform", "ME-OPA adaptive", "QMC (Sobol)"}
+    assert not any("collocation" in m for m in ds.method.values)
+    assert (out / "convergence.png").exists() and (out / "convergence.md").exists()
+    assert main(["converge", "--uncertain", "mu,c", "--sigma", "0.1,0.2,0.3", "--outdir",
+                 str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "--sigma must give one value, or one per uncertain parameter (2), got 3" in err
+    assert "Traceback" not in err
+
+
 def test_simulate_opa_elements_say_what_cannot_be_trusted(tmp_path, capsys):
     """Issue 24: ``simulate opa --sigma 0.05 --elements 16 --distribution beta:2,3`` (100
     periods) printed E[x] = -0.633 without a word where the true ensemble gives -0.846.
@@ -506,6 +529,37 @@ def test_stochastic_diagram_through_the_deterministic_doubling(tmp_path, capsys)
     assert not (tmp_path / "s.nc.parts").exists()  # kept only until the final write
     assert main(["stochastic", "--preset", "3.1", "--sweep", "c=0.04", "--keep-parts"]) == 2
     assert "--keep-parts has no effect without --out" in capsys.readouterr().err
+
+
+def test_stochastic_diagram_of_two_uncertain_parameters(tmp_path, capsys):
+    """``opa-mc stochastic --uncertain mu,a --sigma 0.03,0.002 --distribution
+    semicircle,uniform``: no boundaries (said in one line), the probabilities sampled with
+    their standard errors from the scramblings (tests/opa/dynamics/test_stochastic.py
+    checks them against the one-parameter boundaries); the refusals name the flag."""
+    out, fig = tmp_path / "two.nc", tmp_path / "two.png"
+    flags = ["stochastic", "--preset", "3.1", "--F0", "0", "--uncertain", "mu,a", "--sigma",
+             "0.03,0.002", "--distribution", "semicircle,uniform"]
+    run([*flags, "--sweep", "c=0.0396996668,0.05", "--samples", "64", "--extra-states", "0",
+         "--out", out, "--plot", fig])
+    text = capsys.readouterr().out
+    assert "mu = 0.8 + 0.03 xi_1, a = 1 + 0.002 xi_2, 64 samples each (scrambled Sobol'" in text
+    assert "boundaries not located: continuation in xi is one-dimensional by nature" in text
+    assert "c = 0.05: 2/2 1.000 ± 0.000 (sampled)" in text
+    ds = load(out)
+    assert ds.attrs["uncertain"] == "mu,a" and list(ds.attrs["sigma"]) == [0.03, 0.002]
+    assert ds.mc_xi.dims == ("sample", "parameter") and "boundary_xi" not in ds
+    assert fig.stat().st_size > 10_000 and not (tmp_path / "two.nc.parts").exists()
+    for extra, flag in ((["--emr"], "--emr: the EMR's sweep takes one uncertain parameter"),
+                        (["--samples", "100"], "--samples must be a multiple of 8"),
+                        (["--sigma", "0.03,0.002,0.1"], "--sigma must give one value"),
+                        (["--uncertain", "mu,f"], "--uncertain: each uncertain parameter")):
+        argv = [*flags, "--sweep", "c=0.05", *extra]
+        if extra[0] in ("--sigma", "--uncertain"):  # replaces the flag given above
+            i = argv.index(extra[0])
+            argv[i:i + 2] = []
+        assert main(argv) == 2, extra
+        err = capsys.readouterr().err
+        assert flag in err and "Traceback" not in err, err
 
 
 class _Started(Exception):
