@@ -21,6 +21,8 @@ _HOMES = {
     "plot_frontier": "compare._mapfigures",
     # Sobol indices of the true systems, certified (opa-mc sobol)
     "certify_sobol": "compare._certify_sobol",
+    # the trust line of several uncertain parameters (opa-mc validate --uncertain mu,c)
+    "trust_line": "compare._trustline", "trust_scaled": "compare._trustline:scaled",
     # the paper's figures: matplotlib only when they are asked for
     "reproduce": "compare._figures", "FIGURES": "compare._figures",
 }
@@ -54,6 +56,8 @@ __all__ = [
     "wall_text",
     "write_convergence_report",
     "reproduce",
+    "trust_line",
+    "trust_scaled",
     "ValidateConfig",
     "boundary_table",
     "compare_runs",

@@ -11,7 +11,10 @@ import numpy as np
 
 from opa import IMPULSE_FIELDS, MAX_GRID, PARAMETER_NAMES, UNCERTAIN_PARAMETERS
 from opa.cli._args import parse_sweep, positive_int, whole_number
-from opa.cli._flags import _elements_arg, _impulse_flags, _model_flags, _solver_flags
+from opa.cli._flags import (
+    CliError, _elements_arg, _impulse_flags, _model_flags, _solver_flags, uncertain_names,
+)
+from opa.cli._trustline import cmd_trust_line, relative_sizes
 
 
 
@@ -92,8 +95,13 @@ def register_validate(sub) -> None:
                         "0.05; preset 3.3: up to 0.2)")
     g.add_argument("--orders", type=_order_list, default=None, metavar="A:B",
                    help="OPA orders, 'A:B' inclusive or a comma list (default 0:8)")
-    g.add_argument("--uncertain", choices=("mu", "a", "c"), default=None,
-                   help="the uncertain parameter (default mu)")
+    g.add_argument("--uncertain", type=uncertain_names, default=None, metavar="P[,P...]",
+                   help="the uncertain parameter (default mu); several (mu,c) run the trust "
+                        "line instead: the verdicts along one scale s of --relative, "
+                        "--sigmas being the grid of s (docs/several.md)")
+    g.add_argument("--relative", type=relative_sizes, default=None, metavar="R1,R2,...",
+                   help="several uncertain parameters: each one's spread relative to its "
+                        "nominal value at scale 1 (sigma_j = s x R_j x |p_bar_j|)")
     g.add_argument("--distribution", default=None, metavar="LAW",
                    help="law of xi: semicircle (the paper's), uniform, beta:A,B or "
                         "normal-trunc:K, all on [-1, 1]; the Monte Carlo ensembles sample it "
@@ -166,6 +174,11 @@ def _check_outdir(path: str) -> None:
 
 
 def cmd_validate(args) -> int:
+    if isinstance(args.uncertain, tuple):  # several uncertain parameters: the trust line
+        return cmd_trust_line(args)
+    if args.relative is not None:
+        raise CliError("--relative applies with several uncertain parameters (--uncertain "
+                       "mu,c); with one, --sigmas are the intensities themselves")
     from compare import load_config
 
     model = {name: getattr(args, name) for name in PARAMETER_NAMES

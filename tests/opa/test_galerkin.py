@@ -24,17 +24,17 @@ def gauss_rule(law: str, q: int):
     return x, w / w.sum()
 
 
-def reference(laws, q=14):
+def reference(laws, q=14, scales=SCALES):
     """E[x], Var[x] and the first-order and total Sobol indices of x over the output
     times, from scipy runs at the q x q tensor rule (mu = 0.3 + 0.06 xi_1,
-    c = 0.5 + 0.2 xi_2)."""
+    c = 0.5 + 0.2 xi_2, or the given ``scales``)."""
     (x1, w1), (x2, w2) = gauss_rule(laws[0], q), gauss_rule(laws[1], q)
     omega = FREE["omega"]
     t_out = np.arange(PERIODS * PER_PERIOD + 1) * (2 * np.pi / omega) / PER_PERIOD
     paths = np.empty((q, q, len(t_out)))
     for i, a in enumerate(x1):
         for j, b in enumerate(x2):
-            mu, c = FREE["mu"] + SCALES[0] * a, FREE["c"] + SCALES[1] * b
+            mu, c = FREE["mu"] + scales[0] * a, FREE["c"] + scales[1] * b
 
             def rhs(t, y, mu=mu, c=c):
                 return [y[1], mu * (1 - y[1] ** 2) * y[1] - FREE["a"] * y[0] - c * y[0] ** 3

@@ -1,0 +1,47 @@
+"""``opa-mc validate --uncertain mu,c --relative R1,R2`` (``opa/cli/_trustline.py``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from opa.cli._main import main
+
+FREE = ["--mu", "0.3", "--a", "1.0", "--c", "0.5", "--f", "0.4", "--omega", "1.3",
+        "--delta", "50.0", "--F0", "0.0", "--x0", "0.5", "--v0", "0.0"]
+
+
+def test_the_trust_line_writes_its_dataset_and_table(tmp_path, capsys):
+    out = tmp_path / "line"
+    assert main(["validate", "--uncertain", "mu,c", "--relative", "0.2,0.4", "--sigmas",
+                 "0.25,1", "--orders", "1", "--horizons", "3", "--samples", "64",
+                 "--max-samples", "128", *FREE, "--outdir", str(out)]) == 0
+    with xr.open_dataset(out / "validate.nc") as ds:
+        assert ds.verdict.dims == ("variant", "scale")
+        np.testing.assert_array_equal(ds.scale.values, [0.25, 1.0])
+        np.testing.assert_allclose(ds.attrs["sigma"], [0.2 * 0.3, 0.4 * 0.5])
+        stars = ds.scale_star.values
+    printed = capsys.readouterr().out
+    summary = (out / "summary.md").read_text()
+    assert "| adaptive boxes |" in printed and "| adaptive boxes |" in summary
+    assert f"| {stars[2]:g} |" in summary.splitlines()[-1]
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--uncertain", "mu,c"], "--relative R1,R2,... is needed"),
+    (["--uncertain", "mu,c", "--relative", "0.02"], "--relative must give one positive size"),
+    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--values", "3.9,4"],
+     "--values does not apply with several uncertain parameters"),
+    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--elements", "4"],
+     "--elements does not apply"),
+    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--sigmas", "-1"],
+     "--sigmas must be a positive number"),
+    (["--relative", "0.02"], "--relative applies with several uncertain parameters"),
+    (["--uncertain", "mu,c", "--relative", "0.02,20"], "negative for some samples"),
+])
+def test_refusals_name_the_flag_before_any_work(argv, words, capsys, tmp_path):
+    assert main(["validate", *argv, "--outdir", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err
+    assert words in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x").exists()
