@@ -33,7 +33,7 @@ from opa.engine import SolverOptions, System, provenance_attrs
 LINE_VARIANTS = (("OPA mean", "mean", None), ("OPA saltation", "saltation", None),
             ("adaptive boxes", "saltation", "adaptive"))
 #: the verdicts' codes in the dataset
-CODES = {"agrees": 0, "disagrees": 1, "undecided": 2}
+CODES = {"agrees": 0, "disagrees": 1, "undecided": 2, "failed": 3}
 
 
 def scaled(system: System, relative, scale: float) -> System:
@@ -86,8 +86,12 @@ def trust_line(system: System, relative, scales, *, periods: float = 10,
         for i, (name, law, elements) in enumerate(LINE_VARIANTS):
             run = _run(at.replace(impact_law=law), elements, periods, per_period, options,
                        max_elements)
-            if run is None:  # the OPA system could not be completed: it does not agree
-                data["verdict"][i, j] = data["verdict_mean"][i, j] = CODES["disagrees"]
+            if run is None:  # the OPA system could not be completed: nothing to certify
+                for field in ("verdict", "verdict_mean", "verdict_var"):
+                    data[field][i, j] = CODES["failed"]
+                if log is not None:
+                    log(f"trust line: scale {scale:g}, {name}: the OPA system could not be "
+                        f"completed")
                 continue
             v = verify(run, samples=samples, max_samples=max_samples, seed=seed,
                        options=options)
@@ -149,7 +153,7 @@ def _dataset(system, relative, scales, data, options, started) -> xr.Dataset:
     ds = xr.Dataset(
         {name: (("variant", "scale"), values, {
             "long_name": _LONG_NAMES[name], "units": "1",
-            **({"flag_values": np.arange(3, dtype=np.int8), "flag_meanings": codes}
+            **({"flag_values": np.arange(len(CODES), dtype=np.int8), "flag_meanings": codes}
                if name.startswith("verdict") else {})})
          for name, values in data.items()},
         coords={"variant": ("variant", names), "scale": ("scale", np.asarray(scales))},
@@ -165,7 +169,8 @@ def _dataset(system, relative, scales, data, options, started) -> xr.Dataset:
 
 
 _LONG_NAMES = {
-    "verdict": "the certificate's verdict on the run (agrees, disagrees, undecided)",
+    "verdict": "the certificate's verdict on the run (agrees, disagrees, undecided; failed: "
+               "the OPA system could not be completed)",
     "verdict_mean": "the certificate's verdict on E[x]",
     "verdict_var": "the certificate's verdict on Var[x]",
     "err_mean_rms": "RMS over the outputs of the paired estimate of the error of E[x]",

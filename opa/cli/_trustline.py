@@ -98,7 +98,7 @@ def _options(args) -> SolverOptions:
 def table(ds) -> list[str]:
     """The trust line as a markdown table: a row per variant, a column per scale, and
     s*."""
-    names = {0: "agrees", 1: "disagrees", 2: "undecided"}
+    names = {0: "agrees", 1: "disagrees", 2: "undecided", 3: "failed"}
     scales_ = [f"{s:g}" for s in ds.scale.values]
     head = ["variant", *(f"s = {s}" for s in scales_), "s*"]
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]

@@ -95,3 +95,14 @@ def test_on_the_impact_system_the_line_tells_the_boxes_from_the_single_element()
         want = CODES["disagrees"] if broken else CODES["agrees"]
         assert int(line.verdict.values[i, 0]) == want, (i, broken)
     np.testing.assert_array_equal(line.scale_star.values, [0.0, 0.0, 1.0])
+
+
+def test_a_variant_that_cannot_be_completed_is_failed_not_disagreeing():
+    """At twice the issue's scales a box near grazing escapes (tests/opa/test_boxes.py):
+    the boxes' cell reads failed (code 3), and s* stops before it."""
+    system = opa.System(opa.preset("3.2", omega=3.98), uncertain="mu,c", order=3)
+    line = compare.trust_line(system, (0.02, 0.1), [1.0, 2.0], max_samples=256)
+    boxes = [name for name, _, _ in LINE_VARIANTS].index("adaptive boxes")
+    assert line.verdict.values[boxes].tolist() == [CODES["agrees"], CODES["failed"]]
+    assert line.scale_star.values[boxes] == 1.0
+    assert line.verdict.attrs["flag_meanings"] == "agrees disagrees undecided failed"
