@@ -19,7 +19,7 @@ import numpy as np
 
 from opa import PARAMETER_NAMES
 from opa.cli._args import parse_sweep, positive_int, whole_number
-from opa.cli._flags import _model_flags, _output_flags, _solver_flags
+from opa.cli._flags import _model_flags, _output_flags, _solver_flags, scales, uncertain_names
 
 
 def register_stochastic(sub) -> None:
@@ -34,12 +34,17 @@ def register_stochastic(sub) -> None:
     g = p.add_argument_group("diagram")
     g.add_argument("--sweep", required=True, metavar="NAME=START:STOP:COUNT",
                    help="the control parameter and its values (not the uncertain one)")
-    g.add_argument("--sigma", type=float, default=0.03, metavar="S",
-                   help="intensity of the uncertain parameter (default 0.03)")
-    g.add_argument("--uncertain", choices=("mu", "a", "c"), default="mu",
-                   help="the uncertain parameter (default mu)")
-    g.add_argument("--distribution", default=None, metavar="LAW",
-                   help="law of xi: semicircle (default), uniform, beta:A,B, normal-trunc:K")
+    g.add_argument("--sigma", type=scales, default=0.03, metavar="S[,S...]",
+                   help="intensity of the uncertain parameter, or one per --uncertain name "
+                        "(default 0.03)")
+    g.add_argument("--uncertain", type=uncertain_names, default="mu", metavar="P[,P...]",
+                   help="the uncertain parameter among mu, a, c (default mu), or several "
+                        "such as mu,c: then no boundaries are located (continuation in xi "
+                        "is one-dimensional) and the probabilities are sampled, scrambled "
+                        "Sobol' points with standard errors from 8 scramblings")
+    g.add_argument("--distribution", default=None, metavar="LAW[,LAW...]",
+                   help="law of xi: semicircle (default), uniform, beta:A,B, normal-trunc:K; "
+                        "one per --uncertain name, or one for all")
     g.add_argument("--samples", type=whole_number, default=1024, metavar="M",
                    help="Monte Carlo samples classified at each value (0: none; default 1024)")
     g.add_argument("--seed", type=whole_number, default=0, metavar="K",
@@ -93,13 +98,15 @@ def cmd_stochastic(args) -> int:
 
     check_outputs(args)  # refuses --keep-parts without --out too; --workers bound
     swept = args.sweep.partition("=")[0].strip().lstrip("-")
-    if swept == args.uncertain:
-        raise ValueError(f"--sweep {args.sweep!r}: {swept} is the uncertain parameter "
-                         f"(--uncertain {args.uncertain}); sweep another parameter, or "
+    uncertain = (args.uncertain,) if isinstance(args.uncertain, str) else args.uncertain
+    if swept in uncertain:
+        which = "the uncertain parameter" if len(uncertain) == 1 else "an uncertain parameter"
+        raise ValueError(f"--sweep {args.sweep!r}: {swept} is {which} "
+                         f"(--uncertain {','.join(uncertain)}); sweep another parameter, or "
                          f"make another one uncertain")
     name, values, _ = parse_sweep(
         args.sweep, names=tuple(n for n in PARAMETER_NAMES
-                                if n not in (args.uncertain, "x0", "v0")))
+                                if n not in (*uncertain, "x0", "v0")))
     refuse_given(args, [name], f"has no effect: --sweep sets {name}")
     if args.samples == 0:
         refuse_given(args, ["seed"], "has no effect with --samples 0 (no Monte Carlo samples "
@@ -157,9 +164,17 @@ def _run(args, osc, name, values, keywords) -> int:
 
         plot_stochastic(ds, args.plot)
     if not args.quiet:
-        print(f"opa-mc stochastic: {len(values)} values of {name}, {args.uncertain} = "
-              f"{getattr(osc, args.uncertain):g} + {args.sigma:g} xi, {args.samples} "
-              f"samples each, in {elapsed:.1f} s")
+        uncertain = (args.uncertain,) if isinstance(args.uncertain, str) else args.uncertain
+        sigma = np.broadcast_to(args.sigma, len(uncertain))
+        drawn = ("" if len(uncertain) == 1 else
+                 f" (scrambled Sobol', SE from {ds.attrs['scramblings']} scramblings)")
+        print(f"opa-mc stochastic: {len(values)} values of {name}, " + ", ".join(
+            f"{p} = {getattr(osc, p):g} + {s:g} xi_{j + 1}" if len(uncertain) > 1 else
+            f"{p} = {getattr(osc, p):g} + {s:g} xi" for j, (p, s) in
+            enumerate(zip(uncertain, sigma))) + f", {args.samples} samples each{drawn}, "
+            f"in {elapsed:.1f} s")
+        if "boundaries" in ds.attrs:
+            print(f"  {ds.attrs['boundaries']}")
         for line in summary(ds):
             print(f"  {line}")
         for path in (args.out, args.plot):
@@ -174,12 +189,14 @@ def summary(ds) -> list[str]:
     param = ds.attrs["sweep_parameter"]
     lines = []
     for i, value in enumerate(ds[param].values):
-        shares = [f"{k} {float(p):.3f}" for k, p in zip(ds.type.values, ds.probability[i].values)
-                  if p > 0]
+        sampled = "boundaries" in ds.attrs  # several uncertain parameters: with the SE
+        shares = [f"{k} {float(p):.3f}" + (f" ± {float(e):.3f}" if sampled else "")
+                  for k, p, e in zip(ds.type.values, ds.probability[i].values,
+                                     ds.mc_sem[i].values) if p > 0]
         how = ("continuation" if not int(ds.method[i]) else "sampled"
                if ds.attrs["samples"] else "interval middles, no samples")
         agree = {1: "", 0: "; MC DISAGREES", -1: ""}[int(ds.agree[i])]
-        both = float(ds.coexist_probability[i])
+        both = float(ds.coexist_probability[i]) if "coexist_probability" in ds else 0.0
         shown = float(ds.mc_coexist[i])
         if both > 0 or shown > 0:
             agree += (f"; type depends on the initial state: {both:.3f} of the law, "

@@ -31,6 +31,19 @@ At one control value:
 Where continuation cannot follow (a type that is not periodic, more than one sample of a
 type no interval has, or no periodic attractor to continue) the control value's
 probabilities are the Monte Carlo ones, and ``method`` says so (``note`` says why).
+
+**Several uncertain parameters** (an :class:`opa.System` of d >= 2, or ``uncertain="mu,c"``
+with one sigma each): the boundaries are not located (continuation in xi follows one
+parameter: it is one-dimensional by nature; the log says so in one line and the
+dataset's attribute ``boundaries`` says why); the probabilities are the shares of
+``samples`` systems at points of the problem's law, the same points at every control
+value (:meth:`opa.Problem.sample`: scrambled Sobol' in ``SCRAMBLINGS`` independent
+scramblings of ``samples / SCRAMBLINGS`` points each). A share's standard error is the
+spread of the scramblings' shares, ``sd / sqrt(SCRAMBLINGS)``: the binomial
+``sqrt(p (1 - p) / M)`` assumes M independent points, which scrambled Sobol' points are
+not (their error is usually smaller). The other initial states classify the first
+``coexist`` samples again, as in one dimension; the EMR's sweep (one uncertain
+parameter) is refused.
 """
 
 from __future__ import annotations
@@ -49,6 +62,7 @@ import numpy as np
 from opa._execution import Execution
 from opa._model import UNCERTAIN_PARAMETERS as UNCERTAIN
 from opa._model import Oscillator, SolverOptions
+from opa._problem import Problem
 from opa._system import System
 from opa.dynamics._attractor import (
     NON_PERIODIC,
@@ -97,6 +111,9 @@ XTOL_RANGE = (1e-15, 1e-2)
 #: TINY (the boundaries are root-found to xtol * sigma in the uncertain parameter)
 RESOLUTION = 1e-12
 TINY = 1e-300
+#: several uncertain parameters: the samples are this many independent scramblings of
+#: Sobol' points, whose shares' spread gives the standard errors
+SCRAMBLINGS = 8
 
 
 @dataclass(frozen=True)
@@ -115,6 +132,27 @@ class SliceTask:
     xtol: float
     extra_states: int
     coexist: int
+
+
+@dataclass(frozen=True)
+class SampledTask:
+    """One control value of a diagram of several uncertain parameters (picklable; its
+    ``repr``, the problem included, keys the value's part)."""
+
+    value: float
+    oscillator: Oscillator  # with the control parameter at ``value``
+    problem: Problem
+    samples: int
+    seed: int
+    options: SolverOptions
+    settings: Settings
+    extra_states: int
+    coexist: int
+
+    def points(self) -> np.ndarray:
+        """The sample points xi (samples, d): the same for every control value."""
+        return self.problem.sample(self.samples, "sobol", seed=self.seed,
+                                   replicates=SCRAMBLINGS)
 
 
 def classify(oscillator: Oscillator, uncertain: str, values, *, options: SolverOptions,
@@ -140,11 +178,13 @@ def attractors(oscillator: Oscillator, uncertain: str, values, *, options: Solve
     return settle_batch(system, inputs, states, options=options, settings=settings)
 
 
-def compute_slice(task: SliceTask) -> dict:
+def compute_slice(task: SliceTask | SampledTask) -> dict:
     """The diagram at one control value (module docstring), as arrays (a store part)."""
     import time
 
     clock = time.process_time()
+    if isinstance(task, SampledTask):
+        return _sampled_slice(task, clock)
     at = _Slice(task)
     grid, grid_found = at.grid()
     seeds = at.seeds_of(grid, grid_found)
@@ -192,6 +232,46 @@ def compute_slice(task: SliceTask) -> dict:
         "mc_mismatch": _mismatch(xi, mc_types, intervals),
         "cpu_seconds": time.process_time() - clock,
     }
+
+
+def _sampled_slice(task: SampledTask, clock: float) -> dict:
+    """One control value of several uncertain parameters: its samples classified from
+    (x0, v0), the first ``coexist`` from the other initial states too."""
+    import time
+
+    xi = task.points()
+    system = System(task.oscillator, uncertain=task.problem, order=0)
+    inputs = system.sampled_inputs(task.options, xi=xi)
+
+    def settled(rows, state):
+        sub = type(inputs)(*(np.asarray(a)[rows] for a in (
+            inputs.p, inputs.cfg, inputs.table, inputs.weights, inputs.basis)))
+        states = np.repeat(np.asarray(state, dtype=float)[None], len(rows), axis=0)
+        return settle_batch(system, sub, states, options=task.options,
+                            settings=task.settings)
+
+    osc = task.oscillator
+    mc = settled(np.arange(len(xi)), (osc.x0, osc.v0))
+    checked = np.arange(min(task.coexist, len(xi)))
+    others = [settled(checked, st) for st in initial_states(osc, task.extra_states)[1:]]
+    mc_coexist = np.array([any(not same_attractor(r[j], mc[j]) for r in others)
+                           for j in checked], dtype=np.int8)
+    return {
+        "value": float(task.value), "method": 1, "note": SEVERAL_NOTE,
+        "samples": int(task.samples), "mc_xi": xi,
+        "mc_type": np.array([a.type for a in mc], dtype=str),
+        "mc_lyapunov": np.array([a.lyapunov for a in mc], dtype=float),
+        "mc_periods": np.array([a.periods for a in mc], dtype=np.int64),
+        "mc_settled": np.array([a.settled for a in mc], dtype=np.int8),
+        "mc_points": _last_points(mc), "mc_coexist": mc_coexist,
+        "prob_type": np.zeros(0, dtype=str), "prob_value": np.zeros(0),
+        "cpu_seconds": time.process_time() - clock,
+    }
+
+
+#: why a diagram of several uncertain parameters has no boundaries (its ``method_note``)
+SEVERAL_NOTE = ("no boundaries: continuation in xi is one-dimensional by nature; the "
+                "probabilities are the shares of sampled systems")
 
 
 class _Slice:
@@ -527,6 +607,8 @@ def _check_inputs(oscillator, parameter, values, *, sigma, uncertain, distributi
         oscillator, parameter, values, sigma, uncertain, distribution, xtol)
     samples, seed, settings, extra_states, coexist = _check_sampling(
         samples, seed, transient, record, extra_states, coexist)
+    if system.dimension > 1:
+        _check_several_sampling(samples, emr, system)
     emr, emr_order = _check_emr(emr, emr_order, measure, values, system)
     execution = _check_execution(workers, scheduler, parts, log, values)
     if options is None:
@@ -535,7 +617,7 @@ def _check_inputs(oscillator, parameter, values, *, sigma, uncertain, distributi
         raise DiagramInputError("{options} must be an opa.SolverOptions or None, got {0!r}",
                                 options)
     _check_work(len(values), samples, extra_states, coexist, settings.transient,
-                settings.record)
+                settings.record, continued=system.dimension == 1)
     _check_memory(len(values), samples, settings.transient, settings.record, settings.check,
                   min(execution.workers, len(values)))
     oscillators = _check_spans(oscillator, parameter, values, settings, emr)
@@ -558,6 +640,10 @@ def _check_model(oscillator, parameter, values, sigma, uncertain, distribution, 
     if not isinstance(oscillator, Oscillator):
         raise DiagramInputError("{oscillator} must be an opa.Oscillator or System, got {0}",
                                 type(oscillator).__name__)
+    names = _several(uncertain)
+    if names:
+        return _check_several(given, oscillator, parameter, values, sigma, names,
+                              distribution, xtol)
     if not (isinstance(uncertain, str) and uncertain in UNCERTAIN):
         raise DiagramInputError("{uncertain} must be mu, a or c, got {0!r}", uncertain)
     if isinstance(given, System) and (given.uncertain != uncertain or given.sigma != sigma):
@@ -587,6 +673,74 @@ def _check_model(oscillator, parameter, values, sigma, uncertain, distribution, 
     _check_spread(oscillator, uncertain, sigma, measure, xtol)
     system = System(oscillator, sigma=sigma, uncertain=uncertain, distribution=distribution)
     return oscillator, system, values, measure, sigma, xtol
+
+
+def _several(uncertain) -> tuple | None:
+    """The names of several uncertain parameters (``"mu,c"`` or a sequence of two or
+    more), else None (one parameter, or something the one-parameter checks refuse)."""
+    if isinstance(uncertain, str):
+        names = tuple(n.strip() for n in uncertain.split(","))
+    elif isinstance(uncertain, (tuple, list)):
+        names = tuple(uncertain)
+    else:
+        return None
+    return names if len(names) > 1 else None
+
+
+def _check_several(given, oscillator, parameter, values, sigma, names, distribution, xtol):
+    """:func:`_check_model` of several uncertain parameters: the problem (its refusals
+    name ``sigma``, ``uncertain`` or ``distribution``), the control parameter and values;
+    ``xtol`` has no effect (no boundaries are located). The measure is None."""
+    from opa._model import PARAMETER_NAMES
+
+    if isinstance(given, System) and (tuple(given.uncertain), given.sigma) != (names, sigma):
+        raise DiagramInputError(
+            "{oscillator}: the System's uncertainty ({0}) is not the diagram's ({uncertain} "
+            "{1}): pass its .oscillator, or the same", _quoted(",".join(given.uncertain)),
+            _quoted(",".join(map(str, names))))
+    try:
+        system = (given.replace(order=0) if isinstance(given, System) else
+                  System(oscillator, sigma=sigma, uncertain=names, distribution=distribution,
+                         order=0))
+    except ValueError as err:
+        text = " ".join(str(err).split())
+        raise _named(next((k for k in ("uncertain", "distribution") if text.startswith(k)),
+                          "sigma"), err) from None
+    if any(s <= 0 for s in system.problem.scales):
+        raise DiagramInputError("{sigma} must be positive for each uncertain parameter, got "
+                                "{0}", _quoted(",".join(f"{s:g}" for s in system.sigma)))
+    for name, scale, (lo, _) in zip(names, system.sigma, system.problem.support):
+        mean = float(getattr(oscillator, name))
+        if mean + scale * lo < 0.0 <= mean and not system.allow_negative:
+            raise DiagramInputError(
+                "{sigma} {0:g} makes {1} = {2:g} + sigma xi negative for xi below {3:.3g} "
+                "(the law of xi reaches {4:g}); at most {5:.6g} keeps it >= 0", scale, name,
+                mean, -mean / scale, lo, mean / -lo if lo < 0 else math.inf)
+    if not (isinstance(parameter, str) and parameter in PARAMETER_NAMES) \
+            or parameter in (*names, "x0", "v0"):
+        raise DiagramInputError("{parameter} must be a model parameter other than the "
+                                "uncertain ones ({0}) and x0, v0, got {1!r}",
+                                _quoted(",".join(names)), parameter)
+    if xtol != 1e-10:  # not the default: stochastic_diagram's
+        raise DiagramInputError("{xtol} {0!r} has no effect with {1} uncertain parameters: "
+                                "no boundaries are located (continuation in xi is "
+                                "one-dimensional by nature)", xtol, len(names))
+    return oscillator, system, _values(values), None, tuple(system.sigma), float(xtol)
+
+
+def _check_several_sampling(samples, emr, system) -> None:
+    """Several uncertain parameters: the samples are whole scramblings, and the EMR (a
+    sweep of one uncertain parameter) is refused."""
+    d, names = system.dimension, ",".join(system.uncertain)
+    if emr:
+        raise DiagramInputError("{emr}: the EMR's sweep takes one uncertain parameter; "
+                                "this diagram has {0} ({1})", d, names)
+    if samples < 2 * SCRAMBLINGS or samples % SCRAMBLINGS:
+        raise DiagramInputError(
+            "{samples} must be a multiple of {0} and at least {1} with {2} uncertain "
+            "parameters ({3} independent scramblings of Sobol' points give the standard "
+            "errors; no boundaries are located, so the samples are the probabilities), "
+            "got {4!r}", SCRAMBLINGS, 2 * SCRAMBLINGS, d, SCRAMBLINGS, samples)
 
 
 def _check_sampling(samples, seed, transient, record, extra_states, coexist):
@@ -788,7 +942,8 @@ def _check_spread(oscillator, uncertain: str, sigma: float, measure, xtol: float
             "not differ", sigma, uncertain, mean, xtol)
 
 
-def _check_work(count, samples, extra_states, coexist, transient, record) -> None:
+def _check_work(count, samples, extra_states, coexist, transient, record, *,
+                continued=True) -> None:
     """Refuse (``opa._work.WorkBudgetError``) a diagram beyond the work budget: at each
     value the grid, at least one interval's middle and the samples run from (x0, v0),
     the middle and the checked samples from each other state, each at most transient +
@@ -797,7 +952,8 @@ def _check_work(count, samples, extra_states, coexist, transient, record) -> Non
 
     others = extra_states * (1 + coexist)
     periods = count * ((GRID + 3 + samples + others) * (transient + record)
-                       + CONTINUATION_PERIODS)
+                       + CONTINUATION_PERIODS) if continued else \
+        count * (samples + extra_states * coexist) * (transient + record)
     drivers = [("values", count)]
     if samples and samples >= others:
         drivers.append(("samples", samples))
@@ -926,6 +1082,11 @@ def stochastic_diagram(oscillator: Oscillator | System, parameter: str, values, 
         store = _parts_store(run)
         if store is not None:
             held.callback(store.close)
+        if checked.system.dimension > 1:
+            run.say(f"{_skipped(checked.system)}: the probabilities are the shares of "
+                    f"{checked.samples} sampled systems at each value")
+            ds = _dataset_several(_slices(checked, store, client), checked)
+            return ds
         slices = _slices(checked, store, client)
         ds = _dataset(slices, checked.parameter, checked.values, checked.system,
                       checked.options, checked.measure, checked.settings, checked.seed,
@@ -954,13 +1115,7 @@ def _slices(checked: DiagramInputs, store, client) -> list[dict]:
     from opa._dataset import package_version
 
     run, parameter = checked.execution, checked.parameter
-    tasks = [SliceTask(value=float(v), oscillator=osc, uncertain=checked.uncertain,
-                       sigma=checked.sigma, distribution=checked.measure.name,
-                       samples=checked.samples, seed=checked.seed + i,
-                       options=checked.options, settings=checked.settings,
-                       xtol=checked.xtol, extra_states=checked.extra_states,
-                       coexist=checked.coexist)
-             for i, (v, osc) in enumerate(zip(checked.values, checked.oscillators))]
+    tasks = _tasks(checked)
 
     def inputs(task):
         return {"task": repr(task), "version": package_version()}
@@ -996,6 +1151,24 @@ def _slices(checked: DiagramInputs, store, client) -> list[dict]:
     else:
         _run_slices(tasks, todo, finish, run.workers)
     return [results[i] for i in range(len(tasks))]
+
+
+def _tasks(checked: DiagramInputs) -> list:
+    """Each control value's task: with one uncertain parameter its own seed (seed + i),
+    with several the same sample points at every value (one seed)."""
+    if checked.system.dimension > 1:
+        return [SampledTask(value=float(v), oscillator=osc, problem=checked.system.problem,
+                            samples=checked.samples, seed=checked.seed,
+                            options=checked.options, settings=checked.settings,
+                            extra_states=checked.extra_states, coexist=checked.coexist)
+                for v, osc in zip(checked.values, checked.oscillators)]
+    return [SliceTask(value=float(v), oscillator=osc, uncertain=checked.uncertain,
+                      sigma=checked.sigma, distribution=checked.measure.name,
+                      samples=checked.samples, seed=checked.seed + i,
+                      options=checked.options, settings=checked.settings,
+                      xtol=checked.xtol, extra_states=checked.extra_states,
+                      coexist=checked.coexist)
+            for i, (v, osc) in enumerate(zip(checked.values, checked.oscillators))]
 
 
 def _with_emr(ds, checked: DiagramInputs, client):
@@ -1222,6 +1395,96 @@ def _dataset(slices, parameter, values, system, options, measure, settings, seed
     return ds
 
 
+def _skipped(system) -> str:
+    """Why a diagram of several uncertain parameters locates no boundaries."""
+    return (f"boundaries not located: continuation in xi is one-dimensional by nature, and "
+            f"this diagram has {system.dimension} uncertain parameters "
+            f"({','.join(system.uncertain)})")
+
+
+def _scrambling_sem(types: np.ndarray, kinds) -> np.ndarray:
+    """Each type's standard error from the shares of the ``SCRAMBLINGS`` blocks of
+    ``types`` (one control value's samples, block after block): sd / sqrt(R)."""
+    blocks = np.asarray(types).reshape(SCRAMBLINGS, -1)
+    shares = np.array([(blocks == k).mean(axis=1) for k in kinds]).reshape(len(kinds), -1)
+    return shares.std(axis=1, ddof=1) / math.sqrt(SCRAMBLINGS)
+
+
+def _dataset_several(slices, checked: DiagramInputs):
+    """The dataset of several uncertain parameters: the Monte Carlo part's variables
+    (``probability`` is ``mc_probability``), ``mc_xi`` over (sample, parameter)."""
+    import xarray as xr
+
+    from opa._dataset import provenance_attrs
+
+    param, system, settings = checked.parameter, checked.system, checked.settings
+    shares = [_shares(s) for s in slices]
+    kinds = sorted({k for m in shares for k in m}, key=type_order)
+    P = np.array([[m.get(k, 0.0) for k in kinds] for m in shares]).reshape(len(slices), -1)
+    types = np.stack([np.asarray(s["mc_type"]).astype(str) for s in slices])
+    sem = np.array([_scrambling_sem(t, kinds) for t in types]).reshape(P.shape)
+    points = np.stack([s["mc_points"] for s in slices])
+    one, dims_s = {"units": "1"}, (param, "sample")
+    checked_samples = min(checked.coexist, checked.samples)
+    per = checked.samples // SCRAMBLINGS
+    data = {
+        "probability": ((param, "type"), P, {
+            "long_name": "probability of each attractor type (share of the sampled "
+            "systems: no boundaries with several uncertain parameters)", **one}),
+        "mc_probability": ((param, "type"), P, {
+            "long_name": "share of the Monte Carlo samples on each type", **one}),
+        "mc_sem": ((param, "type"), sem, {
+            "long_name": f"standard error of the share: spread of the shares of "
+            f"{SCRAMBLINGS} independent scramblings of Sobol' points ({per} each), "
+            f"sd / sqrt({SCRAMBLINGS})", **one}),
+        "agree": (param, np.full(len(slices), -1, dtype=np.int8), {
+            "long_name": "-1: no continuation to compare the samples with", **one}),
+        "method": (param, np.ones(len(slices), dtype=np.int8),
+                   {"long_name": "0: continuation in xi; 1: Monte Carlo sampling", **one}),
+        "method_note": (param, np.array([str(s["note"]) for s in slices], dtype=str),
+                        {"long_name": "why continuation could not follow (empty: it did)"}),
+        "mc_coexist": (param, np.array(
+            [float(np.mean(s["mc_coexist"])) if checked_samples else np.nan
+             for s in slices]), {
+            "long_name": f"share of the first {checked_samples} samples whose type depends "
+            "on the initial state", **one}),
+        "mc_xi": (("sample", "parameter"), np.asarray(slices[0]["mc_xi"], dtype=float), {
+            "long_name": "xi of each sample (the same points at every control value)",
+            **one}),
+        "mc_type": (dims_s, types, {
+            "long_name": "attractor type of each sample from (x0, v0)"}),
+        "mc_lyapunov": (dims_s, np.stack([s["mc_lyapunov"] for s in slices]), {
+            "long_name": "largest Lyapunov exponent per unit time (two-trajectory "
+            "estimate; NaN where the run settled on a period first)", **one}),
+        "mc_periods": (dims_s, np.stack([s["mc_periods"] for s in slices]), {
+            "long_name": "forcing periods integrated before the type was decided", **one}),
+        "mc_settled": (dims_s, np.stack([s["mc_settled"] for s in slices]), {
+            "long_name": "1 where the run stopped early (settled on a period, or chaotic); "
+            "0 where its type was read off the last record periods", **one}),
+        "mc_x": ((*dims_s, "point"), points[..., 0], {
+            "long_name": "stroboscopic x of the sample's attractor (NaN padded)", **one}),
+        "mc_v": ((*dims_s, "point"), points[..., 1], {
+            "long_name": "stroboscopic dx/dt of the sample's attractor", **one}),
+    }
+    ds = xr.Dataset(data, coords={
+        param: (param, checked.values, {"long_name": f"control parameter {param}", **one}),
+        "type": ("type", np.array(kinds, dtype=str), {"long_name": "attractor type"}),
+        "parameter": ("parameter", np.array(system.uncertain, dtype=str),
+                      {"long_name": "uncertain parameter"})},
+        attrs=provenance_attrs("stochastic", system, checked.options, seed=checked.seed,
+                               sampler="sobol"))
+    ds.attrs[param] = math.nan  # swept: its values are the coordinate
+    ds.attrs.update(sweep_parameter=param, samples=int(checked.samples),
+                    scramblings=SCRAMBLINGS, boundaries=_skipped(system),
+                    transient=int(settings.transient), record=int(settings.record),
+                    settle_tol=float(settings.settle_tol),
+                    chaos_threshold=float(settings.chaos_threshold),
+                    lyapunov_periods=int(settings.lyapunov_periods),
+                    extra_states=int(checked.extra_states),
+                    coexist_samples=int(checked_samples))
+    return ds
+
+
 def type_order(kind: str):
     """Sort key of attractor types: periodic labels by period and impacts, then the rest
     in the order of ``NON_PERIODIC``."""
@@ -1232,5 +1495,6 @@ def type_order(kind: str):
 
 
 __all__ = ["AGREEMENT_SE", "DiagramInputError", "DiagramInputs", "EMR", "MAX_EXTRA_STATES",
-           "SliceTask", "attractors", "check_diagram", "classify", "compute_slice",
-           "stochastic_diagram", "stochastic_slice", "type_order"]
+           "SCRAMBLINGS", "SampledTask", "SliceTask", "attractors", "check_diagram",
+           "classify", "compute_slice", "stochastic_diagram", "stochastic_slice",
+           "type_order"]

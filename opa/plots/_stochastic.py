@@ -7,7 +7,9 @@ control value; below, the probability of each attractor type, continuation as li
 Monte Carlo as points with 2 binomial standard errors. Right column, when the dataset
 holds it (``emr=True``): the paper's diagram of the EMR (the OPA mean at the same sigma)
 on the same axes; below it, the boundaries in xi where the type changes (the
-two-parameter bifurcation curves xi*(control)), marked by the bifurcation there.
+two-parameter bifurcation curves xi*(control)), marked by the bifurcation there. A
+diagram of several uncertain parameters has no boundaries (its attribute ``boundaries``
+says why): the figure is the points and the sampled probabilities with 2 standard errors.
 """
 
 from __future__ import annotations
@@ -94,7 +96,13 @@ def draw_stochastic(ds: xr.Dataset):
     param = ds.attrs["sweep_parameter"]
     c = ds[param].values
     emr = "emr_x" in ds
-    if emr:
+    bounded = "boundary_kind" in ds  # several uncertain parameters: none located
+    if not bounded:
+        fig, (ax_pts, ax_p) = plt.subplots(2, 1, figsize=(9, 7), sharex=True,
+                                           gridspec_kw={"height_ratios": [3, 2]},
+                                           layout="constrained")
+        ax_b = ax_emr = None
+    elif emr:
         fig, axes = plt.subplots(2, 2, figsize=(13, 8), sharex=True,
                                  gridspec_kw={"height_ratios": [3, 2]}, layout="constrained")
         ax_pts, ax_emr, ax_p, ax_b = axes[0, 0], axes[0, 1], axes[1, 0], axes[1, 1]
@@ -136,22 +144,27 @@ def draw_stochastic(ds: xr.Dataset):
         m = ds.mc_probability.sel(type=kind).values
         if np.all(p < 0.01) and np.all(m < 0.01):
             continue  # the figure's legend lists the types that matter somewhere
-        ax_p.plot(c, p, lw=1.4, label=f"{kind}", **style)
+        ax_p.plot(c, p, lw=1.4 if bounded else 0.8, label=f"{kind}", **style)
         if ds.attrs.get("samples", 0):
             ax_p.errorbar(c, m, yerr=2 * np.nan_to_num(ds.mc_sem.sel(type=kind).values),
                           fmt="o", ms=2.5, color=style["color"], alpha=0.7, lw=0.8)
-    sampled = ds.method.values == 1
+    sampled = (ds.method.values == 1) & bounded  # grey: where sampling decides
     for value in c[sampled]:
         ax_p.axvspan(value, value, color="0.6", lw=3, alpha=0.3)
     ax_p.set_ylim(-0.03, 1.03)
     ax_p.set_ylabel("probability of the attractor type")
-    title = (f"{ds.attrs['uncertain']} = {ds.attrs[ds.attrs['uncertain']]:g} + "
-             f"{ds.attrs['sigma']:g} ξ, ξ ~ {ds.attrs['distribution']}; lines: "
-             f"continuation in ξ (grey: Monte Carlo decides)")
+    title = _uncertainty_title(ds) + ("; lines: continuation in ξ (grey: Monte Carlo "
+                                      "decides)" if bounded else "")
     if ds.attrs.get("samples", 0):
-        title += "; points: Monte Carlo ± 2 SE"
+        title += ("; points: Monte Carlo ± 2 SE" if bounded else
+                  f";\npoints: {ds.attrs['samples']} scrambled Sobol' samples ± 2 SE (from "
+                  f"{ds.attrs['scramblings']} scramblings); no boundaries: continuation "
+                  f"in ξ is one-dimensional")
     ax_p.set_title(title, fontsize=8)
     ax_p.legend(title="type", fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5))
+    if not bounded:
+        ax_p.set_xlabel(f"control parameter {name}")
+        return fig
     kinds = sorted({str(k) for k in ds.boundary_kind.values.ravel() if str(k)})
     for kind in kinds:
         mask = ds.boundary_kind.values == kind
@@ -167,6 +180,17 @@ def draw_stochastic(ds: xr.Dataset):
     for ax in (ax_p, ax_b) if emr else (ax_b,):
         ax.set_xlabel(f"control parameter {name}")
     return fig
+
+
+def _uncertainty_title(ds: xr.Dataset) -> str:
+    """``mu = 0.8 + 0.03 ξ, ξ ~ semicircle``, or with several uncertain parameters one
+    term each: ``mu = 0.8 + 0.03 ξ1, c = 0.05 + 0.005 ξ2, ξ ~ semicircle,uniform``."""
+    names = str(ds.attrs["uncertain"]).split(",")
+    sigma = np.atleast_1d(ds.attrs["sigma"])
+    xi = ["ξ"] if len(names) == 1 else [f"ξ{j + 1}" for j in range(len(names))]
+    terms = ", ".join(f"{n} = {float(ds.attrs[n]):g} + {float(s):g} {x}"
+                      for n, s, x in zip(names, sigma, xi))
+    return f"{terms}, ξ ~ {ds.attrs['distribution']}"
 
 
 def plot_stochastic(ds: xr.Dataset, path: str) -> None:

@@ -222,3 +222,118 @@ def test_a_dask_cluster_gives_the_same_diagram():
 
     # but the CPU time each value took
     assert_same_variables(here, there, skip=[n for n in here.data_vars if "seconds" in n])
+
+
+# ---------------------------------------------------------------- several uncertain parameters
+#: mu and a uncertain at section 3.1 (F0 = 0): the doubling 2/2 -> 4/4 at c = C_PD moves
+#: with a (xi_mu* = -0.35 at a = 0.998, 0 at a = 1, +0.36 at a = 1.002)
+SEVERAL = dict(uncertain="mu,a", sigma=(0.03, 0.002), distribution="semicircle,uniform")
+
+
+@pytest.fixture(scope="module")
+def several():
+    from opa import System
+
+    system = System(SECTION_31, **SEVERAL)
+    return stochastic_diagram(system, "c", [C_PD, 0.05], samples=128, extra_states=1,
+                              coexist=8)
+
+
+def _boundary_in_mu(a: float, c: float) -> tuple[float, float]:
+    """(xi_mu* of the doubling, P(2/2)) of the one-parameter diagram at a fixed a: the
+    boundary by continuation in mu alone, its probability the semicircle's CDF there."""
+    ds = stochastic_diagram(SECTION_31.replace(a=a), "c", [c], sigma=0.03, samples=0,
+                            extra_states=0)
+    xi = ds.boundary_xi.values[0]
+    p = float(ds.probability.sel(type="2/2")[0]) if "2/2" in ds.type.values else 0.0
+    return (float(xi[0]) if len(xi) and np.isfinite(xi[0]) else np.nan), p
+
+
+def test_several_parameters_probabilities_against_the_one_dimensional_boundaries(several):
+    """(mu, a) uncertain: P(2/2) at c = C_PD is the law's mass below the boundary curve
+    xi_mu*(xi_a), computed independently as a 6-point Gauss-Legendre rule over the
+    uniform xi_a of the one-parameter diagrams' exact conditional probabilities
+    (continuation in mu at each node, the semicircle's CDF there); the sampled share lies
+    within 3 standard errors (+ one sample) of it, and every sample farther than 0.02 in
+    xi_mu from the curve has the type of its side. At c = 0.05 every sample is 2/2:
+    probability 1, SE 0, as the one-parameter diagrams at both ends of a say."""
+    ds = several
+    nodes, weights = np.polynomial.legendre.leggauss(6)
+    found = [_boundary_in_mu(1.0 + 0.002 * x, C_PD) for x in nodes]
+    reference = float(np.sum(weights / 2 * [p for _, p in found]))
+    p = float(ds.probability.sel(c=C_PD, type="2/2"))
+    se = float(ds.mc_sem.sel(c=C_PD, type="2/2"))
+    assert 0 < se < 0.05 and abs(p - reference) <= 3 * se + 1 / 128, (p, se, reference)
+    curve = np.polynomial.polynomial.Polynomial.fit(nodes, [x for x, _ in found], 5)
+    xi = ds.mc_xi.values
+    below = xi[:, 0] < curve(xi[:, 1])
+    far = np.abs(xi[:, 0] - curve(xi[:, 1])) > 0.02
+    types = ds.mc_type.sel(c=C_PD).values
+    assert far.sum() > 100
+    assert np.all((types[far] == "2/2") == below[far])
+    assert np.all(np.isin(types, ["2/2", "4/4"]))
+    # c = 0.05: the whole law is 2/2
+    assert [p for _, p in (_boundary_in_mu(a, 0.05) for a in (0.998, 1.002))] == [1.0, 1.0]
+    assert float(ds.probability.sel(c=0.05, type="2/2")) == 1.0
+    assert float(ds.mc_sem.sel(c=0.05, type="2/2")) == 0.0
+    assert float(ds.probability.sel(c=0.05, type="4/4")) == 0.0
+
+
+def test_several_parameters_dataset_says_why_there_are_no_boundaries(several):
+    ds = several
+    assert ds.mc_xi.dims == ("sample", "parameter") and ds.sizes["sample"] == 128
+    assert list(ds.parameter.values) == ["mu", "a"]
+    assert ds.attrs["uncertain"] == "mu,a" and list(ds.attrs["sigma"]) == [0.03, 0.002]
+    assert ds.attrs["distribution"] == "semicircle,uniform"
+    assert "one-dimensional by nature" in ds.attrs["boundaries"]
+    assert "boundary_xi" not in ds and "interval_type" not in ds
+    assert list(ds.method.values) == [1, 1] and list(ds.agree.values) == [-1, -1]
+    np.testing.assert_array_equal(ds.probability.values, ds.mc_probability.values)
+    assert ds.attrs["scramblings"] == 8 and ds.attrs["coexist_samples"] == 8
+    # the points are the problem's scrambled Sobol' points, within its support
+    assert np.all(np.abs(ds.mc_xi.values) <= 1.0)
+    assert np.isfinite(ds.mc_coexist.values).all()
+
+
+@pytest.mark.parametrize("kw, message", [
+    (dict(emr=True), r"^emr: the EMR's sweep takes one uncertain parameter; this diagram "
+                     r"has 2 \(mu,a\)"),
+    (dict(xtol=1e-8), r"^xtol 1e-08 has no effect with 2 uncertain parameters"),
+    (dict(samples=100), r"^samples must be a multiple of 8 and at least 16"),
+    (dict(samples=0), r"^samples must be a multiple of 8"),
+    (dict(sigma=(0.03, 0.002, 0.1)), r"^sigma must give one value, or one per"),
+    (dict(sigma=(0.9, 0.002)), r"^sigma 0.9 makes mu = 0.8 \+ sigma xi negative"),
+    (dict(distribution="semicircle,foo"), r"^distribution"),
+    (dict(parameter="a"), r"^parameter must be a model parameter other than the "
+                          r"uncertain ones \(mu,a\)"),
+])
+def test_several_parameters_refuse_what_is_one_dimensional_by_name(kw, message):
+    keywords = {**SEVERAL, "samples": 16, **kw}
+    parameter = keywords.pop("parameter", "c")
+    with pytest.raises(ValueError, match=message):
+        stochastic_diagram(SECTION_31, parameter, [0.05], **keywords)
+
+
+def test_several_parameters_resume_from_their_parts(tmp_path, monkeypatch):
+    """A removed part is computed again, the dataset is the same; a changed problem
+    (another sigma of a) is not resumed from."""
+    import opa.dynamics._stochastic as S
+
+    kw = dict(**SEVERAL, samples=16, transient=200, extra_states=0,
+              parts=str(tmp_path / "parts"))
+    first = stochastic_diagram(SECTION_31, "c", [C_PD, 0.05], **kw)
+    parts = sorted((tmp_path / "parts").glob("slice-*.npz"))
+    assert len(parts) == 2
+    parts[0].unlink()
+    calls = []
+    original = S.compute_slice
+    monkeypatch.setattr(S, "compute_slice",
+                        lambda *a, **k: calls.append(1) or original(*a, **k))
+    again = stochastic_diagram(SECTION_31, "c", [C_PD, 0.05], **kw)
+    assert len(calls) == 1
+    for name in ("probability", "mc_sem", "mc_type", "mc_xi", "mc_x"):
+        np.testing.assert_array_equal(again[name].values, first[name].values)
+    other = stochastic_diagram(SECTION_31, "c", [C_PD, 0.05],
+                               **{**kw, "sigma": (0.03, 0.003)})
+    assert len(calls) == 3
+    assert list(other.attrs["sigma"]) == [0.03, 0.003]

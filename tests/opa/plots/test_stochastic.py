@@ -69,3 +69,22 @@ def test_the_figure_without_samples_or_emr(tmp_path):
         assert len(fig.axes) == 3
     finally:
         plt.close(fig)
+
+
+def test_the_figure_of_several_uncertain_parameters_has_no_boundary_panel(tmp_path):
+    """(mu, a) uncertain: no boundaries are located, so the figure is two panels, the
+    points and the sampled probabilities, titled with both parameters."""
+    from opa import System
+
+    system = System(preset("3.1", F0=0.0), uncertain="mu,a", sigma=(0.03, 0.002),
+                    distribution="semicircle,uniform")
+    ds = stochastic_diagram(system, "c", [0.0396996668, 0.05], samples=16, extra_states=0)
+    fig = draw_stochastic(ds)
+    axes = fig.get_axes()
+    titles = " ".join(ax.get_title() for ax in axes)
+    assert "mu = 0.8 + 0.03 ξ1, a = 1 + 0.002 ξ2" in titles
+    assert "no boundaries" in titles
+    assert not any("boundary" in ax.get_ylabel() for ax in axes)
+    plt.close(fig)
+    plot_stochastic(ds, tmp_path / "several.png")
+    assert (tmp_path / "several.png").stat().st_size > 10_000
