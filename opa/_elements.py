@@ -174,7 +174,9 @@ def true_runs(system: System, options: SolverOptions, xi, times, *, what: str,
                       stop_on_failure=True)
     if not batch.ok.all():
         m = int(np.flatnonzero(batch.failed)[0])
-        raise SimulationError(f"{what} xi = {xi[m]:.6g} stopped: {batch.message(m)}")
+        point = (f"{xi[m]:.6g}" if np.ndim(xi[m]) == 0  # a row of xi: several parameters
+                 else "(" + ", ".join(f"{v:.6g}" for v in xi[m]) + ")")
+        raise SimulationError(f"{what} xi = {point} stopped: {batch.message(m)}")
     rhs = int(batch.rhs_evaluations.sum())
     return (batch.states, rhs, batch.impacts) if impacts else (batch.states, rhs)
 

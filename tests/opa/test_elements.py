@@ -9,7 +9,7 @@ import pytest
 from scipy import integrate
 
 from mc import simulate_mc
-from opa import Oscillator, SolverOptions, simulate_opa
+from opa import Oscillator, SolverOptions, preset, simulate_opa
 from opa._system import System
 from opa._elements import (
     SHARED_SPLITS,
@@ -330,3 +330,14 @@ def test_the_element_budget_has_one_rule_everywhere(budget, capsys):
         assert status == 2
         err = capsys.readouterr().err
         assert "max" in err and str(budget) in err and err.count("\n") == 1
+
+
+def test_a_true_system_of_several_parameters_that_stops_is_named_by_its_point():
+    """true_runs with rows of xi (several parameters): the message shows the row."""
+    from opa._elements import true_runs
+    from opa._run import SimulationError
+
+    system = System(preset("3.2"), uncertain="mu,c", sigma=(0.01, 0.001))
+    with pytest.raises(SimulationError, match=r"xi = \(0.1, -0.2\) stopped"):
+        true_runs(system, SolverOptions(max_steps=10), np.array([[0.1, -0.2]]),
+                  np.linspace(0.0, 10.0, 5), what="a sample at")
