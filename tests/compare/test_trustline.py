@@ -35,6 +35,7 @@ def test_s_star_is_the_last_scale_of_an_unbroken_run_of_agreement(codes, want):
     assert star(np.array(codes), [1.0, 2.0, 4.0]) == want
 
 
+@pytest.mark.long  # the quick loop keeps the impact case below
 def test_an_agreement_is_within_the_tolerance_of_the_independent_truth():
     """The free oscillator (no impacts), mu and c: at each scale, a variant the line says
     agrees has its true RMS error of E[x] (against scipy at a 14 x 14 Gauss rule) within

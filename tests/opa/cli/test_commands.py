@@ -440,6 +440,7 @@ def test_converge_uncertain_c(tmp_path):
     assert np.isfinite(rows.error).all()
 
 
+@pytest.mark.long  # the quick loop keeps the d = 2 study of tests/compare/test_convergence.py
 def test_converge_two_uncertain_parameters(tmp_path, capsys):
     """``converge --uncertain mu,c --sigma 0.016,0.005 --distribution semicircle,uniform``
     at tiny sizes: boxes and ladders, the parts of one parameter said to be left out, the
