@@ -410,3 +410,16 @@ def check_outputs(args) -> None:
     workers = getattr(args, "workers", None)
     if workers is not None and workers > MAX_WORKERS:
         raise CliError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got {workers}")
+
+
+def write_and_draw(ds, args, draw) -> None:
+    """A command's ``--out`` (the dataset written) and ``--plot`` (``draw(ds, path)``),
+    each said unless ``--quiet``."""
+    from opa import write_netcdf
+
+    for path, write in ((getattr(args, "out", None), write_netcdf),
+                        (getattr(args, "plot", None), draw)):
+        if path:
+            write(ds, path)
+            if not args.quiet:
+                print(f"  wrote {path}")

@@ -20,6 +20,7 @@ from opa.cli._flags import (
     _system_flags,
     check_outputs,
     flagged,
+    write_and_draw,
     options_from,
     system_from,
 )
@@ -66,7 +67,6 @@ def cmd_sobol(args) -> int:
     system = system_from(args)
     options = options_from(args)
     import compare
-    from opa import write_netcdf
 
     try:
         ds = compare.certify_sobol(system, samples=args.samples, seed=args.seed,
@@ -89,16 +89,9 @@ def cmd_sobol(args) -> int:
           f"{100 * ds.attrs['agreement']:.0f} % of the outputs of x and v")
     if not args.quiet:
         print(ds.attrs["verdict"])
-    if args.out:
-        write_netcdf(ds, args.out)
-        if not args.quiet:
-            print(f"  wrote {args.out}")
-    if args.plot:
-        from opa.plots import plot_sensitivity
+    from opa.plots import plot_sensitivity
 
-        plot_sensitivity(ds, args.plot)
-        if not args.quiet:
-            print(f"  wrote {args.plot}")
+    write_and_draw(ds, args, plot_sensitivity)
     return 0
 
 

@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from opa.cli._args import parse_sweep, positive_int, whole_number
-from opa.cli._flags import _model_flags, _solver_flags, _system_flags
+from opa.cli._flags import _model_flags, _solver_flags, _system_flags, write_and_draw
 from opa.dynamics import CONTINUABLE, STABILITY_LAWS
 
 
@@ -61,7 +61,6 @@ def cmd_stability(args) -> int:
     if not args.sweep:
         refuse_given(args, ["seed_value", "depth", "max_points"],
                      "applies with --sweep only (the continuation of a branch)")
-    from opa import write_netcdf
     from opa.dynamics import (BIFURCATION_KINDS, ContinuationOptions, benettin_engine,
                               continue_orbits, impulse_cycle, lyapunov_benettin,
                               lyapunov_exponent, orbit_dataset, periodic_orbit)
@@ -117,16 +116,9 @@ def cmd_stability(args) -> int:
             if not args.quiet:
                 print(f"  Benettin check            {check.exponent:+.5f} ± "
                       f"{check.standard_error:.5f} ({check.method})")
-    if args.out:
-        write_netcdf(ds, args.out)
-        if not args.quiet:
-            print(f"  wrote {args.out}")
-    if args.plot:
-        from opa.plots import plot_branches
+    from opa.plots import plot_branches
 
-        plot_branches(ds, args.plot)
-        if not args.quiet:
-            print(f"  wrote {args.plot}")
+    write_and_draw(ds, args, plot_branches)
     return 0
 
 
