@@ -88,6 +88,12 @@ def test_dask_run_checkpoints_and_resumes_bit_identical(tmp_path):
         lines = []
         resumed = mc.simulate_mc(OSC, scheduler=cluster.scheduler_address, checkpoint=parts,
                                  log=lines.append, **RUN)  # fmt: skip
+        # several uncertain parameters (their laws pickled to the workers): the same bits
+        several = dict(RUN, sigma=(0.05, 0.01), uncertain="mu,c", distribution="beta:2,3,uniform")
+        far = mc.simulate_mc(OSC, scheduler=client, **several)
+    near = mc.simulate_mc(OSC, **several)
+    for name in VARIABLES:
+        np.testing.assert_array_equal(far[name].values, near[name].values, err_msg=name)
     assert sum(" is damaged " in line for line in lines) == 1
     for ds in (first, resumed):
         for name in VARIABLES:
