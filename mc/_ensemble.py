@@ -391,11 +391,15 @@ def _plan(system, options, samples, sampler, seed, replicates, control, times, k
         raise ValueError(f"control needs sampler='sobol' with replicates >= 2 (its "
                          f"standard errors are the replicates' spread), got sampler="
                          f"{sampler!r}, replicates={replicates}")
-    from opa.engine import check_work
+    from opa.engine import check_steps, check_work
 
     periods = float(times[-1] - times[0]) / system.oscillator.forcing_period
-    check_work("this Monte Carlo ensemble", samples * periods,
-               [("samples", samples), ("periods", f"{periods:g}")])
+    drivers = [("samples", samples), ("periods", f"{periods:g}")]
+    # each sample is one trajectory: the step limit of slow forcing, as for the DMR
+    check_steps("this Monte Carlo ensemble", periods, system.oscillator, options.max_steps,
+                [("omega", f"{system.oscillator.omega:g}"), ("periods", f"{periods:g}")])
+    check_work("this Monte Carlo ensemble", samples * periods, drivers,
+               oscillator=system.oscillator)
     size = min(_chunk_size(T, run.chunk_size, run.device), samples)
     if keep_paths:
         check_memory("keep_paths", samples * T * 2 * 8,

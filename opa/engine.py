@@ -85,7 +85,14 @@ from opa._surrogate import (
     surrogate_values,
 )
 from opa._system import IMPULSE_FIELDS, System, as_system
-from opa._work import WorkBudgetError, budget, check_work, parse_duration, process_started
+from opa._work import (
+    WorkBudgetError,
+    budget,
+    check_steps,
+    check_work,
+    parse_duration,
+    process_started,
+)
 from opa.dynamics._orbits import MAX_CYCLE, impulse_cycle
 from opa.dynamics._sections import identify_motion, mean_state, phase_section
 from opa.dynamics._sweep import local_executor, locate_setup, pool_shared, summary_lines, sweep, \
@@ -102,7 +109,7 @@ __all__ = [
     "CHATTER_WINDOW", "ElementBudgetWarning", "IMPULSE_FIELDS", "MAX_CROSSINGS", "MAX_CYCLE",
     "add_true_system_work",
     "MAX_BOXES", "MAX_ELEMENTS", "MAX_GRID", "MAX_SPLITS", "MIN_SPLITS", "Measure", "Oscillator",
-    "OutputLock", "check_work", "check_scheduler_address",
+    "OutputLock", "check_steps", "check_work", "check_scheduler_address",
     "PARAMETER_NAMES", "SPLIT_KINDS", "STATUS_NAMES",
     "SampledRuns", "ScanOptions",
     "SimulationError", "SolverOptions", "Split", "Store", "System", "adaptive_edges",

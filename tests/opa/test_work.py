@@ -6,6 +6,7 @@ import time
 
 import pytest
 
+from mc import simulate_mc
 from opa import Oscillator, preset, simulate_dmr, simulate_opa
 from opa._run import DEFAULT_MAX_STEPS
 from opa._work import (PERIODS_PER_SECOND, WORK_BUDGET_ENV, StepLimitError, WorkBudgetError,
@@ -147,7 +148,7 @@ def test_a_trajectory_past_the_step_limit_is_refused_at_once_by_the_api(monkeypa
     monkeypatch.delenv(WORK_BUDGET_ENV, raising=False)
     slow = preset("3.2", omega=1e-6)
     start = time.perf_counter()
-    for simulate in (simulate_opa, simulate_dmr):
+    for simulate in (simulate_opa, simulate_dmr, simulate_mc):  # each sample: a trajectory
         with pytest.raises(StepLimitError, match=r"omega 1e-06 x periods 1: 6.3e\+06 time "
                            r"units.*more than the step limit of 50000000.*max_steps"
                            rf".*\${WORK_BUDGET_ENV} inf"):
