@@ -82,7 +82,10 @@ def certify_sobol(system: System, *, opa: xr.Dataset | None = None, samples: int
         and ``basis`` are refused.
     samples : int
         M, the rows of A and of B: a power of two >= 8 (with ``sampler="sobol"``). The
-        true systems run ``(d + 2) M`` times.
+        true systems run ``(d + 2) M`` times. The intervals rest on the delta method's
+        normal approximation: with the control variate and random points they covered
+        the exact indices of the free oscillator's test case at 0.89 (M = 32) and 0.93
+        (M = 64) instead of 0.95, and at the nominal rate from M = 128 on (50 seeds).
     seed : int
         Seed of the scrambling (or of the random points): a whole number >= 0.
     options : opa.SolverOptions, optional
