@@ -146,3 +146,8 @@ def run_options(attrs, options=None):
     return SolverOptions(rtol=float(attrs["rtol"]), atol=float(attrs["atol"]),
                          method=str(attrs.get("method", "dop853")),
                          chatter_velocity=float(attrs.get("chatter_velocity", 1e-6)))
+
+
+def several(run: xr.Dataset) -> bool:
+    """Whether a run has several uncertain parameters (its ``uncertain`` = "mu,c")."""
+    return "," in str(run.attrs.get("uncertain", ""))

@@ -16,7 +16,7 @@ import xarray as xr
 
 from compare._inputs import (
     check_attribute_number, check_dataset, check_finite, check_number,
-    check_standard_error, require_attributes, require_time, require_variables,
+    check_standard_error, require_attributes, require_time, require_variables, several,
 )
 
 
@@ -102,7 +102,7 @@ def _check_contents(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
                        "forcing period of error_metrics' windows)")
     check_attribute_number(opa_ds, opa, "omega", positive=True)
     require_variables(opa_ds, opa, ("x_mean", "x_var"))
-    if _several(opa_ds):  # coefficients compared only when both have one basis
+    if several(opa_ds):  # coefficients compared only when both have one basis
         coefficients = ("x_coef",) if "x_coef" in opa_ds else ()
     else:
         coefficients = ("x_coef",) if "x_coef" in opa_ds else _ELEMENTS
@@ -132,11 +132,6 @@ def _check_contents(opa_ds: xr.Dataset, mc_ds: xr.Dataset) -> None:
     quadrature = mc_ds.attrs.get("sampler") == "gauss"
     for name in ("x_sem", "x_var_sem", "x_coef_sem"):
         check_standard_error(mc_ds, mc, name, nan=quadrature)
-
-
-def _several(ds: xr.Dataset) -> bool:
-    """Whether a run has several uncertain parameters (coefficients over ``term``)."""
-    return "," in str(ds.attrs.get("uncertain", ""))
 
 
 def _several_coefficients(opa_ds: xr.Dataset, mc_ds: xr.Dataset):
@@ -249,14 +244,14 @@ def compare_runs(opa_ds: xr.Dataset, mc_ds: xr.Dataset, *, z: float = 3.0,
     _check_contents(opa_ds, mc_ds)
     _check_same_system(opa_ds, mc_ds)
     _check_same_grid(opa_ds, mc_ds)
-    if _several(opa_ds):
+    if several(opa_ds):
         n, coef = _several_coefficients(opa_ds, mc_ds)
         dim = "term"
     else:
         n = min(opa_ds.sizes["order"], mc_ds.sizes["order"])
         coef = _opa_coefficients(opa_ds, n - 1)
         dim = "order"
-    if coef is None and not _several(opa_ds):
+    if coef is None and not several(opa_ds):
         raise ValueError(f"the opa dataset's coefficients cannot be compared: its law of xi "
                          f"{opa_ds.attrs.get('distribution')!r} is not one opa-mc can "
                          f"rebuild from its name")

@@ -65,7 +65,7 @@ import numpy as np
 import xarray as xr
 
 from compare._inputs import (
-    check_attribute_number, check_dataset, require_time, run_fields, run_options,
+    check_attribute_number, check_dataset, require_time, run_fields, run_options, several,
 )
 from compare._strata import (
     build_strata, group_allocation, least_samples, neyman_allocation, slices, split_values,
@@ -136,11 +136,6 @@ def check_counts(samples, max_samples, *, flags: bool = False) -> tuple[int, int
     first, most = ("--verify", "--verify-max") if flags else ("samples", "max_samples")
     samples = _check_count(first, samples, MIN_SAMPLES)
     return samples, _check_count(most, max_samples, samples)
-
-
-def several(run: xr.Dataset) -> bool:
-    """Whether the run has several uncertain parameters (``uncertain`` = "mu,c")."""
-    return "," in str(run.attrs.get("uncertain", ""))
 
 
 def one_parameter(run: xr.Dataset) -> None:

@@ -126,6 +126,7 @@ def surrogate_several(ds, measures, xi, state: str = "x") -> np.ndarray:
     >>> float(abs(x_hat[0, 0] - ds.x0))   # every sample starts at x0
     0.0
     """
+    from opa._boxes import Box
     from opa._chaos import ChaosBasis
 
     xi = np.asarray(xi, dtype=float)
@@ -140,8 +141,7 @@ def surrogate_several(ds, measures, xi, state: str = "x") -> np.ndarray:
     for e in range(ds.sizes["element"]):
         inside = ~taken & np.all((xi >= lower[e]) & (xi <= upper[e]), axis=1)
         if inside.any():
-            box = tuple(m if (lo, hi) == (m.lo, m.hi) else m.restrict(lo, hi)
-                        for m, lo, hi in zip(measures, lower[e], upper[e]))
+            box = Box(tuple(lower[e]), tuple(upper[e])).measures(measures)
             out[inside] = ChaosBasis(box, indices).evaluate(xi[inside]) \
                 @ ds[f"element_{state}_coef"].values[e]
             taken |= inside
