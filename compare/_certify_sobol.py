@@ -155,9 +155,10 @@ def certify_sobol(system: System, *, opa: xr.Dataset | None = None, samples: int
         g = surrogate_several(run, system.problem.measures, points.reshape(-1, d),
                               state).reshape(f.shape)
         with np.errstate(all="ignore"):
-            plain = pick_freeze_indices(f[0], f[1], f[2:], z=z)
+            floor = _solver_floor(f[0], f[1], options)
+            plain = pick_freeze_indices(f[0], f[1], f[2:], z=z, floor=floor)
             cv = pick_freeze_indices(f[0], f[1], f[2:], surrogate=(g[0], g[1], g[2:]),
-                                     exact=exact, z=z)
+                                     exact=exact, z=z, floor=floor)
         chosen = cv if control else plain
         data.update(_variables(state, chosen, plain, exact))
         agreement[state] = (surrogate_agreement(chosen, exact.first, exact.total),
@@ -194,6 +195,20 @@ def _check_keywords(system, samples, seed, control, z, sampler) -> tuple[int, in
         raise ValueError(f"z must be a finite number > 0, got {z!r}")
     system.check_samples()
     return samples, int(seed), float(z)
+
+
+def _solver_floor(f_a, f_b, options) -> np.ndarray:
+    """The numerical error of an index (...) from the true systems' tolerances: each value
+    carries an error up to ~(rtol |f| + atol), each pick-freeze product twice that, so an
+    index up to ~2 (rtol E[f^2] + atol E|f|) / V; ten times that, as the certificate's
+    floor (``compare._verify``: 10 (rtol + atol)). Before the first impact the surrogate
+    matches the true systems to about that, and the control variate's standard errors
+    alone fall below it."""
+    both = np.concatenate([f_a, f_b])
+    variance = both.var(axis=0, ddof=1)
+    error = 20.0 * (options.rtol * (both ** 2).mean(axis=0)
+                    + options.atol * np.abs(both).mean(axis=0))
+    return np.where(variance > 0, error / np.where(variance > 0, variance, 1.0), np.inf)
 
 
 def _surrogate_indices(run: xr.Dataset, state: str) -> SobolIndices:

@@ -98,11 +98,15 @@ class IndexEstimate:
     standard_error : ndarray, shape (d, ...)
     z : float
         The interval's half-width in standard errors (1.96: 95 %).
+    floor : float or ndarray (...)
+        Added to both ends of the interval: the model's own numerical error of an index
+        (its solver's tolerance), which no standard error sees; 0 for an exact model.
     """
 
     estimate: np.ndarray
     standard_error: np.ndarray
     z: float = 1.96
+    floor: object = 0.0
 
     def __post_init__(self):
         if np.shape(self.estimate) != np.shape(self.standard_error):
@@ -113,11 +117,11 @@ class IndexEstimate:
 
     @property
     def lower(self) -> np.ndarray:
-        return self.estimate - self.z * self.standard_error
+        return self.estimate - self.z * self.standard_error - self.floor
 
     @property
     def upper(self) -> np.ndarray:
-        return self.estimate + self.z * self.standard_error
+        return self.estimate + self.z * self.standard_error + self.floor
 
     @property
     def code(self) -> np.ndarray:
@@ -251,7 +255,7 @@ def _ratio(numer, h, variance, v):
 
 
 def pick_freeze_indices(f_a, f_b, f_ab, *, surrogate=None, exact=None,
-                        z: float = 1.96) -> SobolEstimate:
+                        z: float = 1.96, floor=0.0) -> SobolEstimate:
     """First-order and total Sobol indices from paired pick-freeze runs, with standard
     errors, optionally with a surrogate as control variate.
 
@@ -268,6 +272,10 @@ def pick_freeze_indices(f_a, f_b, f_ab, *, surrogate=None, exact=None,
         ``sobol_indices(coefficients, indices)`` returns. Required with ``surrogate``.
     z : float
         Half-width of the intervals in standard errors (1.96: 95 %).
+    floor : float or array_like (...)
+        The model's own numerical error of an index, added to both ends of every
+        interval (:class:`IndexEstimate`); with a control variate that matches the
+        model to its solver's tolerance the standard errors alone shrink below it.
 
     Returns
     -------
@@ -309,8 +317,8 @@ def pick_freeze_indices(f_a, f_b, f_ab, *, surrogate=None, exact=None,
     index, se = _ratio(numer, h, variance, v)
     m = a.shape[0]
     var_se = np.sqrt(((v - v.mean(axis=0)) ** 2).sum(axis=0) / (m - 1) / m)
-    return SobolEstimate(first=IndexEstimate(index[0], se[0], z),
-                         total=IndexEstimate(index[1], se[1], z),
+    return SobolEstimate(first=IndexEstimate(index[0], se[0], z, floor),
+                         total=IndexEstimate(index[1], se[1], z, floor),
                          variance=variance, variance_se=var_se, samples=m,
                          control=surrogate is not None)
 
