@@ -22,6 +22,7 @@ THEMES = {
     "tests/test_layout.py": "this rule",
     "tests/test_reference.py": "tests/reference.py against closed forms",
     "tests/test_truths.py": "tests/truths.py against scipy",
+    "tests/test_impact_truths.py": "tests/impact_truths.py against scipy and closed forms",
     "tests/test_sizes.py": "no function over 120 lines, no public one over 12 named "
                            "parameters",
     "tests/test_matrix.py": "every law, uncertain parameter and element setting through "
