@@ -508,7 +508,7 @@ def _scan_value(cfg: ValidateConfig, value: float) -> dict:
     """The split scans at one value, per horizon (the arrays of
     :func:`compare._mapdata.splits_to_arrays`)."""
     osc = cfg.oscillator_at(value)
-    centre = getattr(osc, cfg.uncertain)
+    centre = osc.value(cfg.uncertain)
     smax = max(cfg.sigmas)
     T = osc.forcing_period
     found, runs, longest = {}, None, None

@@ -32,6 +32,7 @@ from opa._model import (  # the vocabulary (module docstring)
 )
 from opa._run import SimulationError
 from opa._simulate import simulate_dmr, simulate_opa
+from opa._forcelaw import ForceLaw
 from opa._problem import Problem
 from opa._system import System
 from opa._system import (  # the vocabulary (module docstring)
@@ -56,6 +57,7 @@ __all__ = [
     "Execution",
     "Oscillator",
     "Problem",
+    "ForceLaw",
     "System",
     "SolverOptions",
     "Uncertainty",

@@ -220,7 +220,7 @@ def straddling(system: System, options: SolverOptions, edges, t_end: float) -> n
     edges = np.asarray(edges, dtype=float)
     if system.sigma == 0.0:
         return np.zeros(len(edges) - 1, dtype=np.int8)
-    centre = getattr(system.oscillator, system.uncertain)
+    centre = system.oscillator.value(system.uncertain)
     sequences = event_sequences(system, options, system.uncertain,
                                 centre + system.sigma * edges, t_end)
     return np.array([0 if a.signature(t_end) == b.signature(t_end) else 1
@@ -301,7 +301,7 @@ def split_edges(system, options, measure, *, t_end, max_splits=64, tol=1e-6,
     from opa._splits import find_splits
 
     sigma, uncertain = system.sigma, system.uncertain
-    centre = getattr(system.oscillator, uncertain)
+    centre = system.oscillator.value(uncertain)
     if sigma == 0.0:
         return np.array([measure.lo, measure.hi]), []
     key = (system.deterministic(), options, uncertain, sigma, measure.name, measure.lo,

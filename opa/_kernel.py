@@ -73,16 +73,26 @@ from numba import njit, prange
 P_MU, P_A, P_C, P_F, P_OMEGA, P_ETA, P_DELTA = 0, 1, 2, 3, 4, 5, 6
 P_F0, P_A1, P_OMEGA1, P_N, P_TAU, P_SIGMA = 7, 8, 9, 10, 11, 12
 P_CHATTER_V, P_HMAX = 13, 14
-N_PARAMS = 15
+# A polynomial force law's nominal coefficients C[j, k] of x^j v^k (j, k <= POLY_DEGREE)
+# at P_POLY + (POLY_DEGREE + 1) j + k (the law of a user's model, ``FORCE_POLYNOMIAL``).
+POLY_DEGREE = 3
+N_POLY = (POLY_DEGREE + 1) ** 2
+P_POLY = 15
+N_PARAMS = P_POLY + N_POLY
 
-C_NCOEF, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD = range(7)
-N_CFG = 7
+C_NCOEF, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD, C_FORCE = range(8)
+N_CFG = 8
+# The force law g(x, v): the paper's mu (1 - v^2) v - a x - c x^3 (from mu, a, c), or a
+# polynomial sum_jk C[j, k] x^j v^k (a user's model, from its coefficients).
+FORCE_PAPER, FORCE_POLYNOMIAL = 0, 1
 
 # Columns of the per-node parameter table ``table`` (Q, N_TABLE): the coefficients of the
 # force law at each quadrature node (or sample). The kernel never learns which parameter
-# is uncertain, nor how many: the Python layer (``opa._problem``) fills the table.
+# is uncertain, nor how many: the Python layer (``opa._problem``) fills the table. The
+# paper's law reads mu, a, c; a polynomial law its coefficients C[j, k] at T_POLY + 4 j + k.
 T_MU, T_A, T_C = 0, 1, 2
-N_TABLE = 3
+T_POLY = 3
+N_TABLE = T_POLY + N_POLY
 
 IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
 # The paper's closure (eq. (27)) adds back sigma/2 times the projection on U_{N+1} of the
@@ -369,12 +379,78 @@ def _stage_forcing_long(t, theta, h, f, w, cw, sw, force):
 
 
 @njit(cache=True, inline="always")
-def _f2(x, v, mu, a, c, drive, sticking):
+def force_law(p, cfg):
+    """The force law in scalars, for the 2-D register path: (0, mu, a, c, 0, ...) for the
+    paper's, (1, C[0, 0], C[0, 1], ..., C[3, 3]) for a polynomial one (a tuple is passed
+    by value: no reference counts)."""
+    if cfg[C_FORCE] == FORCE_POLYNOMIAL:
+        q = P_POLY
+        return (1.0, p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6],
+                p[q + 7], p[q + 8], p[q + 9], p[q + 10], p[q + 11], p[q + 12], p[q + 13],
+                p[q + 14], p[q + 15])
+    return (0.0, p[P_MU], p[P_A], p[P_C], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0)
+
+
+@njit(cache=True, inline="always")
+def _poly_horner(x, v, c00, c10, c20, c30, c01, c11, c21, c31, c02, c12, c22, c32, c03, c13,
+                 c23, c33):
+    """g = sum_jk C[j, k] x^j v^k and its partial derivatives (g, dg/dx, dg/dv), by
+    Horner in x for each power of v, then in v."""
+    p0 = c00 + x * (c10 + x * (c20 + x * c30))
+    p1 = c01 + x * (c11 + x * (c21 + x * c31))
+    p2 = c02 + x * (c12 + x * (c22 + x * c32))
+    p3 = c03 + x * (c13 + x * (c23 + x * c33))
+    d0 = c10 + x * (2.0 * c20 + x * 3.0 * c30)
+    d1 = c11 + x * (2.0 * c21 + x * 3.0 * c31)
+    d2 = c12 + x * (2.0 * c22 + x * 3.0 * c32)
+    d3 = c13 + x * (2.0 * c23 + x * 3.0 * c33)
+    g = p0 + v * (p1 + v * (p2 + v * p3))
+    gx = d0 + v * (d1 + v * (d2 + v * d3))
+    gv = p1 + v * (2.0 * p2 + v * 3.0 * p3)
+    return g, gx, gv
+
+
+@njit(cache=True, inline="always")
+def _poly_law(x, v, law):
+    """``_poly_horner`` of a ``force_law`` tuple (C[j, k] at law[1 + 4 j + k])."""
+    return _poly_horner(x, v, law[1], law[5], law[9], law[13], law[2], law[6], law[10],
+                        law[14], law[3], law[7], law[11], law[15], law[4], law[8], law[12],
+                        law[16])
+
+
+@njit(cache=True, inline="always")
+def _poly_row(table, k, x, v):
+    """``_poly_horner`` of the polynomial coefficients in row k of the table."""
+    q = T_POLY
+    return _poly_horner(x, v, table[k, q], table[k, q + 4], table[k, q + 8], table[k, q + 12],
+                        table[k, q + 1], table[k, q + 5], table[k, q + 9], table[k, q + 13],
+                        table[k, q + 2], table[k, q + 6], table[k, q + 10], table[k, q + 14],
+                        table[k, q + 3], table[k, q + 7], table[k, q + 11], table[k, q + 15])
+
+
+@njit(cache=True, inline="always")
+def _f2(x, v, law, drive, sticking):
     """Deterministic right-hand side on scalars, (x', v') of eq. (29), with the external
-    force ``drive`` at that time."""
+    force ``drive`` at that time and the force law of ``force_law``."""
     if sticking:
         return 0.0, 0.0
-    return v, mu * (1.0 - v * v) * v - a * x - c * x * x * x + drive
+    if law[0] == 0.0:
+        return v, law[1] * (1.0 - v * v) * v - law[2] * x - law[3] * x * x * x + drive
+    g, _, _ = _poly_law(x, v, law)
+    return v, g + drive
+
+
+@njit(cache=True, inline="always")
+def _own_law(cfg, table, p):
+    """Row 0 of the table holds the parameter vector's own force law."""
+    if cfg[C_FORCE] == FORCE_PAPER:
+        return (table[0, T_MU] == p[P_MU] and table[0, T_A] == p[P_A]
+                and table[0, T_C] == p[P_C])
+    for i in range(N_POLY):
+        if table[0, T_POLY + i] != p[P_POLY + i]:
+            return False
+    return True
 
 
 @njit(cache=True)
@@ -382,8 +458,7 @@ def is_deterministic(m, cfg, table, p):
     """The plain two-dimensional system (the DMR or one sample): N = 0, no tangents and
     a one-node table holding the parameter vector's own coefficients."""
     return (m == 0 and cfg[C_NCOEF] == 1 and table.shape[0] == 1
-            and table[0, T_MU] == p[P_MU] and table[0, T_A] == p[P_A]
-            and table[0, T_C] == p[P_C])
+            and _own_law(cfg, table, p))
 
 
 @njit(cache=True)
@@ -397,9 +472,11 @@ def vector_field(z, m, p, cfg, table, weights, U, drive, sticking, out, work):
     """
     n = cfg[C_NCOEF]
     # is_deterministic written out: a call would count references of three arrays
-    if (m == 0 and n == 1 and table.shape[0] == 1 and table[0, T_MU] == p[P_MU]
-            and table[0, T_A] == p[P_A] and table[0, T_C] == p[P_C]):
-        dx, dv = _f2(z[0], z[1], p[P_MU], p[P_A], p[P_C], drive, False)
+    poly = cfg[C_FORCE] == FORCE_POLYNOMIAL
+    if m == 0 and n == 1 and table.shape[0] == 1 and (
+            (not poly and table[0, T_MU] == p[P_MU] and table[0, T_A] == p[P_A]
+             and table[0, T_C] == p[P_C]) or (poly and _own_law(cfg, table, p))):
+        dx, dv = _f2(z[0], z[1], force_law(p, cfg), drive, False)
         out[0] = 0.0 if sticking else dx
         out[1] = 0.0 if sticking else dv
         return dv
@@ -424,22 +501,32 @@ def vector_field(z, m, p, cfg, table, weights, U, drive, sticking, out, work):
     # that sum would otherwise be amplified by the transverse instability).
     x0 = z[0]
     v0 = z[n]
-    g0 = p[P_MU] * (1.0 - v0 * v0) * v0 - p[P_A] * x0 - p[P_C] * x0 * x0 * x0
+    if poly:
+        g0, _, _ = _poly_law(x0, v0, force_law(p, cfg))
+    else:
+        g0 = p[P_MU] * (1.0 - v0 * v0) * v0 - p[P_A] * x0 - p[P_C] * x0 * x0 * x0
     for i in range(n):
         out[i] = z[n + i]
         out[n + i] = 0.0
     out[n] = g0
     for k in range(q):
-        mu_k = table[k, T_MU]
-        a_k = table[k, T_A]
-        c_k = table[k, T_C]
         x = work[0, k]
         v = work[1, k]
         w = weights[k]
-        g = w * (mu_k * (1.0 - v * v) * v - a_k * x - c_k * x * x * x - g0)
-        if m > 0:
-            work[2, k] = w * (-a_k - 3.0 * c_k * x * x)
-            work[3, k] = w * mu_k * (1.0 - 3.0 * v * v)
+        if poly:
+            gk, gx, gv = _poly_row(table, k, x, v)
+            g = w * (gk - g0)
+            if m > 0:
+                work[2, k] = w * gx
+                work[3, k] = w * gv
+        else:
+            mu_k = table[k, T_MU]
+            a_k = table[k, T_A]
+            c_k = table[k, T_C]
+            g = w * (mu_k * (1.0 - v * v) * v - a_k * x - c_k * x * x * x - g0)
+            if m > 0:
+                work[2, k] = w * (-a_k - 3.0 * c_k * x * x)
+                work[3, k] = w * mu_k * (1.0 - 3.0 * v * v)
         if g != 0.0:
             for i in range(n):
                 out[n + i] += g * U[k, i]
@@ -496,36 +583,36 @@ def vector_field(z, m, p, cfg, table, weights, U, drive, sticking, out, work):
 # arrays out of the calls: numba increments and decrements the reference count of every
 # array argument atomically, which cost 44% of a DMR run with the general argument list.
 @njit(cache=True)
-def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, sticking):
+def _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):
     """One step of the 2-D system, generated from the tableau (see ``step2``)."""
     x1 = x + h * (0.05260015195876773 * k0x)
     v1 = v + h * (0.05260015195876773 * k0v)
     drive = stage_forcing(t, 0.05260015195876773, h, f, w, cw, sw, force)
-    k1x, k1v = _f2(x1, v1, mu, a, c, drive, sticking)
+    k1x, k1v = _f2(x1, v1, law, drive, sticking)
     x2 = x + h * (0.0197250569845379 * k0x + 0.0591751709536137 * k1x)
     v2 = v + h * (0.0197250569845379 * k0v + 0.0591751709536137 * k1v)
     drive = stage_forcing(t, 0.0789002279381516, h, f, w, cw, sw, force)
-    k2x, k2v = _f2(x2, v2, mu, a, c, drive, sticking)
+    k2x, k2v = _f2(x2, v2, law, drive, sticking)
     x3 = x + h * (0.02958758547680685 * k0x + 0.08876275643042054 * k2x)
     v3 = v + h * (0.02958758547680685 * k0v + 0.08876275643042054 * k2v)
     drive = stage_forcing(t, 0.1183503419072274, h, f, w, cw, sw, force)
-    k3x, k3v = _f2(x3, v3, mu, a, c, drive, sticking)
+    k3x, k3v = _f2(x3, v3, law, drive, sticking)
     x4 = x + h * (0.2413651341592667 * k0x + -0.8845494793282861 * k2x + 0.924834003261792 * k3x)
     v4 = v + h * (0.2413651341592667 * k0v + -0.8845494793282861 * k2v + 0.924834003261792 * k3v)
     drive = stage_forcing(t, 0.2816496580927726, h, f, w, cw, sw, force)
-    k4x, k4v = _f2(x4, v4, mu, a, c, drive, sticking)
+    k4x, k4v = _f2(x4, v4, law, drive, sticking)
     x5 = x + h * (0.037037037037037035 * k0x + 0.17082860872947386 * k3x +
                   0.12546768756682242 * k4x)
     v5 = v + h * (0.037037037037037035 * k0v + 0.17082860872947386 * k3v +
                   0.12546768756682242 * k4v)
     drive = stage_forcing(t, 0.3333333333333333, h, f, w, cw, sw, force)
-    k5x, k5v = _f2(x5, v5, mu, a, c, drive, sticking)
+    k5x, k5v = _f2(x5, v5, law, drive, sticking)
     x6 = x + h * (0.037109375 * k0x + 0.17025221101954405 * k3x + 0.06021653898045596 * k4x +
                   -0.017578125 * k5x)
     v6 = v + h * (0.037109375 * k0v + 0.17025221101954405 * k3v + 0.06021653898045596 * k4v +
                   -0.017578125 * k5v)
     drive = stage_forcing(t, 0.25, h, f, w, cw, sw, force)
-    k6x, k6v = _f2(x6, v6, mu, a, c, drive, sticking)
+    k6x, k6v = _f2(x6, v6, law, drive, sticking)
     x7 = x + h * (0.03709200011850479 * k0x + 0.17038392571223998 * k3x +
                   0.10726203044637328 * k4x + -0.015319437748624402 * k5x +
                   0.008273789163814023 * k6x)
@@ -533,13 +620,13 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, stickin
                   0.10726203044637328 * k4v + -0.015319437748624402 * k5v +
                   0.008273789163814023 * k6v)
     drive = stage_forcing(t, 0.3076923076923077, h, f, w, cw, sw, force)
-    k7x, k7v = _f2(x7, v7, mu, a, c, drive, sticking)
+    k7x, k7v = _f2(x7, v7, law, drive, sticking)
     x8 = x + h * (0.6241109587160757 * k0x + -3.3608926294469414 * k3x + -0.868219346841726 * k4x +
                   27.59209969944671 * k5x + 20.154067550477894 * k6x + -43.48988418106996 * k7x)
     v8 = v + h * (0.6241109587160757 * k0v + -3.3608926294469414 * k3v + -0.868219346841726 * k4v +
                   27.59209969944671 * k5v + 20.154067550477894 * k6v + -43.48988418106996 * k7v)
     drive = stage_forcing(t, 0.6512820512820513, h, f, w, cw, sw, force)
-    k8x, k8v = _f2(x8, v8, mu, a, c, drive, sticking)
+    k8x, k8v = _f2(x8, v8, law, drive, sticking)
     x9 = x + h * (0.47766253643826434 * k0x + -2.4881146199716677 * k3x +
                   -0.590290826836843 * k4x + 21.230051448181193 * k5x + 15.279233632882423 * k6x +
                   -33.28821096898486 * k7x + -0.020331201708508627 * k8x)
@@ -547,7 +634,7 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, stickin
                   -0.590290826836843 * k4v + 21.230051448181193 * k5v + 15.279233632882423 * k6v +
                   -33.28821096898486 * k7v + -0.020331201708508627 * k8v)
     drive = stage_forcing(t, 0.6, h, f, w, cw, sw, force)
-    k9x, k9v = _f2(x9, v9, mu, a, c, drive, sticking)
+    k9x, k9v = _f2(x9, v9, law, drive, sticking)
     x10 = x + h * (-0.9371424300859873 * k0x + 5.186372428844064 * k3x + 1.0914373489967295 * k4x +
                    -8.149787010746927 * k5x + -18.52006565999696 * k6x + 22.739487099350505 * k7x +
                    2.4936055526796523 * k8x + -3.0467644718982196 * k9x)
@@ -555,7 +642,7 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, stickin
                    -8.149787010746927 * k5v + -18.52006565999696 * k6v + 22.739487099350505 * k7v +
                    2.4936055526796523 * k8v + -3.0467644718982196 * k9v)
     drive = stage_forcing(t, 0.8571428571428571, h, f, w, cw, sw, force)
-    k10x, k10v = _f2(x10, v10, mu, a, c, drive, sticking)
+    k10x, k10v = _f2(x10, v10, law, drive, sticking)
     x11 = x + h * (2.273310147516538 * k0x + -10.53449546673725 * k3x + -2.0008720582248625 * k4x +
                    -17.9589318631188 * k5x + 27.94888452941996 * k6x + -2.8589982771350235 * k7x +
                    -8.87285693353063 * k8x + 12.360567175794303 * k9x + 0.6433927460157636 * k10x)
@@ -563,21 +650,21 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, stickin
                    -17.9589318631188 * k5v + 27.94888452941996 * k6v + -2.8589982771350235 * k7v +
                    -8.87285693353063 * k8v + 12.360567175794303 * k9v + 0.6433927460157636 * k10v)
     drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)
-    k11x, k11v = _f2(x11, v11, mu, a, c, drive, sticking)
+    k11x, k11v = _f2(x11, v11, law, drive, sticking)
     xn = x + h * (0.054293734116568765 * k0x + 4.450312892752409 * k5x + 1.8915178993145003 * k6x +
                   -5.801203960010585 * k7x + 0.3111643669578199 * k8x + -0.1521609496625161 * k9x +
                   0.20136540080403034 * k10x + 0.04471061572777259 * k11x)
     vn = v + h * (0.054293734116568765 * k0v + 4.450312892752409 * k5v + 1.8915178993145003 * k6v +
                   -5.801203960010585 * k7v + 0.3111643669578199 * k8v + -0.1521609496625161 * k9v +
                   0.20136540080403034 * k10v + 0.04471061572777259 * k11v)
-    k12x, k12v = _f2(xn, vn, mu, a, c, drive, sticking)
+    k12x, k12v = _f2(xn, vn, law, drive, sticking)
     kx = (k1x, k2x, k3x, k4x, k5x, k6x, k7x, k8x, k9x, k10x, k11x, k12x)
     kv = (k1v, k2v, k3v, k4v, k5v, k6v, k7v, k8v, k9v, k10v, k11v, k12v)
     return xn, vn, kx, kv
 
 
 @njit(cache=True)
-def _dense_stages2_dop853(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking):
+def _dense_stages2_dop853(t, h, K, x, v, law, f, w, cw, sw, force, sticking):
     """Rows 13-15 of K (the dense-output stages) of the 2-D system, generated from
     the tableau (see ``step2``)."""
     x13 = x + h * (0.056167502283047954 * K[0, 0] + 0.25350021021662483 * K[6, 0] +
@@ -589,7 +676,7 @@ def _dense_stages2_dop853(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking
                    0.15329179827876568 * K[9, 1] + 0.00820105229563469 * K[10, 1] +
                    0.007567897660545699 * K[11, 1] + -0.008298 * K[12, 1])
     drive = stage_drive(t, 0.1, h, f, w, cw, sw, force)
-    k13x, k13v = _f2(x13, v13, mu, a, c, drive, sticking)
+    k13x, k13v = _f2(x13, v13, law, drive, sticking)
     K[13, 0] = k13x
     K[13, 1] = k13v
     x14 = x + h * (0.03183464816350214 * K[0, 0] + 0.028300909672366776 * K[5, 0] +
@@ -601,7 +688,7 @@ def _dense_stages2_dop853(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking
                    -0.00010834732869724932 * K[10, 1] + 0.0003825710908356584 * K[11, 1] +
                    -0.00034046500868740456 * K[12, 1] + 0.1413124436746325 * k13v)
     drive = stage_drive(t, 0.2, h, f, w, cw, sw, force)
-    k14x, k14v = _f2(x14, v14, mu, a, c, drive, sticking)
+    k14x, k14v = _f2(x14, v14, law, drive, sticking)
     K[14, 0] = k14x
     K[14, 1] = k14v
     x15 = x + h * (-0.42889630158379194 * K[0, 0] + -4.697621415361164 * K[5, 0] +
@@ -613,7 +700,7 @@ def _dense_stages2_dop853(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking
                    0.3567271874552811 * K[8, 1] + -0.0013990241651590145 * K[12, 1] +
                    2.9475147891527724 * k13v + -9.15095847217987 * k14v)
     drive = stage_drive(t, 0.7777777777777778, h, f, w, cw, sw, force)
-    k15x, k15v = _f2(x15, v15, mu, a, c, drive, sticking)
+    k15x, k15v = _f2(x15, v15, law, drive, sticking)
     K[15, 0] = k15x
     K[15, 1] = k15v
 
@@ -648,7 +735,7 @@ def _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol):
 
 
 @njit(cache=True, inline="always")
-def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
+def step2(t, z, h, K, z_new, p, cfg, force, sticking, rtol, atol):
     """DOP853's ``rk_step`` for the two-dimensional system: fills the stage rows of K and
     z_new and returns (error, wall margin) as ``error_norm`` and ``wall_margin`` would
     (DP5, the slower choice, keeps the general loop: one unrolled step compiles in about
@@ -660,8 +747,8 @@ def step2(t, z, h, K, z_new, p, force, sticking, rtol, atol):
     v = z[1]
     k0x = K[0, 0]
     k0v = K[0, 1]
-    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, p[P_MU], p[P_A], p[P_C], p[P_F], w,
-                                     cw, sw, force, sticking)
+    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, force_law(p, cfg), p[P_F], w, cw,
+                                     sw, force, sticking)
     store_stages2(K, kx, kv)
     z_new[0] = xn
     z_new[1] = vn
@@ -714,7 +801,7 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, table, weights, U, force
     C = DP_C if method == METHOD_DP5 else D8_C
     B = DP_B if method == METHOD_DP5 else D8_B
     if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p):
-        step2(t, z, h, K, z_new, p, force, sticking, 1.0, 1.0)
+        step2(t, z, h, K, z_new, p, cfg, force, sticking, 1.0, 1.0)
         return last
     cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, np.int64(1), last, m, p, cfg, table,
                          weights, U, force, sticking, work)
@@ -808,7 +895,7 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights,
                 F[d, j] = h * acc
         return 0
     if size == 2 and is_deterministic(m, cfg, table, p):
-        return dense_prepare2(t, z, z_new, h, K, F, p, force, sticking)
+        return dense_prepare2(t, z, z_new, h, K, F, p, cfg, force, sticking)
     _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, np.int64(13), np.int64(16), m, p, cfg, table,
                 weights, U, force, sticking, work)
     _dop853_coefficients(z, z_new, h, K, F)
@@ -816,11 +903,11 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights,
 
 
 @njit(cache=True)
-def dense_prepare2(t, z, z_new, h, K, F, p, force, sticking):
+def dense_prepare2(t, z, z_new, h, K, F, p, cfg, force, sticking):
     """``dense_prepare`` for DOP853 and the two-dimensional system: the three extra
     stages in scalars (``_dense_stages2_dop853``), the same bits as the general loop."""
     w = p[P_OMEGA]
-    _dense_stages2_dop853(t, h, K, z[0], z[1], p[P_MU], p[P_A], p[P_C], p[P_F], w,
+    _dense_stages2_dop853(t, h, K, z[0], z[1], force_law(p, cfg), p[P_F], w,
                           math.cos(w * t), math.sin(w * t), force, sticking)
     _dop853_coefficients(z, z_new, h, K, F)
     return 3
@@ -1165,8 +1252,9 @@ def _hold(z, m, n, law):
 
 
 @njit(cache=True)
-def escape_bound(y0, p):
-    """The |x_i|, |v_i| beyond which the state counts as escaped (see ESCAPE_FACTOR)."""
+def escape_bound(y0, p, cfg):
+    """The |x_i|, |v_i| beyond which the state counts as escaped (see ESCAPE_FACTOR); the
+    linear stiffness of a polynomial force law is -C[1, 0]."""
     start = 0.0
     for j in range(y0.shape[0]):
         a = abs(y0[j])
@@ -1174,7 +1262,7 @@ def escape_bound(y0, p):
             start = a
     w = p[P_OMEGA]
     drive = abs(p[P_F]) + abs(p[P_F0]) * (1.0 + abs(p[P_A1]))
-    stiffness = abs(p[P_A])
+    stiffness = abs(p[P_POLY + POLY_DEGREE + 1] if cfg[C_FORCE] == FORCE_POLYNOMIAL else p[P_A])
     if stiffness == 0.0:
         return np.inf  # no linear restoring force: no scale to escape from
     return ESCAPE_FACTOR * (1.0 + start + abs(p[P_DELTA])
@@ -1445,7 +1533,7 @@ def step_size(t, h, t_break, hmax, sticking, stick_hmax):
 
 
 @njit(cache=True, inline="always")
-def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, atol):
+def register_step(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
     """Phase "trial step" on the 2-D register path (the DMR, a Monte Carlo sample): one
     DOP853 step of size h from (t, x, v) with f(t, x, v) = (k0x, k0v), every stage in a
     scalar (``_stages2_dop853``) and the error estimate and wall margin from them
@@ -1454,7 +1542,7 @@ def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, a
 
     Returns (err, margin, x_new, v_new, kx, kv), kx and kv the stages 1-12 (the last
     f(t + h, x_new, v_new)), stored in K only when the dense output needs them."""
-    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, math.cos(w * t),
+    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, math.cos(w * t),
                                      math.sin(w * t), force, sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
     return err, margin, xn, vn, kx, kv
@@ -1676,12 +1764,12 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     n_out = t_out.shape[0]
     # the 2-D register path, decided once: its trial step takes and returns scalars only
     two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p)
-    mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
+    law, f_amp, w = force_law(p, cfg), p[P_F], p[P_OMEGA]
     kx = kv = _NO_STAGES
     off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
     t = t_out[0]
     t_end = t_out[n_out - 1]
-    escape = escape_bound(z[:dim], p)
+    escape = escape_bound(z[:dim], p, cfg)
     snap = SNAP * max(1.0, abs(t_end))
     status, j_imp, t_imp, force, force_end = start_run(z, t, t_end, include_start, p, cfg,
                                                        escape, snap, out, stats)
@@ -1742,7 +1830,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
             # ---- trial step into z_new, K[last] = f(t + h_try, z_new)
             if two_d:
                 err, margin, z_new[0], z_new[1], kx, kv = register_step(
-                    t, z[0], z[1], h_try, K[0, 0], K[0, 1], mu, a_lin, c_cub, f_amp, w, force,
+                    t, z[0], z[1], h_try, K[0, 0], K[0, 1], law, f_amp, w, force,
                     sticking, rtol, atol)
                 n_rhs += last
             else:

@@ -16,6 +16,8 @@ import numbers
 import warnings
 from dataclasses import InitVar, dataclass
 
+from opa._forcelaw import ForceLaw
+
 PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n",
                    "x0", "v0")
 UNCERTAIN_PARAMETERS = ("mu", "a", "c")
@@ -194,10 +196,16 @@ class Oscillator:
     n: float = 2.0
     x0: float = -1.0
     v0: float = 0.0
+    force: ForceLaw | None = None
 
     def __post_init__(self):
         for name in PARAMETER_NAMES:
             object.__setattr__(self, name, _finite(name, getattr(self, name)))
+        if self.force is not None and not isinstance(self.force, ForceLaw):
+            if not isinstance(self.force, str):
+                raise ValueError(f"force must be an opa.ForceLaw or an expression in x and v, "
+                                 f"got {self.force!r:.60}")
+            object.__setattr__(self, "force", ForceLaw(self.force))
         if not 0.0 < self.eta <= 1.0:
             raise ValueError(f"eta must be in (0, 1], got {self.eta}")
         if self.omega <= 0.0:
@@ -214,11 +222,41 @@ class Oscillator:
             raise ValueError(f"v0 must be <= 0 when x0 is at the wall, got {self.v0}")
 
     def replace(self, **changes) -> Oscillator:
-        """A copy with some parameters changed (validated again)."""
+        """A copy with some parameters changed (validated again); a change may name a
+        constant of the force law."""
+        law = changes.get("force", self.force)
+        if isinstance(law, ForceLaw):
+            own = {name: changes.pop(name) for name in list(changes) if name in law.constants}
+            if own:
+                changes["force"] = ForceLaw(law.expression, **{**law.constants, **own})
         return dataclasses.replace(self, **changes)
 
     def as_dict(self) -> dict[str, float]:
         return {name: getattr(self, name) for name in PARAMETER_NAMES}
+
+    @property
+    def coefficient_names(self) -> tuple[str, ...]:
+        """The named coefficients of the force law, the parameters that may be uncertain
+        in it: mu, a, c for the paper's law, the names a user's law uses otherwise."""
+        return UNCERTAIN_PARAMETERS if self.force is None else self.force.names
+
+    def value(self, name: str) -> float:
+        """The value of a parameter: one of ``PARAMETER_NAMES`` or a constant of the
+        force law."""
+        if name in PARAMETER_NAMES:
+            return float(getattr(self, name))
+        if self.force is not None and name in self.force.constants:
+            return self.force.constants[name]
+        raise ValueError(f"{name!r:.40} is not a parameter of this oscillator (its force "
+                         f"law's constants: {', '.join(self.coefficient_names)})")
+
+    def law_coefficients(self, values: dict | None = None):
+        """The force law's coefficients C[j, k] (``opa._forcelaw``) at the oscillator's
+        values, or at ``values`` (name -> array) where given; None for the paper's law."""
+        if self.force is None:
+            return None
+        own = {name: self.value(name) for name in self.force.names}
+        return self.force.coefficients({**own, **(values or {})})
 
     @property
     def forcing_period(self) -> float:
@@ -344,7 +382,11 @@ class Uncertainty:
         if sigma < 0.0:
             raise ValueError(f"sigma must be >= 0, got {sigma}")
         object.__setattr__(self, "sigma", sigma)
-        _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS)
+        if not (isinstance(self.parameter, str) and self.parameter.isidentifier()
+                and (self.parameter in UNCERTAIN_PARAMETERS
+                     or self.parameter not in PARAMETER_NAMES)):
+            # a user's force law's constants are checked against the law by opa.System
+            _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS)
         check_flag("allow_negative", self.allow_negative)
 
 

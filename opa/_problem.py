@@ -20,7 +20,9 @@ the same floating-point operations, so every one-dimensional result is unchanged
 bit.
 
 Which coefficients may be uncertain: those of the force law the kernel evaluates at
-each node, :math:`\mu`, :math:`a` and :math:`c` (``UNCERTAIN_PARAMETERS``). The forcing
+each node, :math:`\mu`, :math:`a` and :math:`c` (``UNCERTAIN_PARAMETERS``) of the paper's
+law, or the named constants of a user's law (``opa.ForceLaw``; ``opa.System`` checks the
+names against its oscillator's law). The forcing
 amplitude f, the impulse height F0 and the frequency :math:`\omega` enter the equivalent
 system through the drive and the impulse train, which are one function of time for the
 whole ensemble in today's kernel; they are refused with a message saying so.
@@ -34,10 +36,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from opa._forcelaw import N_COEFFICIENTS
 from opa._model import UNCERTAIN_PARAMETERS, _finite, check_flag
 
-#: the columns of the kernel's parameter table (``opa._kernel.T_MU, T_A, T_C``), by name
+#: the first columns of the kernel's parameter table (``opa._kernel.T_MU, T_A, T_C``), by
+#: name; then a user's force law's N_COEFFICIENTS coefficients C[j, k] (``T_POLY``)
 TABLE_COLUMNS = ("mu", "a", "c")
+#: the width of the kernel's parameter table (``opa._kernel.N_TABLE``)
+TABLE_WIDTH = len(TABLE_COLUMNS) + N_COEFFICIENTS
 #: coefficients that are parameters of the model but cannot be uncertain (yet), and why
 NOT_UNCERTAIN = {
     "f": "the forcing f cos(omega t) is one drive for every node of the equivalent system",
@@ -97,6 +103,8 @@ class Problem:
         ``opa._measure`` (``uniform``, ``beta:2,3``, ``normal-trunc:3``), a bounded chaospy
         distribution or a ``Measure``; one (applies to all) or one per name.
     allow_negative : permit values ``p_bar + sigma xi < 0`` over the support.
+    coefficients : the names that may be uncertain: None for the paper's force law's
+        ``UNCERTAIN_PARAMETERS``, a user's force law's names (``ForceLaw.names``).
 
     Examples
     --------
@@ -105,7 +113,7 @@ class Problem:
     >>> problem.dimension, problem.names, problem.scales
     (2, ('mu', 'c'), (0.02, 0.005))
     >>> xi = np.array([[0.0, 0.0], [1.0, -1.0]])
-    >>> problem.table(xi, Oscillator(mu=0.1, a=1.0, c=0.05)).round(4).tolist()
+    >>> problem.table(xi, Oscillator(mu=0.1, a=1.0, c=0.05))[:, :3].round(4).tolist()
     [[0.1, 1.0, 0.05], [0.12, 1.0, 0.045]]
     """
 
@@ -113,17 +121,20 @@ class Problem:
     scales: tuple = (0.01,)
     laws: tuple = (None,)
     allow_negative: bool = False
+    coefficients: tuple | None = None
 
     def __post_init__(self):
         names = _as_tuple("uncertain", self.names, None)
+        allowed = UNCERTAIN_PARAMETERS if self.coefficients is None else tuple(
+            self.coefficients)
         for name in names:
             if name in NOT_UNCERTAIN:
                 raise ValueError(f"uncertain: {name} cannot be uncertain yet: "
                                  f"{NOT_UNCERTAIN[name]} (uncertain parameters: "
                                  f"{', '.join(UNCERTAIN_PARAMETERS)})")
-            if name not in UNCERTAIN_PARAMETERS:
+            if name not in allowed:
                 raise ValueError(f"uncertain must name parameters among "
-                                 f"{', '.join(UNCERTAIN_PARAMETERS)}, got {name!r:.40}")
+                                 f"{', '.join(allowed)}, got {name!r:.40}")
         if len(set(names)) != len(names):
             raise ValueError(f"uncertain names a parameter twice: {','.join(names)}")
         d = len(names)
@@ -227,19 +238,24 @@ class Problem:
         """Each uncertain parameter's values ``p_bar_j + sigma_j xi_j`` at the points
         ``xi`` (M, d) (or (M,) when d = 1), by name."""
         xi = self._points(xi)
-        return {name: float(getattr(oscillator, name)) + scale * xi[:, j]
+        return {name: oscillator.value(name) + scale * xi[:, j]
                 for j, (name, scale) in enumerate(zip(self.names, self.scales))}
 
     def table(self, xi, oscillator) -> np.ndarray:
-        """The kernel's parameter table at the points ``xi``: shape (M, 3), the columns
-        mu, a, c (``TABLE_COLUMNS``), the oscillator's own value where a column is not
-        uncertain."""
+        """The kernel's parameter table at the points ``xi``: shape (M, TABLE_WIDTH), the
+        columns mu, a, c (``TABLE_COLUMNS``), the oscillator's own value where a column is
+        not uncertain, then a user's force law's coefficients C[j, k] at each point (zeros
+        for the paper's law)."""
         xi = self._points(xi)
-        table = np.empty((len(xi), len(TABLE_COLUMNS)))
+        table = np.zeros((len(xi), TABLE_WIDTH))
         for col, name in enumerate(TABLE_COLUMNS):
             table[:, col] = float(getattr(oscillator, name))
-        for name, values in self.values(xi, oscillator).items():
-            table[:, TABLE_COLUMNS.index(name)] = values
+        values = self.values(xi, oscillator)
+        for name, column in values.items():
+            if name in TABLE_COLUMNS:
+                table[:, TABLE_COLUMNS.index(name)] = column
+        if oscillator.force is not None:
+            table[:, len(TABLE_COLUMNS):] = oscillator.law_coefficients(values)
         return table
 
     def check(self, oscillator) -> None:
@@ -248,7 +264,7 @@ class Problem:
         if self.allow_negative:
             return
         for (name, scale), (lo, _) in zip(zip(self.names, self.scales), self.support):
-            mean = float(getattr(oscillator, name))
+            mean = oscillator.value(name)
             lowest = mean + scale * lo
             if lowest < 0.0 <= mean:
                 raise ValueError(

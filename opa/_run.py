@@ -119,17 +119,18 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     system = (v, iv, m, v, m)  # p, cfg, table, weights, U
     column = nt.UniTuple(f8, 7)  # a component's dense-output coefficients
     stages = nt.UniTuple(f8, 12)  # one component's stages of a 2-D DOP853 step
+    law = nt.UniTuple(f8, 1 + kernel.N_POLY)  # the force law in scalars (force_law)
     helper = {  # leaves and the 2-D stepper: nothing here calls the vector field; what
         # the main group calls first comes first (the main group's leaves give the
         # helper the time to finish the 2-D step before rk_step needs it)
         "is_deterministic": (i8, iv, m, v),
         "last_stage": (i8,),
-        "_stages2_dop853": (f8,) * 14 + (b1,),
+        "_stages2_dop853": (f8,) * 6 + (law,) + (f8,) * 5 + (b1,),
         "_error2": (f8,) * 7 + (stages, stages, f8, f8),
-        "_dense_stages2_dop853": (f8, f8, m) + (f8,) * 10 + (b1,),
+        "_dense_stages2_dop853": (f8, f8, m, f8, f8, law) + (f8,) * 5 + (b1,),
         "_dop853_coefficients": (v, v, f8, m, m),
         "store_stages2": (m, stages, stages),
-        "dense_prepare2": (f8, v, v, f8, m, m, v, f8, b1),
+        "dense_prepare2": (f8, v, v, f8, m, m, v, iv, f8, b1),
         "state_status": (v, i8, f8),
         "first_impulse": (f8, b1, f8, b1),
         "impulse_strength": (f8, v),
@@ -157,7 +158,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "_impact": (f8, v, i8) + system + (f8, v, v, m),
         "error_norm": (i8, v, v, m, f8, f8, f8),
         "wall_margin": (m, i8, i8, f8),
-        "escape_bound": (v, v),
+        "escape_bound": (v, v, iv),
         "rk_step": (i8, f8, v, f8, m, v, v, i8) + system + (f8, b1, m),
         "restep_to": (i8, i8, f8, v, f8, f8, m, m, v, v, i8) + system + (f8, m),
         "dense_prepare": (i8, f8, v, v, f8, m, m, v, i8) + system + (f8, b1, m),
@@ -412,7 +413,11 @@ CHOICE_CODES = {
     "impact_law": {"mean": kernel.LAW_MEAN, "ensemble": kernel.LAW_ENSEMBLE,
                    "saltation": kernel.LAW_SALTATION},
     "method": {"dop853": kernel.METHOD_DOP853, "dp5": kernel.METHOD_DP5},
+    # the force law: the paper's (mu, a, c) or a user's polynomial (its coefficients)
+    "force": {"paper": kernel.FORCE_PAPER, "polynomial": kernel.FORCE_POLYNOMIAL},
 }
+#: the parameter vector's slots of a polynomial force law's coefficients C[j, k]
+POLY_SLOTS = slice(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY)
 
 
 @dataclass(frozen=True)
@@ -431,21 +436,24 @@ class Inputs:
 
 
 def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
-         **choices) -> Inputs:
+         coefficients=None, **choices) -> Inputs:
     """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
     step limit, the impulse train's start, the named choices of :data:`CHOICE_CODES`,
     ``rule`` (:func:`quadrature`'s nodes, weights and basis degree-major: its n + 1 rows
     are the n coefficients' basis functions and the closure's U_{N+1}) and ``table``, the
-    coefficients of the force law at each of its nodes (Q, N_TABLE)."""
+    coefficients of the force law at each of its nodes (Q, N_TABLE). ``coefficients``:
+    a polynomial force law's nominal C[j, k] (N_POLY,), with ``force="polynomial"``."""
     p = np.zeros(kernel.N_PARAMS)
     for name, value in values.items():
         p[PARAMETER_SLOTS[name]] = value
+    if coefficients is not None:
+        p[POLY_SLOTS] = coefficients
     cfg = np.zeros(kernel.N_CFG, dtype=np.int64)
     cfg[kernel.C_NCOEF] = len(rule[2]) - 1
     cfg[kernel.C_AT_ZERO] = int(impulse_at_zero)
     cfg[kernel.C_MAXSTEPS] = int(max_steps)
     slots = {"impulse": kernel.C_IMPULSE, "closure": kernel.C_TRUNC,
-             "impact_law": kernel.C_LAW, "method": kernel.C_METHOD}
+             "impact_law": kernel.C_LAW, "method": kernel.C_METHOD, "force": kernel.C_FORCE}
     for name, value in choices.items():
         cfg[slots[name]] = CHOICE_CODES[name][value]
     _, weights, basis = kernel_quadrature(rule)
@@ -463,18 +471,24 @@ def stack(inputs) -> Inputs:
 
 
 #: the parameter vector's slots of the table's columns
-TABLE_SLOTS = (kernel.P_MU, kernel.P_A, kernel.P_C)
+TABLE_SLOTS = (kernel.P_MU, kernel.P_A, kernel.P_C, *range(kernel.P_POLY,
+                                                            kernel.P_POLY + kernel.N_POLY))
 
 
-def sampled(inputs: Inputs, columns: dict) -> Inputs:
+def sampled(inputs: Inputs, columns: dict, coefficients=None) -> Inputs:
     """B sampled deterministic systems (N = 0, a one-node table of their own
     coefficients) that are ``inputs`` (a deterministic system's) with each named
-    parameter of ``columns`` at its B values."""
+    parameter of ``columns`` at its B values (a user's force law's constants have no
+    slot: their effect is ``coefficients``, the law's C[j, k] of each system, (B, N_POLY)
+    or (1, N_POLY))."""
     columns = {name: np.asarray(values, dtype=float) for name, values in columns.items()}
     B = len(next(iter(columns.values())))
     P = np.repeat(np.asarray(inputs.p)[None, :], B, axis=0)
     for name, values in columns.items():
-        P[:, PARAMETER_SLOTS[name]] = values
+        if name in PARAMETER_SLOTS:
+            P[:, PARAMETER_SLOTS[name]] = values
+    if coefficients is not None:
+        P[:, POLY_SLOTS] = coefficients
     cfgs = np.repeat(np.asarray(inputs.cfg)[None, :], B, axis=0)
     U = np.zeros((B, 1, 2))
     U[:, 0, 0] = 1.0

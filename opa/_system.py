@@ -21,6 +21,7 @@ from opa._model import (
     IMPULSE_MODELS,
     PARAMETER_NAMES,
     TRUNCATIONS,
+    UNCERTAIN_PARAMETERS,
     Oscillator,
     SolverOptions,
     Uncertainty,
@@ -124,7 +125,7 @@ class System:
             problem = self.uncertain
         else:
             problem = Problem(self.uncertain, self.sigma, self.distribution,
-                              self.allow_negative)
+                              self.allow_negative, _allowed(self.oscillator, self.sigma))
         if problem.dimension == 1:  # the fields as they always were
             unc = Uncertainty(problem.scales[0], problem.names[0], problem.allow_negative)
             object.__setattr__(self, "uncertain", unc.parameter)
@@ -139,6 +140,7 @@ class System:
                                  f"uncertain parameter; this system has {problem.dimension} "
                                  f"({','.join(problem.names)}): use truncation 'galerkin'")
         object.__setattr__(self, "allow_negative", problem.allow_negative)
+        _check_law(self.oscillator, problem, self.truncation)
         object.__setattr__(self, "order", check_order(self.order))
         _choice("truncation", self.truncation, TRUNCATIONS)
         _choice("impact_law", self.impact_law, IMPACT_LAWS)
@@ -159,7 +161,8 @@ class System:
     def problem(self) -> Problem:
         """The uncertain parameters, their scales and joint law (:class:`opa.Problem`),
         made once per System (every chunk of samples asks for it)."""
-        return Problem(self.uncertain, self.sigma, self.distribution, self.allow_negative)
+        return Problem(self.uncertain, self.sigma, self.distribution, self.allow_negative,
+                       _allowed(self.oscillator, self.sigma))
 
     def __getstate__(self):
         # the problem's parsed laws may hold closures; a copy in another process rebuilds it
@@ -283,11 +286,13 @@ class System:
                       chatter_velocity=options.chatter_velocity,
                       max_step=options.max_step)
         rule = quadrature(self.order) if rule is None else rule
+        law = o.law_coefficients()
         return pack(values, max_steps=options.max_steps,
                     impulse_at_zero=self.impulse_at_zero, rule=rule,
                     table=self.problem.table(rule[0], o), impulse=self.impulse,
                     closure=self.closure, impact_law=self.impact_law,
-                    method=options.method)
+                    method=options.method, coefficients=None if law is None else law[0],
+                    force="paper" if law is None else "polynomial")
 
     @property
     def closure(self) -> str:
@@ -305,8 +310,9 @@ class System:
         if values is None:
             columns = self.problem.values(xi, self.oscillator)
         else:
-            columns = {self.one_dimensional("values=").uncertain: values}
-        return sampled(self.deterministic().kernel_inputs(options), columns)
+            columns = {self.one_dimensional("values=").uncertain: np.asarray(values, float)}
+        return sampled(self.deterministic().kernel_inputs(options), columns,
+                       self.oscillator.law_coefficients(columns))
 
     def initial_state(self, initial=None) -> np.ndarray:
         """The start of a run: x_0 = x0, v_0 = v0 and the higher coefficients 0, or
@@ -340,6 +346,36 @@ class System:
                     impulse=self.impulse, pulse_width=float(self.pulse_width),
                     impulse_at_zero=int(self.impulse_at_zero), truncation=self.truncation,
                     impact_law=self.impact_law, allow_negative=int(self.allow_negative))
+
+
+def _allowed(oscillator: Oscillator, sigma) -> tuple | None:
+    """The names a problem may make uncertain: None (mu, a, c) for the paper's law, a
+    user's law's constants, and mu, a, c too while every scale is 0 (the deterministic
+    system, whose default ``uncertain="mu"`` names nothing the law uses)."""
+    if oscillator.force is None:
+        return None
+    names = oscillator.coefficient_names
+    try:
+        zero = not np.any(np.asarray(sigma, dtype=float))
+    except (TypeError, ValueError):
+        zero = False  # the Problem refuses it, naming it
+    return names + tuple(n for n in UNCERTAIN_PARAMETERS if n not in names) if zero else names
+
+
+def _check_law(oscillator: Oscillator, problem: Problem, truncation: str) -> None:
+    """The uncertain parameters are coefficients of the oscillator's force law (mu, a, c
+    of the paper's, the named constants of a user's; any name at scale 0), and the
+    paper's truncation is the paper's law's."""
+    names = oscillator.coefficient_names
+    for name, scale in zip(problem.names, problem.scales):
+        if name not in names and scale != 0.0:
+            law = ("the paper's force law" if oscillator.force is None
+                   else f"the force law {oscillator.force.expression!r:.60}")
+            raise ValueError(f"uncertain must name parameters among {', '.join(names)} (the "
+                             f"coefficients of {law}), got {name!r:.40}")
+    if truncation == "paper" and oscillator.force is not None:
+        raise ValueError("truncation 'paper' (eq. (27)) closes the paper's force law; a "
+                         "user's force law takes truncation 'galerkin'")
 
 
 SYSTEM_FIELDS = tuple(f.name for f in dataclasses.fields(System))

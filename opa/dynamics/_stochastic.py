@@ -920,7 +920,7 @@ def _span_checked(parameter, values, oscillators):
 def _check_spread(oscillator, uncertain: str, sigma: float, measure, xtol: float) -> None:
     """Refuse a sigma whose samples ``p_bar + sigma xi`` leave the uncertain parameter's
     range (negative, or beyond the floats) or that double precision cannot resolve."""
-    mean = float(getattr(oscillator, uncertain))
+    mean = oscillator.value(uncertain)
     lowest, highest = mean + sigma * measure.lo, mean + sigma * measure.hi
     if not (math.isfinite(lowest) and math.isfinite(highest)):
         raise DiagramInputError("{sigma} {0:g} takes {1} = {2:g} + sigma xi beyond the "

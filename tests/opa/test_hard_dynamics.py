@@ -138,14 +138,15 @@ def test_error_norm_rejects_a_non_finite_trial_step(bad, method):
 
 def test_escape_bound_follows_the_documented_formula():
     osc = Oscillator(f=2.0, omega=2.8, F0=10.0, a1=0.5, delta=0.3, x0=-1.5, v0=0.7)
-    p = kernel_inputs(osc, SolverOptions()).p
+    inputs = kernel_inputs(osc, SolverOptions())
+    p, cfg = inputs.p, inputs.cfg
     y0 = np.array([osc.x0, osc.v0])
     force = 2.0 + 10.0 * 1.5
     a = osc.a
     expected = 1e3 * (1.0 + 1.5 + 0.3 + force * (1.0 + 1.0 / 2.8 + 1.0 / 2.8**2 + 1.0 / a))
-    assert kernel.escape_bound(y0, p) == pytest.approx(expected, rel=1e-14)
+    assert kernel.escape_bound(y0, p, cfg) == pytest.approx(expected, rel=1e-14)
     p[kernel.P_A] = 0.0  # no restoring force, no scale: nothing escapes
-    assert kernel.escape_bound(y0, p) == np.inf
+    assert kernel.escape_bound(y0, p, cfg) == np.inf
 
 
 def test_a_weak_spring_is_not_an_escape():
@@ -173,8 +174,8 @@ def test_an_ensemble_stops_at_its_first_failed_sample():
 def test_paper_cases_stay_far_inside_the_escape_bound(section):
     """The bound never fires on the paper's cases: they stay 100 times below it."""
     osc = preset(section)
-    p = kernel_inputs(osc, SolverOptions()).p
-    bound = kernel.escape_bound(np.array([osc.x0, osc.v0]), p)
+    inputs = kernel_inputs(osc, SolverOptions())
+    bound = kernel.escape_bound(np.array([osc.x0, osc.v0]), inputs.p, inputs.cfg)
     ds = simulate_dmr(osc, periods=100, per_period=16)
     assert 100.0 * max(np.abs(ds.x).max(), np.abs(ds.v).max()) < bound
 

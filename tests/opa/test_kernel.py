@@ -85,9 +85,13 @@ def test_cuda_kernels_live_only_in_the_gpu_module():
 
 
 def test_the_layout_indices_are_a_permutation():
-    params = [getattr(kernel, n) for n in dir(kernel) if n.startswith("P_")]
+    params = [getattr(kernel, n) for n in dir(kernel) if n.startswith("P_") and n != "P_POLY"]
+    params += range(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY)  # C[j, k] of a user's law
     cfg = [getattr(kernel, n) for n in dir(kernel) if n.startswith("C_")]
     stats = [getattr(kernel, n) for n in dir(kernel) if n.startswith("S_")]
+    table = [kernel.T_MU, kernel.T_A, kernel.T_C, *range(kernel.T_POLY,
+                                                         kernel.T_POLY + kernel.N_POLY)]
+    assert sorted(table) == list(range(kernel.N_TABLE))
     assert sorted(params) == list(range(kernel.N_PARAMS))
     assert sorted(cfg) == list(range(kernel.N_CFG))
     assert sorted(stats) == list(range(kernel.N_STATS))
@@ -109,13 +113,15 @@ def test_the_packer_puts_every_model_field_in_its_slot():
             kernel.P_A1: 0.41, kernel.P_OMEGA1: 4.3, kernel.P_N: 3.0, kernel.P_TAU: 0.53,
             kernel.P_SIGMA: 0.061, kernel.P_CHATTER_V: 3e-6,
             kernel.P_HMAX: 0.59}
+    want.update({kernel.P_POLY + i: 0.0 for i in range(kernel.N_POLY)})  # the paper's law
     assert len(want) == kernel.N_PARAMS
     for slot, value in want.items():
         assert p[slot] == value, slot
     want_cfg = {kernel.C_NCOEF: 8,
                 kernel.C_IMPULSE: kernel.IMPULSE_PULSE, kernel.C_AT_ZERO: 0,
                 kernel.C_TRUNC: kernel.TRUNC_PAPER_X, kernel.C_LAW: kernel.LAW_SALTATION,
-                kernel.C_MAXSTEPS: 12345, kernel.C_METHOD: kernel.METHOD_DP5}
+                kernel.C_MAXSTEPS: 12345, kernel.C_METHOD: kernel.METHOD_DP5,
+                kernel.C_FORCE: kernel.FORCE_PAPER}
     assert len(want_cfg) == kernel.N_CFG
     for slot, value in want_cfg.items():
         assert cfg[slot] == value, slot
@@ -237,7 +243,7 @@ def unrolled_step(name, A, C, B, last):
     every stage a scalar, the sums in the order of the general loops (zero coefficients,
     which add exact zeros there, skipped)."""
     lines = ["@njit(cache=True)",
-             f"def {name}(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, sticking):",
+             f"def {name}(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):",
              '    """One step of the 2-D system, generated from the tableau (see ``step2``)."""']
     for s in range(1, last):
         for comp, state in (("x", "x"), ("v", "v")):
@@ -245,14 +251,14 @@ def unrolled_step(name, A, C, B, last):
             head = f"    {state}{s} = {state} + h * ("
             lines.append(head + _wrapped_sum(terms, len(head)) + ")")
         lines.append(f"    drive = stage_forcing(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
-        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, mu, a, c, drive, sticking)")
+        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, law, drive, sticking)")
     for comp in ("x", "v"):
         terms = [f"{float(B[r])!r} * k{r}{comp}" for r in range(last) if B[r] != 0.0]
         head = f"    {comp}n = {comp} + h * ("
         lines.append(head + _wrapped_sum(terms, len(head)) + ")")
     if float(C[last - 1]) != 1.0:  # else stage last - 1 is at t + h too: its force is reused
         lines.append("    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)")
-    lines.append(f"    k{last}x, k{last}v = _f2(xn, vn, mu, a, c, drive, sticking)")
+    lines.append(f"    k{last}x, k{last}v = _f2(xn, vn, law, drive, sticking)")
     for comp in ("x", "v"):
         names = [f"k{s}{comp}" for s in range(1, last + 1)]
         lines.append(f"    k{comp} = ({_wrapped_sum(names, 10).replace(' +', ',')})")
@@ -264,7 +270,7 @@ def unrolled_dense_stages(name, A, C, first, stop):
     """Source of the kernel's dense-output stages first..stop-1 of the two-dimensional
     system: the earlier stages read from K, the new ones kept in scalars and stored."""
     lines = ["@njit(cache=True)",
-             f"def {name}(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking):",
+             f"def {name}(t, h, K, x, v, law, f, w, cw, sw, force, sticking):",
              f'    """Rows {first}-{stop - 1} of K (the dense-output stages) of the 2-D system, '
              'generated from',
              '    the tableau (see ``step2``)."""']
@@ -275,7 +281,7 @@ def unrolled_dense_stages(name, A, C, first, stop):
             head = f"    {comp}{s} = {comp} + h * ("
             lines.append(head + _wrapped_sum(terms, len(head)) + ")")
         lines.append(f"    drive = stage_drive(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
-        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, mu, a, c, drive, sticking)")
+        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, law, drive, sticking)")
         lines.append(f"    K[{s}, 0] = k{s}x")
         lines.append(f"    K[{s}, 1] = k{s}v")
     return "\n".join(lines) + "\n"

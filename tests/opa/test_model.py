@@ -198,10 +198,17 @@ def test_negative_or_non_finite_sigma_is_refused(sigma):
         Uncertainty(sigma)
 
 
-@pytest.mark.parametrize("parameter", ["eta", "omega", "MU", ""])
+@pytest.mark.parametrize("parameter", ["eta", "omega", "", "x-y"])
 def test_unknown_uncertain_parameter_is_refused(parameter):
     with pytest.raises(ValueError, match=names_parameter_and_value("uncertain", parameter)):
         Uncertainty(0.1, parameter)
+
+
+def test_a_name_that_is_no_coefficient_of_the_law_is_refused_by_the_system():
+    """``Uncertainty`` cannot know a user's force law's constants; the System can."""
+    assert Uncertainty(0.1, "MU").parameter == "MU"
+    with pytest.raises(ValueError, match="among mu, a, c.*got 'MU'"):
+        System(sigma=0.1, uncertain="MU")
 
 
 @pytest.mark.parametrize("parameter", ["mu", "a", "c"])
