@@ -31,6 +31,8 @@ THEMES = {
     "tests/opa/test_opa_system.py": "the OPA equivalent system against the paper's equations",
     "tests/opa/test_hard_dynamics.py": "failures and time bounds across kernel, runs, orbits",
     "tests/opa/dynamics/test_pool.py": "the sweep's worker processes die with their owner",
+    "tests/opa/dynamics/test_nordmark.py":
+        "Nordmark's square-root law near grazing, on a user's force law",
     "tests/opa/cli/test_bad_inputs.py": "the hostile-user corpus of every subcommand",
     "tests/compare/test_report_sentences.py": "the validate report's sentences (compare._findings)",
     "tests/opa/cli/test_commands.py": "the happy path of every subcommand",
