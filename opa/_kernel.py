@@ -81,7 +81,10 @@ P_POLY = 15
 N_PARAMS = P_POLY + N_POLY
 
 C_NCOEF, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD, C_FORCE = range(8)
-N_CFG = 8
+# C_WALL_NODES = 1: the restitution eta or the wall delta is uncertain, so the impact law
+# reads them at each node from the table (columns T_ETA, T_DELTA; p holds their means)
+C_WALL_NODES = 8
+N_CFG = 9
 # The force law g(x, v): the paper's mu (1 - v^2) v - a x - c x^3 (from mu, a, c), or a
 # polynomial sum_jk C[j, k] x^j v^k (a user's model, from its coefficients).
 FORCE_PAPER, FORCE_POLYNOMIAL = 0, 1
@@ -92,7 +95,10 @@ FORCE_PAPER, FORCE_POLYNOMIAL = 0, 1
 # paper's law reads mu, a, c; a polynomial law its coefficients C[j, k] at T_POLY + 4 j + k.
 T_MU, T_A, T_C = 0, 1, 2
 T_POLY = 3
-N_TABLE = T_POLY + N_POLY
+# the restitution and the wall at each node (read only with cfg[C_WALL_NODES] = 1)
+T_ETA = T_POLY + N_POLY
+T_DELTA = T_ETA + 1
+N_TABLE = T_DELTA + 1
 
 IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
 # The paper's closure (eq. (27)) adds back sigma/2 times the projection on U_{N+1} of the
@@ -1193,11 +1199,23 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
     ``S = dR + (f(t*, R y-) - dR f(t*, y-)) e_0^T / v_0-`` (Aizerman-Gantmacher), with
     dR the Jacobian of the reset (mean and ensemble laws only: the Python layer refuses
     tangents with the saltation law). Returns (v_minus, evaluations).
+
+    With an uncertain restitution or wall (``cfg[C_WALL_NODES]``; p holds their means
+    eta_bar, delta_bar over the rule, the table their values at each node): the mean
+    reaches the mean wall, x_0 = delta_bar; ``mean`` reflects v_0 with eta_bar;
+    ``ensemble`` projects each node's own reflection, v_i -> -sum_k w_k U_i(xi_k)
+    eta(xi_k) v(xi_k); ``saltation`` takes the deviations from the wall, y_i = x_i -
+    delta_i, to -eta_bar y_i and the velocities to -eta_bar v_i + k y_i - eta_i v_0-
+    (the first-order effect of each node's own restitution), with delta_i, eta_i the
+    coefficients of delta(xi) and eta(xi). The Python layer refuses tangents there.
     """
     n = cfg[C_NCOEF]
     dim = 2 * n
     eta = p[P_ETA]
     law = cfg[C_LAW]
+    if cfg[C_WALL_NODES] != 0 and n > 1:
+        return _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus,
+                                work)
     m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
     off = np.bool_(False)
     z[0] = p[P_DELTA]
@@ -1232,6 +1250,51 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
                 d = -eta if (r >= n and r < n + top) else 1.0
                 z[dim + r * m + c] = d * z[dim + r * m + c] + (f_plus[r] - d * f_minus[r]) * w0
     return v_minus, evals
+
+
+@njit(cache=True)
+def _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work):
+    """``_impact`` with the restitution or the wall uncertain (see there); no tangents."""
+    n = cfg[C_NCOEF]
+    q = table.shape[0]
+    eta = p[P_ETA]
+    law = cfg[C_LAW]
+    m0 = np.int64(0)
+    off = np.bool_(False)
+    z[0] = p[P_DELTA]
+    v_minus = z[n]
+    if law == LAW_MEAN:
+        z[n] = -eta * z[n]
+        return v_minus, 0
+    if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
+        a_minus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
+                               f_minus, work)
+        z[n] = -eta * z[n]
+        a_plus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
+                              f_plus, work)
+        k = (a_plus + eta * a_minus) / v_minus
+        for i in range(1, n):
+            delta_i = 0.0
+            eta_i = 0.0
+            for j in range(q):
+                delta_i += weights[j] * U[j, i] * table[j, T_DELTA]
+                eta_i += weights[j] * U[j, i] * table[j, T_ETA]
+            y = z[i] - delta_i
+            z[i] = delta_i - eta * y
+            z[n + i] = -eta * z[n + i] + k * y - eta_i * v_minus
+        return v_minus, 2
+    # the ensemble law (and a graze under the saltation law): each node's own reflection
+    for j in range(q):
+        vs = 0.0
+        for i in range(n):
+            vs += z[n + i] * U[j, i]
+        work[1, j] = weights[j] * table[j, T_ETA] * vs
+    for i in range(n):
+        acc = 0.0
+        for j in range(q):
+            acc += work[1, j] * U[j, i]
+        z[n + i] = -acc
+    return v_minus, 0
 
 
 @njit(cache=True)

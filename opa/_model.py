@@ -21,6 +21,8 @@ from opa._forcelaw import ForceLaw
 PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n",
                    "x0", "v0")
 UNCERTAIN_PARAMETERS = ("mu", "a", "c")
+#: the impact's parameters, which may be uncertain too (the impact law reads them per node)
+IMPACT_PARAMETERS = ("eta", "delta")
 METHODS = ("dop853", "dp5")
 IMPULSE_MODELS = ("dirac", "pulse")
 TRUNCATIONS = ("galerkin", "paper")
@@ -235,6 +237,12 @@ class Oscillator:
         return {name: getattr(self, name) for name in PARAMETER_NAMES}
 
     @property
+    def uncertain_names(self) -> tuple[str, ...]:
+        """The parameters that may be uncertain: the force law's coefficients and the
+        impact's restitution eta and wall delta."""
+        return self.coefficient_names + IMPACT_PARAMETERS
+
+    @property
     def coefficient_names(self) -> tuple[str, ...]:
         """The named coefficients of the force law, the parameters that may be uncertain
         in it: mu, a, c for the paper's law, the names a user's law uses otherwise."""
@@ -383,10 +391,10 @@ class Uncertainty:
             raise ValueError(f"sigma must be >= 0, got {sigma}")
         object.__setattr__(self, "sigma", sigma)
         if not (isinstance(self.parameter, str) and self.parameter.isidentifier()
-                and (self.parameter in UNCERTAIN_PARAMETERS
+                and (self.parameter in UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS
                      or self.parameter not in PARAMETER_NAMES)):
             # a user's force law's constants are checked against the law by opa.System
-            _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS)
+            _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS)
         check_flag("allow_negative", self.allow_negative)
 
 

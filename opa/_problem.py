@@ -37,13 +37,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from opa._forcelaw import N_COEFFICIENTS
-from opa._model import UNCERTAIN_PARAMETERS, _finite, check_flag
+from opa._model import IMPACT_PARAMETERS, UNCERTAIN_PARAMETERS, _finite, check_flag
 
 #: the first columns of the kernel's parameter table (``opa._kernel.T_MU, T_A, T_C``), by
 #: name; then a user's force law's N_COEFFICIENTS coefficients C[j, k] (``T_POLY``)
 TABLE_COLUMNS = ("mu", "a", "c")
+#: the last columns: the restitution and the wall at each point (``T_ETA, T_DELTA``)
+WALL_COLUMNS = IMPACT_PARAMETERS
 #: the width of the kernel's parameter table (``opa._kernel.N_TABLE``)
-TABLE_WIDTH = len(TABLE_COLUMNS) + N_COEFFICIENTS
+TABLE_WIDTH = len(TABLE_COLUMNS) + N_COEFFICIENTS + len(WALL_COLUMNS)
 #: coefficients that are parameters of the model but cannot be uncertain (yet), and why
 NOT_UNCERTAIN = {
     "f": "the forcing f cos(omega t) is one drive for every node of the equivalent system",
@@ -125,8 +127,8 @@ class Problem:
 
     def __post_init__(self):
         names = _as_tuple("uncertain", self.names, None)
-        allowed = UNCERTAIN_PARAMETERS if self.coefficients is None else tuple(
-            self.coefficients)
+        allowed = UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS if self.coefficients is None \
+            else tuple(self.coefficients)
         for name in names:
             if name in NOT_UNCERTAIN:
                 raise ValueError(f"uncertain: {name} cannot be uncertain yet: "
@@ -248,22 +250,32 @@ class Problem:
         for the paper's law)."""
         xi = self._points(xi)
         table = np.zeros((len(xi), TABLE_WIDTH))
-        for col, name in enumerate(TABLE_COLUMNS):
-            table[:, col] = float(getattr(oscillator, name))
+        columns = (*TABLE_COLUMNS, *[None] * N_COEFFICIENTS, *WALL_COLUMNS)
         values = self.values(xi, oscillator)
-        for name, column in values.items():
-            if name in TABLE_COLUMNS:
-                table[:, TABLE_COLUMNS.index(name)] = column
+        for col, name in enumerate(columns):
+            if name is not None:
+                table[:, col] = values.get(name, float(getattr(oscillator, name)))
         if oscillator.force is not None:
-            table[:, len(TABLE_COLUMNS):] = oscillator.law_coefficients(values)
+            table[:, len(TABLE_COLUMNS):len(TABLE_COLUMNS) + N_COEFFICIENTS] = \
+                oscillator.law_coefficients(values)
         return table
+
+    def varies_at_the_wall(self) -> bool:
+        """Whether the restitution or the wall is uncertain (at a non-zero scale): the
+        impact law then reads them at each node."""
+        return any(name in WALL_COLUMNS and scale != 0.0
+                   for name, scale in zip(self.names, self.scales))
 
     def check(self, oscillator) -> None:
         """Refuse values ``p_bar + sigma xi < 0`` over the support unless allowed (a
-        parameter whose mean is already negative is the user's choice)."""
+        parameter whose mean is already negative is the user's choice); a restitution
+        outside (0, 1] or a wall below the start x0 anywhere on the support always."""
+        self._check_wall(oscillator)
         if self.allow_negative:
             return
         for (name, scale), (lo, _) in zip(zip(self.names, self.scales), self.support):
+            if name in WALL_COLUMNS:
+                continue  # a wall may lie at x < 0; eta is held in (0, 1] above
             mean = oscillator.value(name)
             lowest = mean + scale * lo
             if lowest < 0.0 <= mean:
@@ -271,6 +283,22 @@ class Problem:
                     f"sigma = {scale} with xi down to {lo:g} makes {name} = {mean:g} + sigma "
                     f"xi = {lowest:.6g} negative for some samples; pass allow_negative=True "
                     f"(--allow-negative) if that is intended")
+
+    def _check_wall(self, oscillator) -> None:
+        for (name, scale), (lo, hi) in zip(zip(self.names, self.scales), self.support):
+            if name not in WALL_COLUMNS or scale == 0.0:
+                continue
+            mean = oscillator.value(name)
+            low, high = sorted((mean + scale * lo, mean + scale * hi))
+            if name == "eta" and not (0.0 < low and high <= 1.0):
+                raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] makes eta = "
+                                 f"{mean:g} + sigma xi leave (0, 1] (from {low:.6g} to "
+                                 f"{high:.6g}): every restitution must be in (0, 1]")
+            if name == "delta" and low < oscillator.x0:
+                raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] puts the wall "
+                                 f"delta = {mean:g} + sigma xi down to {low:.6g}, below the start "
+                                 f"x0 = {oscillator.x0:g}: every sampled system must start "
+                                 f"below its wall")
 
     # ------------------------------------------------------------------ sampling
     def sample(self, samples: int, sampler: str = "sobol", seed: int | None = 0,

@@ -156,6 +156,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "stage_drive": (f8,) * 8,
         "_stage_rows": (f8, v, f8, m, v, table_m, table_v, i8, i8, i8) + system + (f8, b1, m),
         "_impact": (f8, v, i8) + system + (f8, v, v, m),
+        "_impact_at_nodes": (f8, v, v, iv, m, v, m, f8, v, v, m),
         "error_norm": (i8, v, v, m, f8, f8, f8),
         "wall_margin": (m, i8, i8, f8),
         "escape_bound": (v, v, iv),
@@ -436,13 +437,15 @@ class Inputs:
 
 
 def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
-         coefficients=None, **choices) -> Inputs:
+         coefficients=None, wall_nodes: bool = False, **choices) -> Inputs:
     """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
     step limit, the impulse train's start, the named choices of :data:`CHOICE_CODES`,
     ``rule`` (:func:`quadrature`'s nodes, weights and basis degree-major: its n + 1 rows
     are the n coefficients' basis functions and the closure's U_{N+1}) and ``table``, the
     coefficients of the force law at each of its nodes (Q, N_TABLE). ``coefficients``:
-    a polynomial force law's nominal C[j, k] (N_POLY,), with ``force="polynomial"``."""
+    a polynomial force law's nominal C[j, k] (N_POLY,), with ``force="polynomial"``.
+    ``wall_nodes``: the restitution or the wall varies over the nodes (the table's T_ETA,
+    T_DELTA); p then holds their means over the rule."""
     p = np.zeros(kernel.N_PARAMS)
     for name, value in values.items():
         p[PARAMETER_SLOTS[name]] = value
@@ -461,6 +464,10 @@ def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
     if table.shape != (len(weights), kernel.N_TABLE):
         raise ValueError(f"the parameter table must have shape ({len(weights)}, "
                          f"{kernel.N_TABLE}), got {table.shape}")
+    if wall_nodes:
+        cfg[kernel.C_WALL_NODES] = 1
+        for slot, col in ((kernel.P_ETA, kernel.T_ETA), (kernel.P_DELTA, kernel.T_DELTA)):
+            p[slot] = float(weights @ table[:, col] / weights.sum())
     return Inputs(p, cfg, table, weights, basis)
 
 
@@ -471,8 +478,8 @@ def stack(inputs) -> Inputs:
 
 
 #: the parameter vector's slots of the table's columns
-TABLE_SLOTS = (kernel.P_MU, kernel.P_A, kernel.P_C, *range(kernel.P_POLY,
-                                                            kernel.P_POLY + kernel.N_POLY))
+TABLE_SLOTS = (kernel.P_MU, kernel.P_A, kernel.P_C,
+               *range(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY), kernel.P_ETA, kernel.P_DELTA)
 
 
 def sampled(inputs: Inputs, columns: dict, coefficients=None) -> Inputs:
@@ -758,6 +765,10 @@ def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "tr
     if limit is not None:
         cfg = cfg.copy()
         cfg[kernel.C_MAXSTEPS] = limit
+    if variational is not None and cfg[kernel.C_WALL_NODES] and cfg[kernel.C_NCOEF] > 1:
+        raise ValueError("tangents (Floquet multipliers, Lyapunov exponents) of an OPA system "
+                         "with an uncertain eta or delta are not implemented: the impact law "
+                         "reads them per node and has no saltation matrix here yet")
     W = np.zeros((len(y0), 0)) if variational is None else variational.tangent
     if W.shape[0] != len(y0):
         raise ValueError(f"tangent must have {len(y0)} rows, got shape {W.shape}")

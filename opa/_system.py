@@ -21,6 +21,7 @@ from opa._model import (
     IMPULSE_MODELS,
     PARAMETER_NAMES,
     TRUNCATIONS,
+    IMPACT_PARAMETERS,
     UNCERTAIN_PARAMETERS,
     Oscillator,
     SolverOptions,
@@ -77,8 +78,11 @@ class System:
     Parameters
     ----------
     oscillator : the parameters of eq. (1) (the paper's section 3.2 set when omitted).
-    sigma, uncertain : intensity and name (``mu``, ``a`` or ``c``) of the uncertain
-        parameter. The DMR ignores them (:meth:`deterministic`).
+    sigma, uncertain : intensity and name (``mu``, ``a`` or ``c``, the impact's ``eta``
+        or ``delta``, or a constant of a user's force law) of the uncertain parameter,
+        or several (``"mu,c"`` and a tuple of scales, or an :class:`opa.Problem`);
+        ``uncertain`` defaults to ``mu``, or to the first constant of a user's force law.
+        The DMR ignores them (:meth:`deterministic`).
     distribution : the law of xi: None (the semicircle of the paper), a name of
         ``opa._measure.DISTRIBUTIONS``, a chaospy distribution with bounded support or an
         ``opa._measure.Measure``.
@@ -104,7 +108,7 @@ class System:
 
     oscillator: Oscillator = field(default_factory=Oscillator)
     sigma: float = DEFAULT_SIGMA
-    uncertain: str = "mu"
+    uncertain: str | None = None
     distribution: object = None
     allow_negative: bool = False
     order: int = DEFAULT_ORDER
@@ -117,6 +121,9 @@ class System:
     def __post_init__(self):
         if not isinstance(self.oscillator, Oscillator):
             raise ValueError(f"oscillator must be an opa.Oscillator, got {self.oscillator!r:.80}")
+        if self.uncertain is None:  # mu, or the first constant of a user's force law
+            object.__setattr__(self, "uncertain", "mu" if self.oscillator.force is None
+                               else self.oscillator.uncertain_names[0])
         if isinstance(self.uncertain, Problem):
             if (self.sigma, self.distribution, self.allow_negative) != (DEFAULT_SIGMA, None,
                                                                        False):
@@ -292,7 +299,8 @@ class System:
                     table=self.problem.table(rule[0], o), impulse=self.impulse,
                     closure=self.closure, impact_law=self.impact_law,
                     method=options.method, coefficients=None if law is None else law[0],
-                    force="paper" if law is None else "polynomial")
+                    force="paper" if law is None else "polynomial",
+                    wall_nodes=self.problem.varies_at_the_wall())
 
     @property
     def closure(self) -> str:
@@ -354,7 +362,7 @@ def _allowed(oscillator: Oscillator, sigma) -> tuple | None:
     system, whose default ``uncertain="mu"`` names nothing the law uses)."""
     if oscillator.force is None:
         return None
-    names = oscillator.coefficient_names
+    names = oscillator.uncertain_names
     try:
         zero = not np.any(np.asarray(sigma, dtype=float))
     except (TypeError, ValueError):
@@ -366,7 +374,10 @@ def _check_law(oscillator: Oscillator, problem: Problem, truncation: str) -> Non
     """The uncertain parameters are coefficients of the oscillator's force law (mu, a, c
     of the paper's, the named constants of a user's; any name at scale 0), and the
     paper's truncation is the paper's law's."""
-    names = oscillator.coefficient_names
+    if truncation == "paper" and any(name in IMPACT_PARAMETERS for name in problem.names):
+        raise ValueError("truncation 'paper' (eq. (27)) closes a force law's coefficient; an "
+                         "uncertain eta or delta takes truncation 'galerkin'")
+    names = oscillator.uncertain_names
     for name, scale in zip(problem.names, problem.scales):
         if name not in names and scale != 0.0:
             law = ("the paper's force law" if oscillator.force is None

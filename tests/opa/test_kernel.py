@@ -89,8 +89,8 @@ def test_the_layout_indices_are_a_permutation():
     params += range(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY)  # C[j, k] of a user's law
     cfg = [getattr(kernel, n) for n in dir(kernel) if n.startswith("C_")]
     stats = [getattr(kernel, n) for n in dir(kernel) if n.startswith("S_")]
-    table = [kernel.T_MU, kernel.T_A, kernel.T_C, *range(kernel.T_POLY,
-                                                         kernel.T_POLY + kernel.N_POLY)]
+    table = [kernel.T_MU, kernel.T_A, kernel.T_C, kernel.T_ETA, kernel.T_DELTA,
+             *range(kernel.T_POLY, kernel.T_POLY + kernel.N_POLY)]
     assert sorted(table) == list(range(kernel.N_TABLE))
     assert sorted(params) == list(range(kernel.N_PARAMS))
     assert sorted(cfg) == list(range(kernel.N_CFG))
@@ -121,7 +121,7 @@ def test_the_packer_puts_every_model_field_in_its_slot():
                 kernel.C_IMPULSE: kernel.IMPULSE_PULSE, kernel.C_AT_ZERO: 0,
                 kernel.C_TRUNC: kernel.TRUNC_PAPER_X, kernel.C_LAW: kernel.LAW_SALTATION,
                 kernel.C_MAXSTEPS: 12345, kernel.C_METHOD: kernel.METHOD_DP5,
-                kernel.C_FORCE: kernel.FORCE_PAPER}
+                kernel.C_FORCE: kernel.FORCE_PAPER, kernel.C_WALL_NODES: 0}
     assert len(want_cfg) == kernel.N_CFG
     for slot, value in want_cfg.items():
         assert cfg[slot] == value, slot

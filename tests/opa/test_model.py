@@ -198,7 +198,7 @@ def test_negative_or_non_finite_sigma_is_refused(sigma):
         Uncertainty(sigma)
 
 
-@pytest.mark.parametrize("parameter", ["eta", "omega", "", "x-y"])
+@pytest.mark.parametrize("parameter", ["x0", "omega", "", "x-y"])
 def test_unknown_uncertain_parameter_is_refused(parameter):
     with pytest.raises(ValueError, match=names_parameter_and_value("uncertain", parameter)):
         Uncertainty(0.1, parameter)
@@ -234,7 +234,7 @@ def test_simulate_opa_refuses_bad_choices_by_name():
         (dict(order=-1), "order", -1), (dict(order=1.5), "order", 1.5),
         (dict(order=True), "order", True), (dict(truncation="exact"), "truncation", "exact"),
         (dict(impact_law="all"), "impact_law", "all"), (dict(sigma=-0.1), "sigma", -0.1),
-        (dict(uncertain="eta"), "uncertain", "eta"),
+        (dict(uncertain="omega1"), "uncertain", "omega1"),
     ]:  # fmt: skip
         with pytest.raises(ValueError, match=names_parameter_and_value(name, value)):
             simulate_opa(osc, periods=1, **kwargs)

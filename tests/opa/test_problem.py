@@ -20,7 +20,8 @@ def test_one_parameter_is_the_papers_uncertainty_bit_for_bit():
         want = np.array([osc.mu, osc.a, osc.c])[None, :].repeat(len(xi), axis=0)
         want[:, col] = getattr(osc, name) + 0.013 * xi
         assert np.array_equal(table[:, :3], want), name
-        assert not table[:, 3:].any(), name  # no user's force law: its columns are zero
+        assert not table[:, 3:-2].any(), name  # no user's force law: its columns are zero
+        assert np.array_equal(table[:, -2:], np.array([[osc.eta, osc.delta]] * len(xi))), name
 
 
 def test_several_parameters_each_get_their_own_scale_and_column():
