@@ -28,10 +28,10 @@ from opa import (
     UNCERTAIN_PARAMETERS,
     Execution,
     Oscillator,
-    Problem,
     SolverOptions,
     System,
 )
+from opa._forcelaw import OSCILLATOR_COEFFICIENTS
 from opa.cli._args import positive_int, whole_number
 
 EXIT_SIMULATION = 3
@@ -49,6 +49,11 @@ def _model_flags(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--preset", choices=sorted(PRESETS),
                        help="start from the paper's parameter set of this section; "
                             "explicit flags override it (3.3 uses c = 0.05, our choice)")
+    group.add_argument("--model", dest="model_file", default=None, metavar="FILE.toml",
+                       help="the oscillator as a TOML model file: its force law g(x, v), "
+                            "the law's constants, any of the parameters below and "
+                            "optionally [uncertain.NAME] tables (docs/own-oscillator.md); "
+                            "explicit flags override the file's values; not with --preset")
     defaults = Oscillator()
     for name in PARAMETER_NAMES:
         group.add_argument(f"--{name}", type=float, default=None, metavar="VALUE",
@@ -56,16 +61,25 @@ def _model_flags(parser: argparse.ArgumentParser) -> None:
 
 
 def uncertain_names(text: str):
-    """``--uncertain``: one name of ``UNCERTAIN_PARAMETERS`` or a comma-separated list."""
+    """``--uncertain``: one name or a comma-separated list. Which names may be uncertain
+    depends on the force law (``--model``): ``opa.System`` checks them against it."""
     names = [part.strip() for part in str(text).split(",")]
     for name in names:
-        if name not in UNCERTAIN_PARAMETERS:
+        if not name.isidentifier():
             raise argparse.ArgumentTypeError(
-                f"each uncertain parameter must be one of {', '.join(UNCERTAIN_PARAMETERS)}, "
-                f"got {name!r:.40}")
+                f"each uncertain parameter must be a name such as "
+                f"{', '.join(UNCERTAIN_PARAMETERS)} or a force law's constant, got {name!r:.40}")
     if len(set(names)) != len(names):
         raise argparse.ArgumentTypeError(f"a parameter is named twice: {text!r:.60}")
     return names[0] if len(names) == 1 else tuple(names)
+
+
+def uncertain_name(text: str) -> str:
+    """``--uncertain`` where one parameter is uncertain: one name."""
+    names = uncertain_names(text)
+    if not isinstance(names, str):
+        raise argparse.ArgumentTypeError(f"one uncertain parameter here, got {text!r:.60}")
+    return names
 
 
 def scales(text: str):
@@ -100,14 +114,17 @@ def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS,
         g.add_argument("--uncertain", type=uncertain_names, default=None,
                        metavar="P[,P...]",
                        help=f"which parameters are uncertain, among "
-                            f"{', '.join(UNCERTAIN_PARAMETERS)}: one, or several such as "
-                            f"mu,c (default mu)")
+                            f"{', '.join(UNCERTAIN_PARAMETERS)} (or a --model force law's "
+                            f"constants): one, or several such as mu,c (default mu, or the "
+                            f"--model file's [uncertain.NAME] tables)")
     else:
         g.add_argument("--sigma", type=float, default=DEFAULT_SIGMA, metavar="S",
                        help=f"intensity of the uncertain parameter p = p_bar + S xi "
                             f"(default {DEFAULT_SIGMA:g})")
-        g.add_argument("--uncertain", choices=UNCERTAIN_PARAMETERS, default="mu",
-                       help="which parameter is uncertain (default mu)")
+        g.add_argument("--uncertain", type=uncertain_name, default="mu", metavar="P",
+                       help=f"which parameter is uncertain, among "
+                            f"{', '.join(UNCERTAIN_PARAMETERS)} or a --model force law's "
+                            f"constants (default mu, or the --model file's [uncertain.NAME])")
     g.add_argument("--allow-negative", action="store_true",
                    help="allow p_bar - sigma < 0 for the uncertain parameter")
     g.add_argument("--order", type=whole_number, default=DEFAULT_ORDER, metavar="N",
@@ -309,13 +326,81 @@ def check_combinations(args) -> None:
                        f"overwrite the dataset")
 
 
+def model_from(args):
+    """The ``opa._modelfile.Model`` of ``--model FILE.toml`` (read once), or None."""
+    path = getattr(args, "model_file", None)
+    if path is None:
+        return None
+    cached = getattr(args, "_model_read", None)
+    if cached is None:
+        from opa._modelfile import read_model
+
+        if getattr(args, "preset", None):
+            raise CliError(f"--preset {args.preset} and --model {path} both give the "
+                           f"oscillator: give one (the model file's values may be "
+                           f"overridden by the parameter flags)")
+        try:
+            cached = read_model(path)
+        except ValueError as err:
+            raise CliError(f"--model: {err}") from None
+        args._model_read = cached
+    return cached
+
+
+def refuse_force_law(args, command: str, why: str) -> None:
+    """Refuse a ``--model`` file with a user's force law where ``command`` cannot take
+    one yet, in one line saying why."""
+    model = model_from(args)
+    if model is not None and model.oscillator.force is not None:
+        raise CliError(f"--model {args.model_file}: {command} does not take a user's force "
+                       f"law ({model.oscillator.force.expression!r:.60}) yet: {why}")
+
+
 def oscillator_from(args) -> Oscillator:
-    base = dict(PRESETS[args.preset]) if getattr(args, "preset", None) else {}
-    for name in PARAMETER_NAMES:
-        value = getattr(args, name, None)
-        if value is not None:
-            base[name] = value
-    return Oscillator(**base)
+    """The oscillator of ``--preset`` or ``--model`` (or the defaults), each parameter
+    flag given overriding it."""
+    flags = {name: getattr(args, name) for name in PARAMETER_NAMES
+             if getattr(args, name, None) is not None}
+    model = model_from(args)
+    if model is None:
+        base = dict(PRESETS[args.preset]) if getattr(args, "preset", None) else {}
+        return Oscillator(**{**base, **flags})
+    law = model.oscillator.force
+    if law is not None:
+        unused = [name for name in OSCILLATOR_COEFFICIENTS
+                  if name in flags and name not in law.names]
+        if unused:
+            raise CliError(f"--{unused[0]} {flags[unused[0]]:g} has no effect: the force law "
+                           f"{law.expression!r:.60} of --model {args.model_file} does not "
+                           f"name {unused[0]}")
+    return model.oscillator.replace(**flags)
+
+
+def uncertain_from(args) -> dict:
+    """The ``--model`` file's [uncertain.NAME] tables as the keywords ``uncertain``,
+    ``sigma``, ``distribution`` and ``allow_negative``, each unless its flag was given
+    (the flag wins); none when the file has no such tables, with ``--problem``, or when
+    ``--uncertain`` names other parameters."""
+    model = model_from(args)
+    if model is None or model.problem is None or getattr(args, "problem", None):
+        return {}
+    problem = model.problem
+    if given(args, "uncertain"):
+        names = (args.uncertain,) if isinstance(args.uncertain, str) else args.uncertain
+        if tuple(names) != problem.names:
+            return {}
+
+    def one(values: tuple):
+        return values[0] if problem.dimension == 1 else values
+
+    out = {"uncertain": one(problem.names)}
+    if not given(args, "sigma"):
+        out["sigma"] = one(problem.scales)
+    if not given(args, "distribution"):
+        out["distribution"] = one(problem.laws)
+    if not getattr(args, "allow_negative", False):
+        out["allow_negative"] = problem.allow_negative
+    return out
 
 
 def options_from(args) -> SolverOptions:
@@ -345,6 +430,9 @@ def system_from(args, **changes) -> System:
     parameter flags) and every System field the subcommand has a flag for."""
     fields = {name: getattr(args, name) for name in SYSTEM_FIELDS
               if name != "oscillator" and getattr(args, name, None) is not None}
+    oscillator = oscillator_from(args)
+    if "sigma" not in changes:  # not the deterministic system of simulate dmr
+        fields.update(uncertain_from(args))
     if getattr(args, "problem", None) is not None:
         mixed = [flag for flag, name in (("--uncertain", "uncertain"), ("--sigma", "sigma"),
                                          ("--distribution", "distribution"))
@@ -353,12 +441,17 @@ def system_from(args, **changes) -> System:
             raise CliError(f"--problem {args.problem} names the uncertain parameters; "
                            f"{', '.join(mixed)} may not be given with it")
         fields.pop("allow_negative", None)
-        try:
-            fields["uncertain"] = Problem.from_toml(args.problem)
+        from opa._dataset import read_toml
+        from opa._modelfile import uncertain_problem
+
+        try:  # the names are checked against the oscillator's force law (--model)
+            fields["uncertain"] = uncertain_problem(
+                read_toml(args.problem, "problem file"), f"problem file {args.problem}",
+                oscillator)
         except ValueError as err:
             raise CliError(f"--problem: {err}") from None
     try:
-        return System(oscillator_from(args), **{**fields, **changes})
+        return System(oscillator, **{**fields, **changes})
     except ValueError as err:
         raise CliError(flagged(err, ("sigma", "distribution", "uncertain"))) from None
 

@@ -65,6 +65,12 @@ def cmd_sobol(args) -> int:
         raise CliError(f"--uncertain {args.uncertain}: Sobol indices need at least two "
                        f"uncertain parameters (e.g. --uncertain mu,c)")
     system = system_from(args)
+    if system.dimension < 2:  # the default, or the uncertain parameters of a --model file
+        where = (f"--model {args.model_file}: its [uncertain.NAME] tables name one "
+                 f"({system.uncertain}); " if getattr(args, "model_file", None) else
+                 "")
+        raise CliError(f"{where}Sobol indices need at least two uncertain parameters "
+                       f"(e.g. --uncertain mu,c)")
     options = options_from(args)
     import compare
 

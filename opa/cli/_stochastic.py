@@ -38,7 +38,9 @@ def register_stochastic(sub) -> None:
                    help="intensity of the uncertain parameter, or one per --uncertain name "
                         "(default 0.03)")
     g.add_argument("--uncertain", type=uncertain_names, default="mu", metavar="P[,P...]",
-                   help="the uncertain parameter among mu, a, c (default mu), or several "
+                   help="the uncertain parameter among mu, a, c or a --model force law's "
+                        "constants (default mu, or the --model file's [uncertain.NAME]), or "
+                        "several "
                         "such as mu,c: then no boundaries are located (continuation in xi "
                         "is one-dimensional) and the probabilities are sampled, scrambled "
                         "Sobol' points with standard errors from 8 scramblings")
@@ -92,11 +94,17 @@ FLAGS = {"sigma": "--sigma", "uncertain": "--uncertain", "distribution": "--dist
 
 def cmd_stochastic(args) -> int:
     from opa.cli._flags import check_outputs, given, options_from, oscillator_from, \
-        refuse_given
+        refuse_given, uncertain_from
     from opa.dynamics import DiagramInputError, check_diagram
     from opa.engine import WorkBudgetError
 
     check_outputs(args)  # refuses --keep-parts without --out too; --workers bound
+    drawn = uncertain_from(args)  # a --model file's [uncertain.NAME], under the flags
+    if drawn.pop("allow_negative", False):
+        raise ValueError(f"--model {args.model_file}: allow_negative has no effect on "
+                         f"stochastic (its sampled systems take any sign); leave it out")
+    for key, value in drawn.items():
+        setattr(args, key, value)
     swept = args.sweep.partition("=")[0].strip().lstrip("-")
     uncertain = (args.uncertain,) if isinstance(args.uncertain, str) else args.uncertain
     if swept in uncertain:

@@ -173,7 +173,29 @@ def _check_outdir(path: str) -> None:
         raise ValueError(f"--outdir {path} cannot be created: {err.strerror}") from None
 
 
+def _validate_model(args) -> None:
+    """``validate --model FILE``: the file's oscillator (paper's force law) under the
+    parameter flags; the file may not name uncertain parameters (validate sweeps its own
+    grid of sigma)."""
+    from opa.cli._flags import model_from, oscillator_from, refuse_force_law
+
+    model = model_from(args)
+    if model is None:
+        return
+    refuse_force_law(args, "validate", "the trust map runs the paper's truncation (eq. 27) "
+                     "beside galerkin, and keeps its finished runs keyed by mu, a and c; try "
+                     "simulate opa --verify M or sobol")
+    if model.problem is not None:
+        raise CliError(f"--model {args.model_file}: validate sweeps its own grid of sigma "
+                       f"(--sigmas, --uncertain, --distribution): leave out the file's "
+                       f"[uncertain.NAME] tables")
+    osc = oscillator_from(args)
+    for name in PARAMETER_NAMES:  # every value of the file, the flags' included
+        setattr(args, name, getattr(osc, name))
+
+
 def cmd_validate(args) -> int:
+    _validate_model(args)
     if isinstance(args.uncertain, tuple):  # several uncertain parameters: the trust line
         return cmd_trust_line(args)
     if args.relative is not None:
@@ -280,7 +302,7 @@ def register_converge(sub) -> None:
     g.add_argument("--uncertain", type=uncertain_names, default="mu", metavar="P[,P...]",
                    help=f"the uncertain parameters p = p_bar + sigma xi, among "
                         f"{', '.join(UNCERTAIN_PARAMETERS)}: one, or several such as mu,c "
-                        f"(default mu)")
+                        f"(default mu, or the --model file's [uncertain.NAME] tables)")
     g.add_argument("--distribution", default="semicircle", metavar="LAW[,LAW...]",
                    help="law of xi: semicircle, uniform, beta:A,B, normal-trunc:K; one, or "
                         "one per --uncertain name")
@@ -312,18 +334,29 @@ def cmd_converge(args) -> int:
     from compare import (ConvergenceConfig, convergence_lines, run_convergence,
                          write_convergence_report)
     from opa.cli._flags import (MAX_WORKERS, CliError, flagged, oscillator_from,
-                                options_from)
+                                options_from, refuse_force_law, uncertain_from)
 
     if args.workers > MAX_WORKERS:
         raise ValueError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got "
                          f"{args.workers}")
+    refuse_force_law(args, "converge", "its finished runs, kept in OUTDIR and reused by a "
+                     "rerun, are keyed by mu, a and c, not by the force law")
+    oscillator = oscillator_from(args)
     _check_outdir(args.outdir)
     kw = {k: v for k, v in (("budgets", args.budgets), ("uniform", args.uniform))
           if v is not None}
+    drawn = uncertain_from(args)  # a --model file's [uncertain.NAME], under the flags
+    for key, value in drawn.items():
+        setattr(args, key, value)
+    if drawn.get("allow_negative"):
+        kw["allow_negative"] = True
+    if args.distribution is None or isinstance(args.distribution, tuple):
+        args.distribution = ",".join("semicircle" if law is None else str(law)
+                                     for law in np.atleast_1d(args.distribution))
     uncertain = (",".join(args.uncertain) if isinstance(args.uncertain, tuple)
                  else args.uncertain)
     try:
-        cfg = ConvergenceConfig(oscillator=oscillator_from(args), options=options_from(args),
+        cfg = ConvergenceConfig(oscillator=oscillator, options=options_from(args),
                                 sigma=args.sigma, uncertain=uncertain,
                                 distribution=args.distribution, periods=args.periods,
                                 order=args.order, reference=args.reference,

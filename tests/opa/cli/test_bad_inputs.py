@@ -497,7 +497,8 @@ BAD_LAW_CLI = [
     (["validate", "--elements", "adaptive", "--max-elements", "1000"],
      ("max_elements", "1000")),
     (["validate", "--elements", "adaptive", "--max-elements", "0"], ("--max-elements", "0")),
-    (["converge", "--uncertain", "eta"], ("--uncertain", "eta")),
+    (["converge", "--uncertain", "f"], ("--uncertain", "f cannot be uncertain")),
+    (["converge", "--uncertain", "m-u"], ("--uncertain", "m-u")),
     (["converge", "--distribution", "triangle"], ("distribution", "triangle")),
 ]
 
@@ -637,6 +638,55 @@ def test_issue31_bad_config_file(content, name, capsys, tmp_path, monkeypatch):
     status, out, err, seconds = run_cli(["validate", "--config", path], capsys)
     assert_one_line_error(status, err, name, ["validate", "--config", path])
     assert seconds < TIME_LIMIT
+
+
+# --- issue 43: --model FILE.toml, the oscillator as a model file -------------------------
+
+SHAW = os.path.join(os.path.dirname(__file__), "..", "..", "..", "docs", "examples",
+                    "shaw-holmes.toml")
+PAPER_MODEL = "[oscillator]\nomega = 4.0\n[uncertain.c]\nsigma = 0.005\n"
+
+# (argv with {model} for a file of the given content, or the Shaw & Holmes example; what
+# the message must name)
+BAD_MODEL = [
+    (DMR + ["--model", "/nonexistent/model.toml"], ("--model", "/nonexistent/model.toml")),
+    (DMR + ["--model"], "--model"),
+    (DMR + ["--model", "{model}"], ("--model", "TOML"), "force = \n"),
+    (DMR + ["--model", "{model}"], ("--model", "'colour'"), "colour = 1\n"),
+    (DMR + ["--model", "{model}"], ("--model", "eta"), "[oscillator]\neta = 2.0\n"),
+    (DMR + ["--model", "{model}"], ("--model", "sin"), 'force = "sin(x)"\n'),
+    (DMR + ["--model", "{model}"], ("--model", "[constants] k"),
+     'force = "-k*x"\n[constants]\nk = "one"\n'),
+    (DMR + ["--model", SHAW, "--preset", "3.1"], ("--preset", "--model")),
+    (DMR + ["--model", SHAW, "--mu", "0.3"], ("--mu", "no effect")),
+    (DMR + ["--model", SHAW, "--eta", "1.5"], "eta"),
+    (OPA + ["--model", SHAW, "--uncertain", "mu"], ("--uncertain", "zeta")),
+    (OPA + ["--model", SHAW, "--uncertain", "zeta", "--sigma", "-0.01"], "sigma"),
+    (OPA + ["--model", SHAW, "--truncation", "paper"], "paper"),
+    (OPA + ["--model", SHAW, "--problem", "{model}"], ("--problem", "'mu'"),
+     "[mu]\nsigma = 0.01\n"),
+    (MC + ["--model", SHAW, "--distribution", "cauchy"], "cauchy"),
+    (["validate", "--model", SHAW], ("validate", "force law")),
+    (["validate", "--model", "{model}"], ("validate", "[uncertain"), PAPER_MODEL),
+    (["converge", "--model", SHAW], ("converge", "force law")),
+    (["sobol", "--model", SHAW, "--periods", "1"], ("--model", "two")),
+    (["bifurcation", "dmr", "--model", SHAW, "--sweep", "zeta=0.04:0.06:3"], "zeta"),
+    (["stochastic", "--model", SHAW, "--sweep", "omega=2.4"], ("--uncertain", "zeta")),
+    (["stability", "dmr", "--model", SHAW, "--preset", "3.2"], "--preset"),
+]
+
+
+@pytest.mark.parametrize("case", BAD_MODEL, ids=[" ".join(c[0]).replace(SHAW, "SHAW")
+                                                 for c in BAD_MODEL])
+def test_bad_model_file_or_flags_get_one_line_and_exit_2(case, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv, names = case[:2]
+    if len(case) > 2:
+        path = write(tmp_path, "model.toml", case[2])
+        argv = [path if arg == "{model}" else arg for arg in argv]
+    status, out, err, seconds = run_cli(argv, capsys)
+    assert_one_line_error(status, err, names, argv)
+    assert seconds < 20  # refused before any integration
 
 
 def test_a_fifo_as_config_is_refused_at_once(capsys, tmp_path, monkeypatch):

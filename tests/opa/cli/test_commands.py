@@ -553,7 +553,7 @@ def test_stochastic_diagram_of_two_uncertain_parameters(tmp_path, capsys):
     for extra, flag in ((["--emr"], "--emr: the EMR's sweep takes one uncertain parameter"),
                         (["--samples", "100"], "--samples must be a multiple of 8"),
                         (["--sigma", "0.03,0.002,0.1"], "--sigma must give one value"),
-                        (["--uncertain", "mu,f"], "--uncertain: each uncertain parameter")):
+                        (["--uncertain", "mu,f"], "f cannot be uncertain")):
         argv = [*flags, "--sweep", "c=0.05", *extra]
         if extra[0] in ("--sigma", "--uncertain"):  # replaces the flag given above
             i = argv.index(extra[0])
@@ -836,3 +836,74 @@ def test_simulate_opa_with_two_uncertain_parameters_certified(tmp_path, capsys):
                                   10, "--per-period", 8, "--impact-law", "saltation",
                                   "--quiet"]]) == 4
     assert "disagrees with its Monte Carlo certificate" in capsys.readouterr().err
+
+
+# --- issue 43: --model FILE.toml on every command that takes an oscillator --------------
+
+EXAMPLES = os.path.join(os.path.dirname(__file__), "..", "..", "..", "docs", "examples")
+SHAW_MODEL = os.path.join(EXAMPLES, "shaw-holmes.toml")
+DUFFING_MODEL = os.path.join(EXAMPLES, "duffing-impact.toml")
+VDP_MODEL = os.path.join(EXAMPLES, "van-der-pol-x2v.toml")
+
+
+def test_simulate_takes_a_model_file_and_the_flags_override_it(tmp_path):
+    """``simulate dmr|opa|mc --model shaw-holmes.toml``: the file's law, constants,
+    parameters and uncertain constant reach the dataset; dmr is the API's run of the same
+    oscillator bit for bit; an explicit flag overrides the file's value."""
+    import opa
+    from opa._modelfile import read_model
+
+    model = read_model(SHAW_MODEL)
+    for name, extra in (("dmr", []), ("opa", ["--order", 2]), ("mc", ["--samples", 16])):
+        run(["simulate", name, "--model", SHAW_MODEL, "--periods", 3, "--out",
+             tmp_path / f"{name}.nc", "--quiet", *extra])
+        ds = load(tmp_path / f"{name}.nc")
+        assert ds.attrs["force_law"] == "-2*zeta*v - x" and ds.attrs["omega"] == 2.5
+        assert ds.attrs["force_constants"] == "zeta=0.05" and ds.attrs["x0"] == -0.5
+        if name != "dmr":
+            assert (ds.attrs["uncertain"], ds.attrs["sigma"]) == ("zeta", 0.01)
+            assert ds.attrs["distribution"] == "uniform"
+    api = opa.simulate_dmr(opa.System(model.oscillator, sigma=0.0), periods=3)
+    np.testing.assert_array_equal(load(tmp_path / "dmr.nc").x.values, api.x.values)
+    run(["simulate", "opa", "--model", SHAW_MODEL, "--periods", 3, "--omega", 2.6,
+         "--sigma", 0.02, "--order", 2, "--out", tmp_path / "over.nc", "--quiet"])
+    ds = load(tmp_path / "over.nc")
+    assert (ds.attrs["omega"], ds.attrs["sigma"], ds.attrs["uncertain"]) == (2.6, 0.02, "zeta")
+    assert ds.attrs["distribution"] == "uniform"  # not overridden: the file's
+
+
+def test_sweeps_and_orbits_take_a_model_file(tmp_path):
+    """bifurcation, stability and sobol with a user's force law from a model file."""
+    run(["bifurcation", "dmr", "--model", SHAW_MODEL, "--sweep", "omega=2.4,2.6",
+         "--transient", 3, "--record", 2, "--workers", 1, "--no-locate", "--out",
+         tmp_path / "b.nc", "--quiet"])
+    assert load(tmp_path / "b.nc").attrs["force_law"] == "-2*zeta*v - x"
+    run(["stability", "dmr", "--model", SHAW_MODEL, "--transient", 20, "--out",
+         tmp_path / "s.nc", "--quiet"])
+    assert load(tmp_path / "s.nc").attrs["force_law"] == "-2*zeta*v - x"
+    run(["sobol", "--model", DUFFING_MODEL, "--periods", 1, "--samples", 8, "--order", 1,
+         "--out", tmp_path / "sobol.nc", "--quiet"])
+    ds = load(tmp_path / "sobol.nc")
+    assert ds.attrs["force_law"] == "-d*v - k*x - b*x^3" and ds.attrs["uncertain"] == "k,b"
+
+
+def test_stochastic_converge_and_validate_take_a_model_file(tmp_path, capsys):
+    """stochastic with a user's law that names mu; converge and validate with a model file
+    of the paper's law (they refuse a user's law: tests/opa/cli/test_bad_inputs.py)."""
+    run(["stochastic", "--model", VDP_MODEL, "--sweep", "omega=1.2", "--samples", 8,
+         "--transient", 10, "--record", 4, "--extra-states", 0, "--workers", 1, "--out",
+         tmp_path / "st.nc", "--quiet"])
+    ds = load(tmp_path / "st.nc")
+    assert ds.attrs["force_law"] == "mu*(1 - x^2)*v - x" and ds.attrs["uncertain"] == "mu"
+    paper = tmp_path / "paper.toml"
+    paper.write_text("[oscillator]\nomega = 4.0\n[uncertain.c]\nsigma = 0.02\n")
+    run(["converge", "--model", paper, "--periods", 2, "--order", 1, "--budgets", 2,
+         "--uniform", "1,2", "--reference", 1024, "--outdir", tmp_path / "c", "--quiet"])
+    ds = load(tmp_path / "c" / "convergence.nc")
+    assert (ds.attrs["uncertain"], ds.attrs["sigma"], ds.attrs["omega"]) == ("c", 0.02, 4.0)
+    paper.write_text("[oscillator]\nomega = 4.0\nF0 = 0.0\n")
+    run(["validate", "--model", paper, "--omega", 4.1, "--sigmas", 0.01, "--orders", "0:1",
+         "--horizons", 2, "--samples", 64, "--max-samples", 64, "--no-plots",
+         "--no-frontier", "--outdir", tmp_path / "v", "--quiet"])
+    ds = load(tmp_path / "v" / "validate.nc")
+    assert float(ds.omega.values[0]) == 4.1 and ds.attrs["F0"] == 0.0

@@ -1,0 +1,115 @@
+"""The model file reader (opa._modelfile): a round trip to the objects the API builds, and
+one ValueError line naming the path and the key or value for every fault of a file."""
+
+from __future__ import annotations
+
+import glob
+import os
+
+import pytest
+
+from opa import ForceLaw, Oscillator, Problem
+from opa._modelfile import Model, read_model
+
+DOCS = os.path.join(os.path.dirname(__file__), "..", "..", "docs", "examples")
+
+SHAW = """\
+# Shaw & Holmes' linear impact oscillator
+force = "-2*zeta*v - x"
+[constants]
+zeta = 0.05
+[oscillator]
+f = 1
+omega = 2.5
+eta = 0.8
+F0 = 0.0
+x0 = -0.5
+[uncertain.zeta]
+sigma = 0.01
+distribution = "uniform"
+"""
+
+
+def write(tmp_path, text: str | bytes, name: str = "model.toml") -> str:
+    path = tmp_path / name
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    return str(path)
+
+
+def test_round_trip_gives_the_objects_of_the_api(tmp_path):
+    model = read_model(write(tmp_path, SHAW))
+    law = ForceLaw("-2*zeta*v - x", zeta=0.05)
+    assert model.oscillator == Oscillator(force=law, f=1.0, omega=2.5, eta=0.8, F0=0.0,
+                                          x0=-0.5)
+    assert model.problem == Problem("zeta", 0.01, "uniform", coefficients=("zeta",))
+    assert isinstance(model.oscillator.f, float)  # a TOML integer is a number too
+
+
+def test_the_paper_law_and_an_empty_file(tmp_path):
+    model = read_model(write(tmp_path, "[oscillator]\nomega = 4.0\n[uncertain.c]\n"
+                                       "sigma = 0.005\n[uncertain.mu]\nsigma = 0.01\n"))
+    assert model.oscillator == Oscillator(omega=4.0) and model.oscillator.force is None
+    assert model.problem.names == ("c", "mu") and model.problem.scales == (0.005, 0.01)
+    assert read_model(write(tmp_path, "")) == Model(Oscillator(), None,
+                                                    str(tmp_path / "model.toml"))
+
+
+def test_a_law_may_name_the_oscillators_own_coefficients(tmp_path):
+    model = read_model(write(tmp_path, 'force = "mu*(1 - x^2)*v - x"\n[oscillator]\n'
+                                       'mu = 0.3\n[uncertain.mu]\nsigma = 0.05\n'))
+    assert model.oscillator.coefficient_names == ("mu",) and model.oscillator.mu == 0.3
+    assert model.problem.names == ("mu",)
+
+
+@pytest.mark.parametrize("path", sorted(glob.glob(os.path.join(DOCS, "*.toml"))))
+def test_the_docs_examples_read(path):
+    assert read_model(path).oscillator.force is not None
+
+
+BAD = [
+    ("colour = 1\n", "'colour'"),
+    ("force = 3\n", "force"),
+    ('force = "sin(x)"\n', "sin"),
+    ('force = "x^5"\n', "x^5"),
+    ('force = "-k*x"\n', "'k'"),  # a constant with no value
+    ('force = "-x"\n[constants]\nk = 1.0\n', "'k'"),  # a constant the law does not use
+    ('force = "-k*x"\n[constants]\nk = "1"\n', "[constants] k"),
+    ('force = "-k*x"\n[constants]\nk = true\n', "[constants] k"),
+    ("[constants]\nk = 1.0\n", "[constants]"),
+    ('constants = 3\nforce = "-x"\n', "[constants]"),
+    ("oscillator = 3\n", "[oscillator]"),
+    ("[oscillator]\nzeta = 0.1\n", "'zeta'"),
+    ("[oscillator]\nforce = '-x'\n", "'force'"),
+    ("[oscillator]\nomega = '2'\n", "[oscillator] omega"),
+    ("[oscillator]\neta = 1.5\n", "eta"),
+    ("[oscillator]\nx0 = 1.0\n", "x0"),
+    ("[oscillator]\nomega = nan\n", "omega"),
+    ('force = "-x"\n[oscillator]\nmu = 0.3\n', "[oscillator] mu"),  # no effect
+    ('force = "-k*x"\n[constants]\nk = 1.0\n[uncertain.mu]\nsigma = 0.1\n', "'mu'"),
+    ("[uncertain.zeta]\nsigma = 0.1\n", "'zeta'"),
+    ("[uncertain.mu]\ndistribution = 'uniform'\n", "sigma"),
+    ("[uncertain.mu]\nsigma = -0.1\n", "sigma"),
+    ("[uncertain.mu]\nsigma = 0.1\ncolour = 1\n", "'colour'"),
+    ("[uncertain.mu]\nsigma = 0.1\ndistribution = 'cauchy'\n", "cauchy"),
+    ("uncertain = 3\n", "[uncertain]"),
+    ("[uncertain]\n", "no uncertain parameter"),
+    ("[oscillator]\nmu = 0.005\n[uncertain.mu]\nsigma = 0.01\n", "allow_negative"),
+    ("force = \n", "TOML"),
+]
+
+
+@pytest.mark.parametrize("text,named", BAD, ids=[t for t, _ in BAD])
+def test_every_fault_is_one_line_naming_the_path_and_the_key(tmp_path, text, named):
+    path = write(tmp_path, text)
+    with pytest.raises(ValueError) as info:
+        read_model(path)
+    message = str(info.value)
+    assert "\n" not in message and path in message and named in message, message
+
+
+def test_unreadable_and_binary_files_are_named(tmp_path):
+    for path in (str(tmp_path / "missing.toml"), str(tmp_path),
+                 write(tmp_path, bytes(range(256)), "binary.toml")):
+        with pytest.raises(ValueError, match="model file") as info:
+            read_model(path)
+        assert path in str(info.value) and "\n" not in str(info.value)
