@@ -1185,6 +1185,24 @@ def _reflect(z, m, n, eta, all_velocities):
             z[dim + (n + i) * m + c] *= -eta
 
 
+@njit(cache=True, inline="always")
+def _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work):
+    """Reflect the mean's velocity v_0 -> -eta v_0 (z at the wall) and return the
+    saltation gain k = (a+ + eta a-) / v-, a-, a+ the mean's accelerations before and
+    after (two right-hand sides)."""
+    n = cfg[C_NCOEF]
+    eta = p[P_ETA]
+    m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
+    off = np.bool_(False)
+    v_minus = z[n]
+    a_minus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
+                           f_minus, work)
+    z[n] = -eta * z[n]
+    a_plus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
+                          f_plus, work)
+    return (a_plus + eta * a_minus) / v_minus
+
+
 @njit(cache=True)
 def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
     """Apply the impact law at x_0 = delta to y and its saltation matrix to W.
@@ -1222,13 +1240,8 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
     v_minus = z[n]
     evals = 0
     if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
-        a_minus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
-                               f_minus, work)
-        z[n] = -eta * z[n]
-        a_plus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
-                              f_plus, work)
+        k = _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work)
         evals += 2
-        k = (a_plus + eta * a_minus) / v_minus
         for i in range(1, n):
             xi_ = z[i]
             z[i] = -eta * xi_
@@ -1259,20 +1272,13 @@ def _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, wo
     q = table.shape[0]
     eta = p[P_ETA]
     law = cfg[C_LAW]
-    m0 = np.int64(0)
-    off = np.bool_(False)
     z[0] = p[P_DELTA]
     v_minus = z[n]
     if law == LAW_MEAN:
         z[n] = -eta * z[n]
         return v_minus, 0
     if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
-        a_minus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
-                               f_minus, work)
-        z[n] = -eta * z[n]
-        a_plus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
-                              f_plus, work)
-        k = (a_plus + eta * a_minus) / v_minus
+        k = _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work)
         for i in range(1, n):
             delta_i = 0.0
             eta_i = 0.0
