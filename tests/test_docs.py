@@ -177,3 +177,14 @@ def test_the_docs_build_without_a_warning(tmp_path):
 
     subprocess.run([sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html",
                     DOCS, str(tmp_path / "html")], check=True, timeout=1200)
+
+
+def test_the_own_oscillator_page_is_what_its_commands_print():
+    """docs/own-oscillator.md: every ``$ opa-mc`` command of the page, rerun, prints what
+    the page shows (wall times aside); ``python docs/own_oscillator.py`` rewrites it."""
+    page = _load("own_oscillator")
+    with open(page.PAGE, encoding="utf-8") as fh:
+        on_disk = fh.read()
+    assert on_disk.count(page.PROMPT) >= 10
+    assert page.same(on_disk, page.render(on_disk)), \
+        "docs/own-oscillator.md is stale: run python docs/own_oscillator.py"

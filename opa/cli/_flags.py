@@ -31,7 +31,6 @@ from opa import (
     SolverOptions,
     System,
 )
-from opa._forcelaw import OSCILLATOR_COEFFICIENTS
 from opa.cli._args import positive_int, whole_number
 
 EXIT_SIMULATION = 3
@@ -333,7 +332,7 @@ def model_from(args):
         return None
     cached = getattr(args, "_model_read", None)
     if cached is None:
-        from opa._modelfile import read_model
+        from opa.engine import read_model
 
         if getattr(args, "preset", None):
             raise CliError(f"--preset {args.preset} and --model {path} both give the "
@@ -367,6 +366,8 @@ def oscillator_from(args) -> Oscillator:
         return Oscillator(**{**base, **flags})
     law = model.oscillator.force
     if law is not None:
+        from opa.engine import OSCILLATOR_COEFFICIENTS
+
         unused = [name for name in OSCILLATOR_COEFFICIENTS
                   if name in flags and name not in law.names]
         if unused:
@@ -441,8 +442,7 @@ def system_from(args, **changes) -> System:
             raise CliError(f"--problem {args.problem} names the uncertain parameters; "
                            f"{', '.join(mixed)} may not be given with it")
         fields.pop("allow_negative", None)
-        from opa._dataset import read_toml
-        from opa._modelfile import uncertain_problem
+        from opa.engine import read_toml, uncertain_problem
 
         try:  # the names are checked against the oscillator's force law (--model)
             fields["uncertain"] = uncertain_problem(

@@ -183,8 +183,8 @@ def _validate_model(args) -> None:
     if model is None:
         return
     refuse_force_law(args, "validate", "the trust map runs the paper's truncation (eq. 27) "
-                     "beside galerkin, and keeps its finished runs keyed by mu, a and c; try "
-                     "simulate opa --verify M or sobol")
+                     "beside galerkin, and keeps its finished runs keyed by mu, a and c; compare "
+                     "simulate opa with simulate mc, or try sobol")
     if model.problem is not None:
         raise CliError(f"--model {args.model_file}: validate sweeps its own grid of sigma "
                        f"(--sigmas, --uncertain, --distribution): leave out the file's "

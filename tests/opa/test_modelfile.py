@@ -62,8 +62,12 @@ def test_a_law_may_name_the_oscillators_own_coefficients(tmp_path):
 
 
 @pytest.mark.parametrize("path", sorted(glob.glob(os.path.join(DOCS, "*.toml"))))
-def test_the_docs_examples_read(path):
-    assert read_model(path).oscillator.force is not None
+def test_the_docs_examples_read_and_the_refused_ones_are_refused(path):
+    if os.path.basename(path).startswith("refused-"):
+        with pytest.raises(ValueError, match="force law"):
+            read_model(path)
+    else:
+        assert read_model(path).oscillator.force is not None
 
 
 BAD = [

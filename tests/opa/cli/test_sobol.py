@@ -94,7 +94,7 @@ def test_sobol_prints_the_table_and_writes_the_dataset_and_figure(tmp_path, caps
 @pytest.mark.parametrize("change, flag", [
     (dict(uncertain="mu", sigma="0.06"), "--uncertain mu: Sobol indices need at least two"),
     (dict(samples="0"), "argument --samples"),
-    (dict(uncertain="mu,x"), "argument --uncertain"),
+    (dict(uncertain="mu,x"), "--uncertain must name parameters among"),
     (dict(samples="100"), "--samples must be a power of two"),
     (dict(sigma="0.06,0.2,0.1"), "--sigma must give one value"),
     (dict(basis="cubic"), "--basis must be one of"),
