@@ -44,7 +44,8 @@ def _rhs_loop(count, y, p, cfg, nodes, weights, basis, out, work):
     total = 0.0
     for j in range(count):
         drive = _kernel.forcing(1e-3 * j, p, 0.0)
-        _kernel.vector_field(y, 0, p, cfg, nodes, weights, basis, drive, False, out, work)
+        _kernel.vector_field(y, 0, p, cfg, nodes, weights, basis, 1e-3 * j, drive, False, out,
+                             work)
         total += out[out.shape[0] - 1]
     return total
 

@@ -84,7 +84,12 @@ C_NCOEF, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD, C_FORCE = r
 # C_WALL_NODES = 1: the restitution eta or the wall delta is uncertain, so the impact law
 # reads them at each node from the table (columns T_ETA, T_DELTA; p holds their means)
 C_WALL_NODES = 8
-N_CFG = 9
+# C_DRIVE_NODES = 1: the forcing amplitude f, its frequency omega or the impulse height F0
+# is uncertain: the vector field adds each node's own f cos(omega t) (table columns T_F,
+# T_OMEGA; p holds the nominal values, whose drive every node shares) and a kick adds
+# each node's own F0 (T_F0) times the impulse's modulation
+C_DRIVE_NODES = 9
+N_CFG = 10
 # The force law g(x, v): the paper's mu (1 - v^2) v - a x - c x^3 (from mu, a, c), or a
 # polynomial sum_jk C[j, k] x^j v^k (a user's model, from its coefficients).
 FORCE_PAPER, FORCE_POLYNOMIAL = 0, 1
@@ -98,7 +103,9 @@ T_POLY = 3
 # the restitution and the wall at each node (read only with cfg[C_WALL_NODES] = 1)
 T_ETA = T_POLY + N_POLY
 T_DELTA = T_ETA + 1
-N_TABLE = T_DELTA + 1
+# the forcing amplitude, frequency and impulse height at each node (C_DRIVE_NODES = 1)
+T_F, T_OMEGA, T_F0 = T_DELTA + 1, T_DELTA + 2, T_DELTA + 3
+N_TABLE = T_F0 + 1
 
 IMPULSE_DIRAC, IMPULSE_PULSE = 0, 1
 # The paper's closure (eq. (27)) adds back sigma/2 times the projection on U_{N+1} of the
@@ -324,7 +331,13 @@ def last_stage(method):
 @njit(cache=True)
 def impulse_strength(t, p):
     """Impulse magnitude F0 (1 + a1 sin(omega1 t / n)) at an impulse time t (eq. (1))."""
-    return p[P_F0] * (1.0 + p[P_A1] * math.sin(p[P_OMEGA1] * t / p[P_N]))
+    return p[P_F0] * impulse_modulation(t, p)
+
+
+@njit(cache=True, inline="always")
+def impulse_modulation(t, p):
+    """The impulse's modulation 1 + a1 sin(omega1 t / n) at an impulse time t."""
+    return 1.0 + p[P_A1] * math.sin(p[P_OMEGA1] * t / p[P_N])
 
 
 @njit(cache=True, inline="always")
@@ -468,10 +481,11 @@ def is_deterministic(m, cfg, table, p):
 
 
 @njit(cache=True)
-def vector_field(z, m, p, cfg, table, weights, U, drive, sticking, out, work):
+def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work):
     """Write f(t, y) and, for m > 0, J(t, y) W into ``out`` (layout of ``z``).
 
-    ``drive`` is the external force at t (``forcing``: harmonic plus pulse). With
+    ``drive`` is the external force at t (``forcing``: harmonic plus pulse); with
+    ``cfg[C_DRIVE_NODES]`` each node's own harmonic f_k cos(omega_k t) replaces it. With
     ``sticking`` the mean coordinate is held at rest at the wall (and its rows of W).
     ``work`` is a (6, Q) scratch array. Returns the unconstrained acceleration of x_0
     (the release function of sticking).
@@ -515,6 +529,8 @@ def vector_field(z, m, p, cfg, table, weights, U, drive, sticking, out, work):
         out[i] = z[n + i]
         out[n + i] = 0.0
     out[n] = g0
+    drive_nodes = cfg[C_DRIVE_NODES] != 0
+    shared = p[P_F] * math.cos(p[P_OMEGA] * t) if drive_nodes else 0.0
     for k in range(q):
         x = work[0, k]
         v = work[1, k]
@@ -533,6 +549,8 @@ def vector_field(z, m, p, cfg, table, weights, U, drive, sticking, out, work):
             if m > 0:
                 work[2, k] = w * (-a_k - 3.0 * c_k * x * x)
                 work[3, k] = w * mu_k * (1.0 - 3.0 * v * v)
+        if drive_nodes:  # this node's own harmonic drive, less the shared one in ``drive``
+            g += w * (table[k, T_F] * math.cos(table[k, T_OMEGA] * t) - shared)
         if g != 0.0:
             for i in range(n):
                 out[n + i] += g * U[k, i]
@@ -789,7 +807,8 @@ def _stage_rows(t, z, h, K, ztmp, A, C, first, stop, m, p, cfg, table, weights, 
                 acc += A[s, r] * K[r, j]
             ztmp[j] = z[j] + h * acc
         drive = stage_drive(t, C[s], h, p[P_F], p[P_OMEGA], cw, sw, force)
-        vector_field(ztmp, m, p, cfg, table, weights, U, drive, sticking, K[s], work)
+        vector_field(ztmp, m, p, cfg, table, weights, U, t + C[s] * h, drive, sticking,
+                     K[s], work)
     return cw, sw
 
 
@@ -817,7 +836,7 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, table, weights, U, force
             acc += B[r] * K[r, j]
         z_new[j] = z[j] + h * acc
     drive = stage_drive(t, 1.0, h, p[P_F], p[P_OMEGA], cw, sw, force)
-    vector_field(z_new, m, p, cfg, table, weights, U, drive, sticking, K[last], work)
+    vector_field(z_new, m, p, cfg, table, weights, U, t + h, drive, sticking, K[last], work)
     return last
 
 
@@ -1195,10 +1214,10 @@ def _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, wor
     m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
     off = np.bool_(False)
     v_minus = z[n]
-    a_minus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
+    a_minus = vector_field(z, m0, p, cfg, table, weights, U, t, forcing(t, p, force), off,
                            f_minus, work)
     z[n] = -eta * z[n]
-    a_plus = vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off,
+    a_plus = vector_field(z, m0, p, cfg, table, weights, U, t, forcing(t, p, force), off,
                           f_plus, work)
     return (a_plus + eta * a_minus) / v_minus
 
@@ -1249,13 +1268,13 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
         return v_minus, evals
     ensemble = law != LAW_MEAN
     if m > 0:
-        vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off, f_minus, work)
+        vector_field(z, m0, p, cfg, table, weights, U, t, forcing(t, p, force), off, f_minus, work)
         evals += 1
     top = n if ensemble else 1
     for i in range(top):
         z[n + i] = -eta * z[n + i]
     if m > 0:
-        vector_field(z, m0, p, cfg, table, weights, U, forcing(t, p, force), off, f_plus, work)
+        vector_field(z, m0, p, cfg, table, weights, U, t, forcing(t, p, force), off, f_plus, work)
         evals += 1
         for c in range(m):
             w0 = z[dim + c] / v_minus  # e_0^T W / (e_0^T f-)
@@ -1454,14 +1473,23 @@ def start_run(z, t, t_end, include_start, p, cfg, escape, snap, out, stats):
 
 
 @njit(cache=True, inline="always")
-def kick(t, z, m, strength, sticking, seg, n_events, n_impacts, p, cfg, stats, log):
+def kick(t, z, m, strength, sticking, seg, n_events, n_impacts, p, cfg, table, weights, U,
+         stats, log):
     """Phase "kick": a Dirac impulse adds ``strength`` to v_0 at t. A kick into the wall
     while the mean rests on it is an impact at once (``_reflect``: a fixed-time jump, so W
     takes only the reset's Jacobian), logged EV_KICK with the kicked velocity; a kick that
     leaves the mean moving ends sticking (EV_RELEASE). Returns (sticking, n_events,
     n_impacts)."""
     n = cfg[C_NCOEF]
-    z[n] += strength
+    if cfg[C_DRIVE_NODES] != 0 and n > 1:  # each node's own height F0_k
+        mod = strength / p[P_F0] if p[P_F0] != 0.0 else impulse_modulation(t, p)
+        for i in range(n):
+            acc = 0.0
+            for k in range(table.shape[0]):
+                acc += weights[k] * U[k, i] * table[k, T_F0]
+            z[n + i] += mod * acc
+    else:
+        z[n] += strength
     if z[0] >= p[P_DELTA] and z[n] > 0.0:
         v_kick = z[n]
         _reflect(z, m, n, p[P_ETA], cfg[C_LAW] != LAW_MEAN)
@@ -1477,7 +1505,7 @@ def kick(t, z, m, strength, sticking, seg, n_events, n_impacts, p, cfg, stats, l
 
 @njit(cache=True)
 def impulses(t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n_impacts, p,
-             cfg, snap, escape, stats, log):
+             cfg, table, weights, U, snap, escape, stats, log):
     """Phase "impulses" (a breakpoint at t): the pulse that ends at t switches off, and
     every impulse due by t (within ``snap``) acts: a pulse switches on (force and end
     time), a Dirac impulse kicks (``kick``; the state is checked after each).
@@ -1495,7 +1523,8 @@ def impulses(t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n
             force_end = t_imp + p[P_TAU]
         else:
             sticking, n_events, n_impacts = kick(t, z, m, strength, sticking, seg, n_events,
-                                                 n_impacts, p, cfg, stats, log)
+                                                 n_impacts, p, cfg, table, weights, U, stats,
+                                                 log)
             status = state_status(z, 2 * cfg[C_NCOEF], escape)
             if status != OK:
                 return status, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts
@@ -1585,7 +1614,7 @@ def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, table, wei
         n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK))
         if stats.shape[0] > 0:
             stats[seg, S_STICKS] += 1.0
-    vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), sticking, K[0], work)
+    vector_field(z, m, p, cfg, table, weights, U, t, forcing(t, p, force), sticking, K[0], work)
     return sticking, n_events
 
 
@@ -1640,7 +1669,7 @@ def chatter(t, z, m, v_minus, force, p, cfg, table, weights, U, f_minus, work):
     n = cfg[C_NCOEF]
     eta = p[P_ETA]
     z[n] = 0.0
-    acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, forcing(t, p, force),
+    acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, t, forcing(t, p, force),
                        np.bool_(False), f_minus, work)
     if acc > 0.0:
         _hold(z, m, n, cfg[C_LAW])
@@ -1688,7 +1717,7 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
                 stats[seg, S_STICKS] += 1.0
     status = state_status(z, 2 * cfg[C_NCOEF], escape)
     if status == OK:
-        vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), sticking, K[0],
+        vector_field(z, m, p, cfg, table, weights, U, t, forcing(t, p, force), sticking, K[0],
                      work)
         evals += 1
     return t, status, sticking, n_events, n_impacts, evals
@@ -1698,7 +1727,7 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
 def pulls_off(t, z, force, p, cfg, table, weights, U, f_plus, work):
     """Whether the unconstrained acceleration of the mean at rest on the wall turns away
     from it at the state z at t (the release condition of sticking); one evaluation."""
-    acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, forcing(t, p, force),
+    acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, t, forcing(t, p, force),
                        np.bool_(False), f_plus, work)
     return acc < 0.0
 
@@ -1738,7 +1767,7 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, table, weights, U
     n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
     status = state_status(z, 2 * n, escape)
     if status == OK:
-        vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), np.bool_(False),
+        vector_field(z, m, p, cfg, table, weights, U, t, forcing(t, p, force), np.bool_(False),
                      K[0], work)
         evals += 1
     return t, status, n_events, evals
@@ -1861,7 +1890,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
         if t_imp <= t + snap or t >= force_end - snap:
             status, sticking, j_imp, t_imp, force, force_end, n_events, n_impacts = impulses(
                 t, z, m, sticking, j_imp, t_imp, force, force_end, seg, n_events, n_impacts,
-                p, cfg, snap, escape, stats, log)
+                p, cfg, table, weights, U, snap, escape, stats, log)
             if status != OK:
                 break
         if t_out[k_out] <= t:
@@ -1874,7 +1903,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
             seg = k_out - 1
         t_break = next_breakpoint(t_out[k_out], t_imp, force_end, snap)
         # ---- resume: f(t, z) for the next step; sticking may end or begin at t itself
-        acc = vector_field(z, m, p, cfg, table, weights, U, forcing(t, p, force), sticking, K[0],
+        acc = vector_field(z, m, p, cfg, table, weights, U, t, forcing(t, p, force), sticking, K[0],
                            work)
         n_rhs += 1
         if contact_changes(sticking, acc, z[0], z[n], delta):

@@ -23,6 +23,8 @@ PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "om
 UNCERTAIN_PARAMETERS = ("mu", "a", "c")
 #: the impact's parameters, which may be uncertain too (the impact law reads them per node)
 IMPACT_PARAMETERS = ("eta", "delta")
+#: the drive's parameters, which may be uncertain too (each node has its own drive)
+DRIVE_PARAMETERS = ("f", "omega", "F0")
 METHODS = ("dop853", "dp5")
 IMPULSE_MODELS = ("dirac", "pulse")
 TRUNCATIONS = ("galerkin", "paper")
@@ -240,7 +242,7 @@ class Oscillator:
     def uncertain_names(self) -> tuple[str, ...]:
         """The parameters that may be uncertain: the force law's coefficients and the
         impact's restitution eta and wall delta."""
-        return self.coefficient_names + IMPACT_PARAMETERS
+        return self.coefficient_names + IMPACT_PARAMETERS + DRIVE_PARAMETERS
 
     @property
     def coefficient_names(self) -> tuple[str, ...]:
@@ -392,9 +394,10 @@ class Uncertainty:
         object.__setattr__(self, "sigma", sigma)
         if not (isinstance(self.parameter, str) and self.parameter.isidentifier()
                 and (self.parameter in UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS
-                     or self.parameter not in PARAMETER_NAMES)):
+                     + DRIVE_PARAMETERS or self.parameter not in PARAMETER_NAMES)):
             # a user's force law's constants are checked against the law by opa.System
-            _choice("uncertain", self.parameter, UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS)
+            _choice("uncertain", self.parameter,
+                    UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS + DRIVE_PARAMETERS)
         check_flag("allow_negative", self.allow_negative)
 
 

@@ -19,13 +19,14 @@ uncertain=, distribution=)``): the values :math:`\bar p + \sigma \xi` are comput
 the same floating-point operations, so every one-dimensional result is unchanged bit for
 bit.
 
-Which coefficients may be uncertain: those of the force law the kernel evaluates at
-each node, :math:`\mu`, :math:`a` and :math:`c` (``UNCERTAIN_PARAMETERS``) of the paper's
-law, or the named constants of a user's law (``opa.ForceLaw``; ``opa.System`` checks the
-names against its oscillator's law). The forcing
-amplitude f, the impulse height F0 and the frequency :math:`\omega` enter the equivalent
-system through the drive and the impulse train, which are one function of time for the
-whole ensemble in today's kernel; they are refused with a message saying so.
+Which parameters may be uncertain: the coefficients of the force law the kernel
+evaluates at each node, :math:`\mu`, :math:`a` and :math:`c` (``UNCERTAIN_PARAMETERS``)
+of the paper's law or the named constants of a user's law (``opa.ForceLaw``;
+``opa.System`` checks the names against its oscillator's law); the impact's restitution
+:math:`\eta` and wall :math:`\delta` (``IMPACT_PARAMETERS``: the impact law reads them at
+each node); and the drive's f, :math:`\omega` and F0 (``DRIVE_PARAMETERS``: each node adds
+its own :math:`f_k \cos(\omega_k t)` and its own impulse height; the output times stay
+those of the nominal :math:`\omega`). The table has a column for each.
 """
 
 from __future__ import annotations
@@ -37,21 +38,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from opa._forcelaw import N_COEFFICIENTS
-from opa._model import IMPACT_PARAMETERS, UNCERTAIN_PARAMETERS, _finite, check_flag
+from opa._model import (
+    DRIVE_PARAMETERS,
+    IMPACT_PARAMETERS,
+    UNCERTAIN_PARAMETERS,
+    _finite,
+    check_flag,
+)
 
 #: the first columns of the kernel's parameter table (``opa._kernel.T_MU, T_A, T_C``), by
 #: name; then a user's force law's N_COEFFICIENTS coefficients C[j, k] (``T_POLY``)
 TABLE_COLUMNS = ("mu", "a", "c")
-#: the last columns: the restitution and the wall at each point (``T_ETA, T_DELTA``)
+#: then the restitution and the wall at each point (``T_ETA, T_DELTA``)
 WALL_COLUMNS = IMPACT_PARAMETERS
+#: the last columns: the forcing amplitude, frequency and impulse height (``T_F`` ...)
+DRIVE_COLUMNS = DRIVE_PARAMETERS
 #: the width of the kernel's parameter table (``opa._kernel.N_TABLE``)
-TABLE_WIDTH = len(TABLE_COLUMNS) + N_COEFFICIENTS + len(WALL_COLUMNS)
-#: coefficients that are parameters of the model but cannot be uncertain (yet), and why
-NOT_UNCERTAIN = {
-    "f": "the forcing f cos(omega t) is one drive for every node of the equivalent system",
-    "F0": "the impulse train is one train for every node of the equivalent system",
-    "omega": "the output grid and the forcing phase are shared by every node",
-}
+TABLE_WIDTH = len(TABLE_COLUMNS) + N_COEFFICIENTS + len(WALL_COLUMNS) + len(DRIVE_COLUMNS)
 
 
 def split_list(text: str) -> tuple[str, ...]:
@@ -127,13 +130,9 @@ class Problem:
 
     def __post_init__(self):
         names = _as_tuple("uncertain", self.names, None)
-        allowed = UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS if self.coefficients is None \
-            else tuple(self.coefficients)
+        allowed = UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS + DRIVE_PARAMETERS \
+            if self.coefficients is None else tuple(self.coefficients)
         for name in names:
-            if name in NOT_UNCERTAIN:
-                raise ValueError(f"uncertain: {name} cannot be uncertain yet: "
-                                 f"{NOT_UNCERTAIN[name]} (uncertain parameters: "
-                                 f"{', '.join(UNCERTAIN_PARAMETERS)})")
             if name not in allowed:
                 raise ValueError(f"uncertain must name parameters among "
                                  f"{', '.join(allowed)}, got {name!r:.40}")
@@ -250,7 +249,7 @@ class Problem:
         for the paper's law)."""
         xi = self._points(xi)
         table = np.zeros((len(xi), TABLE_WIDTH))
-        columns = (*TABLE_COLUMNS, *[None] * N_COEFFICIENTS, *WALL_COLUMNS)
+        columns = (*TABLE_COLUMNS, *[None] * N_COEFFICIENTS, *WALL_COLUMNS, *DRIVE_COLUMNS)
         values = self.values(xi, oscillator)
         for col, name in enumerate(columns):
             if name is not None:
@@ -259,6 +258,12 @@ class Problem:
             table[:, len(TABLE_COLUMNS):len(TABLE_COLUMNS) + N_COEFFICIENTS] = \
                 oscillator.law_coefficients(values)
         return table
+
+    def varies_in_the_drive(self) -> bool:
+        """Whether f, omega or F0 is uncertain (at a non-zero scale): each node then has its
+        own harmonic drive and impulse height."""
+        return any(name in DRIVE_COLUMNS and scale != 0.0
+                   for name, scale in zip(self.names, self.scales))
 
     def varies_at_the_wall(self) -> bool:
         """Whether the restitution or the wall is uncertain (at a non-zero scale): the
@@ -274,8 +279,8 @@ class Problem:
         if self.allow_negative:
             return
         for (name, scale), (lo, _) in zip(zip(self.names, self.scales), self.support):
-            if name in WALL_COLUMNS:
-                continue  # a wall may lie at x < 0; eta is held in (0, 1] above
+            if name in (*WALL_COLUMNS, *DRIVE_COLUMNS):
+                continue  # a wall, a forcing or an impulse may be negative; eta, omega above
             mean = oscillator.value(name)
             lowest = mean + scale * lo
             if lowest < 0.0 <= mean:
@@ -286,7 +291,7 @@ class Problem:
 
     def _check_wall(self, oscillator) -> None:
         for (name, scale), (lo, hi) in zip(zip(self.names, self.scales), self.support):
-            if name not in WALL_COLUMNS or scale == 0.0:
+            if name not in (*WALL_COLUMNS, "omega") or scale == 0.0:
                 continue
             mean = oscillator.value(name)
             low, high = sorted((mean + scale * lo, mean + scale * hi))
@@ -294,6 +299,10 @@ class Problem:
                 raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] makes eta = "
                                  f"{mean:g} + sigma xi leave (0, 1] (from {low:.6g} to "
                                  f"{high:.6g}): every restitution must be in (0, 1]")
+            if name == "omega" and low <= 0.0:
+                raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] makes omega = "
+                                 f"{mean:g} + sigma xi reach {low:.6g}: every frequency must "
+                                 f"be > 0")
             if name == "delta" and low < oscillator.x0:
                 raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] puts the wall "
                                  f"delta = {mean:g} + sigma xi down to {low:.6g}, below the start "

@@ -147,11 +147,11 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "free_flight_maximum": (i8, f8, column, f8),
         # the driver's phases that call no vector field (those that do are inlined)
         "start_run": (v, f8, f8, b1, v, iv, f8, f8, m, m),
-        "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, f8, f8, m, m),
+        "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, m, v, m, f8, f8, m, m),
         "store_outputs": (f8, v, i8, i8, b1, v, m, m),
     }
     main = {  # the vector field, everything that calls it, and a few leaves
-        "vector_field": (v, i8) + system + (f8, b1, v, m),
+        "vector_field": (v, i8) + system + (f8, f8, b1, v, m),
         "_stage_forcing_long": (f8,) * 8,
         "stage_drive": (f8,) * 8,
         "_stage_rows": (f8, v, f8, m, v, table_m, table_v, i8, i8, i8) + system + (f8, b1, m),
@@ -437,7 +437,8 @@ class Inputs:
 
 
 def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
-         coefficients=None, wall_nodes: bool = False, **choices) -> Inputs:
+         coefficients=None, wall_nodes: bool = False, drive_nodes: bool = False,
+         **choices) -> Inputs:
     """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
     step limit, the impulse train's start, the named choices of :data:`CHOICE_CODES`,
     ``rule`` (:func:`quadrature`'s nodes, weights and basis degree-major: its n + 1 rows
@@ -445,7 +446,8 @@ def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
     coefficients of the force law at each of its nodes (Q, N_TABLE). ``coefficients``:
     a polynomial force law's nominal C[j, k] (N_POLY,), with ``force="polynomial"``.
     ``wall_nodes``: the restitution or the wall varies over the nodes (the table's T_ETA,
-    T_DELTA); p then holds their means over the rule."""
+    T_DELTA); p then holds their means over the rule. ``drive_nodes``: f, omega or F0
+    varies over the nodes (T_F, T_OMEGA, T_F0); p keeps the nominal drive."""
     p = np.zeros(kernel.N_PARAMS)
     for name, value in values.items():
         p[PARAMETER_SLOTS[name]] = value
@@ -468,6 +470,8 @@ def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
         cfg[kernel.C_WALL_NODES] = 1
         for slot, col in ((kernel.P_ETA, kernel.T_ETA), (kernel.P_DELTA, kernel.T_DELTA)):
             p[slot] = float(weights @ table[:, col] / weights.sum())
+    if drive_nodes:
+        cfg[kernel.C_DRIVE_NODES] = 1
     return Inputs(p, cfg, table, weights, basis)
 
 
@@ -479,7 +483,8 @@ def stack(inputs) -> Inputs:
 
 #: the parameter vector's slots of the table's columns
 TABLE_SLOTS = (kernel.P_MU, kernel.P_A, kernel.P_C,
-               *range(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY), kernel.P_ETA, kernel.P_DELTA)
+               *range(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY), kernel.P_ETA, kernel.P_DELTA,
+               kernel.P_F, kernel.P_OMEGA, kernel.P_F0)
 
 
 def sampled(inputs: Inputs, columns: dict, coefficients=None) -> Inputs:

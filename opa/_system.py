@@ -21,6 +21,7 @@ from opa._model import (
     IMPULSE_MODELS,
     PARAMETER_NAMES,
     TRUNCATIONS,
+    DRIVE_PARAMETERS,
     IMPACT_PARAMETERS,
     UNCERTAIN_PARAMETERS,
     Oscillator,
@@ -162,6 +163,10 @@ class System:
                 f"pulse_width must be shorter than the impulse period 2 pi/omega1 = "
                 f"{self.impulse_period:.6g}, got {tau}")
         object.__setattr__(self, "pulse_width", tau)
+        if self.impulse == "pulse" and any(name == "F0" and scale != 0.0 for name, scale in
+                                           zip(problem.names, problem.scales)):
+            raise ValueError("an uncertain F0 takes Dirac impulses (impulse 'dirac'): a pulse's "
+                             "height is one force for every node of the equivalent system")
 
     # ------------------------------------------------------------------ the uncertainty
     @functools.cached_property
@@ -300,7 +305,8 @@ class System:
                     closure=self.closure, impact_law=self.impact_law,
                     method=options.method, coefficients=None if law is None else law[0],
                     force="paper" if law is None else "polynomial",
-                    wall_nodes=self.problem.varies_at_the_wall())
+                    wall_nodes=self.problem.varies_at_the_wall(),
+                    drive_nodes=self.problem.varies_in_the_drive())
 
     @property
     def closure(self) -> str:
@@ -374,9 +380,10 @@ def _check_law(oscillator: Oscillator, problem: Problem, truncation: str) -> Non
     """The uncertain parameters are coefficients of the oscillator's force law (mu, a, c
     of the paper's, the named constants of a user's; any name at scale 0), and the
     paper's truncation is the paper's law's."""
-    if truncation == "paper" and any(name in IMPACT_PARAMETERS for name in problem.names):
+    if truncation == "paper" and any(name in IMPACT_PARAMETERS + DRIVE_PARAMETERS
+                                     for name in problem.names):
         raise ValueError("truncation 'paper' (eq. (27)) closes a force law's coefficient; an "
-                         "uncertain eta or delta takes truncation 'galerkin'")
+                         "uncertain eta, delta, f, omega or F0 takes truncation 'galerkin'")
     names = oscillator.uncertain_names
     for name, scale in zip(problem.names, problem.scales):
         if name not in names and scale != 0.0:

@@ -29,7 +29,7 @@ THEMES = {
                             "simulate, --plot and compare_runs",
     "tests/opa/test_solver.py": "the event-driven integrator (opa._kernel) and simulate_dmr",
     "tests/opa/test_impact_uncertain.py":
-        "an uncertain eta or delta through the impact laws (opa._kernel, _problem, _run)",
+        "an uncertain eta, delta, f, omega or F0 (opa._kernel, _problem, _run, _system)",
     "tests/opa/test_opa_system.py": "the OPA equivalent system against the paper's equations",
     "tests/opa/test_hard_dynamics.py": "failures and time bounds across kernel, runs, orbits",
     "tests/opa/dynamics/test_pool.py": "the sweep's worker processes die with their owner",

@@ -1,9 +1,11 @@
-"""An uncertain restitution eta or wall delta: the impact law at each node (issue 43).
+"""An uncertain restitution eta or wall delta (the impact law at each node, issue 43) and
+an uncertain drive f, omega or F0 (each node's own forcing and kick, issue 42).
 
 Independent reference: scipy's event integrator of ``tests/impact_truths.py`` run at the
 20 Gauss-Legendre nodes of the uniform law, on Shaw & Holmes' linear impact oscillator
 started on its stable period-1 orbit (one impact per period for every eta and delta of
-the support, so E[x] and Var[x] are smooth in xi and the rule is exact to round-off).
+the support, so E[x] and Var[x] are smooth in xi and the rule is exact to round-off);
+for the drive, scipy runs of eq. (1) at 12 Gauss-Legendre nodes, the wall out of reach.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
 import mc
 import opa
@@ -114,3 +117,53 @@ def test_tangents_are_refused_where_the_impact_law_reads_each_node():
     with pytest.raises(ValueError, match="not implemented"):
         run(inputs, y0, np.array([0.0, 1.0]), rtol=1e-8, atol=1e-8,
             variational=Variational(np.eye(len(y0))))
+
+
+# ------------------------------------------------------------------ an uncertain drive
+def scipy_paper_flight(osc: opa.Oscillator, times) -> np.ndarray:
+    """x(t) of eq. (1) with the wall out of reach, the one impulse in [0, 3 T] at t = 0
+    (a kick of F0 (1 + a1 sin 0) = F0), by scipy."""
+    def rhs(t, y):
+        x, v = y
+        return [v, osc.mu * (1 - v * v) * v - osc.a * x - osc.c * x**3
+                + osc.f * math.cos(osc.omega * t)]
+    return solve_ivp(rhs, (0.0, times[-1]), [osc.x0, osc.v0 + osc.F0], t_eval=times,
+                     method="DOP853", rtol=1e-12, atol=1e-12).y[0]
+
+
+@pytest.mark.parametrize("name, sigma", [("f", 0.1), ("omega", 0.02), ("F0", 0.05)])
+def test_an_uncertain_drive_converges_to_quadrature_of_scipy_runs(name, sigma):
+    """f, omega or F0 uniform, no impacts over three periods: the OPA system's E[x] and
+    Var[x] against a 12-node Gauss-Legendre rule of scipy runs; the error falls
+    geometrically with the order (each node's own drive and kick)."""
+    osc = opa.preset("3.2", delta=50.0)
+    T3 = 3 * 2 * math.pi / osc.omega
+    times = np.linspace(0.0, T3, 13)
+    nodes, weights = np.polynomial.legendre.leggauss(12)
+    weights = weights / 2
+    runs = np.array([scipy_paper_flight(osc.replace(**{name: getattr(osc, name) + sigma * z}),
+                                        times) for z in nodes])
+    mean = weights @ runs
+    var = weights @ (runs - mean) ** 2
+    errors = []
+    for order in (1, 3, 6):
+        system = opa.System(osc, uncertain=name, sigma=sigma, distribution="uniform",
+                            order=order)
+        ds = opa.simulate_opa(system, times=times)
+        errors.append(max(float(np.abs(ds.x_mean - mean).max()),
+                          float(np.abs(ds.x_var - var).max())))
+    assert var.max() > 1e-5, name  # the drive's uncertainty matters
+    assert errors[-1] < 1e-8 and errors[0] > 100 * errors[-1], (name, errors)
+    assert opa.System(osc, uncertain=name, sigma=sigma, order=2).kernel_inputs(
+        opa.SolverOptions()).cfg[kernel.C_DRIVE_NODES] == 1
+
+
+@pytest.mark.parametrize("fields, words", [
+    (dict(uncertain="omega", sigma=5.0), "every frequency must be > 0"),
+    (dict(uncertain="F0", sigma=0.05, impulse="pulse"), "impulse 'dirac'"),
+    (dict(uncertain="f", sigma=0.05, truncation="paper"), "truncation 'galerkin'"),
+])
+def test_an_impossible_drive_is_refused_in_one_line(fields, words):
+    with pytest.raises(ValueError) as err:
+        opa.simulate_opa(opa.System(opa.preset("3.2"), **fields), periods=1)
+    assert words in str(err.value) and "\n" not in str(err.value)

@@ -89,7 +89,8 @@ def test_the_layout_indices_are_a_permutation():
     params += range(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY)  # C[j, k] of a user's law
     cfg = [getattr(kernel, n) for n in dir(kernel) if n.startswith("C_")]
     stats = [getattr(kernel, n) for n in dir(kernel) if n.startswith("S_")]
-    table = [kernel.T_MU, kernel.T_A, kernel.T_C, kernel.T_ETA, kernel.T_DELTA,
+    table = [kernel.T_MU, kernel.T_A, kernel.T_C, kernel.T_ETA, kernel.T_DELTA, kernel.T_F,
+             kernel.T_OMEGA, kernel.T_F0,
              *range(kernel.T_POLY, kernel.T_POLY + kernel.N_POLY)]
     assert sorted(table) == list(range(kernel.N_TABLE))
     assert sorted(params) == list(range(kernel.N_PARAMS))
@@ -121,7 +122,8 @@ def test_the_packer_puts_every_model_field_in_its_slot():
                 kernel.C_IMPULSE: kernel.IMPULSE_PULSE, kernel.C_AT_ZERO: 0,
                 kernel.C_TRUNC: kernel.TRUNC_PAPER_X, kernel.C_LAW: kernel.LAW_SALTATION,
                 kernel.C_MAXSTEPS: 12345, kernel.C_METHOD: kernel.METHOD_DP5,
-                kernel.C_FORCE: kernel.FORCE_PAPER, kernel.C_WALL_NODES: 0}
+                kernel.C_FORCE: kernel.FORCE_PAPER, kernel.C_WALL_NODES: 0,
+                kernel.C_DRIVE_NODES: 0}
     assert len(want_cfg) == kernel.N_CFG
     for slot, value in want_cfg.items():
         assert cfg[slot] == value, slot
@@ -328,7 +330,8 @@ def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h,
         Ks = np.zeros((kernel.K_ROWS, 2))
         work = np.empty((6, 2))
         drive = kernel.forcing(2.3, p, force)
-        kernel.vector_field(z, 0, p, cfg, rule_nodes, weights, U, drive, sticking, Ks[0], work)
+        kernel.vector_field(z, 0, p, cfg, rule_nodes, weights, U, 2.3, drive, sticking, Ks[0],
+                            work)
         z_new = np.empty(2)
         kernel.rk_step(method, 2.3, z, h, Ks, z_new, np.empty(2), 0, p, cfg, rule_nodes, weights,
                        U, force, sticking, work)
@@ -499,11 +502,11 @@ def test_the_chatter_phase_sticks_at_the_accumulation_time(g):
 def test_the_kick_phase_at_rest_on_the_wall(strength):
     """A kick into the wall while the mean rests on it is an impact at once (v = -eta
     kick, logged EV_KICK with the kick); either kick ends the sticking (EV_RELEASE)."""
-    p, cfg, *_ = phase_system(free_mass())
+    p, cfg, table, weights, U, _ = phase_system(free_mass())
     z = np.array([0.0, 0.0])
     stats, log = np.zeros((1, kernel.N_STATS)), np.zeros((4, 3))
-    sticking, n_events, n_impacts = kernel.kick(2.0, z, 0, strength, True, 0, 0, 0, p, cfg, stats,
-                                                log)
+    sticking, n_events, n_impacts = kernel.kick(2.0, z, 0, strength, True, 0, 0, 0, p, cfg,
+                                                table, weights, U, stats, log)
     into = strength > 0
     assert not sticking and n_impacts == int(into) and stats[0, kernel.S_IMPACTS] == int(into)
     assert z[1] == (-ETA * strength if into else strength)

@@ -198,7 +198,7 @@ def test_negative_or_non_finite_sigma_is_refused(sigma):
         Uncertainty(sigma)
 
 
-@pytest.mark.parametrize("parameter", ["x0", "omega", "", "x-y"])
+@pytest.mark.parametrize("parameter", ["x0", "omega1", "", "x-y"])
 def test_unknown_uncertain_parameter_is_refused(parameter):
     with pytest.raises(ValueError, match=names_parameter_and_value("uncertain", parameter)):
         Uncertainty(0.1, parameter)

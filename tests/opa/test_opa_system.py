@@ -86,7 +86,7 @@ def kernel_rhs(t, y, oscillator, sigma, order, uncertain, truncation, pulse=0.0)
     nodes, weights, basis = rule(inputs)
     out = np.empty_like(y)
     work = np.empty((6, len(nodes)))
-    release = _kernel.vector_field(y, 0, p, cfg, nodes, weights, basis,
+    release = _kernel.vector_field(y, 0, p, cfg, nodes, weights, basis, t,
                                    _kernel.forcing(t, p, pulse), False, out, work)
     return out, release
 

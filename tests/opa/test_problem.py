@@ -20,8 +20,9 @@ def test_one_parameter_is_the_papers_uncertainty_bit_for_bit():
         want = np.array([osc.mu, osc.a, osc.c])[None, :].repeat(len(xi), axis=0)
         want[:, col] = getattr(osc, name) + 0.013 * xi
         assert np.array_equal(table[:, :3], want), name
-        assert not table[:, 3:-2].any(), name  # no user's force law: its columns are zero
-        assert np.array_equal(table[:, -2:], np.array([[osc.eta, osc.delta]] * len(xi))), name
+        assert not table[:, 3:-5].any(), name  # no user's force law: its columns are zero
+        want = [[osc.eta, osc.delta, osc.f, osc.omega, osc.F0]] * len(xi)
+        assert np.array_equal(table[:, -5:], np.array(want)), name
 
 
 def test_several_parameters_each_get_their_own_scale_and_column():
@@ -55,8 +56,8 @@ def test_one_scale_and_one_law_apply_to_all():
 @pytest.mark.parametrize("kwargs, words", [
     (dict(names="mu,mu"), "twice"),
     (dict(names="x"), "uncertain must name"),
-    (dict(names="f"), "cannot be uncertain yet"),
-    (dict(names="omega"), "cannot be uncertain yet"),
+    (dict(names="x0"), "uncertain must name"),
+    (dict(names="omega1"), "uncertain must name"),
     (dict(names="mu,c", scales=(0.1, 0.2, 0.3)), "one per uncertain parameter (2), got 3"),
     (dict(names="mu", scales=-1.0), "sigma must be >= 0"),
     (dict(names="mu", scales=float("nan")), "sigma must be finite"),

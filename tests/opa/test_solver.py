@@ -120,8 +120,8 @@ def kernel_step(osc: Oscillator, t0: float, y0, h: float, method: int = kernel.M
     y0 = np.asarray(y0, dtype=float)
     stages, y_new, ytmp = np.zeros((kernel.K_ROWS, 2)), np.empty(2), np.empty(2)
     work, F = np.empty((6, 1)), np.empty((7, 2))
-    kernel.vector_field(y0, 0, p, cfg, nodes, weights, U, kernel.forcing(t0, p, 0.0), False,
-                        stages[0], work)
+    kernel.vector_field(y0, 0, p, cfg, nodes, weights, U, t0, kernel.forcing(t0, p, 0.0),
+                        False, stages[0], work)
     kernel.rk_step(method, t0, y0, h, stages, y_new, ytmp, 0, p, cfg, nodes, weights, U, 0.0, False,
                    work)
     kernel.dense_prepare(method, t0, y0, y_new, h, stages, F, ytmp, 0, p, cfg, nodes, weights, U,

@@ -36,7 +36,7 @@ def test_defaults_are_one_set_everywhere():
 
 
 @pytest.mark.parametrize(("field", "value"), [
-    ("sigma", -0.1), ("sigma", math.nan), ("uncertain", "f"), ("order", -1), ("order", 1.5),
+    ("sigma", -0.1), ("sigma", math.nan), ("uncertain", "a1"), ("order", -1), ("order", 1.5),
     ("truncation", "exact"), ("impact_law", "elastic"), ("impulse", "step"),
     ("pulse_width", 0.0), ("pulse_width", math.inf), ("impulse_at_zero", "yes"),
     ("allow_negative", "no"), ("distribution", "cauchy"),
