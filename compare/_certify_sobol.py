@@ -247,6 +247,10 @@ def _opa_run(system, opa, periods, per_period, basis, options) -> xr.Dataset:
         raise ValueError(f"opa is a run of the uncertain parameters {','.join(names)}, the "
                          f"system's are {','.join(system.problem.names)}")
     expected = provenance_attrs("opa", system, options)
+    for name in ("force_law", "force_constants"):  # the paper's law has neither
+        if str(opa.attrs.get(name, "")) != str(expected.get(name, "")):
+            raise ValueError(f"opa was run with the force law {opa.attrs.get(name, 'none')!r:.60}"
+                             f", the system has {expected.get(name, 'none')!r:.60} ({name})")
     for name in (*PARAMETER_NAMES, "distribution"):
         if name in opa.attrs and not np.array_equal(opa.attrs[name], expected[name]):
             raise ValueError(f"opa was run with {name} = {opa.attrs[name]}, the system has "

@@ -81,7 +81,7 @@ def split_values(system, options, measure, horizon: float) -> tuple[np.ndarray, 
     if sigma == 0.0:
         return np.empty(0), True
     name = system.uncertain
-    centre = float(getattr(system.oscillator, name))
+    centre = system.oscillator.value(name)
     lo, hi = centre + sigma * measure.a, centre + sigma * measure.b
     tol = max(SPLIT_TOL * sigma, 8.0 * np.finfo(float).eps * max(abs(lo), abs(hi)))
     found = scan_splits(system, options, name, lo, hi, horizon,

@@ -46,7 +46,7 @@ def scaled(system: System, relative, scale: float) -> System:
                          f"({problem.dimension}), got {relative}")
     if not (math.isfinite(scale) and scale > 0):
         raise ValueError(f"each scale must be a positive number, got {scale}")
-    means = [abs(float(getattr(system.oscillator, n))) for n in problem.names]
+    means = [abs(system.oscillator.value(n)) for n in problem.names]
     if not all(means):
         zero = [n for n, m in zip(problem.names, means) if not m]
         raise ValueError(f"relative sizes need nonzero nominal values; {','.join(zero)} = 0")

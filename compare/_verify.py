@@ -111,7 +111,7 @@ def system_of(run: xr.Dataset, options: SolverOptions | None = None
     for name in needed:
         if name not in words:
             check_attribute_number(run, "the run", name)
-    oscillator = Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES})
+    oscillator = Oscillator.from_attrs(attrs)
     distribution = attrs.get("distribution", "semicircle")
     system = System(oscillator, sigma=float(attrs["sigma"]), order=0,
                     uncertain=str(attrs["uncertain"]),

@@ -71,7 +71,7 @@ def several_system_of(run: xr.Dataset, options: SolverOptions | None = None):
                          f"known, so it cannot be verified")
     laws = tuple(None if law == "semicircle" else law for law in
                  split_list(str(attrs["distribution"])))
-    system = System(Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES}),
+    system = System(Oscillator.from_attrs(attrs),
                     uncertain=str(attrs["uncertain"]),
                     sigma=tuple(float(s) for s in np.atleast_1d(attrs["sigma"])),
                     distribution=laws, **run_fields(attrs))

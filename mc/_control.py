@@ -67,6 +67,13 @@ def check_control(control, system, times: np.ndarray | None) -> np.ndarray:
         raise ValueError(f"control: the run did not complete ({control.attrs['failure']})")
     attrs = control.attrs
     ours = {name: float(getattr(system.oscillator, name)) for name in PARAMETER_NAMES}
+    for name, value in system.oscillator.law_attrs().items():  # the force law too
+        if str(attrs.get(name, "")) != value:
+            raise ValueError(f"control: {name} = {str(attrs.get(name, 'none'))!r:.60} in the "
+                             f"run, {value!r:.60} in the ensemble")
+    if "force_law" in attrs and system.oscillator.force is None:
+        raise ValueError(f"control: the run has the force law {attrs['force_law']!r:.60}, the "
+                         f"ensemble the paper's")
     if system.dimension == 1:
         ours.update(sigma=float(system.sigma))
     for name, value in ours.items():

@@ -53,10 +53,7 @@ def provenance_attrs(model: str, system, options: SolverOptions, *, seed: int = 
     a missing seed as -1 and a missing sampler as "none".
     """
     attrs = {name: float(getattr(system.oscillator, name)) for name in PARAMETER_NAMES}
-    law = system.oscillator.force
-    if law is not None:  # a user's force law: its expression and constants (name=value)
-        attrs.update(force_law=law.expression, force_constants=",".join(
-            f"{name}={value!r}" for name, value in law.constants.items()))
+    attrs.update(system.oscillator.law_attrs())  # a user's force law: expression, constants
     attrs.update(model=model, **system.dataset_attrs())
     attrs.update(
         rtol=float(options.rtol),

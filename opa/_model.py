@@ -235,8 +235,33 @@ class Oscillator:
                 changes["force"] = ForceLaw(law.expression, **{**law.constants, **own})
         return dataclasses.replace(self, **changes)
 
-    def as_dict(self) -> dict[str, float]:
-        return {name: getattr(self, name) for name in PARAMETER_NAMES}
+    def as_dict(self) -> dict:
+        """Every parameter by name and, for a user's force law, its expression and
+        constants (``law_attrs``): what resume keys and manifests hash."""
+        return {**{name: getattr(self, name) for name in PARAMETER_NAMES}, **self.law_attrs()}
+
+    @classmethod
+    def from_attrs(cls, attrs) -> Oscillator:
+        """The oscillator a dataset was computed with, from its attributes: every
+        ``PARAMETER_NAMES`` value and, for a user's force law, ``force_law`` and
+        ``force_constants`` (``name=value,...``, as ``opa._dataset.provenance_attrs``
+        writes them)."""
+        values = {name: float(attrs[name]) for name in PARAMETER_NAMES}
+        if "force_law" in attrs:
+            text = str(attrs.get("force_constants", ""))
+            constants = {}
+            for item in filter(None, text.split(",")):
+                name, _, value = item.partition("=")
+                constants[name.strip()] = float(value)
+            values["force"] = ForceLaw(str(attrs["force_law"]), **constants)
+        return cls(**values)
+
+    def law_attrs(self) -> dict:
+        """The force law as dataset attributes (none for the paper's law)."""
+        if self.force is None:
+            return {}
+        return dict(force_law=self.force.expression, force_constants=",".join(
+            f"{name}={value!r}" for name, value in self.force.constants.items()))
 
     @property
     def uncertain_names(self) -> tuple[str, ...]:

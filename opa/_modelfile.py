@@ -27,11 +27,11 @@ numbers (``1`` or ``1.0``), never strings or booleans. Every fault of a file is 
 not TOML, an unknown key, a wrong type, a bad expression (``opa.ForceLaw``'s message), a
 constant with no value, a value the oscillator refuses.
 
->>> import tempfile, os
+>>> import tempfile, pathlib
 >>> text = 'force = "-2*zeta*v - x"\n[constants]\nzeta = 0.05\n[oscillator]\nF0 = 0.0\n'
 >>> with tempfile.TemporaryDirectory() as folder:
-...     path = os.path.join(folder, "shaw.toml")
-...     _ = open(path, "w").write(text)
+...     path = pathlib.Path(folder) / "shaw.toml"
+...     _ = path.write_text(text)
 ...     model = read_model(path)
 >>> model.oscillator.force.expression, model.oscillator.value("zeta"), model.problem
 ('-2*zeta*v - x', 0.05, None)
@@ -39,7 +39,6 @@ constant with no value, a value the oscillator refuses.
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 
 from opa._forcelaw import OSCILLATOR_COEFFICIENTS, ForceLaw
@@ -114,22 +113,16 @@ def _oscillator(where: str, data: dict, law: ForceLaw | None) -> Oscillator:
 def uncertain_problem(table: dict, where: str, oscillator: Oscillator) -> Problem:
     """The :class:`opa.Problem` of [uncertain.*] tables (``opa.Problem.from_table``'s
     format), its names checked against ``oscillator``'s force law: the paper's mu, a, c
-    or a user's law's constants (``Oscillator.coefficient_names``)."""
-    coefficients = None if oscillator.force is None else oscillator.coefficient_names
-    # from_table builds its problem by calling its class; this factory adds the names
-    # the oscillator's law allows (from_table itself knows only the paper's law)
-    factory = functools.partial(_problem, coefficients=coefficients)
+    or a user's law's constants, and the impact's and the drive's parameters
+    (``Oscillator.uncertain_names``)."""
+    coefficients = None if oscillator.force is None else oscillator.uncertain_names
     try:
-        problem = Problem.from_table.__func__(factory, table, where)
+        problem = Problem.from_table(table, where, coefficients)
         problem.check(oscillator)
     except ValueError as err:  # the Problem's own refusals name no file: say which
         text = str(err)
         raise ValueError(text if text.startswith(where) else f"{where}: {text}") from None
     return problem
-
-
-def _problem(names, scales, laws, allow_negative, *, coefficients):
-    return Problem(names, scales, laws, allow_negative, coefficients)
 
 
 def read_model(path) -> Model:

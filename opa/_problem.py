@@ -154,10 +154,12 @@ class Problem:
 
     # ------------------------------------------------------------------ from a table
     @classmethod
-    def from_table(cls, table: dict, where: str = "the problem") -> Problem:
+    def from_table(cls, table: dict, where: str = "the problem",
+                   coefficients: tuple | None = None) -> Problem:
         """The problem of a TOML-style table: one sub-table per uncertain parameter, in
         order, each with ``sigma`` and optionally ``distribution``; optionally
-        ``allow_negative`` at the top.
+        ``allow_negative`` at the top. ``coefficients``: the names allowed (a user's
+        force law's, ``Oscillator.uncertain_names``; None: the paper's).
 
         >>> Problem.from_table({"mu": {"sigma": 0.016},
         ...                     "c": {"sigma": 0.005, "distribution": "uniform"}}).laws
@@ -185,7 +187,7 @@ class Problem:
             laws.append(entry.get("distribution"))
         if not names:
             raise ValueError(f"{where} names no uncertain parameter (one table [name] each)")
-        return cls(tuple(names), tuple(scales), tuple(laws), allow)
+        return cls(tuple(names), tuple(scales), tuple(laws), allow, coefficients)
 
     @classmethod
     def from_toml(cls, path) -> Problem:

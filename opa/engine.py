@@ -10,7 +10,7 @@ from opa._basis import chebyshev_u, gauss_nodes, orthonormal, quadrature_order
 from opa._boxes import MAX_BOXES
 from opa._chaos import MAX_CHAOS_TERMS, ChaosBasis
 from opa._forcelaw import OSCILLATOR_COEFFICIENTS
-from opa._modelfile import Model, read_model, uncertain_problem
+from opa._modelfile import read_model, uncertain_problem
 from opa._problem import split_list
 from opa._dataset import (
     COMMAND,
@@ -124,7 +124,7 @@ __all__ = [
     "locate_setup", "mean_state", "opa_variants", "orthonormal", "output_times",
     "package_version", "parse", "phase_section", "pool_shared", "preset", "provenance_attrs",
     "quadrature_order", "read_toml", "remove_store", "require_gpu", "run_batch",
-    "split_list", "Model", "OSCILLATOR_COEFFICIENTS", "read_model", "uncertain_problem",
+    "split_list", "OSCILLATOR_COEFFICIENTS", "read_model", "uncertain_problem",
     "run_elements", "run_measure",
     "true_system_work",
     "usable_cores",

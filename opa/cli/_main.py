@@ -37,7 +37,6 @@ from opa.cli._flags import (
     execution_from,
     flagged,
     refuse_given,
-    refuse_force_law,
     options_from,
     say,
     system_from,
@@ -67,10 +66,7 @@ def _simulate(args) -> int:
         if args.verify is None:
             refuse_given(args, ["strict", "verify_max", "seed"],
                          "applies with --verify M only")
-        else:
-            refuse_force_law(args, "simulate opa --verify", "its true systems "
-                             "(compare.verify) are integrated with the paper's force law; "
-                             "compare with simulate mc --model instead")
+
     if args.model == "mc" and args.sampler == "gauss":
         refuse_given(args, ["seed"], "has no effect with --sampler gauss (a quadrature "
                                      "draws nothing)")

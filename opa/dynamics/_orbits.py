@@ -131,7 +131,7 @@ class ImpactSystem(System):
         return self.replace(**{name: float(value)})
 
     def parameter(self, name: str) -> float:
-        return self.sigma if name == "sigma" else float(getattr(self.oscillator, name))
+        return self.sigma if name == "sigma" else self.oscillator.value(name)
 
     def attrs(self) -> dict:
         """Dataset attributes (docs/datasets.md)."""

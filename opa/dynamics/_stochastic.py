@@ -710,7 +710,7 @@ def _check_several(given, oscillator, parameter, values, sigma, names, distribut
         raise DiagramInputError("{sigma} must be positive for each uncertain parameter, got "
                                 "{0}", _quoted(",".join(f"{s:g}" for s in system.sigma)))
     for name, scale, (lo, _) in zip(names, system.sigma, system.problem.support):
-        mean = float(getattr(oscillator, name))
+        mean = oscillator.value(name)
         if mean + scale * lo < 0.0 <= mean and not system.allow_negative:
             raise DiagramInputError(
                 "{sigma} {0:g} makes {1} = {2:g} + sigma xi negative for xi below {3:.3g} "

@@ -507,7 +507,7 @@ def test_dask_local_cluster_gives_exactly_the_local_result():
          r"samples must be a multiple of replicates = 8, got 100"),
         (dict(sampler="sobol", replicates=0), r"replicates must be a positive integer, got 0"),
         (dict(order=-1), r"order \(N\) must be an integer >= 0, got -1"),
-        (dict(uncertain="f"), r"uncertain: f cannot be uncertain yet"),
+        (dict(uncertain="a1"), r"uncertain must name parameters among .*, got 'a1'"),
         (dict(sigma=0.9), r"makes mu = 0.8 \+ sigma xi = -0.1 negative"),
         (dict(chunk_size=0), r"chunk_size must be a positive integer, got 0"),
         (dict(samples=True), r"samples must be a positive integer, got True"),

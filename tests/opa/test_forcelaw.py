@@ -192,3 +192,26 @@ def test_shaw_holmes_period_one_orbits_and_their_multipliers(case):
         want = sorted(orbit["multipliers"], key=lambda z: (-abs(z), z.imag))
         np.testing.assert_allclose(got, want, atol=1e-6)
         assert found.stable == bool(np.all(np.abs(want) < 1))
+
+
+def test_a_run_of_a_user_law_is_certified_against_its_own_law():
+    """compare.verify rebuilds the true systems from the run's attributes, force law
+    included (``Oscillator.from_attrs``): a converged run agrees, and the same run
+    claiming another constant, or the paper's law, is found out."""
+    import compare
+
+    law = ForceLaw("-2*zeta*v - x - k3*x^3", zeta=0.05, k3=0.1)
+    osc = opa.Oscillator(force=law, a=1.0, f=1.0, omega=2.5, eta=0.8, delta=0.3, F0=0.0,
+                         omega1=2.5, x0=-0.5)
+    system = opa.System(osc, uncertain="k3", sigma=0.05, distribution="uniform", order=3,
+                        impact_law="saltation")
+    ds = opa.simulate_opa(system, periods=5, per_period=8, elements="adaptive")
+    assert opa.Oscillator.from_attrs(ds.attrs) == osc
+    assert compare.verify(ds, samples=256, max_samples=1024).attrs["verdict"] == "agrees"
+    other = ds.copy()
+    other.attrs["force_constants"] = "zeta=0.05,k3=0.5"
+    assert compare.verify(other, samples=256, max_samples=1024).attrs["verdict"] == "disagrees"
+    paper = ds.copy()
+    del paper.attrs["force_law"], paper.attrs["force_constants"]
+    paper.attrs["uncertain"] = "c"
+    assert compare.verify(paper, samples=256, max_samples=1024).attrs["verdict"] == "disagrees"

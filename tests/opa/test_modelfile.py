@@ -41,7 +41,8 @@ def test_round_trip_gives_the_objects_of_the_api(tmp_path):
     law = ForceLaw("-2*zeta*v - x", zeta=0.05)
     assert model.oscillator == Oscillator(force=law, f=1.0, omega=2.5, eta=0.8, F0=0.0,
                                           x0=-0.5)
-    assert model.problem == Problem("zeta", 0.01, "uniform", coefficients=("zeta",))
+    names = ("zeta", "eta", "delta", "f", "omega", "F0")  # the law's, the impact's, the drive's
+    assert model.problem == Problem("zeta", 0.01, "uniform", coefficients=names)
     assert isinstance(model.oscillator.f, float)  # a TOML integer is a number too
 
 

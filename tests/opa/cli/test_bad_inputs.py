@@ -663,7 +663,6 @@ BAD_MODEL = [
     (OPA + ["--model", SHAW, "--uncertain", "mu"], ("--uncertain", "zeta")),
     (OPA + ["--model", SHAW, "--uncertain", "zeta", "--sigma", "-0.01"], "sigma"),
     (OPA + ["--model", SHAW, "--truncation", "paper"], "paper"),
-    (OPA + ["--model", SHAW, "--verify", "64"], ("--verify", "paper's force law")),
     (OPA + ["--model", SHAW, "--problem", "{model}"], ("--problem", "'mu'"),
      "[mu]\nsigma = 0.01\n"),
     (MC + ["--model", SHAW, "--distribution", "cauchy"], "cauchy"),
