@@ -167,8 +167,10 @@ class ValidateConfig:
         if self.parameter == self.uncertain:
             raise ValueError(f"the swept parameter must differ from the uncertain one, got "
                              f"{self.parameter!r} for both")
-        if self.uncertain not in ("mu", "a", "c"):
-            raise ValueError(f"uncertain must be one of mu, a, c, got {self.uncertain!r}")
+        allowed = getattr(self.oscillator, "uncertain_names", ("mu", "a", "c"))
+        if self.uncertain not in allowed:
+            raise ValueError(f"uncertain must be one of {', '.join(allowed)}, got "
+                             f"{self.uncertain!r}")
         for name in ("values", "sigmas", "horizons"):
             seq = getattr(self, name)
             if not isinstance(seq, tuple) or not seq or not all(
@@ -293,8 +295,9 @@ class ValidateConfig:
 
     @property
     def single_variants(self) -> tuple[tuple[str, str], ...]:
-        """(impact law, truncation) of the single-element variants."""
-        return VARIANTS if self.semicircle else LAW_VARIANTS
+        """(impact law, truncation) of the single-element variants: the paper's
+        truncation only for the paper's law of xi and the paper's force law."""
+        return VARIANTS if self.semicircle and self.oscillator.force is None else LAW_VARIANTS
 
     @property
     def element_laws(self) -> tuple[str, ...]:

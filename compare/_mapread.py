@@ -105,8 +105,9 @@ def check_map(ds, entry: str) -> None:
                          f"attribute model = 'validate'), got model = {model!r}")
     variables, attributes, time = MAP_NEEDS[entry]
     require_attributes(ds, _MAP, _MAP_ATTRS + attributes)
-    require_attributes(ds, _MAP, (str(ds.attrs["uncertain"]),),
-                       hint=" (the nominal value of the uncertain parameter)")
+    if "force_law" not in ds.attrs:  # a user's law holds its constants in force_constants
+        require_attributes(ds, _MAP, (str(ds.attrs["uncertain"]),),
+                           hint=" (the nominal value of the uncertain parameter)")
     require_variables(ds, _MAP, _MAP_COORDS + (str(ds.attrs["parameter"]),) + variables)
     if time:
         require_time(ds, _MAP, old_name=True)
@@ -194,7 +195,14 @@ def _unc(ds) -> str:
 
 
 def nominal(ds) -> float:
-    return float(ds.attrs[ds.attrs["uncertain"]])
+    """The uncertain parameter's nominal value: its attribute, or a constant of the run's
+    own force law (``force_constants``)."""
+    name = str(ds.attrs["uncertain"])
+    if name not in ds.attrs and "force_law" in ds.attrs:
+        from opa.engine import Oscillator
+
+        return Oscillator.constants_from_attrs(ds.attrs)[name]
+    return float(ds.attrs[name])
 
 
 # -- the boundary and what sits there ------------------------------------------------------

@@ -546,7 +546,7 @@ def value_splits(cfg: ValidateConfig, work: Work, value: float
     """The centre of the ensembles and, per horizon (in ``cfg.horizons`` order), the
     splits of the sampled systems' event sequences over the largest ensemble, kept as a
     part (read once per task: every round's design reads it)."""
-    centre = getattr(cfg.oscillator_at(value), cfg.uncertain)
+    centre = cfg.oscillator_at(value).value(cfg.uncertain)
     inputs = {"system": cfg.system_at(value), "uncertain": cfg.uncertain,
               "sigmas": [min(cfg.sigmas), max(cfg.sigmas)], "horizons": cfg.horizons,
               "tol": cfg.split_resolution, "per_period": cfg.per_period,
@@ -1028,9 +1028,11 @@ def _attrs(cfg: ValidateConfig) -> dict:
     attrs.update(
         distribution=cfg.distribution,
         elements=("none" if cfg.elements is None else str(cfg.elements)),
-        variants_dropped=(", ".join(cfg.dropped_variants) + " (eq. (27) truncates the "
-                          "semicircle's basis; under another law only the Galerkin projection "
-                          "exists)") if cfg.dropped_variants else "none",
+        variants_dropped=(", ".join(cfg.dropped_variants) + (
+            " (eq. (27) closes the paper's force law; a user's law has the Galerkin "
+            "projection only)" if cfg.oscillator.force is not None else
+            " (eq. (27) truncates the semicircle's basis; under another law only the "
+            "Galerkin projection exists)")) if cfg.dropped_variants else "none",
     )
     if cfg.elements is not None:
         attrs.update(element_order=int(cfg.nmax), element_text=(

@@ -3,7 +3,8 @@
 Every ``    $ opa-mc ...`` line of the page is run in this process from the repository's root
 (``opa.cli._main.main``); the indented lines below it, up to the next blank line, are
 replaced by its standard output (and, for a command that is refused, its one-line error
-and the exit status). ``tests/test_docs.py`` reruns them and fails when the page says
+and the exit status); the output's own blank lines are written indented, so the block
+ends at the first line that is not. ``tests/test_docs.py`` reruns them and fails when the page says
 anything else; wall times ("in 0.41 s") are compared as numbers of the same form only.
 
     python docs/own_oscillator.py            # rewrite docs/own-oscillator.md
@@ -58,8 +59,9 @@ def render(text: str) -> str:
         out.append(line)
         i += 1
         if line.startswith(PROMPT):
-            while i < len(lines) and lines[i].strip():
-                i += 1  # the output printed before
+            while (i < len(lines) and lines[i].startswith("    ")
+                   and not lines[i].startswith(PROMPT)):
+                i += 1  # the output printed before (its blank lines are indented too)
             out += [f"    {printed_line}" for printed_line in printed(line[len(PROMPT):])]
     return "\n".join(out) + "\n"
 

@@ -357,8 +357,10 @@ def digest(payload) -> str:
 
     ``payload`` is made of JSON values (dict keys sorted, tuples as lists, floats
     exactly), numpy scalars (as their values), numpy arrays (by dtype, shape and bytes;
-    object arrays by their elements) and dataclass instances (by type name and their
-    compared fields: an :class:`opa.System` or a law of xi by what defines it). Anything
+    object arrays by their elements), dataclass instances (by type name and their
+    compared fields: an :class:`opa.System` or a law of xi by what defines it; a field in
+    the class's ``_digest_optional`` only when it is not at its default) and objects with
+    a ``digest_payload()`` (an :class:`opa.ForceLaw`: its expression and constants). Anything
     else is a TypeError: a key never rests on an object's ``repr``.
 
     >>> digest({"b": (1, 2.5), "a": np.arange(3)}) == digest({"a": np.arange(3),
@@ -389,9 +391,16 @@ def _canonical(value):
     if isinstance(value, (list, tuple)):
         return [_canonical(v) for v in value]
     if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        # fields added later with a default (``_digest_optional``) count only when set, so
+        # that the keys of every part written before them still match
+        optional = getattr(type(value), "_digest_optional", ())
         return {"__dataclass__": type(value).__qualname__,
                 **{f.name: _canonical(getattr(value, f.name))
-                   for f in dataclasses.fields(value) if f.compare}}
+                   for f in dataclasses.fields(value) if f.compare and not (
+                       f.name in optional and getattr(value, f.name) == f.default)}}
+    if hasattr(value, "digest_payload"):  # an object that says what defines it
+        return {"__object__": type(value).__qualname__,
+                "payload": _canonical(value.digest_payload())}
     raise TypeError(f"digest: cannot hash a {type(value).__name__} ({value!r:.60})")
 
 

@@ -249,6 +249,10 @@ class ForceLaw:
     def __hash__(self) -> int:
         return hash((self.expression, tuple(sorted(self.constants.items()))))
 
+    def digest_payload(self) -> dict:
+        """What defines the law, for the keys of stored parts (``opa._dataset.digest``)."""
+        return dict(expression=self.expression, constants=dict(self.constants))
+
     def __reduce__(self):
         return (_rebuild, (self.expression, dict(self.constants)))
 

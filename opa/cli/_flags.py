@@ -346,15 +346,6 @@ def model_from(args):
     return cached
 
 
-def refuse_force_law(args, command: str, why: str) -> None:
-    """Refuse a ``--model`` file with a user's force law where ``command`` cannot take
-    one yet, in one line saying why."""
-    model = model_from(args)
-    if model is not None and model.oscillator.force is not None:
-        raise CliError(f"--model {args.model_file}: {command} does not take a user's force "
-                       f"law ({model.oscillator.force.expression!r:.60}) yet: {why}")
-
-
 def oscillator_from(args) -> Oscillator:
     """The oscillator of ``--preset`` or ``--model`` (or the defaults), each parameter
     flag given overriding it."""

@@ -174,17 +174,14 @@ def _check_outdir(path: str) -> None:
 
 
 def _validate_model(args) -> None:
-    """``validate --model FILE``: the file's oscillator (paper's force law) under the
+    """``validate --model FILE``: the file's oscillator and force law under the
     parameter flags; the file may not name uncertain parameters (validate sweeps its own
     grid of sigma)."""
-    from opa.cli._flags import model_from, oscillator_from, refuse_force_law
+    from opa.cli._flags import model_from, oscillator_from
 
     model = model_from(args)
     if model is None:
         return
-    refuse_force_law(args, "validate", "the trust map runs the paper's truncation (eq. 27) "
-                     "beside galerkin, and keeps its finished runs keyed by mu, a and c; compare "
-                     "simulate opa with simulate mc, or try sobol")
     if model.problem is not None:
         raise CliError(f"--model {args.model_file}: validate sweeps its own grid of sigma "
                        f"(--sigmas, --uncertain, --distribution): leave out the file's "
@@ -192,6 +189,7 @@ def _validate_model(args) -> None:
     osc = oscillator_from(args)
     for name in PARAMETER_NAMES:  # every value of the file, the flags' included
         setattr(args, name, getattr(osc, name))
+    args.force_law = osc.force  # and its force law (None: the paper's)
 
 
 def cmd_validate(args) -> int:
@@ -207,6 +205,8 @@ def cmd_validate(args) -> int:
              if getattr(args, name, None) is not None}
     if args.preset:
         model["preset"] = args.preset
+    if getattr(args, "force_law", None) is not None:
+        model["force"] = args.force_law
     solver = {k: getattr(args, k) for k in ("rtol", "atol", "max_step", "chatter_velocity",
                                             "method")
               if getattr(args, k, None) is not None}
@@ -334,13 +334,11 @@ def cmd_converge(args) -> int:
     from compare import (ConvergenceConfig, convergence_lines, run_convergence,
                          write_convergence_report)
     from opa.cli._flags import (MAX_WORKERS, CliError, flagged, oscillator_from,
-                                options_from, refuse_force_law, uncertain_from)
+                                options_from, uncertain_from)
 
     if args.workers > MAX_WORKERS:
         raise ValueError(f"--workers must be at most {MAX_WORKERS} (4 per CPU), got "
                          f"{args.workers}")
-    refuse_force_law(args, "converge", "its finished runs, kept in OUTDIR and reused by a "
-                     "rerun, are keyed by mu, a and c, not by the force law")
     oscillator = oscillator_from(args)
     _check_outdir(args.outdir)
     kw = {k: v for k, v in (("budgets", args.budgets), ("uniform", args.uniform))

@@ -285,7 +285,7 @@ class _Slice:
         self.task = task
         self.measure = parse(task.distribution)
         self.osc, self.sigma = task.oscillator, task.sigma
-        self.centre = float(getattr(self.osc, task.uncertain))
+        self.centre = self.osc.value(task.uncertain)
         self.lo, self.hi = self.measure.lo, self.measure.hi
         self.cycle = impulse_cycle(self.osc) or 1
 
