@@ -395,3 +395,18 @@ def test_an_edited_slice_of_a_stochastic_diagram_is_recomputed(tmp_path):
     assert np.isfinite(again.probability.values).all()
     for name in ("probability", "mc_probability", "mc_type", "mc_xi", "boundary_xi"):
         np.testing.assert_array_equal(again[name].values, clean[name].values, err_msg=name)
+
+
+def test_a_force_law_keys_a_part_and_the_paper_law_keeps_the_old_keys():
+    """A field added later (the oscillator's ``force``) counts in a digest only when set:
+    the paper's law hashes as before the field existed (no ``force`` entry), two user's
+    laws, or two values of one constant, hash apart."""
+    import opa
+    from opa._dataset import _canonical, digest
+
+    assert "force" not in _canonical(opa.Oscillator())
+    law = opa.ForceLaw("-2*zeta*v - x", zeta=0.05)
+    a, b = opa.Oscillator(force=law), opa.Oscillator(force=law.__class__("-2*zeta*v - x",
+                                                                         zeta=0.06))
+    assert digest(a) == digest(opa.Oscillator(force=opa.ForceLaw("-2*zeta*v - x", zeta=0.05)))
+    assert len({digest(a), digest(b), digest(opa.Oscillator())}) == 3
