@@ -398,17 +398,13 @@ def _stage_forcing_long(t, theta, h, f, w, cw, sw, force):
 
 
 @njit(cache=True, inline="always")
-def force_law(p, cfg):
-    """The force law in scalars, for the 2-D register path: (0, mu, a, c, 0, ...) for the
-    paper's, (1, C[0, 0], C[0, 1], ..., C[3, 3]) for a polynomial one (a tuple is passed
-    by value: no reference counts)."""
-    if cfg[C_FORCE] == FORCE_POLYNOMIAL:
-        q = P_POLY
-        return (1.0, p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6],
-                p[q + 7], p[q + 8], p[q + 9], p[q + 10], p[q + 11], p[q + 12], p[q + 13],
-                p[q + 14], p[q + 15])
-    return (0.0, p[P_MU], p[P_A], p[P_C], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-            0.0, 0.0, 0.0)
+def force_law(p):
+    """A polynomial force law's coefficients in scalars, (C[0, 0], C[0, 1], ..., C[3, 3]),
+    for its 2-D register path (a tuple is passed by value: no reference counts)."""
+    q = P_POLY
+    return (p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6], p[q + 7],
+            p[q + 8], p[q + 9], p[q + 10], p[q + 11], p[q + 12], p[q + 13], p[q + 14],
+            p[q + 15])
 
 
 @njit(cache=True, inline="always")
@@ -432,10 +428,10 @@ def _poly_horner(x, v, c00, c10, c20, c30, c01, c11, c21, c31, c02, c12, c22, c3
 
 @njit(cache=True, inline="always")
 def _poly_law(x, v, law):
-    """``_poly_horner`` of a ``force_law`` tuple (C[j, k] at law[1 + 4 j + k])."""
-    return _poly_horner(x, v, law[1], law[5], law[9], law[13], law[2], law[6], law[10],
-                        law[14], law[3], law[7], law[11], law[15], law[4], law[8], law[12],
-                        law[16])
+    """``_poly_horner`` of a ``force_law`` tuple (C[j, k] at law[4 j + k])."""
+    return _poly_horner(x, v, law[0], law[4], law[8], law[12], law[1], law[5], law[9],
+                        law[13], law[2], law[6], law[10], law[14], law[3], law[7], law[11],
+                        law[15])
 
 
 @njit(cache=True, inline="always")
@@ -449,13 +445,19 @@ def _poly_row(table, k, x, v):
 
 
 @njit(cache=True, inline="always")
-def _f2(x, v, law, drive, sticking):
+def _f2(x, v, mu, a, c, drive, sticking):
     """Deterministic right-hand side on scalars, (x', v') of eq. (29), with the external
-    force ``drive`` at that time and the force law of ``force_law``."""
+    force ``drive`` at that time."""
     if sticking:
         return 0.0, 0.0
-    if law[0] == 0.0:
-        return v, law[1] * (1.0 - v * v) * v - law[2] * x - law[3] * x * x * x + drive
+    return v, mu * (1.0 - v * v) * v - a * x - c * x * x * x + drive
+
+
+@njit(cache=True, inline="always")
+def _f2_poly(x, v, law, drive, sticking):
+    """``_f2`` of a polynomial force law (``force_law``'s tuple)."""
+    if sticking:
+        return 0.0, 0.0
     g, _, _ = _poly_law(x, v, law)
     return v, g + drive
 
@@ -496,7 +498,10 @@ def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work)
     if m == 0 and n == 1 and table.shape[0] == 1 and (
             (not poly and table[0, T_MU] == p[P_MU] and table[0, T_A] == p[P_A]
              and table[0, T_C] == p[P_C]) or (poly and _own_law(cfg, table, p))):
-        dx, dv = _f2(z[0], z[1], force_law(p, cfg), drive, False)
+        if poly:
+            dx, dv = _f2_poly(z[0], z[1], force_law(p), drive, False)
+        else:
+            dx, dv = _f2(z[0], z[1], p[P_MU], p[P_A], p[P_C], drive, False)
         out[0] = 0.0 if sticking else dx
         out[1] = 0.0 if sticking else dv
         return dv
@@ -522,7 +527,7 @@ def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work)
     x0 = z[0]
     v0 = z[n]
     if poly:
-        g0, _, _ = _poly_law(x0, v0, force_law(p, cfg))
+        g0, _, _ = _poly_law(x0, v0, force_law(p))
     else:
         g0 = p[P_MU] * (1.0 - v0 * v0) * v0 - p[P_A] * x0 - p[P_C] * x0 * x0 * x0
     for i in range(n):
@@ -607,36 +612,36 @@ def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work)
 # arrays out of the calls: numba increments and decrements the reference count of every
 # array argument atomically, which cost 44% of a DMR run with the general argument list.
 @njit(cache=True)
-def _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):
+def _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, cw, sw, force, sticking):
     """One step of the 2-D system, generated from the tableau (see ``step2``)."""
     x1 = x + h * (0.05260015195876773 * k0x)
     v1 = v + h * (0.05260015195876773 * k0v)
     drive = stage_forcing(t, 0.05260015195876773, h, f, w, cw, sw, force)
-    k1x, k1v = _f2(x1, v1, law, drive, sticking)
+    k1x, k1v = _f2(x1, v1, mu, a, c, drive, sticking)
     x2 = x + h * (0.0197250569845379 * k0x + 0.0591751709536137 * k1x)
     v2 = v + h * (0.0197250569845379 * k0v + 0.0591751709536137 * k1v)
     drive = stage_forcing(t, 0.0789002279381516, h, f, w, cw, sw, force)
-    k2x, k2v = _f2(x2, v2, law, drive, sticking)
+    k2x, k2v = _f2(x2, v2, mu, a, c, drive, sticking)
     x3 = x + h * (0.02958758547680685 * k0x + 0.08876275643042054 * k2x)
     v3 = v + h * (0.02958758547680685 * k0v + 0.08876275643042054 * k2v)
     drive = stage_forcing(t, 0.1183503419072274, h, f, w, cw, sw, force)
-    k3x, k3v = _f2(x3, v3, law, drive, sticking)
+    k3x, k3v = _f2(x3, v3, mu, a, c, drive, sticking)
     x4 = x + h * (0.2413651341592667 * k0x + -0.8845494793282861 * k2x + 0.924834003261792 * k3x)
     v4 = v + h * (0.2413651341592667 * k0v + -0.8845494793282861 * k2v + 0.924834003261792 * k3v)
     drive = stage_forcing(t, 0.2816496580927726, h, f, w, cw, sw, force)
-    k4x, k4v = _f2(x4, v4, law, drive, sticking)
+    k4x, k4v = _f2(x4, v4, mu, a, c, drive, sticking)
     x5 = x + h * (0.037037037037037035 * k0x + 0.17082860872947386 * k3x +
                   0.12546768756682242 * k4x)
     v5 = v + h * (0.037037037037037035 * k0v + 0.17082860872947386 * k3v +
                   0.12546768756682242 * k4v)
     drive = stage_forcing(t, 0.3333333333333333, h, f, w, cw, sw, force)
-    k5x, k5v = _f2(x5, v5, law, drive, sticking)
+    k5x, k5v = _f2(x5, v5, mu, a, c, drive, sticking)
     x6 = x + h * (0.037109375 * k0x + 0.17025221101954405 * k3x + 0.06021653898045596 * k4x +
                   -0.017578125 * k5x)
     v6 = v + h * (0.037109375 * k0v + 0.17025221101954405 * k3v + 0.06021653898045596 * k4v +
                   -0.017578125 * k5v)
     drive = stage_forcing(t, 0.25, h, f, w, cw, sw, force)
-    k6x, k6v = _f2(x6, v6, law, drive, sticking)
+    k6x, k6v = _f2(x6, v6, mu, a, c, drive, sticking)
     x7 = x + h * (0.03709200011850479 * k0x + 0.17038392571223998 * k3x +
                   0.10726203044637328 * k4x + -0.015319437748624402 * k5x +
                   0.008273789163814023 * k6x)
@@ -644,13 +649,13 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):
                   0.10726203044637328 * k4v + -0.015319437748624402 * k5v +
                   0.008273789163814023 * k6v)
     drive = stage_forcing(t, 0.3076923076923077, h, f, w, cw, sw, force)
-    k7x, k7v = _f2(x7, v7, law, drive, sticking)
+    k7x, k7v = _f2(x7, v7, mu, a, c, drive, sticking)
     x8 = x + h * (0.6241109587160757 * k0x + -3.3608926294469414 * k3x + -0.868219346841726 * k4x +
                   27.59209969944671 * k5x + 20.154067550477894 * k6x + -43.48988418106996 * k7x)
     v8 = v + h * (0.6241109587160757 * k0v + -3.3608926294469414 * k3v + -0.868219346841726 * k4v +
                   27.59209969944671 * k5v + 20.154067550477894 * k6v + -43.48988418106996 * k7v)
     drive = stage_forcing(t, 0.6512820512820513, h, f, w, cw, sw, force)
-    k8x, k8v = _f2(x8, v8, law, drive, sticking)
+    k8x, k8v = _f2(x8, v8, mu, a, c, drive, sticking)
     x9 = x + h * (0.47766253643826434 * k0x + -2.4881146199716677 * k3x +
                   -0.590290826836843 * k4x + 21.230051448181193 * k5x + 15.279233632882423 * k6x +
                   -33.28821096898486 * k7x + -0.020331201708508627 * k8x)
@@ -658,7 +663,7 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):
                   -0.590290826836843 * k4v + 21.230051448181193 * k5v + 15.279233632882423 * k6v +
                   -33.28821096898486 * k7v + -0.020331201708508627 * k8v)
     drive = stage_forcing(t, 0.6, h, f, w, cw, sw, force)
-    k9x, k9v = _f2(x9, v9, law, drive, sticking)
+    k9x, k9v = _f2(x9, v9, mu, a, c, drive, sticking)
     x10 = x + h * (-0.9371424300859873 * k0x + 5.186372428844064 * k3x + 1.0914373489967295 * k4x +
                    -8.149787010746927 * k5x + -18.52006565999696 * k6x + 22.739487099350505 * k7x +
                    2.4936055526796523 * k8x + -3.0467644718982196 * k9x)
@@ -666,7 +671,7 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):
                    -8.149787010746927 * k5v + -18.52006565999696 * k6v + 22.739487099350505 * k7v +
                    2.4936055526796523 * k8v + -3.0467644718982196 * k9v)
     drive = stage_forcing(t, 0.8571428571428571, h, f, w, cw, sw, force)
-    k10x, k10v = _f2(x10, v10, law, drive, sticking)
+    k10x, k10v = _f2(x10, v10, mu, a, c, drive, sticking)
     x11 = x + h * (2.273310147516538 * k0x + -10.53449546673725 * k3x + -2.0008720582248625 * k4x +
                    -17.9589318631188 * k5x + 27.94888452941996 * k6x + -2.8589982771350235 * k7x +
                    -8.87285693353063 * k8x + 12.360567175794303 * k9x + 0.6433927460157636 * k10x)
@@ -674,21 +679,21 @@ def _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):
                    -17.9589318631188 * k5v + 27.94888452941996 * k6v + -2.8589982771350235 * k7v +
                    -8.87285693353063 * k8v + 12.360567175794303 * k9v + 0.6433927460157636 * k10v)
     drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)
-    k11x, k11v = _f2(x11, v11, law, drive, sticking)
+    k11x, k11v = _f2(x11, v11, mu, a, c, drive, sticking)
     xn = x + h * (0.054293734116568765 * k0x + 4.450312892752409 * k5x + 1.8915178993145003 * k6x +
                   -5.801203960010585 * k7x + 0.3111643669578199 * k8x + -0.1521609496625161 * k9x +
                   0.20136540080403034 * k10x + 0.04471061572777259 * k11x)
     vn = v + h * (0.054293734116568765 * k0v + 4.450312892752409 * k5v + 1.8915178993145003 * k6v +
                   -5.801203960010585 * k7v + 0.3111643669578199 * k8v + -0.1521609496625161 * k9v +
                   0.20136540080403034 * k10v + 0.04471061572777259 * k11v)
-    k12x, k12v = _f2(xn, vn, law, drive, sticking)
+    k12x, k12v = _f2(xn, vn, mu, a, c, drive, sticking)
     kx = (k1x, k2x, k3x, k4x, k5x, k6x, k7x, k8x, k9x, k10x, k11x, k12x)
     kv = (k1v, k2v, k3v, k4v, k5v, k6v, k7v, k8v, k9v, k10v, k11v, k12v)
     return xn, vn, kx, kv
 
 
 @njit(cache=True)
-def _dense_stages2_dop853(t, h, K, x, v, law, f, w, cw, sw, force, sticking):
+def _dense_stages2_dop853(t, h, K, x, v, mu, a, c, f, w, cw, sw, force, sticking):
     """Rows 13-15 of K (the dense-output stages) of the 2-D system, generated from
     the tableau (see ``step2``)."""
     x13 = x + h * (0.056167502283047954 * K[0, 0] + 0.25350021021662483 * K[6, 0] +
@@ -700,7 +705,7 @@ def _dense_stages2_dop853(t, h, K, x, v, law, f, w, cw, sw, force, sticking):
                    0.15329179827876568 * K[9, 1] + 0.00820105229563469 * K[10, 1] +
                    0.007567897660545699 * K[11, 1] + -0.008298 * K[12, 1])
     drive = stage_drive(t, 0.1, h, f, w, cw, sw, force)
-    k13x, k13v = _f2(x13, v13, law, drive, sticking)
+    k13x, k13v = _f2(x13, v13, mu, a, c, drive, sticking)
     K[13, 0] = k13x
     K[13, 1] = k13v
     x14 = x + h * (0.03183464816350214 * K[0, 0] + 0.028300909672366776 * K[5, 0] +
@@ -712,7 +717,7 @@ def _dense_stages2_dop853(t, h, K, x, v, law, f, w, cw, sw, force, sticking):
                    -0.00010834732869724932 * K[10, 1] + 0.0003825710908356584 * K[11, 1] +
                    -0.00034046500868740456 * K[12, 1] + 0.1413124436746325 * k13v)
     drive = stage_drive(t, 0.2, h, f, w, cw, sw, force)
-    k14x, k14v = _f2(x14, v14, law, drive, sticking)
+    k14x, k14v = _f2(x14, v14, mu, a, c, drive, sticking)
     K[14, 0] = k14x
     K[14, 1] = k14v
     x15 = x + h * (-0.42889630158379194 * K[0, 0] + -4.697621415361164 * K[5, 0] +
@@ -724,7 +729,130 @@ def _dense_stages2_dop853(t, h, K, x, v, law, f, w, cw, sw, force, sticking):
                    0.3567271874552811 * K[8, 1] + -0.0013990241651590145 * K[12, 1] +
                    2.9475147891527724 * k13v + -9.15095847217987 * k14v)
     drive = stage_drive(t, 0.7777777777777778, h, f, w, cw, sw, force)
-    k15x, k15v = _f2(x15, v15, law, drive, sticking)
+    k15x, k15v = _f2(x15, v15, mu, a, c, drive, sticking)
+    K[15, 0] = k15x
+    K[15, 1] = k15v
+
+
+@njit(cache=True)
+def _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):
+    """One step of the 2-D system, generated from the tableau (see ``step2``)."""
+    x1 = x + h * (0.05260015195876773 * k0x)
+    v1 = v + h * (0.05260015195876773 * k0v)
+    drive = stage_forcing(t, 0.05260015195876773, h, f, w, cw, sw, force)
+    k1x, k1v = _f2_poly(x1, v1, law, drive, sticking)
+    x2 = x + h * (0.0197250569845379 * k0x + 0.0591751709536137 * k1x)
+    v2 = v + h * (0.0197250569845379 * k0v + 0.0591751709536137 * k1v)
+    drive = stage_forcing(t, 0.0789002279381516, h, f, w, cw, sw, force)
+    k2x, k2v = _f2_poly(x2, v2, law, drive, sticking)
+    x3 = x + h * (0.02958758547680685 * k0x + 0.08876275643042054 * k2x)
+    v3 = v + h * (0.02958758547680685 * k0v + 0.08876275643042054 * k2v)
+    drive = stage_forcing(t, 0.1183503419072274, h, f, w, cw, sw, force)
+    k3x, k3v = _f2_poly(x3, v3, law, drive, sticking)
+    x4 = x + h * (0.2413651341592667 * k0x + -0.8845494793282861 * k2x + 0.924834003261792 * k3x)
+    v4 = v + h * (0.2413651341592667 * k0v + -0.8845494793282861 * k2v + 0.924834003261792 * k3v)
+    drive = stage_forcing(t, 0.2816496580927726, h, f, w, cw, sw, force)
+    k4x, k4v = _f2_poly(x4, v4, law, drive, sticking)
+    x5 = x + h * (0.037037037037037035 * k0x + 0.17082860872947386 * k3x +
+                  0.12546768756682242 * k4x)
+    v5 = v + h * (0.037037037037037035 * k0v + 0.17082860872947386 * k3v +
+                  0.12546768756682242 * k4v)
+    drive = stage_forcing(t, 0.3333333333333333, h, f, w, cw, sw, force)
+    k5x, k5v = _f2_poly(x5, v5, law, drive, sticking)
+    x6 = x + h * (0.037109375 * k0x + 0.17025221101954405 * k3x + 0.06021653898045596 * k4x +
+                  -0.017578125 * k5x)
+    v6 = v + h * (0.037109375 * k0v + 0.17025221101954405 * k3v + 0.06021653898045596 * k4v +
+                  -0.017578125 * k5v)
+    drive = stage_forcing(t, 0.25, h, f, w, cw, sw, force)
+    k6x, k6v = _f2_poly(x6, v6, law, drive, sticking)
+    x7 = x + h * (0.03709200011850479 * k0x + 0.17038392571223998 * k3x +
+                  0.10726203044637328 * k4x + -0.015319437748624402 * k5x +
+                  0.008273789163814023 * k6x)
+    v7 = v + h * (0.03709200011850479 * k0v + 0.17038392571223998 * k3v +
+                  0.10726203044637328 * k4v + -0.015319437748624402 * k5v +
+                  0.008273789163814023 * k6v)
+    drive = stage_forcing(t, 0.3076923076923077, h, f, w, cw, sw, force)
+    k7x, k7v = _f2_poly(x7, v7, law, drive, sticking)
+    x8 = x + h * (0.6241109587160757 * k0x + -3.3608926294469414 * k3x + -0.868219346841726 * k4x +
+                  27.59209969944671 * k5x + 20.154067550477894 * k6x + -43.48988418106996 * k7x)
+    v8 = v + h * (0.6241109587160757 * k0v + -3.3608926294469414 * k3v + -0.868219346841726 * k4v +
+                  27.59209969944671 * k5v + 20.154067550477894 * k6v + -43.48988418106996 * k7v)
+    drive = stage_forcing(t, 0.6512820512820513, h, f, w, cw, sw, force)
+    k8x, k8v = _f2_poly(x8, v8, law, drive, sticking)
+    x9 = x + h * (0.47766253643826434 * k0x + -2.4881146199716677 * k3x +
+                  -0.590290826836843 * k4x + 21.230051448181193 * k5x + 15.279233632882423 * k6x +
+                  -33.28821096898486 * k7x + -0.020331201708508627 * k8x)
+    v9 = v + h * (0.47766253643826434 * k0v + -2.4881146199716677 * k3v +
+                  -0.590290826836843 * k4v + 21.230051448181193 * k5v + 15.279233632882423 * k6v +
+                  -33.28821096898486 * k7v + -0.020331201708508627 * k8v)
+    drive = stage_forcing(t, 0.6, h, f, w, cw, sw, force)
+    k9x, k9v = _f2_poly(x9, v9, law, drive, sticking)
+    x10 = x + h * (-0.9371424300859873 * k0x + 5.186372428844064 * k3x + 1.0914373489967295 * k4x +
+                   -8.149787010746927 * k5x + -18.52006565999696 * k6x + 22.739487099350505 * k7x +
+                   2.4936055526796523 * k8x + -3.0467644718982196 * k9x)
+    v10 = v + h * (-0.9371424300859873 * k0v + 5.186372428844064 * k3v + 1.0914373489967295 * k4v +
+                   -8.149787010746927 * k5v + -18.52006565999696 * k6v + 22.739487099350505 * k7v +
+                   2.4936055526796523 * k8v + -3.0467644718982196 * k9v)
+    drive = stage_forcing(t, 0.8571428571428571, h, f, w, cw, sw, force)
+    k10x, k10v = _f2_poly(x10, v10, law, drive, sticking)
+    x11 = x + h * (2.273310147516538 * k0x + -10.53449546673725 * k3x + -2.0008720582248625 * k4x +
+                   -17.9589318631188 * k5x + 27.94888452941996 * k6x + -2.8589982771350235 * k7x +
+                   -8.87285693353063 * k8x + 12.360567175794303 * k9x + 0.6433927460157636 * k10x)
+    v11 = v + h * (2.273310147516538 * k0v + -10.53449546673725 * k3v + -2.0008720582248625 * k4v +
+                   -17.9589318631188 * k5v + 27.94888452941996 * k6v + -2.8589982771350235 * k7v +
+                   -8.87285693353063 * k8v + 12.360567175794303 * k9v + 0.6433927460157636 * k10v)
+    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)
+    k11x, k11v = _f2_poly(x11, v11, law, drive, sticking)
+    xn = x + h * (0.054293734116568765 * k0x + 4.450312892752409 * k5x + 1.8915178993145003 * k6x +
+                  -5.801203960010585 * k7x + 0.3111643669578199 * k8x + -0.1521609496625161 * k9x +
+                  0.20136540080403034 * k10x + 0.04471061572777259 * k11x)
+    vn = v + h * (0.054293734116568765 * k0v + 4.450312892752409 * k5v + 1.8915178993145003 * k6v +
+                  -5.801203960010585 * k7v + 0.3111643669578199 * k8v + -0.1521609496625161 * k9v +
+                  0.20136540080403034 * k10v + 0.04471061572777259 * k11v)
+    k12x, k12v = _f2_poly(xn, vn, law, drive, sticking)
+    kx = (k1x, k2x, k3x, k4x, k5x, k6x, k7x, k8x, k9x, k10x, k11x, k12x)
+    kv = (k1v, k2v, k3v, k4v, k5v, k6v, k7v, k8v, k9v, k10v, k11v, k12v)
+    return xn, vn, kx, kv
+
+
+@njit(cache=True)
+def _dense_stages2_dop853_poly(t, h, K, x, v, law, f, w, cw, sw, force, sticking):
+    """Rows 13-15 of K (the dense-output stages) of the 2-D system, generated from
+    the tableau (see ``step2``)."""
+    x13 = x + h * (0.056167502283047954 * K[0, 0] + 0.25350021021662483 * K[6, 0] +
+                   -0.2462390374708025 * K[7, 0] + -0.12419142326381637 * K[8, 0] +
+                   0.15329179827876568 * K[9, 0] + 0.00820105229563469 * K[10, 0] +
+                   0.007567897660545699 * K[11, 0] + -0.008298 * K[12, 0])
+    v13 = v + h * (0.056167502283047954 * K[0, 1] + 0.25350021021662483 * K[6, 1] +
+                   -0.2462390374708025 * K[7, 1] + -0.12419142326381637 * K[8, 1] +
+                   0.15329179827876568 * K[9, 1] + 0.00820105229563469 * K[10, 1] +
+                   0.007567897660545699 * K[11, 1] + -0.008298 * K[12, 1])
+    drive = stage_drive(t, 0.1, h, f, w, cw, sw, force)
+    k13x, k13v = _f2_poly(x13, v13, law, drive, sticking)
+    K[13, 0] = k13x
+    K[13, 1] = k13v
+    x14 = x + h * (0.03183464816350214 * K[0, 0] + 0.028300909672366776 * K[5, 0] +
+                   0.053541988307438566 * K[6, 0] + -0.05492374857139099 * K[7, 0] +
+                   -0.00010834732869724932 * K[10, 0] + 0.0003825710908356584 * K[11, 0] +
+                   -0.00034046500868740456 * K[12, 0] + 0.1413124436746325 * k13x)
+    v14 = v + h * (0.03183464816350214 * K[0, 1] + 0.028300909672366776 * K[5, 1] +
+                   0.053541988307438566 * K[6, 1] + -0.05492374857139099 * K[7, 1] +
+                   -0.00010834732869724932 * K[10, 1] + 0.0003825710908356584 * K[11, 1] +
+                   -0.00034046500868740456 * K[12, 1] + 0.1413124436746325 * k13v)
+    drive = stage_drive(t, 0.2, h, f, w, cw, sw, force)
+    k14x, k14v = _f2_poly(x14, v14, law, drive, sticking)
+    K[14, 0] = k14x
+    K[14, 1] = k14v
+    x15 = x + h * (-0.42889630158379194 * K[0, 0] + -4.697621415361164 * K[5, 0] +
+                   7.683421196062599 * K[6, 0] + 4.06898981839711 * K[7, 0] +
+                   0.3567271874552811 * K[8, 0] + -0.0013990241651590145 * K[12, 0] +
+                   2.9475147891527724 * k13x + -9.15095847217987 * k14x)
+    v15 = v + h * (-0.42889630158379194 * K[0, 1] + -4.697621415361164 * K[5, 1] +
+                   7.683421196062599 * K[6, 1] + 4.06898981839711 * K[7, 1] +
+                   0.3567271874552811 * K[8, 1] + -0.0013990241651590145 * K[12, 1] +
+                   2.9475147891527724 * k13v + -9.15095847217987 * k14v)
+    drive = stage_drive(t, 0.7777777777777778, h, f, w, cw, sw, force)
+    k15x, k15v = _f2_poly(x15, v15, law, drive, sticking)
     K[15, 0] = k15x
     K[15, 1] = k15v
 
@@ -771,8 +899,12 @@ def step2(t, z, h, K, z_new, p, cfg, force, sticking, rtol, atol):
     v = z[1]
     k0x = K[0, 0]
     k0v = K[0, 1]
-    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, force_law(p, cfg), p[P_F], w, cw,
-                                     sw, force, sticking)
+    if cfg[C_FORCE] == FORCE_POLYNOMIAL:
+        xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, force_law(p), p[P_F], w,
+                                              cw, sw, force, sticking)
+    else:
+        xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, p[P_MU], p[P_A], p[P_C], p[P_F],
+                                         w, cw, sw, force, sticking)
     store_stages2(K, kx, kv)
     z_new[0] = xn
     z_new[1] = vn
@@ -932,8 +1064,12 @@ def dense_prepare2(t, z, z_new, h, K, F, p, cfg, force, sticking):
     """``dense_prepare`` for DOP853 and the two-dimensional system: the three extra
     stages in scalars (``_dense_stages2_dop853``), the same bits as the general loop."""
     w = p[P_OMEGA]
-    _dense_stages2_dop853(t, h, K, z[0], z[1], force_law(p, cfg), p[P_F], w,
-                          math.cos(w * t), math.sin(w * t), force, sticking)
+    if cfg[C_FORCE] == FORCE_POLYNOMIAL:
+        _dense_stages2_dop853_poly(t, h, K, z[0], z[1], force_law(p), p[P_F], w,
+                                   math.cos(w * t), math.sin(w * t), force, sticking)
+    else:
+        _dense_stages2_dop853(t, h, K, z[0], z[1], p[P_MU], p[P_A], p[P_C], p[P_F], w,
+                              math.cos(w * t), math.sin(w * t), force, sticking)
     _dop853_coefficients(z, z_new, h, K, F)
     return 3
 
@@ -1631,7 +1767,7 @@ def step_size(t, h, t_break, hmax, sticking, stick_hmax):
 
 
 @njit(cache=True, inline="always")
-def register_step(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
+def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, atol):
     """Phase "trial step" on the 2-D register path (the DMR, a Monte Carlo sample): one
     DOP853 step of size h from (t, x, v) with f(t, x, v) = (k0x, k0v), every stage in a
     scalar (``_stages2_dop853``) and the error estimate and wall margin from them
@@ -1640,8 +1776,17 @@ def register_step(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
 
     Returns (err, margin, x_new, v_new, kx, kv), kx and kv the stages 1-12 (the last
     f(t + h, x_new, v_new)), stored in K only when the dense output needs them."""
-    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, law, f, w, math.cos(w * t),
+    xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, mu, a, c, f, w, math.cos(w * t),
                                      math.sin(w * t), force, sticking)
+    err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
+    return err, margin, xn, vn, kx, kv
+
+
+@njit(cache=True, inline="always")
+def register_step_poly(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
+    """``register_step`` of a polynomial force law (``force_law``'s tuple of C[j, k])."""
+    xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, math.cos(w * t),
+                                          math.sin(w * t), force, sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
     return err, margin, xn, vn, kx, kv
 
@@ -1862,7 +2007,9 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     n_out = t_out.shape[0]
     # the 2-D register path, decided once: its trial step takes and returns scalars only
     two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p)
-    law, f_amp, w = force_law(p, cfg), p[P_F], p[P_OMEGA]
+    mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
+    poly = cfg[C_FORCE] == FORCE_POLYNOMIAL
+    law = force_law(p)  # a polynomial law's coefficients (read only when poly)
     kx = kv = _NO_STAGES
     off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
     t = t_out[0]
@@ -1927,9 +2074,14 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
                 break
             # ---- trial step into z_new, K[last] = f(t + h_try, z_new)
             if two_d:
-                err, margin, z_new[0], z_new[1], kx, kv = register_step(
-                    t, z[0], z[1], h_try, K[0, 0], K[0, 1], law, f_amp, w, force,
-                    sticking, rtol, atol)
+                if poly:
+                    err, margin, z_new[0], z_new[1], kx, kv = register_step_poly(
+                        t, z[0], z[1], h_try, K[0, 0], K[0, 1], law, f_amp, w, force,
+                        sticking, rtol, atol)
+                else:
+                    err, margin, z_new[0], z_new[1], kx, kv = register_step(
+                        t, z[0], z[1], h_try, K[0, 0], K[0, 1], mu, a_lin, c_cub, f_amp, w,
+                        force, sticking, rtol, atol)
                 n_rhs += last
             else:
                 n_rhs += rk_step(method, t, z, h_try, K, z_new, ztmp, m, p, cfg, table, weights,

@@ -119,15 +119,17 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     system = (v, iv, m, v, m)  # p, cfg, table, weights, U
     column = nt.UniTuple(f8, 7)  # a component's dense-output coefficients
     stages = nt.UniTuple(f8, 12)  # one component's stages of a 2-D DOP853 step
-    law = nt.UniTuple(f8, 1 + kernel.N_POLY)  # the force law in scalars (force_law)
+    law = nt.UniTuple(f8, kernel.N_POLY)  # a polynomial law's coefficients (force_law)
     helper = {  # leaves and the 2-D stepper: nothing here calls the vector field; what
         # the main group calls first comes first (the main group's leaves give the
         # helper the time to finish the 2-D step before rk_step needs it)
         "is_deterministic": (i8, iv, m, v),
         "last_stage": (i8,),
-        "_stages2_dop853": (f8,) * 6 + (law,) + (f8,) * 5 + (b1,),
+        "_stages2_dop853": (f8,) * 14 + (b1,),
+        "_stages2_dop853_poly": (f8,) * 6 + (law,) + (f8,) * 5 + (b1,),
         "_error2": (f8,) * 7 + (stages, stages, f8, f8),
-        "_dense_stages2_dop853": (f8, f8, m, f8, f8, law) + (f8,) * 5 + (b1,),
+        "_dense_stages2_dop853": (f8, f8, m) + (f8,) * 10 + (b1,),
+        "_dense_stages2_dop853_poly": (f8, f8, m, f8, f8, law) + (f8,) * 5 + (b1,),
         "_dop853_coefficients": (v, v, f8, m, m),
         "store_stages2": (m, stages, stages),
         "dense_prepare2": (f8, v, v, f8, m, m, v, iv, f8, b1),

@@ -240,12 +240,18 @@ def _wrapped_sum(terms, indent):
     return ("\n" + " " * indent).join(lines)
 
 
-def unrolled_step(name, A, C, B, last):
+#: the force law's arguments and right-hand side of each 2-D register path: the paper's
+#: law (mu, a, c) and a user's polynomial law (``force_law``'s tuple of C[j, k])
+LAWS = {"paper": ("mu, a, c", "_f2"), "polynomial": ("law", "_f2_poly")}
+
+
+def unrolled_step(name, A, C, B, last, law="paper"):
     """Source of the kernel's unrolled step of the two-dimensional system for a tableau:
     every stage a scalar, the sums in the order of the general loops (zero coefficients,
     which add exact zeros there, skipped)."""
+    args, f2 = LAWS[law]
     lines = ["@njit(cache=True)",
-             f"def {name}(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force, sticking):",
+             f"def {name}(t, x, v, h, k0x, k0v, {args}, f, w, cw, sw, force, sticking):",
              '    """One step of the 2-D system, generated from the tableau (see ``step2``)."""']
     for s in range(1, last):
         for comp, state in (("x", "x"), ("v", "v")):
@@ -253,14 +259,14 @@ def unrolled_step(name, A, C, B, last):
             head = f"    {state}{s} = {state} + h * ("
             lines.append(head + _wrapped_sum(terms, len(head)) + ")")
         lines.append(f"    drive = stage_forcing(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
-        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, law, drive, sticking)")
+        lines.append(f"    k{s}x, k{s}v = {f2}(x{s}, v{s}, {args}, drive, sticking)")
     for comp in ("x", "v"):
         terms = [f"{float(B[r])!r} * k{r}{comp}" for r in range(last) if B[r] != 0.0]
         head = f"    {comp}n = {comp} + h * ("
         lines.append(head + _wrapped_sum(terms, len(head)) + ")")
     if float(C[last - 1]) != 1.0:  # else stage last - 1 is at t + h too: its force is reused
         lines.append("    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)")
-    lines.append(f"    k{last}x, k{last}v = _f2(xn, vn, law, drive, sticking)")
+    lines.append(f"    k{last}x, k{last}v = {f2}(xn, vn, {args}, drive, sticking)")
     for comp in ("x", "v"):
         names = [f"k{s}{comp}" for s in range(1, last + 1)]
         lines.append(f"    k{comp} = ({_wrapped_sum(names, 10).replace(' +', ',')})")
@@ -268,11 +274,12 @@ def unrolled_step(name, A, C, B, last):
     return "\n".join(lines) + "\n"
 
 
-def unrolled_dense_stages(name, A, C, first, stop):
+def unrolled_dense_stages(name, A, C, first, stop, law="paper"):
     """Source of the kernel's dense-output stages first..stop-1 of the two-dimensional
     system: the earlier stages read from K, the new ones kept in scalars and stored."""
+    args, f2 = LAWS[law]
     lines = ["@njit(cache=True)",
-             f"def {name}(t, h, K, x, v, law, f, w, cw, sw, force, sticking):",
+             f"def {name}(t, h, K, x, v, {args}, f, w, cw, sw, force, sticking):",
              f'    """Rows {first}-{stop - 1} of K (the dense-output stages) of the 2-D system, '
              'generated from',
              '    the tableau (see ``step2``)."""']
@@ -283,22 +290,26 @@ def unrolled_dense_stages(name, A, C, first, stop):
             head = f"    {comp}{s} = {comp} + h * ("
             lines.append(head + _wrapped_sum(terms, len(head)) + ")")
         lines.append(f"    drive = stage_drive(t, {float(C[s])!r}, h, f, w, cw, sw, force)")
-        lines.append(f"    k{s}x, k{s}v = _f2(x{s}, v{s}, law, drive, sticking)")
+        lines.append(f"    k{s}x, k{s}v = {f2}(x{s}, v{s}, {args}, drive, sticking)")
         lines.append(f"    K[{s}, 0] = k{s}x")
         lines.append(f"    K[{s}, 1] = k{s}v")
     return "\n".join(lines) + "\n"
 
 
-def kernel_steps_source() -> str:
-    return (unrolled_step("_stages2_dop853", kernel.D8_A, kernel.D8_C, kernel.D8_B, 12) + "\n\n"
-            + unrolled_dense_stages("_dense_stages2_dop853", kernel.D8_A, kernel.D8_C, 13, 16))
+def kernel_steps_source(law: str = "paper") -> str:
+    suffix = "" if law == "paper" else "_poly"
+    return (unrolled_step(f"_stages2_dop853{suffix}", kernel.D8_A, kernel.D8_C, kernel.D8_B,
+                          12, law) + "\n\n"
+            + unrolled_dense_stages(f"_dense_stages2_dop853{suffix}", kernel.D8_A, kernel.D8_C,
+                                    13, 16, law))
 
 
 def test_the_unrolled_steps_are_generated_from_the_tableaux():
     """The kernel's unrolled 2-D step is exactly what the tableau generates (print
     ``kernel_steps_source()`` to regenerate them after a tableau change)."""
     source = (ROOT / "opa" / "_kernel.py").read_text()
-    assert kernel_steps_source() in source
+    assert kernel_steps_source("paper") in source
+    assert kernel_steps_source("polynomial") in source
 
 
 def two_node_rule(inputs):
@@ -310,15 +321,16 @@ def two_node_rule(inputs):
             np.ascontiguousarray(np.repeat(U, 2, axis=0)))
 
 
+@pytest.mark.parametrize("law", [None, "mu*(1 - v^2)*v - a*x - c*x^3 + 0.1*x^2*v"])
 @pytest.mark.parametrize("method", [kernel.METHOD_DOP853, kernel.METHOD_DP5])
 @pytest.mark.parametrize("h, force, sticking", [(0.07, 0.0, False), (0.3, 0.8, False),
                                                 (1.0, 0.0, False), (0.07, 0.5, True)])
 def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h, force,
-                                                                       sticking):
+                                                                       sticking, law):
     """The same step and dense output by the unrolled 2-D path and by the general loop
     (forced by :func:`two_node_rule`): every stage, the new state and every dense-output
-    coefficient equal."""
-    osc = opa.preset("3.2")
+    coefficient equal, for the paper's law and a user's polynomial law."""
+    osc = opa.preset("3.2", force=law)
     inputs = kernel_inputs(osc, opa.SolverOptions())
     p, cfg = inputs.p, inputs.cfg
     nodes, weights, U = rule(inputs)
@@ -343,7 +355,8 @@ def test_the_two_dimensional_step_equals_the_general_loop_bit_for_bit(method, h,
     assert kernel.is_deterministic(0, cfg, nodes, p)
     assert not kernel.is_deterministic(0, cfg, general_nodes, p)
     shifted = nodes.copy()
-    shifted[0, kernel.T_MU] += 1e-12  # a sample's own table is not the parameter vector's
+    column = kernel.T_MU if law is None else kernel.T_POLY + 1  # mu, or C[0, 1]
+    shifted[0, column] += 1e-12  # a sample's own table is not the parameter vector's
     assert not kernel.is_deterministic(0, cfg, shifted, p)
     np.testing.assert_array_equal(stages[0], stages[1])
     np.testing.assert_array_equal(results[0], results[1])
