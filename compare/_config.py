@@ -296,8 +296,11 @@ class ValidateConfig:
     @property
     def single_variants(self) -> tuple[tuple[str, str], ...]:
         """(impact law, truncation) of the single-element variants: the paper's
-        truncation only for the paper's law of xi and the paper's force law."""
-        return VARIANTS if self.semicircle and self.oscillator.force is None else LAW_VARIANTS
+        truncation only for the paper's law of xi and force law, and an uncertain mu, a
+        or c (eq. (27) closes a coefficient of that law)."""
+        paper = (self.semicircle and self.oscillator.force is None
+                 and self.uncertain in ("mu", "a", "c"))
+        return VARIANTS if paper else LAW_VARIANTS
 
     @property
     def element_laws(self) -> tuple[str, ...]:

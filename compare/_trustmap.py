@@ -1029,8 +1029,9 @@ def _attrs(cfg: ValidateConfig) -> dict:
         distribution=cfg.distribution,
         elements=("none" if cfg.elements is None else str(cfg.elements)),
         variants_dropped=(", ".join(cfg.dropped_variants) + (
-            " (eq. (27) closes the paper's force law; a user's law has the Galerkin "
-            "projection only)" if cfg.oscillator.force is not None else
+            " (eq. (27) closes a coefficient of the paper's force law; a user's law, and an "
+            "uncertain eta, delta, f, omega or F0, have the Galerkin projection only)"
+            if cfg.oscillator.force is not None or cfg.uncertain not in ("mu", "a", "c") else
             " (eq. (27) truncates the semicircle's basis; under another law only the "
             "Galerkin projection exists)")) if cfg.dropped_variants else "none",
     )

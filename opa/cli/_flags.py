@@ -38,6 +38,10 @@ EXIT_SIMULATION = 3
 EXIT_UNVERIFIED = 4
 MAX_WORKERS = 4 * (os.cpu_count() or 1)
 
+#: what --uncertain may name with the paper's law: its coefficients, the impact's eta and
+#: delta, and the drive's f, omega and F0
+UNCERTAIN_NAMES = Oscillator().uncertain_names
+
 
 class CliError(Exception):
     """A user mistake detected after parsing (reported without traceback)."""
@@ -113,7 +117,7 @@ def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS,
         g.add_argument("--uncertain", type=uncertain_names, default=None,
                        metavar="P[,P...]",
                        help=f"which parameters are uncertain, among "
-                            f"{', '.join(UNCERTAIN_PARAMETERS)} (or a --model force law's "
+                            f"{', '.join(UNCERTAIN_NAMES)} (or a --model force law's "
                             f"constants): one, or several such as mu,c (default mu, or the "
                             f"--model file's [uncertain.NAME] tables)")
     else:
@@ -122,7 +126,7 @@ def _system_flags(parser: argparse.ArgumentParser, *, laws=IMPACT_LAWS,
                             f"(default {DEFAULT_SIGMA:g})")
         g.add_argument("--uncertain", type=uncertain_name, default="mu", metavar="P",
                        help=f"which parameter is uncertain, among "
-                            f"{', '.join(UNCERTAIN_PARAMETERS)} or a --model force law's "
+                            f"{', '.join(UNCERTAIN_NAMES)} or a --model force law's "
                             f"constants (default mu, or the --model file's [uncertain.NAME])")
     g.add_argument("--allow-negative", action="store_true",
                    help="allow p_bar - sigma < 0 for the uncertain parameter")

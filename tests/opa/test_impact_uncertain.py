@@ -167,3 +167,22 @@ def test_an_impossible_drive_is_refused_in_one_line(fields, words):
     with pytest.raises(ValueError) as err:
         opa.simulate_opa(opa.System(opa.preset("3.2"), **fields), periods=1)
     assert words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_trust_map_of_an_uncertain_restitution(tmp_path):
+    """validate with eta uncertain: the paper's truncation (a force-law closure) is left
+    out, the map is computed and says why."""
+    import xarray as xr
+
+    from opa.cli._main import main
+
+    status = main(["validate", "--uncertain", "eta", "--values", "3.99", "--sigmas",
+                   "0.01,0.03", "--orders", "0:1", "--horizons", "2", "--samples", "128",
+                   "--max-samples", "256", "--no-frontier", "--no-plots", "--quiet",
+                   "--outdir", str(tmp_path / "map")])
+    assert status == 0
+    ds = xr.open_dataset(tmp_path / "map" / "validate.nc")
+    variants = [str(v) for v in ds.variant.values]
+    assert not any("paper" in v for v in variants) and "saltation/galerkin" in variants
+    assert "uncertain eta" in ds.attrs["variants_dropped"]
+    ds.close()
