@@ -1,4 +1,6 @@
-"""Issue 43's target for an uncertain impact: eta = 0.8 + 0.05 xi and delta = 0 + 0.05 xi.
+"""Issue 43's target for an uncertain impact: eta = 0.8 + 0.05 xi and delta = 0 + 0.05 xi
+(and, with ``--drive``, issue 42's f = 1.5 + 0.05 xi, omega = 3.98 + 0.01 xi and
+F0 = 0.1 + 0.02 xi).
 
 Case: the section 3.2 set at omega = 3.98, 10 forcing periods, 8 outputs per period, xi
 of the paper's semicircle law (``--distribution`` to change it). For each uncertain
@@ -31,6 +33,7 @@ import mc
 import opa
 
 PARAMETERS = {"eta": 0.05, "delta": 0.05}
+DRIVE = {"f": 0.05, "omega": 0.01, "F0": 0.02}
 TARGET = 1e-4
 
 
@@ -40,8 +43,8 @@ def rms(a, b) -> float:
 
 def rows(name: str, distribution: str | None, log2_samples: int, budgets) -> list[str]:
     osc = opa.preset("3.2", omega=3.98)
-    base = opa.System(osc, uncertain=name, sigma=PARAMETERS[name], distribution=distribution,
-                      order=4)
+    base = opa.System(osc, uncertain=name, sigma={**PARAMETERS, **DRIVE}[name],
+                      distribution=distribution, order=4)
     grid = dict(periods=10, per_period=8)
     start = time.perf_counter()
     ref = mc.simulate_mc(base, samples=2**log2_samples, progress=False, **grid)
@@ -78,11 +81,13 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--smoke", action="store_true", help="tiny sizes")
     parser.add_argument("--distribution", default=None, help="law of xi (default semicircle)")
+    parser.add_argument("--drive", action="store_true",
+                        help="f, omega and F0 uncertain instead of eta and delta")
     args = parser.parse_args(argv)
     load = os.getloadavg()
     print(f"impact_uncertain: load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; "
           f"distribution {args.distribution or 'semicircle'}", flush=True)
-    for name in PARAMETERS:
+    for name in DRIVE if args.drive else PARAMETERS:
         sizes = (10, (8,)) if args.smoke else (16, (64, 128, 256))
         print("\n".join(rows(name, args.distribution, *sizes)), flush=True)
     return 0

@@ -1611,21 +1611,21 @@ def start_run(z, t, t_end, include_start, p, cfg, escape, snap, out, stats):
 @njit(cache=True, inline="always")
 def kick(t, z, m, strength, sticking, seg, n_events, n_impacts, p, cfg, table, weights, U,
          stats, log):
-    """Phase "kick": a Dirac impulse adds ``strength`` to v_0 at t. A kick into the wall
-    while the mean rests on it is an impact at once (``_reflect``: a fixed-time jump, so W
-    takes only the reset's Jacobian), logged EV_KICK with the kicked velocity; a kick that
-    leaves the mean moving ends sticking (EV_RELEASE). Returns (sticking, n_events,
-    n_impacts)."""
+    """Phase "kick": a Dirac impulse adds ``strength`` to v_0 at t (and, with
+    ``cfg[C_DRIVE_NODES]``, each node's own height less the shared one, projected). A
+    kick into the wall while the mean rests on it is an impact at once (``_reflect``: a
+    fixed-time jump, so W takes only the reset's Jacobian), logged EV_KICK with the kicked
+    velocity; a kick that leaves the mean moving ends sticking (EV_RELEASE). Returns
+    (sticking, n_events, n_impacts)."""
     n = cfg[C_NCOEF]
-    if cfg[C_DRIVE_NODES] != 0 and n > 1:  # each node's own height F0_k
+    z[n] += strength
+    if cfg[C_DRIVE_NODES] != 0 and n > 1:  # each node's own height F0_k, less the shared
         mod = strength / p[P_F0] if p[P_F0] != 0.0 else impulse_modulation(t, p)
         for i in range(n):
             acc = 0.0
             for k in range(table.shape[0]):
-                acc += weights[k] * U[k, i] * table[k, T_F0]
+                acc += weights[k] * U[k, i] * (table[k, T_F0] - p[P_F0])
             z[n + i] += mod * acc
-    else:
-        z[n] += strength
     if z[0] >= p[P_DELTA] and z[n] > 0.0:
         v_kick = z[n]
         _reflect(z, m, n, p[P_ETA], cfg[C_LAW] != LAW_MEAN)
