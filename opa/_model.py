@@ -2,6 +2,7 @@
 
     x'' - mu (1 - x'^2) x' + a x + c x^3 = f cos(omega t) + F(t),   x < delta
     x'(t+) = -eta x'(t-)                                            at x = delta
+    x'(t+) = -eta_minus x'(t-)         at x = delta_minus (an optional lower wall)
     F(t) = sum_j delta_Dirac(t - j T1) F0 (1 + a1 sin(omega1 t / n)),   T1 = 2 pi / omega1
 
 Everything here is validated once, in ``__post_init__``, with messages that name the
@@ -201,6 +202,11 @@ class Oscillator:
     x0: float = -1.0
     v0: float = 0.0
     force: ForceLaw | None = None
+    #: an optional lower wall x = delta_minus < delta (motion in delta_minus < x < delta,
+    #: e.g. a gear pair rattling in its backlash): -inf is none
+    delta_minus: float = -math.inf
+    #: the lower wall's restitution, 0 < eta_minus <= 1; None: the same as eta
+    eta_minus: float | None = None
 
     def __post_init__(self):
         for name in PARAMETER_NAMES:
@@ -224,6 +230,40 @@ class Oscillator:
             )
         if self.x0 == self.delta and self.v0 > 0.0:
             raise ValueError(f"v0 must be <= 0 when x0 is at the wall, got {self.v0}")
+        self._check_lower_wall()
+
+    def _check_lower_wall(self) -> None:
+        """delta_minus: -inf (no lower wall) or a finite wall below delta with x0 not below
+        it (at it only moving up); eta_minus in (0, 1] or None (eta's value)."""
+        dm = self.delta_minus
+        if isinstance(dm, (bool, str, bytes)) or not isinstance(dm, numbers.Real) \
+                or math.isnan(dm) or dm == math.inf:
+            raise ValueError(f"delta_minus must be a real number or -inf (no lower wall), got "
+                             f"{dm!r:.60}")
+        object.__setattr__(self, "delta_minus", float(dm))
+        if self.eta_minus is not None:
+            object.__setattr__(self, "eta_minus", _finite("eta_minus", self.eta_minus))
+            if not 0.0 < self.eta_minus <= 1.0:
+                raise ValueError(f"eta_minus must be in (0, 1], got {self.eta_minus}")
+        if self.delta_minus >= self.delta:
+            raise ValueError(f"delta_minus must be below the wall delta = {self.delta}, got "
+                             f"{self.delta_minus}")
+        if self.x0 < self.delta_minus:
+            raise ValueError(f"x0 must not be below the lower wall (x0 >= delta_minus = "
+                             f"{self.delta_minus}), got {self.x0}")
+        if self.x0 == self.delta_minus and self.v0 < 0.0:
+            raise ValueError(f"v0 must be >= 0 when x0 is at the lower wall (delta_minus), got "
+                             f"{self.v0}")
+
+    @property
+    def two_walls(self) -> bool:
+        """Whether the lower wall exists (delta_minus > -inf)."""
+        return self.delta_minus > -math.inf
+
+    @property
+    def lower_restitution(self) -> float:
+        """The lower wall's restitution: eta_minus, or eta where it is None."""
+        return self.eta if self.eta_minus is None else self.eta_minus
 
     def replace(self, **changes) -> Oscillator:
         """A copy with some parameters changed (validated again); a change may name a
