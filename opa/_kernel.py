@@ -40,6 +40,17 @@ re-stepping exactly to it (Newton on full Runge-Kutta steps); the impact law app
 the reset to y and its saltation matrix to W; Dirac impulses and pulse switches are
 breakpoints at fixed times; chatter ends in sticking, which ends at release.
 
+An optional lower wall x_0 = delta_minus < delta (p[P_DELTA_MINUS], restitution
+p[P_ETA_MINUS]; -inf: none) takes the same path mirrored: the wall functions take a
+``side`` (+1.0 the upper wall, -1.0 the lower) and look at side (x_0 - wall), the
+impact law's formulas hold with the signed v- < 0, sticking rests on the wall nearer
+to x_0 (``resting_side``: it is held exactly there) and ends where the force turns away
+from it (acc > 0 at the lower wall), a Dirac kick downwards at rest on the lower wall is
+an impact at once, and lower-wall events are logged as their kind plus EV_LOWER. The
+uncertain wall (C_WALL_NODES) and the gap statistic S_GAP are the upper wall's only.
+With delta_minus = -inf every lower-wall test (x_0 <= delta_minus, ...) is false and the
+upper wall's arithmetic is unchanged (times side = 1.0): one-wall runs give the same bits.
+
 The driver ``integrate`` is a loop over named phases, each a function of the section
 "The driver's phases" (some inlined) or of the steppers and the wall scan; a behaviour
 is found by its phase:
@@ -51,8 +62,9 @@ is found by its phase:
   f(t, y) for the next step, and ``stick_or_release`` where ``contact_changes`` at t;
 - each step: ``step_size``, the trial step (``register_step`` on the 2-D register path,
   chosen once per run; ``rk_step`` otherwise), the error control (``next_step_size``);
-- inside an accepted step, on its dense output (``step_dense``): ``wall_crossing`` (the
-  wall scan), ``impact_event`` (re-step to the wall, impact law and saltation matrix,
+- inside an accepted step, on its dense output (``step_dense``): ``first_crossing`` (the
+  scan of each wall that ``may_reach_wall``/``may_reach_floor`` leaves in by
+  ``wall_crossing``), ``impact_event`` (re-step to the wall, impact law and saltation matrix,
   event log, ``chatter`` -> sticking); while sticking ``pulls_off`` and ``release_event``;
   ``free_flight_gap`` (the gap statistics); then the state advances to the step's end.
 
@@ -1921,10 +1933,12 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
         the rule's weights; U : (Q, n + 1) node-major basis values.
     out : (n_out, D) the states at ``t_out`` (W is not stored); rows not reached are NaN.
     stats : (n_out - 1, N_STATS) per-interval statistics (impacts, smallest pre-impact
-        velocity, sticking episodes, steps, sticking at the end, smallest free-flight
-        gap delta - x_0 at maxima), or an empty (0, N_STATS) array to skip them.
-    log : (cap, 3) event rows (time, velocity, kind EV_*); impacts record the
-        pre-impact velocity of x_0; rows beyond cap are counted, not written.
+        speed |v-|, sticking episodes, steps, sticking at the end, smallest free-flight
+        gap delta - x_0 at maxima, the upper wall's only), or an empty (0, N_STATS) array
+        to skip them.
+    log : (cap, 3) event rows (time, velocity, kind EV_*, plus EV_LOWER at the lower
+        wall); impacts record the pre-impact velocity of x_0 (negative at the lower
+        wall); rows beyond cap are counted, not written.
 
     Returns
     -------

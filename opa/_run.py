@@ -597,8 +597,9 @@ class Events:
 
 @dataclass(frozen=True)
 class Statistics:
-    """Per output interval: impacts, smallest pre-impact velocity, sticking episodes,
-    steps, sticking at its end (0/1) and smallest free-flight gap delta - x_0."""
+    """Per output interval: impacts, smallest pre-impact speed |v-| (at either wall),
+    sticking episodes, steps, sticking at its end (0/1) and smallest free-flight gap
+    delta - x_0 (the upper wall's only: a lower wall has no gap statistic)."""
 
     impacts: np.ndarray
     min_velocity: np.ndarray
