@@ -273,3 +273,29 @@ def test_an_uncertain_wall_with_a_lower_wall_is_refused_in_one_line(name):
     with pytest.raises(ValueError) as err:
         opa.System(gear_pair(), uncertain=name, sigma=0.01)
     assert "takes one wall" in str(err.value) and "\n" not in str(err.value)
+
+
+def test_the_simulated_gpu_runs_the_two_wall_ensemble_as_the_cpu():
+    """The CUDA simulator (``tests/opa/test_gpu.py``) on the gear pair's sampled
+    stiffnesses: the same states and event logs (walls included) as the CPU kernel."""
+    from tests.opa.test_gpu import _simulated
+
+    got = _simulated("""
+        import json
+        import numpy as np
+        import opa
+        from opa import _run
+        from tests.opa.test_two_walls import gear_pair, T
+        system = opa.System(gear_pair(), uncertain="k", sigma=0.05, distribution="uniform")
+        inputs = system.sampled_inputs(opa.SolverOptions(), xi=np.linspace(-1.0, 1.0, 5))
+        times = np.linspace(0.0, 3 * T, 7)
+        y0 = system.deterministic().initial_state()
+        kw = dict(rtol=1e-9, atol=1e-9, capacity=64)
+        cpu = _run.run_batch(inputs, y0, times, **kw)
+        gpu = _run.run_batch(inputs, y0, times, **kw, device="cuda")
+        same = all(np.array_equal(cpu.log(b), gpu.log(b)) for b in range(5))
+        walls = sorted({int(w) for b in range(5) for w in cpu.events(b).wall})
+        print(json.dumps(dict(states=bool(np.array_equal(cpu.states, gpu.states)),
+                              logs=bool(same), walls=walls)))
+        """)
+    assert got == dict(states=True, logs=True, walls=[-1, 1])
