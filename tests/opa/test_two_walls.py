@@ -151,8 +151,8 @@ def test_every_impact_law_at_the_lower_wall_against_monte_carlo(impact_law):
 
 def test_the_tangent_map_through_lower_wall_impacts_is_the_flow_maps_derivative():
     """The Jacobian of the flow map over two periods (W through the saltation matrices
-    of two lower-wall and two upper-wall impacts) against central differences of the
-    end state in the start state (steps 1e-6: error O(1e-12 / 1e-6 + 1e-12))."""
+    of three lower-wall and three upper-wall impacts) against central differences of the
+    end state in the start state (steps 1e-6; measured difference 2.2e-9)."""
     osc = gear_pair()
     system = opa.System(osc, order=0)
     inputs = system.kernel_inputs(TIGHT)
@@ -167,7 +167,7 @@ def test_the_tangent_map_through_lower_wall_impacts_is_the_flow_maps_derivative(
         plus = run(inputs, y0 + step, times, rtol=1e-12, atol=1e-12).states[-1]
         minus = run(inputs, y0 - step, times, rtol=1e-12, atol=1e-12).states[-1]
         fd[:, j] = (plus - minus) / 2e-6
-    np.testing.assert_allclose(rec.tangent, fd, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(rec.tangent, fd, rtol=0, atol=1e-7)
 
 
 # ---------------------------------------------------------------- sticking on the lower wall
