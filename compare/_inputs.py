@@ -136,6 +136,12 @@ def run_fields(attrs) -> dict:
                 impulse_at_zero=bool(attrs["impulse_at_zero"]))
 
 
+def lower_wall(attrs) -> dict[str, float]:
+    """A run's lower wall (its attributes delta_minus, eta_minus, present only where the
+    oscillator has one), for the Oscillator of the true systems."""
+    return {name: float(attrs[name]) for name in ("delta_minus", "eta_minus") if name in attrs}
+
+
 def run_options(attrs, options=None):
     """The solver options a run was computed with, from its attributes (``options``
     instead, when given)."""

@@ -65,7 +65,8 @@ import numpy as np
 import xarray as xr
 
 from compare._inputs import (
-    check_attribute_number, check_dataset, require_time, run_fields, run_options, several,
+    check_attribute_number, check_dataset, lower_wall, require_time, run_fields, run_options,
+    several,
 )
 from compare._strata import (
     build_strata, group_allocation, least_samples, neyman_allocation, slices, split_values,
@@ -111,7 +112,8 @@ def system_of(run: xr.Dataset, options: SolverOptions | None = None
     for name in needed:
         if name not in words:
             check_attribute_number(run, "the run", name)
-    oscillator = Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES})
+    oscillator = Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES},
+                            **lower_wall(attrs))
     distribution = attrs.get("distribution", "semicircle")
     system = System(oscillator, sigma=float(attrs["sigma"]), order=0,
                     uncertain=str(attrs["uncertain"]),

@@ -45,7 +45,7 @@ import math
 import numpy as np
 import xarray as xr
 
-from compare._inputs import check_dataset, require_time, run_fields, run_options
+from compare._inputs import check_dataset, lower_wall, require_time, run_fields, run_options
 from compare._pairs import REPLICATES
 from compare._trust import band_multiplier, bounded_verdict
 from opa.engine import (
@@ -71,7 +71,8 @@ def several_system_of(run: xr.Dataset, options: SolverOptions | None = None):
                          f"known, so it cannot be verified")
     laws = tuple(None if law == "semicircle" else law for law in
                  split_list(str(attrs["distribution"])))
-    system = System(Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES}),
+    system = System(Oscillator(**{name: float(attrs[name]) for name in PARAMETER_NAMES},
+                               **lower_wall(attrs)),
                     uncertain=str(attrs["uncertain"]),
                     sigma=tuple(float(s) for s in np.atleast_1d(attrs["sigma"])),
                     distribution=laws, **run_fields(attrs))

@@ -53,9 +53,7 @@ def provenance_attrs(model: str, system, options: SolverOptions, *, seed: int = 
     a missing seed as -1 and a missing sampler as "none".
     """
     attrs = {name: float(getattr(system.oscillator, name)) for name in PARAMETER_NAMES}
-    if system.oscillator.two_walls:  # the lower wall: only where it exists (finite floats)
-        attrs.update(delta_minus=float(system.oscillator.delta_minus),
-                     eta_minus=float(system.oscillator.lower_restitution))
+    attrs.update(system.oscillator.lower_wall_attrs())  # only where a lower wall exists
     law = system.oscillator.force
     if law is not None:  # a user's force law: its expression and constants (name=value)
         attrs.update(force_law=law.expression, force_constants=",".join(

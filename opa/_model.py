@@ -182,6 +182,11 @@ class Oscillator:
     train of section 2 (a1 = 1, F0 = 0.1, omega1 = 1, n = 2) and the initial state
     x0 = -1, v0 = 0 of section 3.1.
 
+    ``delta_minus`` (default -inf, none) adds a lower wall with restitution ``eta_minus``
+    (None: eta): the motion is then in delta_minus < x < delta. It is not one of
+    ``PARAMETER_NAMES`` (not sweepable, not uncertain, not a flag of the CLI or a key of
+    a model file yet); datasets and manifests carry it only where it exists.
+
     Examples
     --------
     >>> Oscillator(c=0.035, omega=2.8, a=1.0, f=2.0).c
@@ -276,7 +281,18 @@ class Oscillator:
         return dataclasses.replace(self, **changes)
 
     def as_dict(self) -> dict[str, float]:
-        return {name: getattr(self, name) for name in PARAMETER_NAMES}
+        """The parameters by name (what run manifests and checkpoints record), with the
+        lower wall's delta_minus and eta_minus only where it exists (a one-wall
+        oscillator's dict is what it always was)."""
+        values = {name: getattr(self, name) for name in PARAMETER_NAMES}
+        return {**values, **self.lower_wall_attrs()}
+
+    def lower_wall_attrs(self) -> dict[str, float]:
+        """{delta_minus, eta_minus} as floats with a lower wall, else {} (dataset attributes
+        and manifests carry them only then)."""
+        if not self.two_walls:
+            return {}
+        return {"delta_minus": float(self.delta_minus), "eta_minus": self.lower_restitution}
 
     @property
     def uncertain_names(self) -> tuple[str, ...]:

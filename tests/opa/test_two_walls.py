@@ -250,6 +250,20 @@ def test_the_kernel_logs_lower_wall_events_with_their_own_kinds():
     assert ev.impacts.sum() == 2
 
 
+def test_a_two_wall_run_names_its_lower_wall_to_whoever_reads_it_back():
+    """Manifests (``as_dict``) and dataset attributes carry delta_minus and eta_minus
+    only with a lower wall; ``compare.verify`` rebuilds the true systems with it."""
+    from compare._verify import system_of
+
+    osc = opa.preset("3.2", F0=0.0, delta_minus=-1.2)
+    assert opa.Oscillator(**osc.as_dict()) == osc.replace(eta_minus=osc.eta)
+    assert set(opa.Oscillator().as_dict()) == set(opa.PARAMETER_NAMES)
+    ds = opa.simulate_opa(opa.System(osc, uncertain="mu", sigma=0.02, order=2), periods=1)
+    assert (ds.attrs["delta_minus"], ds.attrs["eta_minus"]) == (-1.2, 0.8)
+    system, _ = system_of(ds)
+    assert system.oscillator == osc.replace(eta_minus=0.8)
+
+
 # ---------------------------------------------------------------- refused input
 @pytest.mark.parametrize("fields, words", [
     (dict(delta_minus=0.5), "delta_minus must be below the wall delta"),
