@@ -65,7 +65,8 @@ import numpy as np
 import xarray as xr
 
 from compare._inputs import (
-    check_attribute_number, check_dataset, require_time, run_fields, run_options, several,
+    check_attribute_number, check_dataset, require_time, run_fields, run_options,
+    several,
 )
 from compare._strata import (
     build_strata, group_allocation, least_samples, neyman_allocation, slices, split_values,

@@ -26,7 +26,10 @@ Common to all: the coordinate `time` is dimensionless (units "1") with the forci
 name, beside the choices made (`sigma`, `N`, `uncertain`, `impulse`, `truncation`,
 `impact_law`, `rtol`, `atol`, `seed`, `sampler`), `Conventions`, `history`, `source` and
 `opa_mc_version`. netCDF attributes cannot be bools, dicts or None, so flags are 0/1,
-a missing seed is -1 and a missing sampler is "none".
+a missing seed is -1 and a missing sampler is "none". An oscillator with a lower wall
+(`delta_minus`) adds the attributes `delta_minus` and `eta_minus` and, beside the impact
+variables, `impact_wall` (impact; +1 the upper wall, -1 the lower, where `impact_velocity`
+is negative); a one-wall dataset has none of them.
 """
 
 

@@ -53,6 +53,7 @@ def provenance_attrs(model: str, system, options: SolverOptions, *, seed: int = 
     a missing seed as -1 and a missing sampler as "none".
     """
     attrs = {name: float(getattr(system.oscillator, name)) for name in PARAMETER_NAMES}
+    attrs.update(system.oscillator.lower_wall_attrs())  # only where a lower wall exists
     attrs.update(system.oscillator.law_attrs())  # a user's force law: expression, constants
     attrs.update(model=model, **system.dataset_attrs())
     attrs.update(

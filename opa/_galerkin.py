@@ -153,7 +153,7 @@ def chaos_dataset(system, options, times, rec, chaos: ChaosBasis) -> xr.Dataset:
         "multi_index": (("term", "parameter"), chaos.indices.astype(np.int64),
                         {"long_name": "degree of each parameter's polynomial in Psi_alpha",
                          "units": "1"}),
-        **rec.events.dataset_vars(),
+        **rec.events.dataset_vars(system.oscillator.two_walls),
     }
     for state, coef in (("x", xc), ("v", vc)):
         with np.errstate(all="ignore"):

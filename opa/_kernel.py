@@ -40,6 +40,17 @@ re-stepping exactly to it (Newton on full Runge-Kutta steps); the impact law app
 the reset to y and its saltation matrix to W; Dirac impulses and pulse switches are
 breakpoints at fixed times; chatter ends in sticking, which ends at release.
 
+An optional lower wall x_0 = delta_minus < delta (p[P_DELTA_MINUS], restitution
+p[P_ETA_MINUS]; -inf: none) takes the same path mirrored: the wall functions take a
+``side`` (+1.0 the upper wall, -1.0 the lower) and look at side (x_0 - wall), the
+impact law's formulas hold with the signed v- < 0, sticking rests on the wall nearer
+to x_0 (``resting_side``: it is held exactly there) and ends where the force turns away
+from it (acc > 0 at the lower wall), a Dirac kick downwards at rest on the lower wall is
+an impact at once, and lower-wall events are logged as their kind plus EV_LOWER. The
+uncertain wall (C_WALL_NODES) and the gap statistic S_GAP are the upper wall's only.
+With delta_minus = -inf every lower-wall test (x_0 <= delta_minus, ...) is false and the
+upper wall's arithmetic is unchanged (times side = 1.0): one-wall runs give the same bits.
+
 The driver ``integrate`` is a loop over named phases, each a function of the section
 "The driver's phases" (some inlined) or of the steppers and the wall scan; a behaviour
 is found by its phase:
@@ -51,8 +62,9 @@ is found by its phase:
   f(t, y) for the next step, and ``stick_or_release`` where ``contact_changes`` at t;
 - each step: ``step_size``, the trial step (``register_step`` on the 2-D register path,
   chosen once per run; ``rk_step`` otherwise), the error control (``next_step_size``);
-- inside an accepted step, on its dense output (``step_dense``): ``wall_crossing`` (the
-  wall scan), ``impact_event`` (re-step to the wall, impact law and saltation matrix,
+- inside an accepted step, on its dense output (``step_dense``): ``first_crossing`` (the
+  scan of each wall that ``may_reach_wall``/``may_reach_floor`` leaves in by
+  ``wall_crossing``), ``impact_event`` (re-step to the wall, impact law and saltation matrix,
   event log, ``chatter`` -> sticking); while sticking ``pulls_off`` and ``release_event``;
   ``free_flight_gap`` (the gap statistics); then the state advances to the step's end.
 
@@ -78,7 +90,13 @@ P_CHATTER_V, P_HMAX = 13, 14
 POLY_DEGREE = 3
 N_POLY = (POLY_DEGREE + 1) ** 2
 P_POLY = 15
-N_PARAMS = P_POLY + N_POLY
+# The optional lower wall x_0 = delta_minus < delta (motion in delta_minus < x_0 < delta, a
+# gear pair's backlash) and its restitution. delta_minus = -inf is no lower wall: every
+# check x_0 <= delta_minus is then false, so a one-wall run takes the same floating-point
+# path as before the lower wall existed (bit for bit).
+P_DELTA_MINUS = P_POLY + N_POLY
+P_ETA_MINUS = P_DELTA_MINUS + 1
+N_PARAMS = P_ETA_MINUS + 1
 
 C_NCOEF, C_IMPULSE, C_AT_ZERO, C_TRUNC, C_LAW, C_MAXSTEPS, C_METHOD, C_FORCE = range(8)
 # C_WALL_NODES = 1: the restitution eta or the wall delta is uncertain, so the impact law
@@ -122,6 +140,10 @@ N_STATS = 6
 # Kinds in the event log (rows: time, velocity, kind). EV_KICK is an impact made by a
 # Dirac kick into the wall while the mean rests on it (logged with the kicked velocity).
 EV_IMPACT, EV_GRAZE, EV_STICK, EV_RELEASE, EV_KICK = 0, 1, 2, 3, 4
+# An event at the lower wall is logged as its kind plus EV_LOWER (an impact there as
+# EV_IMPACT + EV_LOWER, with its pre-impact velocity, negative); the upper wall's kinds
+# are unchanged. ``opa._run.Events`` decodes the kind and the wall.
+EV_LOWER = 8
 
 # An impact whose pre-impact velocity is below this is logged as a graze (EV_GRAZE), and
 # the saltation law, whose matrix divides by it, reflects every v_i instead.
@@ -134,7 +156,7 @@ SNAP = 1e-10
 
 # Escape bound: a state component |x_i| or |v_i| at or beyond
 #
-#     ESCAPE_FACTOR * (1 + max_j |y_j(t0)| + |delta|
+#     ESCAPE_FACTOR * (1 + max_j |y_j(t0)| + |delta| (+ |delta_minus| with a lower wall)
 #                      + (|f| + |F0| (1 + |a1|)) (1 + 1/omega + 1/omega^2 + 1/|a|))
 #
 # ends the run as escaped (``escape_bound``). The bracket is the problem's own scale: the
@@ -160,8 +182,8 @@ STATUS_MESSAGES = {
                "vector field overflowing even at the smallest step or a jump (impact, "
                "impulse, release) giving a non-finite state"),
     ESCAPED: ("the trajectory diverged: the state escaped (|x| or |x'| beyond the escape "
-              "bound 1000 (1 + max|y(t0)| + |delta| + (|f| + |F0| (1 + |a1|)) (1 + 1/omega "
-              "+ 1/omega^2 + 1/|a|)))"),
+              "bound 1000 (1 + max|y(t0)| + |delta| (+ |delta_minus|) + (|f| + |F0| (1 + |a1|)) "
+              "(1 + 1/omega + 1/omega^2 + 1/|a|)))"),
     SKIPPED: "not integrated: another sample of the ensemble failed first",
     BAD_TIME: ("a time is not finite (NaN or inf), or too large for the impulse times to "
                "be resolved"),
@@ -1157,7 +1179,10 @@ def dense_state(method, theta, z_old, F, out):
 
 
 # ---------------------------------------------------------------------------
-# The wall x_0 = delta on the dense output
+# The walls x_0 = delta (upper, side +1) and x_0 = delta_minus (lower, side -1) on the
+# dense output. The functions below serve both through ``side``: they look at
+# side (x_0 - wall), which is positive beyond the wall on either side (for the upper wall
+# side = 1.0, a multiplication that changes no bit).
 @njit(cache=True)
 def wall_margin(K, last, n, h):
     """How far x_0 may rise inside a step above the higher of its end values: the
@@ -1185,14 +1210,37 @@ def may_reach_wall(x_old, x_new, margin, delta):
     return max(x_old, x_new) + margin >= delta
 
 
+@njit(cache=True, inline="always")
+def may_reach_floor(x_old, x_new, margin, delta_minus):
+    """``may_reach_wall`` for the lower wall (never true without one: delta_minus = -inf)."""
+    return min(x_old, x_new) - margin <= delta_minus
+
+
+@njit(cache=True, inline="always")
+def resting_side(x0, delta, delta_minus):
+    """The wall the mean rests on while sticking (held exactly on it): -1.0 the lower when
+    x_0 is nearer to it, else +1.0 (always without a lower wall: x_0 - (-inf) = inf)."""
+    return -1.0 if x0 - delta_minus < delta - x0 else 1.0
+
+
+@njit(cache=True, inline="always")
+def wall_of(side, p):
+    """(position, restitution) of the wall on ``side``: (delta, eta) for +1, (delta_minus,
+    eta_minus) for -1."""
+    if side > 0.0:
+        return p[P_DELTA], p[P_ETA]
+    return p[P_DELTA_MINUS], p[P_ETA_MINUS]
+
+
 @njit(cache=True)
-def _bisect_wall(method, lo, hi, x_old, c, h, delta):
-    """Root of x_0(theta) = delta in [lo, hi] with g(lo) <= 0 < g(hi)."""
+def _bisect_wall(method, lo, hi, x_old, c, h, delta, side=1.0):
+    """Root of x_0(theta) = delta in [lo, hi] with g(lo) <= 0 < g(hi),
+    g = side (x_0 - delta)."""
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         if mid <= lo or mid >= hi:
             break
-        if dense_x(method, mid, x_old, c) - delta > 0.0:
+        if side * (dense_x(method, mid, x_old, c) - delta) > 0.0:
             hi = mid
         else:
             lo = mid
@@ -1202,11 +1250,12 @@ def _bisect_wall(method, lo, hi, x_old, c, h, delta):
 
 
 @njit(cache=True)
-def _bisect_maximum(method, lo, hi, c):
-    """Location of a maximum of x_0(theta) in [lo, hi] where the slope goes + to -."""
+def _bisect_maximum(method, lo, hi, c, side=1.0):
+    """Location of a maximum of side x_0(theta) in [lo, hi] where its slope goes + to -
+    (a minimum of x_0 for side = -1)."""
     for _ in range(100):
         mid = 0.5 * (lo + hi)
-        if dense_dx(method, mid, c) > 0.0:
+        if side * dense_dx(method, mid, c) > 0.0:
             lo = mid
         else:
             hi = mid
@@ -1216,24 +1265,26 @@ def _bisect_maximum(method, lo, hi, c):
 
 
 @njit(cache=True)
-def wall_crossing(method, x_old, c, h, delta):
-    """First theta in (0, 1] where the dense x_0 reaches delta, or -1.
+def wall_crossing(method, x_old, c, h, delta, side=1.0):
+    """First theta in (0, 1] where the dense x_0 reaches the wall delta on ``side`` (+1:
+    from below, the upper wall; -1: from above, the lower wall), or -1.
 
-    The interpolant is scanned on N_SCAN sub-intervals and every interior maximum is
-    inspected, so a step whose interpolant touches the wall and comes back is caught.
+    The interpolant is scanned on N_SCAN sub-intervals and every interior maximum (of
+    side x_0) is inspected, so a step whose interpolant touches the wall and comes back
+    is caught.
     """
     prev_t = 0.0
-    prev_g = dense_x(method, 0.0, x_old, c) - delta
-    prev_s = dense_dx(method, 0.0, c)
+    prev_g = side * (dense_x(method, 0.0, x_old, c) - delta)
+    prev_s = side * dense_dx(method, 0.0, c)
     for i in range(1, N_SCAN + 1):
         th = i / N_SCAN
-        g = dense_x(method, th, x_old, c) - delta
-        s = dense_dx(method, th, c)
+        g = side * (dense_x(method, th, x_old, c) - delta)
+        s = side * dense_dx(method, th, c)
         hit = g > 0.0
         hi_t = th
         if not hit and prev_s > 0.0 and s < 0.0:
-            tm = _bisect_maximum(method, prev_t, th, c)
-            if dense_x(method, tm, x_old, c) - delta > 0.0:
+            tm = _bisect_maximum(method, prev_t, th, c, side)
+            if side * (dense_x(method, tm, x_old, c) - delta) > 0.0:
                 hit = True
                 hi_t = tm
         if hit:
@@ -1246,17 +1297,32 @@ def wall_crossing(method, x_old, c, h, delta):
                     tt *= 0.5
                     if tt <= lo_t:
                         break
-                    if dense_x(method, tt, x_old, c) - delta < 0.0:
+                    if side * (dense_x(method, tt, x_old, c) - delta) < 0.0:
                         found = True
                         break
                 if not found:
                     return -1.0
                 lo_t = tt
-            return _bisect_wall(method, lo_t, hi_t, x_old, c, h, delta)
+            return _bisect_wall(method, lo_t, hi_t, x_old, c, h, delta, side)
         prev_t = th
         prev_g = g
         prev_s = s
     return -1.0
+
+
+@njit(cache=True, inline="always")
+def first_crossing(method, x_old, c, h, delta, delta_minus, near_wall, near_floor):
+    """The first wall crossing in a step (``wall_crossing`` of each wall that
+    ``may_reach_wall``/``may_reach_floor`` left in): (theta, side), side +1.0 the upper
+    wall, -1.0 the lower; theta -1 when neither wall is reached."""
+    theta = wall_crossing(method, x_old, c, h, delta, 1.0) if near_wall else -1.0
+    side = 1.0
+    if near_floor:
+        low = wall_crossing(method, x_old, c, h, delta_minus, -1.0)
+        if low > 0.0 and (theta <= 0.0 or low < theta):
+            theta = low
+            side = -1.0
+    return theta, side
 
 
 @njit(cache=True)
@@ -1272,7 +1338,7 @@ def free_flight_maximum(method, x_old, c, delta):
         th = i / N_SCAN
         s = dense_dx(method, th, c)
         if prev_s > 0.0 and s <= 0.0:
-            tm = _bisect_maximum(method, prev_t, th, c)
+            tm = _bisect_maximum(method, prev_t, th, c, 1.0)
             g = delta - dense_x(method, tm, x_old, c)
             if g < gap:
                 gap = g
@@ -1282,7 +1348,9 @@ def free_flight_maximum(method, x_old, c, delta):
     return gap, where
 
 
-IMPACT_ROOT, MAXIMUM_ROOT = 0, 1
+# the events ``restep_to`` refines: an impact on the upper wall, a free-flight maximum,
+# an impact on the lower wall
+IMPACT_ROOT, MAXIMUM_ROOT, IMPACT_LOWER_ROOT = 0, 1, 2
 
 
 @njit(cache=True)
@@ -1292,14 +1360,16 @@ def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, table
     g(t + hh) = 0 from hh = theta h, each iterate a fresh Runge-Kutta step from (t, z), so
     the state there is a full-order step result, not an interpolant.
 
-    kind IMPACT_ROOT: g = x_0 - delta, g' = v_0 > 0 (the impact time). MAXIMUM_ROOT:
+    kind IMPACT_ROOT: g = x_0 - delta, g' = v_0 > 0 (the impact time); IMPACT_LOWER_ROOT:
+    g = x_0 - delta_minus, g' = v_0 < 0 (the impact on the lower wall). MAXIMUM_ROOT:
     g = v_0, g' = v_0' < 0 (a free-flight maximum of x_0, whose gap to the wall then
     varies smoothly with the parameters; the interpolant's error changes with the step
     sequence). Leaves the state at t + hh in ``z_new``; returns (hh, evaluations).
     """
     n = cfg[C_NCOEF]
     last = last_stage(method)
-    delta = p[P_DELTA]
+    side = -1.0 if kind == IMPACT_LOWER_ROOT else 1.0
+    delta = p[P_DELTA_MINUS] if kind == IMPACT_LOWER_ROOT else p[P_DELTA]
     off = np.bool_(False)
     for j in range(z.shape[0]):
         K2[0, j] = K[0, j]
@@ -1308,10 +1378,10 @@ def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, table
     for _ in range(4):
         evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, table, weights, U, force,
                          off, work)
-        if kind == IMPACT_ROOT:
+        if kind != MAXIMUM_ROOT:
             g = z_new[0] - delta
             slope = z_new[n]
-            done = slope <= 0.0 or abs(g) <= 1e-14 * (1.0 + abs(delta))
+            done = side * slope <= 0.0 or abs(g) <= 1e-14 * (1.0 + abs(delta))
         else:
             g = z_new[n]
             slope = K2[last, n]
@@ -1341,12 +1411,12 @@ def _reflect(z, m, n, eta, all_velocities):
 
 
 @njit(cache=True, inline="always")
-def _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work):
+def _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work, eta):
     """Reflect the mean's velocity v_0 -> -eta v_0 (z at the wall) and return the
     saltation gain k = (a+ + eta a-) / v-, a-, a+ the mean's accelerations before and
-    after (two right-hand sides)."""
+    after (two right-hand sides). The same at either wall: the signed v- (< 0 at the
+    lower wall) is e_0^T f- of the saltation matrix, whatever the wall's side."""
     n = cfg[C_NCOEF]
-    eta = p[P_ETA]
     m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
     off = np.bool_(False)
     v_minus = z[n]
@@ -1359,8 +1429,9 @@ def _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, wor
 
 
 @njit(cache=True)
-def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
-    """Apply the impact law at x_0 = delta to y and its saltation matrix to W.
+def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work, side=1.0):
+    """Apply the impact law at the wall of ``side`` (+1: x_0 = delta with eta; -1: the
+    lower wall x_0 = delta_minus with eta_minus) to y and its saltation matrix to W.
 
     Laws: ``mean`` reflects v_0 (eq. (28)); ``ensemble`` every v_i; ``saltation`` applies
     to the deviation coefficients the saltation matrix of the sampled systems' impact
@@ -1371,7 +1442,9 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
     For W the event surface is h(y) = x_0 - delta with normal e_0, and the jump is
     ``S = dR + (f(t*, R y-) - dR f(t*, y-)) e_0^T / v_0-`` (Aizerman-Gantmacher), with
     dR the Jacobian of the reset (mean and ensemble laws only: the Python layer refuses
-    tangents with the saltation law). Returns (v_minus, evaluations).
+    tangents with the saltation law). Returns (v_minus, evaluations). Every formula holds
+    at the lower wall with its signed v- < 0 (the surface x_0 - delta_minus has the same
+    normal e_0); only the graze test looks at the speed side v-.
 
     With an uncertain restitution or wall (``cfg[C_WALL_NODES]``; p holds their means
     eta_bar, delta_bar over the rule, the table their values at each node): the mean
@@ -1380,22 +1453,24 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
     eta(xi_k) v(xi_k); ``saltation`` takes the deviations from the wall, y_i = x_i -
     delta_i, to -eta_bar y_i and the velocities to -eta_bar v_i + k y_i - eta_i v_0-
     (the first-order effect of each node's own restitution), with delta_i, eta_i the
-    coefficients of delta(xi) and eta(xi). The Python layer refuses tangents there.
+    coefficients of delta(xi) and eta(xi). The Python layer refuses tangents there, and
+    an uncertain wall together with a lower wall.
     """
     n = cfg[C_NCOEF]
     dim = 2 * n
-    eta = p[P_ETA]
+    delta, eta = wall_of(side, p)
     law = cfg[C_LAW]
-    if cfg[C_WALL_NODES] != 0 and n > 1:
+    if cfg[C_WALL_NODES] != 0 and n > 1 and side > 0.0:
         return _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus,
                                 work)
     m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
     off = np.bool_(False)
-    z[0] = p[P_DELTA]
+    z[0] = delta
     v_minus = z[n]
     evals = 0
-    if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
-        k = _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work)
+    if law == LAW_SALTATION and side * v_minus > EVENT_GRAZE_VELOCITY:
+        k = _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work,
+                            eta)
         evals += 2
         for i in range(1, n):
             xi_ = z[i]
@@ -1433,7 +1508,8 @@ def _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, wo
         z[n] = -eta * z[n]
         return v_minus, 0
     if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
-        k = _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work)
+        k = _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work,
+                            eta)
         for i in range(1, n):
             delta_i = 0.0
             eta_i = 0.0
@@ -1489,7 +1565,9 @@ def escape_bound(y0, p, cfg):
     stiffness = abs(p[P_POLY + POLY_DEGREE + 1] if cfg[C_FORCE] == FORCE_POLYNOMIAL else p[P_A])
     if stiffness == 0.0:
         return np.inf  # no linear restoring force: no scale to escape from
-    return ESCAPE_FACTOR * (1.0 + start + abs(p[P_DELTA])
+    # the lower wall's |delta_minus| enters as |delta| does (adding 0.0 without one)
+    lower = abs(p[P_DELTA_MINUS]) if p[P_DELTA_MINUS] > -np.inf else 0.0
+    return ESCAPE_FACTOR * (1.0 + start + abs(p[P_DELTA]) + lower
                             + drive * (1.0 + 1.0 / w + 1.0 / (w * w) + 1.0 / stiffness))
 
 
@@ -1615,8 +1693,9 @@ def kick(t, z, m, strength, sticking, seg, n_events, n_impacts, p, cfg, table, w
     ``cfg[C_DRIVE_NODES]``, each node's own height less the shared one, projected). A
     kick into the wall while the mean rests on it is an impact at once (``_reflect``: a
     fixed-time jump, so W takes only the reset's Jacobian), logged EV_KICK with the kicked
-    velocity; a kick that leaves the mean moving ends sticking (EV_RELEASE). Returns
-    (sticking, n_events, n_impacts)."""
+    velocity; a kick that leaves the mean moving ends sticking (EV_RELEASE). At the lower
+    wall the same with eta_minus, a kick downwards into it, and the kinds plus EV_LOWER.
+    Returns (sticking, n_events, n_impacts)."""
     n = cfg[C_NCOEF]
     z[n] += strength
     if cfg[C_DRIVE_NODES] != 0 and n > 1:  # each node's own height F0_k, less the shared
@@ -1626,16 +1705,20 @@ def kick(t, z, m, strength, sticking, seg, n_events, n_impacts, p, cfg, table, w
             for k in range(table.shape[0]):
                 acc += weights[k] * U[k, i] * (table[k, T_F0] - p[P_F0])
             z[n + i] += mod * acc
-    if z[0] >= p[P_DELTA] and z[n] > 0.0:
+    upper = z[0] >= p[P_DELTA] and z[n] > 0.0
+    if upper or (z[0] <= p[P_DELTA_MINUS] and z[n] < 0.0):
         v_kick = z[n]
-        _reflect(z, m, n, p[P_ETA], cfg[C_LAW] != LAW_MEAN)
-        n_events = _log_event(log, n_events, t, v_kick, np.int64(EV_KICK))
+        _reflect(z, m, n, p[P_ETA] if upper else p[P_ETA_MINUS], cfg[C_LAW] != LAW_MEAN)
+        n_events = _log_event(log, n_events, t, v_kick,
+                              np.int64(EV_KICK if upper else EV_KICK + EV_LOWER))
         n_impacts += 1
         if seg < stats.shape[0]:
             stats[seg, S_IMPACTS] += 1.0
     if sticking and z[n] != 0.0:
         sticking = np.bool_(False)
-        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
+        lower = resting_side(z[0], p[P_DELTA], p[P_DELTA_MINUS]) < 0.0
+        n_events = _log_event(log, n_events, t, 0.0,
+                              np.int64(EV_RELEASE + EV_LOWER if lower else EV_RELEASE))
     return sticking, n_events, n_impacts
 
 
@@ -1724,14 +1807,15 @@ def next_breakpoint(t_next_out, t_imp, force_end, snap):
 
 
 @njit(cache=True, inline="always")
-def contact_changes(sticking, acc, x0, v0, delta):
+def contact_changes(sticking, acc, x0, v0, delta, delta_minus=-np.inf):
     """Whether sticking ends or begins at a breakpoint (phase "resume"), from the
     unconstrained acceleration ``acc`` of x_0 there: sticking ends when it points away from
-    the wall; it begins at rest on the wall (x_0 = delta, v_0 = 0, e.g. the start state,
-    from which no impact will be detected) with the net force into it."""
+    the wall it rests on (acc < 0 at the upper wall, acc > 0 at the lower); it begins at
+    rest on a wall (x_0 = delta or delta_minus, v_0 = 0, e.g. the start state, from which
+    no impact will be detected) with the net force into it."""
     if sticking:
-        return acc < 0.0
-    return x0 >= delta and v0 == 0.0 and acc > 0.0
+        return resting_side(x0, delta, delta_minus) * acc < 0.0
+    return v0 == 0.0 and ((x0 >= delta and acc > 0.0) or (x0 <= delta_minus and acc < 0.0))
 
 
 @njit(cache=True, inline="always")
@@ -1739,15 +1823,18 @@ def stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg, table, wei
                      work, stats, log):
     """Phase "resume", where ``contact_changes``: sticking ends at t (EV_RELEASE) or
     begins there (EV_STICK: the mean held at rest on the wall by ``_hold``), and f(t, z)
-    into K[0] again for the next step. Returns (sticking, n_events); one evaluation."""
+    into K[0] again for the next step; at the lower wall the kinds plus EV_LOWER.
+    Returns (sticking, n_events); one evaluation."""
+    lower = resting_side(z[0], p[P_DELTA], p[P_DELTA_MINUS]) < 0.0
+    offset = EV_LOWER if lower else 0
     if sticking:
         sticking = np.bool_(False)
-        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
+        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE + offset))
     else:
-        z[0] = p[P_DELTA]
+        z[0] = p[P_DELTA_MINUS] if lower else p[P_DELTA]
         _hold(z, m, cfg[C_NCOEF], cfg[C_LAW])
         sticking = np.bool_(True)
-        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK))
+        n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_STICK + offset))
         if stats.shape[0] > 0:
             stats[seg, S_STICKS] += 1.0
     vector_field(z, m, p, cfg, table, weights, U, t, forcing(t, p, force), sticking, K[0], work)
@@ -1803,20 +1890,22 @@ def next_step_size(method, err, h_try, h, is_last):
 
 
 @njit(cache=True, inline="always")
-def chatter(t, z, m, v_minus, force, p, cfg, table, weights, U, f_minus, work):
+def chatter(t, z, m, v_minus, force, p, cfg, table, weights, U, f_minus, work, side=1.0):
     """Phase "chatter -> stick", after an impact slower than the chatter velocity
     (eta < 1): with the net force into the wall (acceleration g > 0 at rest there) the
     bounces that would follow, of speeds eta^k v-, accumulate after
     2 eta v- / (g (1 - eta)) (flights 2 eta^k v- / g); the mean is put at rest on the wall
-    (``_hold``) and sticks from then. Otherwise the impact law's rebound stands.
+    (``_hold``) and sticks from then. Otherwise the impact law's rebound stands. At the
+    lower wall (``side`` -1, eta_minus) the force into it is g < 0, and v- < 0: the same
+    accumulation time.
 
     Returns (sticking, the time the sticking starts); one evaluation."""
     n = cfg[C_NCOEF]
-    eta = p[P_ETA]
+    _, eta = wall_of(side, p)
     z[n] = 0.0
     acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, t, forcing(t, p, force),
                        np.bool_(False), f_minus, work)
-    if acc > 0.0:
+    if side * acc > 0.0:
         _hold(z, m, n, cfg[C_LAW])
         return True, t + 2.0 * eta * v_minus / (acc * (1.0 - eta))
     z[n] = -eta * v_minus
@@ -1825,7 +1914,8 @@ def chatter(t, z, m, v_minus, force, p, cfg, table, weights, U, f_minus, work):
 
 @njit(cache=True, inline="always")
 def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impacts, p, cfg,
-                 table, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log, escape):
+                 table, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log, escape,
+                 side=1.0):
     """Phase "impact": x_0 reaches the wall at theta h into the accepted step from t
     (``wall_crossing`` on its dense output). The state there is a re-step exactly to it
     (``restep_to``: Newton on full Runge-Kutta steps, into z_new); it takes the impact
@@ -1833,31 +1923,38 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
     or EV_GRAZE below EVENT_GRAZE_VELOCITY, with the pre-impact velocity v-) and counted;
     an impact slower than the chatter velocity may end in sticking (``chatter``); the state
     is checked (near grazing the saltation matrix, which divides by v-, can overflow).
-    Then f(t, z) into K[0] for the next step.
+    Then f(t, z) into K[0] for the next step. ``side`` -1: the lower wall (re-step to
+    x_0 = delta_minus, eta_minus, the kinds plus EV_LOWER, the logged v- negative; the
+    statistics take the speed |v-|).
 
     Returns (t, status, sticking, n_events, n_impacts, evaluations), t the impact time."""
-    hh, evals = restep_to(method, np.int64(IMPACT_ROOT), t, z, h, theta, K, K2, z_new, ztmp,
+    root = IMPACT_ROOT if side > 0.0 else IMPACT_LOWER_ROOT
+    hh, evals = restep_to(method, np.int64(root), t, z, h, theta, K, K2, z_new, ztmp,
                           m, p, cfg, table, weights, U, force, work)
     t = t + hh
     for j in range(z.shape[0]):
         z[j] = z_new[j]
-    v_minus, e = _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work)
+    v_minus, e = _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work,
+                         side)
     evals += e
     n_impacts += 1
-    kind = np.int64(EV_GRAZE if v_minus < EVENT_GRAZE_VELOCITY else EV_IMPACT)
+    speed = side * v_minus
+    offset = 0 if side > 0.0 else EV_LOWER
+    kind = np.int64((EV_GRAZE if speed < EVENT_GRAZE_VELOCITY else EV_IMPACT) + offset)
     n_events = _log_event(log, n_events, t, v_minus, kind)
     want_stats = stats.shape[0] > 0
     if want_stats:
         stats[seg, S_IMPACTS] += 1.0
-        if v_minus < stats[seg, S_MIN_VELOCITY]:
-            stats[seg, S_MIN_VELOCITY] = v_minus
+        if speed < stats[seg, S_MIN_VELOCITY]:
+            stats[seg, S_MIN_VELOCITY] = speed
     sticking = False
-    if p[P_ETA] < 1.0 and v_minus < p[P_CHATTER_V]:
+    _, eta = wall_of(side, p)
+    if eta < 1.0 and speed < p[P_CHATTER_V]:
         sticking, t_stick = chatter(t, z, m, v_minus, force, p, cfg, table, weights, U,
-                                    f_minus, work)
+                                    f_minus, work, side)
         evals += 1
         if sticking:
-            n_events = _log_event(log, n_events, t_stick, 0.0, np.int64(EV_STICK))
+            n_events = _log_event(log, n_events, t_stick, 0.0, np.int64(EV_STICK + offset))
             if want_stats:
                 stats[seg, S_STICKS] += 1.0
     status = state_status(z, 2 * cfg[C_NCOEF], escape)
@@ -1871,10 +1968,12 @@ def impact_event(method, t, h, theta, z, z_new, m, force, seg, n_events, n_impac
 @njit(cache=True, inline="always")
 def pulls_off(t, z, force, p, cfg, table, weights, U, f_plus, work):
     """Whether the unconstrained acceleration of the mean at rest on the wall turns away
-    from it at the state z at t (the release condition of sticking); one evaluation."""
+    from it at the state z at t (the release condition of sticking: acc < 0 at the upper
+    wall, acc > 0 at the lower, the wall z[0] rests on); one evaluation."""
+    side = resting_side(z[0], p[P_DELTA], p[P_DELTA_MINUS])
     acc = vector_field(z, np.int64(0), p, cfg, table, weights, U, t, forcing(t, p, force),
                        np.bool_(False), f_plus, work)
-    return acc < 0.0
+    return side * acc < 0.0
 
 
 @njit(cache=True, inline="always")
@@ -1883,11 +1982,13 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, table, weights, U
     """Phase "release": sticking ends inside the accepted step from t (its dense output F
     ready), where the unconstrained acceleration at rest on the wall turns away from it
     (``pulls_off``), located by bisection to 1e-13 in time; the state there, held on the
-    wall, leaves it (EV_RELEASE). Then f(t, z) into K[0] for the next step.
+    wall, leaves it (EV_RELEASE; EV_RELEASE + EV_LOWER from the lower wall). Then f(t, z)
+    into K[0] for the next step.
 
     Returns (t, status, n_events, evaluations)."""
     n = cfg[C_NCOEF]
-    delta = p[P_DELTA]
+    lower = resting_side(z[0], p[P_DELTA], p[P_DELTA_MINUS]) < 0.0
+    delta = p[P_DELTA_MINUS] if lower else p[P_DELTA]
     lo = 0.0
     hi = 1.0
     evals = 0
@@ -1909,7 +2010,8 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, table, weights, U
         z[j] = ztmp[j]
     z[0] = delta
     z[n] = 0.0
-    n_events = _log_event(log, n_events, t, 0.0, np.int64(EV_RELEASE))
+    n_events = _log_event(log, n_events, t, 0.0,
+                          np.int64(EV_RELEASE + EV_LOWER if lower else EV_RELEASE))
     status = state_status(z, 2 * n, escape)
     if status == OK:
         vector_field(z, m, p, cfg, table, weights, U, t, forcing(t, p, force), np.bool_(False),
@@ -1922,7 +2024,8 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, table, weights, U
 def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, table, weights,
                     U, force, work, stats):
     """Phase "gap statistics": the highest maximum of x_0 inside the accepted step (dense
-    output F ready; ``free_flight_maximum``), refined by re-stepping exactly to it
+    output F ready; ``free_flight_maximum``), of the upper wall only (a lower wall has no
+    gap statistic: S_GAP is delta - x_0 at the maxima), refined by re-stepping exactly to it
     (``restep_to``) when it comes closer to the wall than the interval's smallest gap so
     far (``stats[seg, S_GAP]``). Returns the evaluations."""
     gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)), p[P_DELTA])
@@ -1975,10 +2078,12 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
         the rule's weights; U : (Q, n + 1) node-major basis values.
     out : (n_out, D) the states at ``t_out`` (W is not stored); rows not reached are NaN.
     stats : (n_out - 1, N_STATS) per-interval statistics (impacts, smallest pre-impact
-        velocity, sticking episodes, steps, sticking at the end, smallest free-flight
-        gap delta - x_0 at maxima), or an empty (0, N_STATS) array to skip them.
-    log : (cap, 3) event rows (time, velocity, kind EV_*); impacts record the
-        pre-impact velocity of x_0; rows beyond cap are counted, not written.
+        speed |v-|, sticking episodes, steps, sticking at the end, smallest free-flight
+        gap delta - x_0 at maxima, the upper wall's only), or an empty (0, N_STATS) array
+        to skip them.
+    log : (cap, 3) event rows (time, velocity, kind EV_*, plus EV_LOWER at the lower
+        wall); impacts record the pre-impact velocity of x_0 (negative at the lower
+        wall); rows beyond cap are counted, not written.
 
     Returns
     -------
@@ -2000,6 +2105,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     method = cfg[C_METHOD]
     last = last_stage(method)
     delta = p[P_DELTA]
+    delta_minus = p[P_DELTA_MINUS]  # -inf: no lower wall
     max_steps = cfg[C_MAXSTEPS]
     hmax = p[P_HMAX]
     stick_hmax = 2.0 * np.pi / p[P_OMEGA] / 32.0
@@ -2053,7 +2159,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
         acc = vector_field(z, m, p, cfg, table, weights, U, t, forcing(t, p, force), sticking, K[0],
                            work)
         n_rhs += 1
-        if contact_changes(sticking, acc, z[0], z[n], delta):
+        if contact_changes(sticking, acc, z[0], z[n], delta, delta_minus):
             sticking, n_events = stick_or_release(t, z, m, force, sticking, seg, n_events, p, cfg,
                                                   table, weights, U, K, work, stats, log)
             n_rhs += 1
@@ -2106,13 +2212,14 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
             if sticking:  # sticking ends inside the step?
                 n_rhs += 1
                 jump = pulls_off(t + h_try, z_new, force, p, cfg, table, weights, U, f_plus, work)
-                near_wall = near_top = off
+                near_wall = near_floor = near_top = off
             else:  # an impact, or a free-flight maximum closer than the smallest gap so far?
                 jump = off
                 near_wall = may_reach_wall(z[0], z_new[0], margin, delta)
+                near_floor = may_reach_floor(z[0], z_new[0], margin, delta_minus)
                 near_top = want_stats and K[0, 0] > 0.0 and may_reach_wall(
                     z[0], z_new[0], margin, delta - stats[seg, S_GAP])
-            if jump or near_wall or near_top:
+            if jump or near_wall or near_floor or near_top:
                 n_rhs += step_dense(two_d, kx, kv, method, t, z, z_new, h_try, K, F, ztmp, m, p,
                                     cfg, table, weights, U, force, sticking, work)
             if jump:
@@ -2121,14 +2228,15 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
                                                            K, F, ztmp, f_plus, work, log, escape)
                 n_rhs += evals
                 sticking = off
-            elif near_wall:
-                theta = wall_crossing(method, z[0], dense_column(F, np.int64(0)), h_try, delta)
+            elif near_wall or near_floor:  # the first crossing of either wall in the step
+                theta, side = first_crossing(method, z[0], dense_column(F, np.int64(0)), h_try,
+                                             delta, delta_minus, near_wall, near_floor)
                 jump = theta > 0.0
                 if jump:
                     t, status, sticking, n_events, n_impacts, evals = impact_event(
                         method, t, h_try, theta, z, z_new, m, force, seg, n_events, n_impacts, p,
                         cfg, table, weights, U, K, K2, ztmp, f_minus, f_plus, work, stats, log,
-                        escape)
+                        escape, side)
                     n_rhs += evals
                     h_next = max(h_next * 0.5, 1e-10)
             if jump:  # the state jumped at t inside the step: resume stepping from there
@@ -2154,7 +2262,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
                     z[j] = z_new[j]
                     K[0, j] = K[last, j]
             if sticking:
-                z[0] = delta
+                z[0] = delta if resting_side(z[0], delta, delta_minus) > 0.0 else delta_minus
                 z[n] = 0.0
             h = h_next
             status = state_status(z, dim, escape)

@@ -2,6 +2,7 @@
 
     x'' - mu (1 - x'^2) x' + a x + c x^3 = f cos(omega t) + F(t),   x < delta
     x'(t+) = -eta x'(t-)                                            at x = delta
+    x'(t+) = -eta_minus x'(t-)         at x = delta_minus (an optional lower wall)
     F(t) = sum_j delta_Dirac(t - j T1) F0 (1 + a1 sin(omega1 t / n)),   T1 = 2 pi / omega1
 
 Everything here is validated once, in ``__post_init__``, with messages that name the
@@ -181,6 +182,11 @@ class Oscillator:
     train of section 2 (a1 = 1, F0 = 0.1, omega1 = 1, n = 2) and the initial state
     x0 = -1, v0 = 0 of section 3.1.
 
+    ``delta_minus`` (default -inf, none) adds a lower wall with restitution ``eta_minus``
+    (None: eta): the motion is then in delta_minus < x < delta. It is not one of
+    ``PARAMETER_NAMES`` (not sweepable, not uncertain, not a flag of the CLI or a key of
+    a model file yet); datasets and manifests carry it only where it exists.
+
     Examples
     --------
     >>> Oscillator(c=0.035, omega=2.8, a=1.0, f=2.0).c
@@ -201,6 +207,11 @@ class Oscillator:
     x0: float = -1.0
     v0: float = 0.0
     force: ForceLaw | None = None
+    #: an optional lower wall x = delta_minus < delta (motion in delta_minus < x < delta,
+    #: e.g. a gear pair rattling in its backlash): -inf is none
+    delta_minus: float = -math.inf
+    #: the lower wall's restitution, 0 < eta_minus <= 1; None: the same as eta
+    eta_minus: float | None = None
 
     # added after parts were written: a digest (opa._dataset.digest) counts them when set
     _digest_optional = ("force",)
@@ -227,6 +238,40 @@ class Oscillator:
             )
         if self.x0 == self.delta and self.v0 > 0.0:
             raise ValueError(f"v0 must be <= 0 when x0 is at the wall, got {self.v0}")
+        self._check_lower_wall()
+
+    def _check_lower_wall(self) -> None:
+        """delta_minus: -inf (no lower wall) or a finite wall below delta with x0 not below
+        it (at it only moving up); eta_minus in (0, 1] or None (eta's value)."""
+        dm = self.delta_minus
+        if isinstance(dm, (bool, str, bytes)) or not isinstance(dm, numbers.Real) \
+                or math.isnan(dm) or dm == math.inf:
+            raise ValueError(f"delta_minus must be a real number or -inf (no lower wall), got "
+                             f"{dm!r:.60}")
+        object.__setattr__(self, "delta_minus", float(dm))
+        if self.eta_minus is not None:
+            object.__setattr__(self, "eta_minus", _finite("eta_minus", self.eta_minus))
+            if not 0.0 < self.eta_minus <= 1.0:
+                raise ValueError(f"eta_minus must be in (0, 1], got {self.eta_minus}")
+        if self.delta_minus >= self.delta:
+            raise ValueError(f"delta_minus must be below the wall delta = {self.delta}, got "
+                             f"{self.delta_minus}")
+        if self.x0 < self.delta_minus:
+            raise ValueError(f"x0 must not be below the lower wall (x0 >= delta_minus = "
+                             f"{self.delta_minus}), got {self.x0}")
+        if self.x0 == self.delta_minus and self.v0 < 0.0:
+            raise ValueError(f"v0 must be >= 0 when x0 is at the lower wall (delta_minus), got "
+                             f"{self.v0}")
+
+    @property
+    def two_walls(self) -> bool:
+        """Whether the lower wall exists (delta_minus > -inf)."""
+        return self.delta_minus > -math.inf
+
+    @property
+    def lower_restitution(self) -> float:
+        """The lower wall's restitution: eta_minus, or eta where it is None."""
+        return self.eta if self.eta_minus is None else self.eta_minus
 
     def replace(self, **changes) -> Oscillator:
         """A copy with some parameters changed (validated again); a change may name a
@@ -239,17 +284,22 @@ class Oscillator:
         return dataclasses.replace(self, **changes)
 
     def as_dict(self) -> dict:
-        """Every parameter by name and, for a user's force law, its expression and
-        constants (``law_attrs``): what resume keys and manifests hash."""
-        return {**{name: getattr(self, name) for name in PARAMETER_NAMES}, **self.law_attrs()}
+        """Every parameter by name (what resume keys, run manifests and checkpoints hash),
+        with the lower wall's delta_minus and eta_minus only where it exists and a user's
+        force law's expression and constants (``law_attrs``) only where one is given: a
+        one-wall oscillator of the paper's law gives what it always did."""
+        values = {name: getattr(self, name) for name in PARAMETER_NAMES}
+        return {**values, **self.lower_wall_attrs(), **self.law_attrs()}
 
     @classmethod
     def from_attrs(cls, attrs) -> Oscillator:
         """The oscillator a dataset was computed with, from its attributes: every
         ``PARAMETER_NAMES`` value and, for a user's force law, ``force_law`` and
         ``force_constants`` (``name=value,...``, as ``opa._dataset.provenance_attrs``
-        writes them)."""
+        writes them), and a lower wall's ``delta_minus``, ``eta_minus`` where present."""
         values = {name: float(attrs[name]) for name in PARAMETER_NAMES}
+        values.update({name: float(attrs[name]) for name in ("delta_minus", "eta_minus")
+                       if name in attrs})
         if "force_law" in attrs:
             values["force"] = ForceLaw(str(attrs["force_law"]),
                                        **cls.constants_from_attrs(attrs))
@@ -271,6 +321,13 @@ class Oscillator:
             return {}
         return dict(force_law=self.force.expression, force_constants=",".join(
             f"{name}={value!r}" for name, value in self.force.constants.items()))
+
+    def lower_wall_attrs(self) -> dict[str, float]:
+        """{delta_minus, eta_minus} as floats with a lower wall, else {} (dataset attributes
+        and manifests carry them only then)."""
+        if not self.two_walls:
+            return {}
+        return {"delta_minus": float(self.delta_minus), "eta_minus": self.lower_restitution}
 
     @property
     def uncertain_names(self) -> tuple[str, ...]:

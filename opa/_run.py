@@ -142,9 +142,9 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "dense_x": (i8, f8, f8, column),
         "dense_dx": (i8, f8, column),
         "dense_value": (i8, f8, v, m, i8),
-        "_bisect_wall": (i8, f8, f8, f8, column, f8, f8),
-        "_bisect_maximum": (i8, f8, f8, column),
-        "wall_crossing": (i8, f8, column, f8, f8),
+        "_bisect_wall": (i8, f8, f8, f8, column, f8, f8, f8),
+        "_bisect_maximum": (i8, f8, f8, column, f8),
+        "wall_crossing": (i8, f8, column, f8, f8, f8),
         "dense_state": (i8, f8, v, m, v),
         "free_flight_maximum": (i8, f8, column, f8),
         # the driver's phases that call no vector field (those that do are inlined)
@@ -157,7 +157,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "_stage_forcing_long": (f8,) * 8,
         "stage_drive": (f8,) * 8,
         "_stage_rows": (f8, v, f8, m, v, table_m, table_v, i8, i8, i8) + system + (f8, b1, m),
-        "_impact": (f8, v, i8) + system + (f8, v, v, m),
+        "_impact": (f8, v, i8) + system + (f8, v, v, m, f8),
         "_impact_at_nodes": (f8, v, v, iv, m, v, m, f8, v, v, m),
         "error_norm": (i8, v, v, m, f8, f8, f8),
         "wall_margin": (m, i8, i8, f8),
@@ -405,6 +405,8 @@ PARAMETER_SLOTS = {
     "a1": kernel.P_A1, "omega1": kernel.P_OMEGA1, "n": kernel.P_N,
     "pulse_width": kernel.P_TAU, "sigma": kernel.P_SIGMA, "chatter_velocity": kernel.P_CHATTER_V,
     "max_step": kernel.P_HMAX,
+    # the optional lower wall (``pack`` puts -inf, no wall, and eta there when not given)
+    "delta_minus": kernel.P_DELTA_MINUS, "eta_minus": kernel.P_ETA_MINUS,
 }
 #: the kernel's codes of each named choice
 CHOICE_CODES = {
@@ -451,6 +453,8 @@ def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
     T_DELTA); p then holds their means over the rule. ``drive_nodes``: f, omega or F0
     varies over the nodes (T_F, T_OMEGA, T_F0); p keeps the nominal drive."""
     p = np.zeros(kernel.N_PARAMS)
+    p[kernel.P_DELTA_MINUS] = -np.inf  # no lower wall unless ``values`` names one
+    p[kernel.P_ETA_MINUS] = values.get("eta", 1.0)
     for name, value in values.items():
         p[PARAMETER_SLOTS[name]] = value
     if coefficients is not None:
@@ -514,12 +518,19 @@ def sampled(inputs: Inputs, columns: dict, coefficients=None) -> Inputs:
 @dataclass(frozen=True)
 class Events:
     """One run's event log, decoded: rows in time order with their time, velocity (the
-    pre-impact velocity of x_0 for impacts and kicks, 0 for sticking and release) and
-    kind."""
+    pre-impact velocity of x_0 for impacts and kicks, 0 for sticking and release), kind
+    and wall (+1 the upper wall delta, -1 the lower wall delta_minus: the kernel logs a
+    lower-wall event as its kind plus ``EV_LOWER``; ``kind`` here is the kind alone, and
+    a lower-wall impact's velocity is negative)."""
 
     time: np.ndarray
     velocity: np.ndarray
     kind: np.ndarray
+    wall: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.wall is None:
+            object.__setattr__(self, "wall", np.ones(len(self.kind), dtype=np.int8))
 
     #: the kinds, by name
     IMPACT, GRAZE, STICK, RELEASE, KICK = (kernel.EV_IMPACT, kernel.EV_GRAZE, kernel.EV_STICK,
@@ -528,7 +539,11 @@ class Events:
     @classmethod
     def of(cls, log: np.ndarray) -> Events:
         log = np.asarray(log, dtype=float).reshape(-1, 3)
-        return cls(log[:, 0].copy(), log[:, 1].copy(), log[:, 2].astype(np.int8))
+        raw = log[:, 2].astype(np.int8)
+        lower = raw >= kernel.EV_LOWER
+        return cls(log[:, 0].copy(), log[:, 1].copy(),
+                   np.where(lower, raw - kernel.EV_LOWER, raw).astype(np.int8),
+                   np.where(lower, -1, 1).astype(np.int8))
 
     def __len__(self) -> int:
         return len(self.time)
@@ -554,9 +569,14 @@ class Events:
                  kernel.EV_STICK: stick, kernel.EV_RELEASE: release}
         return [table[int(k)] for k in self.kind]
 
-    def dataset_vars(self) -> dict:
-        """The event variables of a trajectory dataset (docs/datasets.md)."""
+    def dataset_vars(self, two_walls: bool = False) -> dict:
+        """The event variables of a trajectory dataset (docs/datasets.md); ``two_walls``
+        (the oscillator has a lower wall) adds ``impact_wall``, +1 or -1 per impact."""
         impact = self.impacts
+        walls = {} if not two_walls else {"impact_wall": (
+            "impact", self.wall[impact].astype(np.int8),
+            {"long_name": "wall of the impact: +1 the upper wall delta, -1 the lower wall "
+                          "delta_minus", "units": "1"})}
         return {
             "impact_time": ("impact", self.time[impact],
                             {"long_name": "time of impact with the wall", "units": "1"}),
@@ -573,13 +593,15 @@ class Events:
             "release_time": ("release", self.time[self.kind == kernel.EV_RELEASE],
                              {"long_name": "time of release from the wall after sticking",
                               "units": "1"}),
+            **walls,
         }
 
 
 @dataclass(frozen=True)
 class Statistics:
-    """Per output interval: impacts, smallest pre-impact velocity, sticking episodes,
-    steps, sticking at its end (0/1) and smallest free-flight gap delta - x_0."""
+    """Per output interval: impacts, smallest pre-impact speed |v-| (at either wall),
+    sticking episodes, steps, sticking at its end (0/1) and smallest free-flight gap
+    delta - x_0 (the upper wall's only: a lower wall has no gap statistic)."""
 
     impacts: np.ndarray
     min_velocity: np.ndarray

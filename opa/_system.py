@@ -297,6 +297,8 @@ class System:
                       sigma=self.sigma if self.dimension == 1 else 0.0,
                       chatter_velocity=options.chatter_velocity,
                       max_step=options.max_step)
+        if o.two_walls:
+            values.update(delta_minus=o.delta_minus, eta_minus=o.lower_restitution)
         rule = quadrature(self.order) if rule is None else rule
         law = o.law_coefficients()
         return pack(values, max_steps=options.max_steps,
@@ -344,6 +346,9 @@ class System:
                              f"{initial.shape}")
         if initial[0, 0] > self.oscillator.delta:
             raise ValueError(f"initial x_0 must not be beyond the wall, got {initial[0, 0]}")
+        if initial[0, 0] < self.oscillator.delta_minus:
+            raise ValueError(f"initial x_0 must not be below the lower wall (delta_minus = "
+                             f"{self.oscillator.delta_minus}), got {initial[0, 0]}")
         y[:] = initial.ravel()
         return y
 
@@ -384,6 +389,11 @@ def _check_law(oscillator: Oscillator, problem: Problem, truncation: str) -> Non
                                      for name in problem.names):
         raise ValueError("truncation 'paper' (eq. (27)) closes a force law's coefficient; an "
                          "uncertain eta, delta, f, omega or F0 takes truncation 'galerkin'")
+    if oscillator.two_walls and any(name in IMPACT_PARAMETERS and scale != 0.0
+                                    for name, scale in zip(problem.names, problem.scales)):
+        raise ValueError("an uncertain eta or delta takes one wall: the uncertain impact law "
+                         "is the upper wall's only (this oscillator has a lower wall, "
+                         "delta_minus)")
     names = oscillator.uncertain_names
     for name, scale in zip(problem.names, problem.scales):
         if name not in names and scale != 0.0:

@@ -31,6 +31,7 @@ THEMES = {
     "tests/opa/test_impact_uncertain.py":
         "an uncertain eta, delta, f, omega or F0 (opa._kernel, _problem, _run, _system)",
     "tests/opa/test_opa_system.py": "the OPA equivalent system against the paper's equations",
+    "tests/opa/test_two_walls.py": "a lower wall (opa._kernel, _model, _run, _system) vs scipy",
     "tests/opa/test_hard_dynamics.py": "failures and time bounds across kernel, runs, orbits",
     "tests/opa/dynamics/test_pool.py": "the sweep's worker processes die with their owner",
     "tests/opa/dynamics/test_nordmark.py":

@@ -102,7 +102,8 @@ def test_the_packer_puts_every_model_field_in_its_slot():
     """Distinct values for every field of the model and the options: each lands in its
     own slot of ``p`` or ``cfg`` (a swap of two slots would show)."""
     osc = opa.Oscillator(mu=0.11, a=1.13, c=0.17, f=0.19, omega=2.3, eta=0.29, delta=0.31,
-                         F0=0.37, a1=0.41, omega1=4.3, n=3, x0=-0.5, v0=0.25)
+                         F0=0.37, a1=0.41, omega1=4.3, n=3, x0=-0.5, v0=0.25,
+                         delta_minus=-0.67, eta_minus=0.71)
     opts = opa.SolverOptions(impulse="pulse", pulse_width=0.53, impulse_at_zero=False,
                              rtol=1e-9, atol=1e-11, max_steps=12345, chatter_velocity=3e-6,
                              max_step=0.59, method="dp5")
@@ -113,7 +114,7 @@ def test_the_packer_puts_every_model_field_in_its_slot():
             kernel.P_OMEGA: 2.3, kernel.P_ETA: 0.29, kernel.P_DELTA: 0.31, kernel.P_F0: 0.37,
             kernel.P_A1: 0.41, kernel.P_OMEGA1: 4.3, kernel.P_N: 3.0, kernel.P_TAU: 0.53,
             kernel.P_SIGMA: 0.061, kernel.P_CHATTER_V: 3e-6,
-            kernel.P_HMAX: 0.59}
+            kernel.P_HMAX: 0.59, kernel.P_DELTA_MINUS: -0.67, kernel.P_ETA_MINUS: 0.71}
     want.update({kernel.P_POLY + i: 0.0 for i in range(kernel.N_POLY)})  # the paper's law
     assert len(want) == kernel.N_PARAMS
     for slot, value in want.items():
