@@ -52,7 +52,8 @@ def run_dmr(law: str, periods: int):
 
 
 def run_mc(law: str, samples: int, periods: int):
-    return mc.simulate_mc(oscillator(law), sigma=0.01, samples=samples, sampler="random",
+    return mc.simulate_mc(oscillator(law), uncertain="mu", sigma=0.01, samples=samples,
+                          sampler="random",
                           seed=0, periods=periods, per_period=1, options=LOOSE, progress=False)
 
 

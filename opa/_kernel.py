@@ -1869,9 +1869,11 @@ def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, a
     return err, margin, xn, vn, kx, kv
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def register_step_poly(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
-    """``register_step`` of a polynomial force law (``force_law``'s tuple of C[j, k])."""
+    """``register_step`` of a polynomial force law (``force_law``'s tuple of C[j, k]).
+    A call, not inlined: a second inlined step in the driver's loop made the paper's
+    law's DMR 4 % slower (benchmarks.bench_several's speed check)."""
     xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, math.cos(w * t),
                                           math.sin(w * t), force, sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)

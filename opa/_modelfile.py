@@ -9,8 +9,8 @@ The format, every part optional::
     [constants]                 # the law's named constants (only with force)
     zeta = 0.05
 
-    [oscillator]                # any of opa.Oscillator's fields:
-    f = 1.0                     #   mu a c f omega eta delta F0 a1 omega1 n x0 v0
+    [oscillator]                # any of opa.Oscillator's fields: mu a c f omega eta
+    f = 1.0                     #   delta F0 a1 omega1 n x0 v0, and delta_minus eta_minus
     omega = 2.5                 # the others keep Oscillator's defaults (the paper's
     eta = 0.8                   # section 3.2 set: F0 = 0.1 gives an impulse train,
     F0 = 0.0                    # F0 = 0 none)
@@ -20,7 +20,9 @@ The format, every part optional::
     sigma = 0.01                # the tables of --problem FILE.toml (opa.Problem);
     distribution = "uniform"    # allow_negative = true under [uncertain]
 
-With a user's force law, ``mu``, ``a`` and ``c`` are fields of [oscillator] only where the
+``delta_minus`` (< delta) adds a lower wall, with the restitution ``eta_minus`` (eta when
+left out): the motion is then delta_minus < x < delta (a gear pair's backlash). With a
+user's force law, ``mu``, ``a`` and ``c`` are fields of [oscillator] only where the
 law names them (elsewhere they would have no effect, and are refused). Numbers are TOML
 numbers (``1`` or ``1.0``), never strings or booleans. Every fault of a file is one
 ``ValueError`` line naming the path and the key or value: an unreadable file, one that is
@@ -47,6 +49,8 @@ from opa._problem import Problem
 
 #: the top-level keys and tables of a model file
 KEYS = ("force", "constants", "oscillator", "uncertain")
+#: the keys of [oscillator]: every parameter, and a lower wall's delta_minus, eta_minus
+OSCILLATOR_KEYS = PARAMETER_NAMES + ("delta_minus", "eta_minus")
 
 
 @dataclass(frozen=True)
@@ -96,9 +100,9 @@ def _oscillator(where: str, data: dict, law: ForceLaw | None) -> Oscillator:
     fields = _table(f"{where}: [oscillator]", data.get("oscillator", {}))
     values = {}
     for name, value in fields.items():
-        if name not in PARAMETER_NAMES:
+        if name not in OSCILLATOR_KEYS:
             raise ValueError(f"{where}: [oscillator] has unknown key {name!r:.40} (it takes "
-                             f"{' '.join(PARAMETER_NAMES)}; a force law's constants go in "
+                             f"{' '.join(OSCILLATOR_KEYS)}; a force law's constants go in "
                              f"[constants])")
         if law is not None and name in OSCILLATOR_COEFFICIENTS and name not in law.names:
             raise ValueError(f"{where}: [oscillator] {name} has no effect: the force law "

@@ -118,3 +118,17 @@ def test_unreadable_and_binary_files_are_named(tmp_path):
         with pytest.raises(ValueError, match="model file") as info:
             read_model(path)
         assert path in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_lower_wall_in_the_file(tmp_path):
+    """delta_minus and eta_minus in [oscillator] give the oscillator its lower wall; a
+    lower wall above the upper one is refused in one line naming it."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    model = read_model(os.path.join(here, "..", "..", "docs", "examples", "gear-pair.toml"))
+    assert (model.oscillator.delta_minus, model.oscillator.eta_minus) == (-0.8, 0.7)
+    assert model.oscillator.two_walls and model.oscillator.delta == 0.5
+    path = tmp_path / "bad.toml"
+    path.write_text("[oscillator]\ndelta = 0.5\ndelta_minus = 0.6\nx0 = 0.0\n")
+    with pytest.raises(ValueError) as err:
+        read_model(path)
+    assert "delta_minus" in str(err.value) and "\n" not in str(err.value)
