@@ -44,17 +44,21 @@ MAX_EXPRESSION = 2000
 # sorted tuple of (name, power) pairs of the named constants.
 
 
-def _real(name: str, value) -> float:
-    """``value`` as a finite float (bools and strings refused), or one line naming it."""
-    if isinstance(value, (bool, str, bytes, np.bool_)):
-        raise ValueError(f"{name} must be a real number, got {value!r:.40}")
+# the one check of a real parameter (opa._model takes it from here: this module
+# imports nothing of the package)
+def _finite(name: str, value) -> float:
+    """``value`` as a finite float; bools and strings are refused, not converted."""
+    if isinstance(value, (bool, str, bytes)) or (type(value).__module__ == "numpy" and (
+            type(value).__name__ in ("bool_", "bool") or getattr(value, "dtype", None) is not None
+            and value.dtype.kind == "b")):  # numpy bools, and 0-d boolean arrays
+        raise ValueError(f"{name} must be a real number, got {value!r}")
     try:
-        out = float(value)
+        value = float(value)
     except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{name} must be a real number, got {value!r:.40}") from None
-    if not math.isfinite(out):
-        raise ValueError(f"{name} must be finite, got {out}")
-    return out
+        raise ValueError(f"{name} must be a real number, got {value!r}") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value}")
+    return value
 
 
 def _constant(value: float) -> dict:
@@ -233,7 +237,7 @@ class ForceLaw:
                 raise ValueError(f"force law constant {name!r} is the oscillator's own: set it "
                                  f"on the oscillator (opa.Oscillator({name}=...))")
         self.expression = expression.strip()
-        self.constants = {name: _real(f"force law constant {name}", value)
+        self.constants = {name: _finite(f"force law constant {name}", value)
                           for name, value in constants.items()}
         self.names = names
         self._terms = terms

@@ -17,7 +17,7 @@ import numbers
 import warnings
 from dataclasses import InitVar, dataclass
 
-from opa._forcelaw import ForceLaw
+from opa._forcelaw import ForceLaw, _finite
 
 PARAMETER_NAMES = ("mu", "a", "c", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "n",
                    "x0", "v0")
@@ -62,21 +62,6 @@ MAX_IMPULSES = 10**7
 # Largest grid of swept values, sigmas or orders of a validation study: every point of a
 # trust map runs Monte Carlo ensembles, so even this is days of work.
 MAX_GRID = 1000
-
-
-def _finite(name: str, value) -> float:
-    """``value`` as a finite float; bools and strings are refused, not converted."""
-    if isinstance(value, (bool, str, bytes)) or (type(value).__module__ == "numpy" and (
-            type(value).__name__ in ("bool_", "bool") or getattr(value, "dtype", None) is not None
-            and value.dtype.kind == "b")):  # numpy bools, and 0-d boolean arrays
-        raise ValueError(f"{name} must be a real number, got {value!r}")
-    try:
-        value = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise ValueError(f"{name} must be a real number, got {value!r}") from None
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value}")
-    return value
 
 
 #: where runs may go: this process's CPU cores, or a CUDA GPU (:mod:`opa._gpu`)
