@@ -127,6 +127,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "last_stage": (i8,),
         "_stages2_dop853": (f8,) * 14 + (b1,),
         "_stages2_dop853_poly": (f8,) * 6 + (law,) + (f8,) * 5 + (b1,),
+        "register_step_poly": (f8,) * 6 + (law,) + (f8,) * 3 + (b1, f8, f8),
         "_error2": (f8,) * 7 + (stages, stages, f8, f8),
         "_dense_stages2_dop853": (f8, f8, m) + (f8,) * 10 + (b1,),
         "_dense_stages2_dop853_poly": (f8, f8, m, f8, f8, law) + (f8,) * 5 + (b1,),

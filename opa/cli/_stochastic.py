@@ -38,8 +38,9 @@ def register_stochastic(sub) -> None:
                    help="intensity of the uncertain parameter, or one per --uncertain name "
                         "(default 0.03)")
     g.add_argument("--uncertain", type=uncertain_names, default="mu", metavar="P[,P...]",
-                   help="the uncertain parameter among mu, a, c or a --model force law's "
-                        "constants (default mu, or the --model file's [uncertain.NAME]), or "
+                   help="the uncertain parameter among mu, a, c, eta, delta, f, omega, F0 or "
+                        "a --model force law's constants (default mu, or the --model file's "
+                        "[uncertain.NAME]), or "
                         "several "
                         "such as mu,c: then no boundaries are located (continuation in xi "
                         "is one-dimensional) and the probabilities are sampled, scrambled "
@@ -177,8 +178,8 @@ def _run(args, osc, name, values, keywords) -> int:
         drawn = ("" if len(uncertain) == 1 else
                  f" (scrambled Sobol', SE from {ds.attrs['scramblings']} scramblings)")
         print(f"opa-mc stochastic: {len(values)} values of {name}, " + ", ".join(
-            f"{p} = {getattr(osc, p):g} + {s:g} xi_{j + 1}" if len(uncertain) > 1 else
-            f"{p} = {getattr(osc, p):g} + {s:g} xi" for j, (p, s) in
+            f"{p} = {osc.value(p):g} + {s:g} xi_{j + 1}" if len(uncertain) > 1 else
+            f"{p} = {osc.value(p):g} + {s:g} xi" for j, (p, s) in
             enumerate(zip(uncertain, sigma))) + f", {args.samples} samples each{drawn}, "
             f"in {elapsed:.1f} s")
         if "boundaries" in ds.attrs:

@@ -60,7 +60,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from opa._execution import Execution
-from opa._model import UNCERTAIN_PARAMETERS as UNCERTAIN
 from opa._model import Oscillator, SolverOptions
 from opa._problem import Problem
 from opa._system import System
@@ -644,8 +643,9 @@ def _check_model(oscillator, parameter, values, sigma, uncertain, distribution, 
     if names:
         return _check_several(given, oscillator, parameter, values, sigma, names,
                               distribution, xtol)
-    if not (isinstance(uncertain, str) and uncertain in UNCERTAIN):
-        raise DiagramInputError("{uncertain} must be mu, a or c, got {0!r}", uncertain)
+    if not (isinstance(uncertain, str) and uncertain in oscillator.uncertain_names):
+        raise DiagramInputError("{uncertain} must be one of {0}, got {1!r}",
+                                ", ".join(oscillator.uncertain_names), uncertain)
     if isinstance(given, System) and (given.uncertain != uncertain or given.sigma != sigma):
         raise DiagramInputError(
             "{oscillator}: the System's uncertainty ({0}, sigma {1:g}) is not the diagram's "

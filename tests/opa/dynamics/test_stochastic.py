@@ -105,7 +105,7 @@ def test_coexisting_attractors_are_reported():
 @pytest.mark.parametrize("kw, message", [
     (dict(sigma=0.0), "sigma must be a positive number"),
     (dict(sigma=0.03, samples=1), "samples must be 0 or an integer >= 2"),
-    (dict(sigma=0.03, uncertain="f"), "uncertain must be mu, a or c"),
+    (dict(sigma=0.03, uncertain="a1"), "uncertain must be one of mu, a, c, eta, delta, f"),
     (dict(sigma=0.03, extra_states=-1), "extra_states must be an integer >= 0"),
     (dict(sigma=0.03, workers=0), "workers must be an integer >= 1"),
     (dict(sigma=0.03, emr="yes"), "emr must be True or False"),

@@ -155,10 +155,10 @@ BAD_CLI = [
     ("wrongly accepted", "--sigma 1e-300", "--sigma"),
     ("wrongly accepted", "--sigma 1e-17", "--sigma"),
     # --uncertain, and sigma beyond the uncertain parameter's range
-    ("held", "--uncertain f", "--uncertain"),
+    ("held", "--uncertain a1", "--uncertain"),
     ("held", "--uncertain=", "--uncertain"),
     ("held", "--uncertain MU", "--uncertain"),
-    ("held", "--uncertain eta", "--uncertain"),
+    ("held", "--uncertain x0", "--uncertain"),
     ("unnamed culprit", "--uncertain a --sigma 2", ("--sigma", "a")),
     ("unnamed culprit", "--uncertain c --sigma 1 --sweep mu=0.8", ("--sigma", "c")),
     ("unnamed culprit", "--uncertain c --c 0 --sweep mu=0.8", ("--sigma", "c = 0")),
@@ -475,7 +475,7 @@ BAD_API = [
                               sigma=1.7e308), "sigma"),  # c_bar + sigma xi overflows
     ("held", dict(uncertain=None), "uncertain"),
     ("held", dict(uncertain="MU"), "uncertain"),
-    ("held", dict(uncertain="eta"), "uncertain"),
+    ("held", dict(uncertain="omega1"), "uncertain"),
     ("held", dict(uncertain=1), "uncertain"),
     ("held", dict(distribution=3), "distribution"),
     ("held", dict(distribution=""), "distribution"),
