@@ -670,7 +670,7 @@ BAD_MODEL = [
     (["validate", "--model", "{model}"], ("validate", "[uncertain"), PAPER_MODEL),
     (["sobol", "--model", SHAW, "--periods", "1"], ("--model", "two")),
     (["bifurcation", "dmr", "--model", SHAW, "--sweep", "zeta=0.04:0.06:3"], "zeta"),
-    (["stochastic", "--model", SHAW, "--sweep", "omega=2.4"], ("--uncertain", "zeta")),
+    (["stochastic", "--model", SHAW, "--sweep", "zeta=0.1"], ("--sweep", "zeta")),
     (["stability", "dmr", "--model", SHAW, "--preset", "3.2"], "--preset"),
 ]
 
