@@ -199,7 +199,7 @@ class Oscillator:
     eta_minus: float | None = None
 
     # added after parts were written: a digest (opa._dataset.digest) counts them when set
-    _digest_optional = ("force",)
+    _digest_optional = ("force", "delta_minus", "eta_minus")
 
     def __post_init__(self):
         for name in PARAMETER_NAMES:

@@ -128,6 +128,9 @@ class Problem:
     allow_negative: bool = False
     coefficients: tuple | None = None
 
+    # added after parts were written: a digest (opa._dataset.digest) counts it when set
+    _digest_optional = ("coefficients",)
+
     def __post_init__(self):
         names = _as_tuple("uncertain", self.names, None)
         allowed = UNCERTAIN_PARAMETERS + IMPACT_PARAMETERS + DRIVE_PARAMETERS \

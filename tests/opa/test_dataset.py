@@ -398,13 +398,16 @@ def test_an_edited_slice_of_a_stochastic_diagram_is_recomputed(tmp_path):
 
 
 def test_a_force_law_keys_a_part_and_the_paper_law_keeps_the_old_keys():
-    """A field added later (the oscillator's ``force``) counts in a digest only when set:
+    """Fields added later (the oscillator's ``force`` and lower wall) count in a digest only
+    when set:
     the paper's law hashes as before the field existed (no ``force`` entry), two user's
     laws, or two values of one constant, hash apart."""
     import opa
     from opa._dataset import _canonical, digest
 
-    assert "force" not in _canonical(opa.Oscillator())
+    canonical = _canonical(opa.Oscillator())
+    assert not {"force", "delta_minus", "eta_minus"} & set(canonical)  # added later, unset
+    assert "delta_minus" in _canonical(opa.Oscillator(delta_minus=-2.0))
     law = opa.ForceLaw("-2*zeta*v - x", zeta=0.05)
     a, b = opa.Oscillator(force=law), opa.Oscillator(force=law.__class__("-2*zeta*v - x",
                                                                          zeta=0.06))

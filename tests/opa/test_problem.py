@@ -147,3 +147,12 @@ def test_a_bad_problem_file_gets_one_line_naming_it(tmp_path, text, words):
 def test_a_problem_and_its_fields_are_not_given_together():
     with pytest.raises(ValueError, match="as a Problem or as sigma"):
         opa.System(uncertain=Problem("mu,c", 0.01), sigma=0.02)
+
+
+def test_the_names_a_law_allows_count_in_a_digest_only_when_given():
+    """``coefficients`` came after parts keyed by a Problem were written: left at None it
+    is not in the digest (those keys still match), given it is."""
+    from opa._dataset import _canonical
+
+    assert "coefficients" not in _canonical(Problem("mu,c", (0.02, 0.005)))
+    assert "coefficients" in _canonical(Problem("zeta", 0.01, coefficients=("zeta",)))
