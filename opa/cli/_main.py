@@ -259,11 +259,19 @@ def _share(share: float) -> str:
 
 def _element_lines(ds) -> list[str]:
     """What a user must know of an element run: the law, the adaptive tolerance, the
-    elements computed by collocation and those that contain a split."""
-    if ds.attrs.get("model") != "opa" or ds.attrs.get("element_mode", "single") == "single":
+    elements computed by collocation and those that contain a split; and that the mean
+    impact law misses an uncertain eta's or delta's spread."""
+    if ds.attrs.get("model") != "opa":
         return []
+    blind = (ds.attrs.get("impact_law") == "mean"
+             and {"eta", "delta"} & set(str(ds.attrs.get("uncertain", "")).split(",")))
+    notes = ["warning: impact law mean reflects with the mean eta at the mean wall: it adds "
+             "no spread from an uncertain eta or delta, so Var[x] misses it; use "
+             "--impact-law saltation with --elements adaptive"] if blind else []
+    if ds.attrs.get("element_mode", "single") == "single":
+        return notes
     K = ds.sizes["element"]
-    lines = [f"{K} elements ({ds.attrs['element_mode']}), {ds.attrs['distribution']} law, "
+    lines = notes + [f"{K} elements ({ds.attrs['element_mode']}), {ds.attrs['distribution']} law, "
              f"impact law {ds.attrs['impact_law']}"]
     if ds.attrs["element_mode"] == "adaptive":
         if ds.attrs["tolerance_met"]:

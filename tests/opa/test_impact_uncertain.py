@@ -186,3 +186,15 @@ def test_the_trust_map_of_an_uncertain_restitution(tmp_path):
     assert not any("paper" in v for v in variants) and "saltation/galerkin" in variants
     assert "uncertain eta" in ds.attrs["variants_dropped"]
     ds.close()
+
+
+def test_simulate_says_the_mean_law_misses_an_uncertain_wall(capsys):
+    """simulate opa with eta uncertain under the mean law warns that Var[x] misses it."""
+    from opa.cli._main import main
+
+    assert main(["simulate", "opa", "--uncertain", "eta", "--sigma", "0.03",
+                 "--periods", "1"]) == 0
+    assert "impact law mean reflects with the mean eta" in capsys.readouterr().out
+    assert main(["simulate", "opa", "--uncertain", "eta", "--sigma", "0.03", "--periods",
+                 "1", "--impact-law", "saltation"]) == 0
+    assert "impact law mean reflects" not in capsys.readouterr().out
