@@ -16,6 +16,18 @@ the named constants, so any of them may be uncertain (:meth:`coefficients` evalu
 them at each quadrature node or sample). The compiled kernel takes the 4 x 4 table
 C[j, k] (powers of x and of v up to ``MAX_POWER`` = 3) as numbers, so a new law is not a
 new compilation. The paper's law is :data:`PAPER_LAW`.
+
+The escape hatch: an expression that is not such a polynomial (``max``, ``sqrt``,
+``tanh``, ..., a power that is not a whole number up to 3, a division by a constant) is
+compiled into a function of its own (``opa._forcefunction``: ``kind`` "compiled"), and
+:meth:`ForceLaw.from_function` takes a Python function g(x, v, constant, ...) that numba
+can compile (``kind`` "function"). Both cost a compile of their own per process, take the
+general step rather than the polynomial's unrolled one, and have their Jacobian by
+central differences:
+
+>>> hertz = ForceLaw("-2*zeta*v - x - k*max(x - g, 0)^1.5", zeta=0.05, k=50.0, g=0.5)
+>>> hertz.kind, hertz.names
+('compiled', ('zeta', 'k', 'g'))
 """
 
 from __future__ import annotations
@@ -37,6 +49,9 @@ RESERVED = ("x", "v", "t", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "
             "sigma", "xi")
 #: the paper's law, eq. (1)
 PAPER_EXPRESSION = "mu*(1 - v^2)*v - a*x - c*x^3"
+#: the functions a compiled law may call (``opa._forcefunction.FUNCTIONS``)
+FUNCTION_NAMES = ("abs", "sqrt", "exp", "log", "sin", "cos", "tan", "sinh", "cosh", "tanh",
+                  "atan", "max", "min", "sign")
 #: longest expression accepted (a guard against pathological input, not a modelling limit)
 MAX_EXPRESSION = 2000
 
@@ -186,8 +201,13 @@ def _coefficient_text(coef: dict) -> str:
     return " + ".join(parts).replace("+ -", "- ")
 
 
+#: the kinds of law: a polynomial (the kernel's table), a compiled expression, a function
+KINDS = ("polynomial", "compiled", "function")
+
+
 class ForceLaw:
-    """g(x, v) of x'' = g(x, v) + f cos(omega t) + impulses, a polynomial in x and v.
+    """g(x, v) of x'' = g(x, v) + f cos(omega t) + impulses: a polynomial in x and v, or
+    (the escape hatch) a compiled expression or function.
 
     Parameters
     ----------
@@ -195,13 +215,49 @@ class ForceLaw:
     **constants : the values of the law's own named constants (any name in the
         expression other than x, v and the oscillator's mu, a, c).
 
-    Refused, in one line naming the piece: anything but a polynomial in x and v with
-    named coefficients; a power of x or of v above ``MAX_POWER``; a named constant
+    Refused, in one line naming the piece: anything but numbers, x, v, named constants,
+    ``+ - * / **`` and the functions of ``opa._forcefunction.FUNCTIONS``; a named constant
     without a value or with a value not used; a constant named like the state, time or
-    one of the oscillator's other parameters.
+    one of the oscillator's other parameters. A polynomial with powers of x and v up to
+    ``MAX_POWER`` is expanded (``kind`` "polynomial"); any other allowed expression is
+    compiled (``kind`` "compiled"); :meth:`compiled` compiles a polynomial too.
     """
 
+    kind = "polynomial"
+    function = None
+
     def __init__(self, expression: str, **constants):
+        self._setup(expression, constants, compile_it=False)
+
+    @classmethod
+    def compiled(cls, expression: str, **constants) -> ForceLaw:
+        """The law compiled as a function even where it is a polynomial (the escape
+        hatch's path, e.g. to compare it with the polynomial one)."""
+        law = cls.__new__(cls)
+        law._setup(expression, constants, compile_it=True)
+        return law
+
+    @classmethod
+    def from_function(cls, function, **constants) -> ForceLaw:
+        """A law g(x, v, c_0, ...) given as a Python function that numba can compile
+        (or a numba ``njit`` function), its constants named by its parameters after x and
+        v and valued by ``constants``. Processes that run it (``--workers``, Dask) import
+        it by its module and name, so it must live in an importable module there."""
+        from opa._forcefunction import function_parameters, function_reference
+
+        law = cls.__new__(cls)
+        names = function_parameters(function)
+        law._check_names(f"force function {function_reference(function)}", names, constants)
+        law.kind = "function"
+        law.function = function
+        law.expression = function_reference(function)
+        law.constants = {name: _finite(f"force law constant {name}", value)
+                         for name, value in constants.items()}
+        law.names = names
+        law._terms = None
+        return law
+
+    def _setup(self, expression, constants: dict, compile_it: bool) -> None:
         if not isinstance(expression, str) or not expression.strip():
             raise ValueError(f"force law must be a non-empty expression in x and v, got "
                              f"{expression!r:.60}")
@@ -213,70 +269,125 @@ class ForceLaw:
         except SyntaxError:
             raise ValueError(f"force law {expression!r:.80} is not an expression in x and v "
                              f"(write e.g. \"-2*zeta*v - x - c*x^3\")") from None
-        expander = _Expander(text)
-        terms = expander.expand(tree.body)
-        for (j, k) in terms:
-            if j > MAX_POWER or k > MAX_POWER:
-                raise ValueError(
-                    f"force law {expression!r:.80} has the term x^{j} v^{k}: the powers of x "
-                    f"and of v are at most {MAX_POWER} each")
-        names = tuple(expander.names)
-        for name in names:
-            if name in RESERVED:
-                raise ValueError(f"force law {expression!r:.80} names {name!r}, which is the "
-                                 f"oscillator's own parameter or the state; a law may use x, v, "
-                                 f"mu, a, c and constants of its own")
-            if name not in OSCILLATOR_COEFFICIENTS and name not in constants:
-                raise ValueError(f"force law {expression!r:.80}: the constant {name!r} has no "
-                                 f"value (give it as {name}=...)")
-        for name in constants:
-            if name not in names:
-                raise ValueError(f"force law {expression!r:.80} does not use the constant "
-                                 f"{name!r} given a value")
-            if name in OSCILLATOR_COEFFICIENTS:
-                raise ValueError(f"force law constant {name!r} is the oscillator's own: set it "
-                                 f"on the oscillator (opa.Oscillator({name}=...))")
+        terms = None if compile_it else _polynomial(text, tree)
+        if terms is None:  # not a polynomial the kernel's table holds: compiled
+            from opa._forcefunction import MAX_CONSTANTS, check_expression
+
+            names = tuple(check_expression(text, tree))
+            if len(names) > MAX_CONSTANTS:
+                raise ValueError(f"force law {expression!r:.80} has {len(names)} constants; a "
+                                 f"compiled law takes at most {MAX_CONSTANTS}")
+            self.kind = "compiled"
+        else:
+            names = tuple(_names_of(tree))
+        self._check_names(f"force law {expression!r:.80}", names, constants)
         self.expression = expression.strip()
+        self._text = text
         self.constants = {name: _finite(f"force law constant {name}", value)
                           for name, value in constants.items()}
         self.names = names
         self._terms = terms
 
+    @staticmethod
+    def _check_names(what: str, names, constants: dict) -> None:
+        for name in names:
+            if name in RESERVED:
+                raise ValueError(f"{what} names {name!r}, which is the oscillator's own "
+                                 f"parameter or the state; a law may use x, v, mu, a, c and "
+                                 f"constants of its own")
+            if name not in OSCILLATOR_COEFFICIENTS and name not in constants:
+                raise ValueError(f"{what}: the constant {name!r} has no value (give it as "
+                                 f"{name}=...)")
+        for name in constants:
+            if name not in names:
+                raise ValueError(f"{what} does not use the constant {name!r} given a value")
+            if name in OSCILLATOR_COEFFICIENTS:
+                raise ValueError(f"force law constant {name!r} is the oscillator's own: set it "
+                                 f"on the oscillator (opa.Oscillator({name}=...))")
+
     def __repr__(self) -> str:
         extra = "".join(f", {k}={v!r}" for k, v in self.constants.items())
+        if self.kind == "function":
+            return f"ForceLaw.from_function({self.expression}{extra})"
+        if self.kind == "compiled" and self._terms is None and _is_polynomial(self._text):
+            return f"ForceLaw.compiled({self.expression!r}{extra})"
         return f"ForceLaw({self.expression!r}{extra})"
 
+    def _identity(self) -> tuple:
+        return (self.kind, self.expression, self.function,
+                tuple(sorted(self.constants.items())))
+
     def __eq__(self, other) -> bool:
-        return (isinstance(other, ForceLaw) and self.expression == other.expression
-                and self.constants == other.constants)
+        return isinstance(other, ForceLaw) and self._identity() == other._identity()
 
     def __hash__(self) -> int:
-        return hash((self.expression, tuple(sorted(self.constants.items()))))
+        return hash(self._identity())
 
     def digest_payload(self) -> dict:
-        """What defines the law, for the keys of stored parts (``opa._dataset.digest``)."""
-        return dict(expression=self.expression, constants=dict(self.constants))
+        """What defines the law, for the keys of stored parts (``opa._dataset.digest``);
+        a polynomial's is what it always was."""
+        payload = dict(expression=self.expression, constants=dict(self.constants))
+        if self.kind == "function":
+            from opa._forcefunction import function_digest
+
+            payload.update(kind=self.kind, source=function_digest(self.function))
+        elif self.kind == "compiled":
+            payload.update(kind=self.kind)
+        return payload
 
     def __reduce__(self):
+        if self.kind == "function":
+            return (_rebuild_function, (self.function, dict(self.constants)))
+        if self.kind == "compiled":
+            return (_rebuild_compiled, (self.expression, dict(self.constants)))
         return (_rebuild, (self.expression, dict(self.constants)))
+
+    def with_constants(self, **changes) -> ForceLaw:
+        """The same law with some constants' values changed."""
+        constants = {**self.constants, **changes}
+        if self.kind == "function":
+            return ForceLaw.from_function(self.function, **constants)
+        if self.kind == "compiled":
+            return ForceLaw.compiled(self.expression, **constants)
+        return ForceLaw(self.expression, **constants)
+
+    def address(self) -> int:
+        """The address of a compiled law's C function in this process (compiled on first
+        use); 0 for a polynomial."""
+        from opa._forcefunction import expression_address, function_address
+
+        if self.kind == "compiled":
+            return expression_address(self._text, self.names)
+        if self.kind == "function":
+            return function_address(self.function, len(self.names))
+        return 0
 
     @property
     def is_paper(self) -> bool:
         """Whether this is the paper's law as written in :data:`PAPER_EXPRESSION`."""
-        return self.expression == PAPER_EXPRESSION and not self.constants
+        return (self.kind == "polynomial" and self.expression == PAPER_EXPRESSION
+                and not self.constants)
 
     def terms(self) -> dict:
-        """{(j, k): coefficient of x^j v^k as text}, the expanded law."""
+        """{(j, k): coefficient of x^j v^k as text}, the expanded law (a polynomial's)."""
+        if self._terms is None:
+            raise ValueError(f"the {self.kind} force law {self.expression!r:.60} has no "
+                             f"expansion in powers of x and v")
         return {key: _coefficient_text(coef) for key, coef in sorted(self._terms.items())}
 
     def coefficients(self, values: Mapping) -> np.ndarray:
         """C[j, k] at each of M points, shape (M, N_COEFFICIENTS) row-major in j, with
         ``values`` the named constants' values: arrays (M,) or numbers, one per name of
-        :attr:`names` (the oscillator's mu, a, c included where the law names them)."""
+        :attr:`names` (the oscillator's mu, a, c included where the law names them). A
+        compiled law's are its constants themselves, in the order of :attr:`names`."""
         arrays = {name: np.atleast_1d(np.asarray(values[name], dtype=float))
                   for name in self.names}
         size = max((len(a) for a in arrays.values()), default=1)
         out = np.zeros((size, N_COEFFICIENTS))
+        if self._terms is None:  # a compiled law reads its constants in these slots
+            for i, name in enumerate(self.names):
+                out[:, i] = arrays[name]
+            return out
         for (j, k), coef in self._terms.items():
             column = np.zeros(size)
             for mono, number in coef.items():
@@ -290,14 +401,56 @@ class ForceLaw:
     def __call__(self, x, v, values: Mapping | None = None):
         """g(x, v) in numpy at the law's constants (or ``values``), for checks and plots."""
         merged = {**self.constants, **(values or {})}
-        coef = self.coefficients(merged)[0].reshape(MAX_POWER + 1, MAX_POWER + 1)
         x, v = np.asarray(x, dtype=float), np.asarray(v, dtype=float)
+        if self.kind == "function":
+            return np.vectorize(self.function, otypes=[float])(
+                x, v, *(merged[name] for name in self.names))
+        if self.kind == "compiled":
+            from opa._forcefunction import FUNCTIONS
+
+            scope = {"__builtins__": {}, **FUNCTIONS, "x": x, "v": v,
+                     **{name: merged[name] for name in self.names}}
+            return eval(compile(self._text, "<force law>", "eval"), scope)  # noqa: S307 (checked)
+        coef = self.coefficients(merged)[0].reshape(MAX_POWER + 1, MAX_POWER + 1)
         return sum(coef[j, k] * x**j * v**k for j in range(MAX_POWER + 1)
                    for k in range(MAX_POWER + 1) if coef[j, k] != 0.0)
 
 
+def _polynomial(text: str, tree) -> dict | None:
+    """The expansion of a polynomial of powers up to MAX_POWER, None for any other
+    expression (which the compiled path checks and refuses in its own words)."""
+    if any(isinstance(n, ast.Name) and n.id in FUNCTION_NAMES for n in ast.walk(tree)):
+        return None
+    try:
+        terms = _Expander(text).expand(tree.body)
+    except ValueError:
+        return None
+    if any(j > MAX_POWER or k > MAX_POWER for (j, k) in terms):
+        return None
+    return terms
+
+
+def _is_polynomial(text: str) -> bool:
+    return _polynomial(text, ast.parse(text, mode="eval")) is not None
+
+
+def _names_of(tree) -> list[str]:
+    """The names a polynomial uses besides x and v, in order of first use."""
+    expander = _Expander("")
+    expander.expand(tree.body)
+    return expander.names
+
+
 def _rebuild(expression: str, constants: dict) -> ForceLaw:
     return ForceLaw(expression, **constants)
+
+
+def _rebuild_compiled(expression: str, constants: dict) -> ForceLaw:
+    return ForceLaw.compiled(expression, **constants)
+
+
+def _rebuild_function(function, constants: dict) -> ForceLaw:
+    return ForceLaw.from_function(function, **constants)
 
 
 #: the paper's force law, eq. (1), as a user's law (the built-in one is faster to the bit)

@@ -78,7 +78,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.extending import intrinsic
 
 # ---------------------------------------------------------------------------
 # Layout of the float parameter vector ``p`` and the integer configuration ``cfg``.
@@ -107,10 +109,17 @@ C_WALL_NODES = 8
 # T_OMEGA; p holds the nominal values, whose drive every node shares) and a kick adds
 # each node's own F0 (T_F0) times the impulse's modulation
 C_DRIVE_NODES = 9
-N_CFG = 10
-# The force law g(x, v): the paper's mu (1 - v^2) v - a x - c x^3 (from mu, a, c), or a
-# polynomial sum_jk C[j, k] x^j v^k (a user's model, from its coefficients).
-FORCE_PAPER, FORCE_POLYNOMIAL = 0, 1
+# C_FUNCTION: the address of a compiled force function (``FORCE_FUNCTION``), a C function
+# double g(double x, double v, double *theta) made in this process by
+# ``opa._forcefunction`` (0 for the other laws)
+C_FUNCTION = 10
+N_CFG = 11
+# The force law g(x, v): the paper's mu (1 - v^2) v - a x - c x^3 (from mu, a, c), a
+# polynomial sum_jk C[j, k] x^j v^k (a user's model, from its coefficients), or a compiled
+# function of a user's (the escape hatch for a force that is not polynomial): it reads its
+# N_POLY constants theta where a polynomial law has its coefficients (P_POLY, T_POLY), and
+# its Jacobian is taken by central differences (``_function_law``).
+FORCE_PAPER, FORCE_POLYNOMIAL, FORCE_FUNCTION = 0, 1, 2
 
 # Columns of the per-node parameter table ``table`` (Q, N_TABLE): the coefficients of the
 # force law at each quadrature node (or sample). The kernel never learns which parameter
@@ -466,6 +475,55 @@ def _poly_row(table, k, x, v):
                         table[k, q + 3], table[k, q + 7], table[k, q + 11], table[k, q + 15])
 
 
+@intrinsic
+def _call_function(typingctx, address, x, v, theta):
+    """g(x, v, theta) of the C function at ``address`` (an int64), with ``theta`` the
+    address of its constants (an int64): a call through a pointer, so one compiled kernel
+    serves every user's function (and its on-disk cache stays valid)."""
+    sig = types.float64(types.int64, types.float64, types.float64, types.int64)
+
+    def codegen(context, builder, signature, args):
+        double = ir.DoubleType()
+        fnty = ir.FunctionType(double, [double, double, double.as_pointer()])
+        fn = builder.inttoptr(args[0], fnty.as_pointer())
+        return builder.call(fn, [args[1], args[2], builder.inttoptr(args[3],
+                                                                    double.as_pointer())])
+    return sig, codegen
+
+
+#: relative step of the central differences of a compiled force function's Jacobian
+FUNCTION_STEP = 1e-6
+
+
+@njit(cache=True, inline="always")
+def _function_law(address, x, v, theta, derivatives):
+    """(g, dg/dx, dg/dv) of a compiled force function (``FORCE_FUNCTION``) with its
+    constants at the address ``theta``; the derivatives by central differences of step
+    FUNCTION_STEP (1 + |x|), only when ``derivatives`` (else 0)."""
+    g = _call_function(address, x, v, theta)
+    if not derivatives:
+        return g, 0.0, 0.0
+    hx = FUNCTION_STEP * (1.0 + abs(x))
+    hv = FUNCTION_STEP * (1.0 + abs(v))
+    gx = (_call_function(address, x + hx, v, theta)
+          - _call_function(address, x - hx, v, theta)) / (2.0 * hx)
+    gv = (_call_function(address, x, v + hv, theta)
+          - _call_function(address, x, v - hv, theta)) / (2.0 * hv)
+    return g, gx, gv
+
+
+@njit(cache=True, inline="always")
+def _theta_of_p(p):
+    """The address of a compiled force function's constants in the parameter vector."""
+    return p.ctypes.data + P_POLY * p.strides[0]
+
+
+@njit(cache=True, inline="always")
+def _theta_of_row(table, k):
+    """The address of a compiled force function's constants in row k of the table."""
+    return table.ctypes.data + k * table.strides[0] + T_POLY * table.strides[1]
+
+
 @njit(cache=True, inline="always")
 def _f2(x, v, mu, a, c, drive, sticking):
     """Deterministic right-hand side on scalars, (x', v') of eq. (29), with the external
@@ -517,10 +575,14 @@ def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work)
     n = cfg[C_NCOEF]
     # is_deterministic written out: a call would count references of three arrays
     poly = cfg[C_FORCE] == FORCE_POLYNOMIAL
+    function = cfg[C_FORCE] == FORCE_FUNCTION
     if m == 0 and n == 1 and table.shape[0] == 1 and (
-            (not poly and table[0, T_MU] == p[P_MU] and table[0, T_A] == p[P_A]
-             and table[0, T_C] == p[P_C]) or (poly and _own_law(cfg, table, p))):
-        if poly:
+            (not poly and not function and table[0, T_MU] == p[P_MU] and table[0, T_A] == p[P_A]
+             and table[0, T_C] == p[P_C]) or ((poly or function) and _own_law(cfg, table, p))):
+        if function:
+            dx = z[1]
+            dv = _call_function(cfg[C_FUNCTION], z[0], z[1], _theta_of_p(p)) + drive
+        elif poly:
             dx, dv = _f2_poly(z[0], z[1], force_law(p), drive, False)
         else:
             dx, dv = _f2(z[0], z[1], p[P_MU], p[P_A], p[P_C], drive, False)
@@ -548,7 +610,9 @@ def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work)
     # that sum would otherwise be amplified by the transverse instability).
     x0 = z[0]
     v0 = z[n]
-    if poly:
+    if function:
+        g0 = _call_function(cfg[C_FUNCTION], x0, v0, _theta_of_p(p))
+    elif poly:
         g0, _, _ = _poly_law(x0, v0, force_law(p))
     else:
         g0 = p[P_MU] * (1.0 - v0 * v0) * v0 - p[P_A] * x0 - p[P_C] * x0 * x0 * x0
@@ -562,8 +626,12 @@ def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work)
         x = work[0, k]
         v = work[1, k]
         w = weights[k]
-        if poly:
-            gk, gx, gv = _poly_row(table, k, x, v)
+        if poly or function:
+            if function:
+                gk, gx, gv = _function_law(cfg[C_FUNCTION], x, v, _theta_of_row(table, k),
+                                           m > 0)
+            else:
+                gk, gx, gv = _poly_row(table, k, x, v)
             g = w * (gk - g0)
             if m > 0:
                 work[2, k] = w * gx
@@ -979,7 +1047,8 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, table, weights, U, force
     A = DP_A if method == METHOD_DP5 else D8_A
     C = DP_C if method == METHOD_DP5 else D8_C
     B = DP_B if method == METHOD_DP5 else D8_B
-    if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p):
+    if (method == METHOD_DOP853 and size == 2 and cfg[C_FORCE] != FORCE_FUNCTION
+            and is_deterministic(m, cfg, table, p)):
         step2(t, z, h, K, z_new, p, cfg, force, sticking, 1.0, 1.0)
         return last
     cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, np.int64(1), last, m, p, cfg, table,
@@ -1073,7 +1142,7 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights,
                     acc += K[s, j] * DP_P[s, d]
                 F[d, j] = h * acc
         return 0
-    if size == 2 and is_deterministic(m, cfg, table, p):
+    if size == 2 and cfg[C_FORCE] != FORCE_FUNCTION and is_deterministic(m, cfg, table, p):
         return dense_prepare2(t, z, z_new, h, K, F, p, cfg, force, sticking)
     _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, np.int64(13), np.int64(16), m, p, cfg, table,
                 weights, U, force, sticking, work)
@@ -1554,7 +1623,8 @@ def _hold(z, m, n, law):
 @njit(cache=True)
 def escape_bound(y0, p, cfg):
     """The |x_i|, |v_i| beyond which the state counts as escaped (see ESCAPE_FACTOR); the
-    linear stiffness of a polynomial force law is -C[1, 0]."""
+    linear stiffness of a polynomial force law is -C[1, 0], of a compiled function its
+    -dg/dx at the origin."""
     start = 0.0
     for j in range(y0.shape[0]):
         a = abs(y0[j])
@@ -1562,7 +1632,12 @@ def escape_bound(y0, p, cfg):
             start = a
     w = p[P_OMEGA]
     drive = abs(p[P_F]) + abs(p[P_F0]) * (1.0 + abs(p[P_A1]))
-    stiffness = abs(p[P_POLY + POLY_DEGREE + 1] if cfg[C_FORCE] == FORCE_POLYNOMIAL else p[P_A])
+    if cfg[C_FORCE] == FORCE_FUNCTION:  # -dg/dx at the origin, by central differences
+        _, gx, _ = _function_law(cfg[C_FUNCTION], 0.0, 0.0, _theta_of_p(p), True)
+        stiffness = abs(gx)
+    else:
+        stiffness = abs(p[P_POLY + POLY_DEGREE + 1] if cfg[C_FORCE] == FORCE_POLYNOMIAL
+                        else p[P_A])
     if stiffness == 0.0:
         return np.inf  # no linear restoring force: no scale to escape from
     # the lower wall's |delta_minus| enters as |delta| does (adding 0.0 without one)
@@ -2114,7 +2189,9 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
     # the 2-D register path, decided once: its trial step takes and returns scalars only
-    two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p)
+    # (a compiled force function takes the general step: its calls go through a pointer)
+    two_d = (method == METHOD_DOP853 and size == 2 and cfg[C_FORCE] != FORCE_FUNCTION
+             and is_deterministic(m, cfg, table, p))
     mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
     poly = cfg[C_FORCE] == FORCE_POLYNOMIAL
     law = force_law(p)  # a polynomial law's coefficients (read only when poly)
@@ -2328,3 +2405,28 @@ def run_batch_from(Y0, include_start, t_out, P, cfgs, table, weights, U, rtol, a
                         np.empty((0, N_STATS)), np.empty(0), logs[b])
         for j in range(5):
             counters[b, j] = res[j]
+
+
+# ---------------------------------------------------------------------------
+# A user's compiled force function (FORCE_FUNCTION): made here, since jitted code lives in
+# this module only; ``opa._forcefunction`` writes the Python source and keeps the result.
+FUNCTION_SIGNATURE = types.float64(types.float64, types.float64, types.CPointer(types.float64))
+
+
+def jit_user_function(function):
+    """A user's Python function, jitted for its calls from a compiled force function
+    (returned as it is when it is jitted already)."""
+    from numba.core.registry import CPUDispatcher
+
+    if isinstance(function, CPUDispatcher):
+        return function
+    return njit(function)
+
+
+def compile_force_function(function):
+    """``function(x, v, theta)`` (theta: a pointer to its constants) as a C function of
+    FUNCTION_SIGNATURE; its ``address`` goes to cfg[C_FUNCTION]. One compile per model and
+    process (about 0.1 s to 1 s): the kernel itself stays compiled and cached."""
+    from numba import cfunc
+
+    return cfunc(FUNCTION_SIGNATURE)(function)

@@ -265,7 +265,7 @@ class Oscillator:
         if isinstance(law, ForceLaw):
             own = {name: changes.pop(name) for name in list(changes) if name in law.constants}
             if own:
-                changes["force"] = ForceLaw(law.expression, **{**law.constants, **own})
+                changes["force"] = law.with_constants(**own)
         return dataclasses.replace(self, **changes)
 
     def as_dict(self) -> dict:
@@ -286,8 +286,7 @@ class Oscillator:
         values.update({name: float(attrs[name]) for name in ("delta_minus", "eta_minus")
                        if name in attrs})
         if "force_law" in attrs:
-            values["force"] = ForceLaw(str(attrs["force_law"]),
-                                       **cls.constants_from_attrs(attrs))
+            values["force"] = law_from_attrs(attrs, cls.constants_from_attrs(attrs))
         return cls(**values)
 
     @staticmethod
@@ -304,8 +303,9 @@ class Oscillator:
         """The force law as dataset attributes (none for the paper's law)."""
         if self.force is None:
             return {}
+        kind = {} if self.force.kind == "polynomial" else {"force_kind": self.force.kind}
         return dict(force_law=self.force.expression, force_constants=",".join(
-            f"{name}={value!r}" for name, value in self.force.constants.items()))
+            f"{name}={value!r}" for name, value in self.force.constants.items()), **kind)
 
     def lower_wall_attrs(self) -> dict[str, float]:
         """{delta_minus, eta_minus} as floats with a lower wall, else {} (dataset attributes
@@ -550,3 +550,20 @@ __all__ = [
     "time_grid",
     "PARAMETER_NAMES",
 ]
+
+
+def law_from_attrs(attrs, constants: dict) -> ForceLaw:
+    """A user's force law from a dataset's ``force_law`` and ``force_kind`` (absent: a
+    polynomial; "compiled": the expression compiled; "function": ``module:name`` of a
+    function, imported)."""
+    kind = str(attrs.get("force_kind", "polynomial"))
+    text = str(attrs["force_law"])
+    if kind == "function":
+        from opa._forcefunction import imported_function
+
+        return ForceLaw.from_function(imported_function(text), **constants)
+    if kind == "compiled":
+        return ForceLaw.compiled(text, **constants)
+    if kind != "polynomial":
+        raise ValueError(f"force_kind {kind!r:.40} is none of polynomial, compiled, function")
+    return ForceLaw(text, **constants)

@@ -5,7 +5,9 @@ The format, every part optional::
 
     # Shaw & Holmes' linear impact oscillator
     force = "-2*zeta*v - x"     # g(x, v) in x'' = g + f cos(omega t) + impulses
-                                # (opa.ForceLaw; left out: the paper's law, eq. (1))
+                                # (opa.ForceLaw; left out: the paper's law, eq. (1));
+                                # or function = "module:name", a Python function
+                                # g(x, v, zeta) in module.py beside the file
     [constants]                 # the law's named constants (only with force)
     zeta = 0.05
 
@@ -48,7 +50,7 @@ from opa._model import PARAMETER_NAMES, Oscillator, _finite
 from opa._problem import Problem
 
 #: the top-level keys and tables of a model file
-KEYS = ("force", "constants", "oscillator", "uncertain")
+KEYS = ("force", "function", "constants", "oscillator", "uncertain")
 #: the keys of [oscillator]: every parameter, and a lower wall's delta_minus, eta_minus
 OSCILLATOR_KEYS = PARAMETER_NAMES + ("delta_minus", "eta_minus")
 
@@ -76,9 +78,34 @@ def _table(where: str, value) -> dict:
     return value
 
 
-def _law(where: str, data: dict) -> ForceLaw | None:
-    """The force law of the file's ``force`` and ``[constants]`` (None: the paper's)."""
+def _function_law(where: str, reference, values: dict, folder: str) -> ForceLaw:
+    """The law of ``function = "module:name"``: a Python function g(x, v, constant, ...)
+    imported from ``module``, looked for first in the model file's own folder."""
+    import sys
+
+    from opa._forcefunction import imported_function
+
+    if not isinstance(reference, str) or ":" not in reference:
+        raise ValueError(f"{where}: function must be a string \"module:name\" (a Python "
+                         f"function g(x, v, constant, ...) in module.py), got {reference!r:.40}")
+    if folder not in sys.path:
+        sys.path.insert(0, folder)  # a module beside the file (workers inherit the path)
+    try:
+        return ForceLaw.from_function(imported_function(reference), **values)
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from None
+
+
+def _law(where: str, data: dict, folder: str = ".") -> ForceLaw | None:
+    """The force law of the file's ``force`` or ``function`` and ``[constants]`` (None:
+    the paper's)."""
     constants = _table(f"{where}: [constants]", data.get("constants", {}))
+    if "function" in data:
+        if "force" in data:
+            raise ValueError(f"{where}: give force or function, not both")
+        values = {name: _number(f"{where}: [constants] {name}", value)
+                  for name, value in constants.items()}
+        return _function_law(where, data["function"], values, folder)
     if "force" not in data:
         if constants:
             raise ValueError(f"{where}: [constants] needs force = \"...\" (the paper's law "
@@ -139,9 +166,13 @@ def read_model(path) -> Model:
     where = f"model file {path}"
     unknown = [key for key in data if key not in KEYS]
     if unknown:
-        raise ValueError(f"{where}: unknown key {unknown[0]!r:.40} (a model file takes force, "
-                         f"[constants], [oscillator] and [uncertain.NAME] tables)")
-    oscillator = _oscillator(where, data, _law(where, data))
+        raise ValueError(f"{where}: unknown key {unknown[0]!r:.40} (a model file takes force "
+                         f"or function, [constants], [oscillator] and [uncertain.NAME] "
+                         f"tables)")
+    import os
+
+    folder = os.path.dirname(os.path.abspath(str(path)))
+    oscillator = _oscillator(where, data, _law(where, data, folder))
     problem = None
     if "uncertain" in data:
         table = _table(f"{where}: [uncertain]", data["uncertain"])

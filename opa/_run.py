@@ -15,6 +15,7 @@ import numpy as np
 
 from opa import _kernel as kernel
 from opa._basis import chebyshev_u, gauss_nodes, quadrature_order
+from opa._forcefunction import check_addresses
 from opa._memory import check_memory
 from opa._model import check_span, time_grid
 
@@ -420,7 +421,8 @@ CHOICE_CODES = {
                    "saltation": kernel.LAW_SALTATION},
     "method": {"dop853": kernel.METHOD_DOP853, "dp5": kernel.METHOD_DP5},
     # the force law: the paper's (mu, a, c) or a user's polynomial (its coefficients)
-    "force": {"paper": kernel.FORCE_PAPER, "polynomial": kernel.FORCE_POLYNOMIAL},
+    "force": {"paper": kernel.FORCE_PAPER, "polynomial": kernel.FORCE_POLYNOMIAL,
+              "function": kernel.FORCE_FUNCTION},
 }
 #: the parameter vector's slots of a polynomial force law's coefficients C[j, k]
 POLY_SLOTS = slice(kernel.P_POLY, kernel.P_POLY + kernel.N_POLY)
@@ -443,7 +445,7 @@ class Inputs:
 
 def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
          coefficients=None, wall_nodes: bool = False, drive_nodes: bool = False,
-         **choices) -> Inputs:
+         function_address: int = 0, **choices) -> Inputs:
     """The kernel's inputs from named values (the keys of :data:`PARAMETER_SLOTS`), the
     step limit, the impulse train's start, the named choices of :data:`CHOICE_CODES`,
     ``rule`` (:func:`quadrature`'s nodes, weights and basis degree-major: its n + 1 rows
@@ -452,7 +454,9 @@ def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
     a polynomial force law's nominal C[j, k] (N_POLY,), with ``force="polynomial"``.
     ``wall_nodes``: the restitution or the wall varies over the nodes (the table's T_ETA,
     T_DELTA); p then holds their means over the rule. ``drive_nodes``: f, omega or F0
-    varies over the nodes (T_F, T_OMEGA, T_F0); p keeps the nominal drive."""
+    varies over the nodes (T_F, T_OMEGA, T_F0); p keeps the nominal drive.
+    ``function_address``: a compiled force function's (``force="function"``; its
+    constants take the coefficients' place), made in this process."""
     p = np.zeros(kernel.N_PARAMS)
     p[kernel.P_DELTA_MINUS] = -np.inf  # no lower wall unless ``values`` names one
     p[kernel.P_ETA_MINUS] = values.get("eta", 1.0)
@@ -464,6 +468,7 @@ def pack(values: dict, *, max_steps: int, impulse_at_zero: bool, rule, table,
     cfg[kernel.C_NCOEF] = len(rule[2]) - 1
     cfg[kernel.C_AT_ZERO] = int(impulse_at_zero)
     cfg[kernel.C_MAXSTEPS] = int(max_steps)
+    cfg[kernel.C_FUNCTION] = int(function_address)
     slots = {"impulse": kernel.C_IMPULSE, "closure": kernel.C_TRUNC,
              "impact_law": kernel.C_LAW, "method": kernel.C_METHOD, "force": kernel.C_FORCE}
     for name, value in choices.items():
@@ -790,6 +795,7 @@ def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "tr
     times = np.ascontiguousarray(times, dtype=float)
     _count(y0.shape[-1], inputs.p, times, include_start)
     cfg = inputs.cfg
+    check_addresses(cfg)
     limit = (step_guard(times, inputs.p)
              if guard and cfg[kernel.C_MAXSTEPS] == DEFAULT_MAX_STEPS else None)
     if limit is not None:
@@ -851,6 +857,12 @@ def _failure(label, status, out, times, z, n_steps, n_impacts, limit) -> str:
             f"{advice(status)}")
 
 
+def _cpu_only(cfgs) -> None:
+    if (np.asarray(cfgs)[..., kernel.C_FORCE] == kernel.FORCE_FUNCTION).any():
+        raise ValueError("a compiled force function runs on the CPU only: leave out "
+                         "--device cuda")
+
+
 def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: int = 0,
               stop_on_failure: bool = False, guard: bool = True,
               include_start: bool = True, device: str = "cpu") -> Batch:
@@ -870,6 +882,7 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
     if own_states and stop_on_failure:
         raise ValueError("stop_on_failure needs one start state and include_start")
     cfgs, guarded = _guarded_cfgs(inputs, times, guard)
+    check_addresses(cfgs)
     dim = y0.shape[-1]
     _count(dim, inputs.p, times, include_start)
     out = np.empty((B, len(times), dim))
@@ -878,6 +891,7 @@ def run_batch(inputs: Inputs, y0, times, *, rtol: float, atol: float, capacity: 
     if device == "cuda":
         from . import _gpu
 
+        _cpu_only(cfgs)
         out, logs, counters = _gpu.run_batch(
             np.broadcast_to(y0, (B, dim)), include_start, times, inputs.p, cfgs,
             inputs.table, inputs.weights, inputs.basis, rtol, atol, capacity)
@@ -911,6 +925,7 @@ def gpu_moments(inputs: Inputs, y0, times, *, rtol: float, atol: float,
 
     times = np.ascontiguousarray(times, dtype=float)
     cfgs, _ = _guarded_cfgs(inputs, times, guard)
+    _cpu_only(cfgs)
     y0 = np.ascontiguousarray(y0, dtype=float)
     B = len(inputs.p)
     _count(y0.shape[-1], inputs.p, times, True)

@@ -306,7 +306,9 @@ class System:
                     table=self.problem.table(rule[0], o), impulse=self.impulse,
                     closure=self.closure, impact_law=self.impact_law,
                     method=options.method, coefficients=None if law is None else law[0],
-                    force="paper" if law is None else "polynomial",
+                    force="paper" if law is None else (
+                        "polynomial" if o.force.kind == "polynomial" else "function"),
+                    function_address=0 if law is None else o.force.address(),
                     wall_nodes=self.problem.varies_at_the_wall(),
                     drive_nodes=self.problem.varies_in_the_drive())
 

@@ -183,10 +183,12 @@ def test_the_kernel_has_one_caller():
     """``opa._run`` is the only module of the packages that imports the compiled kernel,
     beside ``opa._gpu``, which compiles the kernel's driver for a GPU and whose launches
     only ``opa._run`` makes (``opa.engine`` takes ``require`` from it: the device check
-    itself lives with the other checks in ``opa._model``);
+    itself lives with the other checks in ``opa._model``), and ``opa._forcefunction``,
+    which has the kernel compile a user's force function with the kernel's signature
+    (and runs nothing);
     everything else goes through ``_run``'s interface (``run``, ``run_batch``, ``Record``)."""
     importers = sorted(m for m in MODULES if any(t == "opa._kernel" for t, _ in imports(m)))
-    assert importers == ["opa._gpu", "opa._run"]
+    assert importers == ["opa._forcefunction", "opa._gpu", "opa._run"]
     gpu_importers = sorted(m for m in MODULES if any(t == "opa._gpu" for t, _ in imports(m)))
     assert gpu_importers == ["opa._run", "opa.engine"]
     taken = {a.name for node in ast.walk(TREES["opa.engine"])
