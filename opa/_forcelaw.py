@@ -38,6 +38,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from opa._forcefunction import (FUNCTION_NAMES, FUNCTIONS, MAX_CONSTANTS, check_expression,
+                                function_address, function_digest, function_parameters,
+                                function_reference, expression_address)
+
 #: highest power of x and of v in a term (the kernel's table is C[j, k], j, k <= 3)
 MAX_POWER = 3
 #: number of coefficients C[j, k] the kernel takes, row-major in j
@@ -49,9 +53,6 @@ RESERVED = ("x", "v", "t", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "
             "sigma", "xi")
 #: the paper's law, eq. (1)
 PAPER_EXPRESSION = "mu*(1 - v^2)*v - a*x - c*x^3"
-#: the functions a compiled law may call (``opa._forcefunction.FUNCTIONS``)
-FUNCTION_NAMES = ("abs", "sqrt", "exp", "log", "sin", "cos", "tan", "sinh", "cosh", "tanh",
-                  "atan", "max", "min", "sign")
 #: longest expression accepted (a guard against pathological input, not a modelling limit)
 MAX_EXPRESSION = 2000
 
@@ -60,7 +61,7 @@ MAX_EXPRESSION = 2000
 
 
 # the one check of a real parameter (opa._model takes it from here: this module
-# imports nothing of the package)
+# imports only opa._forcefunction, which imports only the kernel)
 def _finite(name: str, value) -> float:
     """``value`` as a finite float; bools and strings are refused, not converted."""
     if isinstance(value, (bool, str, bytes)) or (type(value).__module__ == "numpy" and (
@@ -243,8 +244,6 @@ class ForceLaw:
         (or a numba ``njit`` function), its constants named by its parameters after x and
         v and valued by ``constants``. Processes that run it (``--workers``, Dask) import
         it by its module and name, so it must live in an importable module there."""
-        from opa._forcefunction import function_parameters, function_reference
-
         law = cls.__new__(cls)
         names = function_parameters(function)
         law._check_names(f"force function {function_reference(function)}", names, constants)
@@ -271,8 +270,6 @@ class ForceLaw:
                              f"(write e.g. \"-2*zeta*v - x - c*x^3\")") from None
         terms = None if compile_it else _polynomial(text, tree)
         if terms is None:  # not a polynomial the kernel's table holds: compiled
-            from opa._forcefunction import MAX_CONSTANTS, check_expression
-
             names = tuple(check_expression(text, tree))
             if len(names) > MAX_CONSTANTS:
                 raise ValueError(f"force law {expression!r:.80} has {len(names)} constants; a "
@@ -328,8 +325,6 @@ class ForceLaw:
         a polynomial's is what it always was."""
         payload = dict(expression=self.expression, constants=dict(self.constants))
         if self.kind == "function":
-            from opa._forcefunction import function_digest
-
             payload.update(kind=self.kind, source=function_digest(self.function))
         elif self.kind == "compiled":
             payload.update(kind=self.kind)
@@ -354,8 +349,6 @@ class ForceLaw:
     def address(self) -> int:
         """The address of a compiled law's C function in this process (compiled on first
         use); 0 for a polynomial."""
-        from opa._forcefunction import expression_address, function_address
-
         if self.kind == "compiled":
             return expression_address(self._text, self.names)
         if self.kind == "function":
@@ -406,8 +399,6 @@ class ForceLaw:
             return np.vectorize(self.function, otypes=[float])(
                 x, v, *(merged[name] for name in self.names))
         if self.kind == "compiled":
-            from opa._forcefunction import FUNCTIONS
-
             scope = {"__builtins__": {}, **FUNCTIONS, "x": x, "v": v,
                      **{name: merged[name] for name in self.names}}
             return eval(compile(self._text, "<force law>", "eval"), scope)  # noqa: S307 (checked)

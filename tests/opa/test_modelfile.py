@@ -6,6 +6,7 @@ from __future__ import annotations
 import glob
 import os
 
+import numpy as np
 import pytest
 
 from opa import ForceLaw, Oscillator, Problem
@@ -71,11 +72,32 @@ def test_the_docs_examples_read_and_the_refused_ones_are_refused(path):
         assert read_model(path).oscillator.force is not None
 
 
+def test_a_function_beside_the_file_is_the_same_law_as_its_expression():
+    """``function = "contact:hertz"`` imports docs/examples/contact.py; the runs equal
+    those of the same law written as an expression."""
+    import opa
+
+    by_function = read_model(os.path.join(DOCS, "hertz-function.toml")).oscillator
+    by_expression = read_model(os.path.join(DOCS, "hertz-contact.toml")).oscillator
+    assert by_function.force.kind == "function" and by_expression.force.kind == "compiled"
+    assert by_function.force.expression == "contact:hertz"
+    a, b = (opa.simulate_dmr(o, periods=5, per_period=8) for o in (by_function, by_expression))
+    assert int(a.impact_time.count()) > 2
+    np.testing.assert_allclose(a.x, b.x, rtol=0, atol=1e-13)
+
+
 BAD = [
     ("colour = 1\n", "'colour'"),
     ("force = 3\n", "force"),
     ('force = "foo(x)"\n', "foo(x)"),
     ('force = "x.real"\n', "x.real"),
+    ('function = "contact"\n', "module:name"),
+    ('function = 3\n', "module:name"),
+    ('function = "no_such_module_xyz:g"\n', "cannot be imported"),
+    ('function = "math:pi"\n', "not a function"),
+    ('function = "math:hypot"\n', "no signature"),
+    ('function = "os.path:join"\n', "g(x, v, constant, ...)"),
+    ('force = "-x"\nfunction = "math:hypot"\n', "not both"),
     ('force = "-k*x"\n', "'k'"),  # a constant with no value
     ('force = "-x"\n[constants]\nk = 1.0\n', "'k'"),  # a constant the law does not use
     ('force = "-k*x"\n[constants]\nk = "1"\n', "[constants] k"),
