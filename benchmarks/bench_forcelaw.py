@@ -9,10 +9,14 @@ train), all in one pytest-benchmark session:
 - ``mc``: 512 random samples of sigma = 0.01 on mu, 100 periods (8 samples x 5 periods
   in smoke mode), rtol = atol = 1e-8, two threads;
 
-each with three laws: ``builtin`` (the paper's law, eq. (1)), ``paper-as-user`` (the same
+each with five laws: ``builtin`` (the paper's law, eq. (1)), ``paper-as-user`` (the same
 law written as ``opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3")``, the kernel's polynomial
-path) and ``duffing-user`` (``-2*zeta*v - a*x - c*x^3 + mu*(1 - v^2)*v`` with zeta = 0:
-five terms, the same motion to round-off). Before timing, each user law is checked to
+path), ``duffing-user`` (``-2*zeta*v - a*x - c*x^3 + mu*(1 - v^2)*v`` with zeta = 0:
+five terms, the same motion to round-off), and the escape hatch's two ways:
+``paper-compiled`` (the expression compiled, ``opa.ForceLaw.compiled``) and
+``paper-function`` (the Python function :func:`paper_law`, ``ForceLaw.from_function``),
+both called through a pointer on the general step, with their compile excluded by the
+warm-up round. Before timing, each user law is checked to
 agree with the built-in run over 20 periods (states to 1e-9; longer, round-off grows).
 
 Run ``python -m pytest benchmarks/bench_forcelaw.py --benchmark-only -p no:xdist`` for the
@@ -29,10 +33,19 @@ import mc
 import opa
 
 OSCILLATOR = opa.preset("3.2", omega=3.98)
+
+
+def paper_law(x, v, mu, a, c):
+    """The paper's law as a Python function (the escape hatch's second way)."""
+    return mu * (1.0 - v * v) * v - a * x - c * x * x * x
+
+
 LAWS = {
     "builtin": None,
     "paper-as-user": opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3"),
     "duffing-user": opa.ForceLaw("-2*zeta*v - a*x - c*x^3 + mu*(1 - v^2)*v", zeta=0.0),
+    "paper-compiled": opa.ForceLaw.compiled("mu*(1 - v^2)*v - a*x - c*x^3"),
+    "paper-function": opa.ForceLaw.from_function(paper_law),
 }
 TIGHT = opa.SolverOptions(rtol=1e-10, atol=1e-10)
 LOOSE = opa.SolverOptions(rtol=1e-8, atol=1e-8)
