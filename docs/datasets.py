@@ -32,7 +32,10 @@ variables, `impact_wall` (impact; +1 the upper wall, -1 the lower, where `impact
 is negative); a one-wall dataset has none of them. A user's force law (`opa.ForceLaw`,
 docs/own-oscillator.md) adds the attributes `force_law` (its expression) and
 `force_constants` (`name=value,...`, the values of its own constants); the paper's law
-has neither.
+has neither. A compiled law adds `force_kind`: "compiled" (an expression that is not a
+polynomial of powers up to 3, compiled into a function) or "function" (a Python
+function, `force_law` then being its `module:name`); a polynomial law has no
+`force_kind`.
 """
 
 
