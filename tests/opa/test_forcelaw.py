@@ -220,3 +220,97 @@ def test_a_run_of_a_user_law_is_certified_against_its_own_law():
     del paper.attrs["force_law"], paper.attrs["force_constants"]
     paper.attrs["uncertain"] = "c"
     assert compare.verify(paper, samples=256, max_samples=1024).attrs["verdict"] == "disagrees"
+
+
+# --------------------------------------- the paper's law as a user's: the map, the diagram
+PAPER_FILE = """force = "{expression}"
+[oscillator]
+mu = 0.8
+a = 0.5
+c = 0.05
+f = 1.5
+eta = 0.8
+delta = 0.0
+F0 = 0.1
+x0 = -1.0
+"""
+#: statistics of paired differences that are round-off themselves (an error SE, or a
+#: variance reduction Var[x] / Var[x - x_hat] with x - x_hat ~ 1e-12): compared relatively;
+#: the times of a run are not compared
+ILL_CONDITIONED = ("err_mean_se", "err_var_se", "pair_reduction")
+TIMES = ("mc_seconds", "point_seconds")
+
+
+def _validate(tmp_path, name, *source):
+    from opa.cli._main import main
+
+    out = tmp_path / name
+    assert main(["validate", *source, "--values", "3.98", "--sigmas", "0.01,0.02",
+                 "--orders", "0:2", "--horizons", "2,4", "--samples", "256",
+                 "--max-samples", "1024", "--seed", "7", "--no-frontier", "--no-plots",
+                 "--quiet", "--outdir", str(out)]) == 0
+    import xarray as xr
+
+    return xr.load_dataset(out / "validate.nc")
+
+
+@pytest.mark.long
+@pytest.mark.parametrize("compiled", [False, True])
+def test_the_paper_law_as_a_user_law_gives_the_validate_map_to_round_off(tmp_path, compiled):
+    """``opa-mc validate`` of section 3.2 at omega = 3.98 (2 sigmas, N = 0..2, 2 horizons):
+    the built-in law and the same law in a model file (polynomial, or compiled with
+    ``max(v, v)`` = v) give every verdict, sigma* and variable of the variants they share
+    to 1e-10 or 1e-9 relative (the user's map leaves out the paper's truncation, which
+    closes the built-in law only)."""
+    expression = PAPER_EXPRESSION + ("" if not compiled else " + 0*max(v, v)")
+    model = tmp_path / "paper.toml"
+    model.write_text(PAPER_FILE.format(expression=expression))
+    built_in = _validate(tmp_path, "built-in", "--preset", "3.2")
+    user = _validate(tmp_path, "user", "--model", str(model))
+    assert list(user.variant.values) == [v for v in built_in.variant.values
+                                         if not v.endswith("/paper")]
+    built_in["mc_control"] = xr_variant_name(built_in, "mc_control")
+    user["mc_control"] = xr_variant_name(user, "mc_control")
+    built_in = built_in.sel(variant=user.variant.values)
+    for name in built_in.data_vars:
+        if name in TIMES:
+            continue
+        a, b = built_in[name].values, user[name].values
+        if a.dtype.kind not in "fc":
+            np.testing.assert_array_equal(a, b, err_msg=name)
+        elif name in ILL_CONDITIONED:
+            np.testing.assert_allclose(b, a, rtol=1e-3, err_msg=name)
+        else:
+            np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-10, err_msg=name)
+    assert (built_in.verdict.values != 0).any()  # verdicts were made
+
+
+def xr_variant_name(ds, name):
+    """The variant named by an index variable (its position differs between the maps)."""
+    return ds[name].copy(data=np.vectorize(lambda i: "-" if i < 0 else
+                                           str(ds.variant.values[i]))(ds[name].values))
+
+
+@pytest.mark.parametrize("law", [ForceLaw(PAPER_EXPRESSION),
+                                 ForceLaw.compiled(PAPER_EXPRESSION)], ids=["poly", "compiled"])
+def test_the_paper_law_as_a_user_law_gives_the_stochastic_diagram_at_c_004(law):
+    """The stochastic diagram's slice of section 3.1 at c = 0.04 (mu uncertain, sigma =
+    0.05, 64 Monte Carlo samples with two other initial states): the types, boundaries,
+    probabilities and the samples' types and Lyapunov exponents of the built-in law."""
+    from opa.dynamics._stochastic import stochastic_slice
+
+    osc = opa.preset("3.1", c=0.04)
+    slices = [stochastic_slice(o, "mu", 0.05, "semicircle", samples=64, seed=3,
+                               options=opa.SolverOptions(), extra_states=2)
+              for o in (osc, osc.replace(force=law))]
+    assert len(slices[0]["mc_type"]) == 64
+    for key, a in slices[0].items():
+        if key == "cpu_seconds":
+            continue
+        b = slices[1][key]
+        if isinstance(a, np.ndarray) and a.dtype.kind in "fc":
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-9, err_msg=key)
+        elif isinstance(a, np.ndarray):
+            np.testing.assert_array_equal(b, a, err_msg=key)
+        else:
+            assert b == a or (a != a and b != b), key  # NaN: the same "none"
