@@ -543,6 +543,14 @@ def _f2_poly(x, v, law, drive, sticking):
 
 
 @njit(cache=True, inline="always")
+def _f2_fn(x, v, address, theta, drive, sticking):
+    """``_f2`` of a compiled force function (its address, its constants' address)."""
+    if sticking:
+        return 0.0, 0.0
+    return v, _call_function(address, x, v, theta) + drive
+
+
+@njit(cache=True, inline="always")
 def _own_law(cfg, table, p):
     """Row 0 of the table holds the parameter vector's own force law."""
     if cfg[C_FORCE] == FORCE_PAPER:
@@ -948,6 +956,129 @@ def _dense_stages2_dop853_poly(t, h, K, x, v, law, f, w, cw, sw, force, sticking
 
 
 @njit(cache=True)
+def _stages2_dop853_fn(t, x, v, h, k0x, k0v, address, theta, f, w, cw, sw, force, sticking):
+    """One step of the 2-D system, generated from the tableau (see ``step2``)."""
+    x1 = x + h * (0.05260015195876773 * k0x)
+    v1 = v + h * (0.05260015195876773 * k0v)
+    drive = stage_forcing(t, 0.05260015195876773, h, f, w, cw, sw, force)
+    k1x, k1v = _f2_fn(x1, v1, address, theta, drive, sticking)
+    x2 = x + h * (0.0197250569845379 * k0x + 0.0591751709536137 * k1x)
+    v2 = v + h * (0.0197250569845379 * k0v + 0.0591751709536137 * k1v)
+    drive = stage_forcing(t, 0.0789002279381516, h, f, w, cw, sw, force)
+    k2x, k2v = _f2_fn(x2, v2, address, theta, drive, sticking)
+    x3 = x + h * (0.02958758547680685 * k0x + 0.08876275643042054 * k2x)
+    v3 = v + h * (0.02958758547680685 * k0v + 0.08876275643042054 * k2v)
+    drive = stage_forcing(t, 0.1183503419072274, h, f, w, cw, sw, force)
+    k3x, k3v = _f2_fn(x3, v3, address, theta, drive, sticking)
+    x4 = x + h * (0.2413651341592667 * k0x + -0.8845494793282861 * k2x + 0.924834003261792 * k3x)
+    v4 = v + h * (0.2413651341592667 * k0v + -0.8845494793282861 * k2v + 0.924834003261792 * k3v)
+    drive = stage_forcing(t, 0.2816496580927726, h, f, w, cw, sw, force)
+    k4x, k4v = _f2_fn(x4, v4, address, theta, drive, sticking)
+    x5 = x + h * (0.037037037037037035 * k0x + 0.17082860872947386 * k3x +
+                  0.12546768756682242 * k4x)
+    v5 = v + h * (0.037037037037037035 * k0v + 0.17082860872947386 * k3v +
+                  0.12546768756682242 * k4v)
+    drive = stage_forcing(t, 0.3333333333333333, h, f, w, cw, sw, force)
+    k5x, k5v = _f2_fn(x5, v5, address, theta, drive, sticking)
+    x6 = x + h * (0.037109375 * k0x + 0.17025221101954405 * k3x + 0.06021653898045596 * k4x +
+                  -0.017578125 * k5x)
+    v6 = v + h * (0.037109375 * k0v + 0.17025221101954405 * k3v + 0.06021653898045596 * k4v +
+                  -0.017578125 * k5v)
+    drive = stage_forcing(t, 0.25, h, f, w, cw, sw, force)
+    k6x, k6v = _f2_fn(x6, v6, address, theta, drive, sticking)
+    x7 = x + h * (0.03709200011850479 * k0x + 0.17038392571223998 * k3x +
+                  0.10726203044637328 * k4x + -0.015319437748624402 * k5x +
+                  0.008273789163814023 * k6x)
+    v7 = v + h * (0.03709200011850479 * k0v + 0.17038392571223998 * k3v +
+                  0.10726203044637328 * k4v + -0.015319437748624402 * k5v +
+                  0.008273789163814023 * k6v)
+    drive = stage_forcing(t, 0.3076923076923077, h, f, w, cw, sw, force)
+    k7x, k7v = _f2_fn(x7, v7, address, theta, drive, sticking)
+    x8 = x + h * (0.6241109587160757 * k0x + -3.3608926294469414 * k3x + -0.868219346841726 * k4x +
+                  27.59209969944671 * k5x + 20.154067550477894 * k6x + -43.48988418106996 * k7x)
+    v8 = v + h * (0.6241109587160757 * k0v + -3.3608926294469414 * k3v + -0.868219346841726 * k4v +
+                  27.59209969944671 * k5v + 20.154067550477894 * k6v + -43.48988418106996 * k7v)
+    drive = stage_forcing(t, 0.6512820512820513, h, f, w, cw, sw, force)
+    k8x, k8v = _f2_fn(x8, v8, address, theta, drive, sticking)
+    x9 = x + h * (0.47766253643826434 * k0x + -2.4881146199716677 * k3x +
+                  -0.590290826836843 * k4x + 21.230051448181193 * k5x + 15.279233632882423 * k6x +
+                  -33.28821096898486 * k7x + -0.020331201708508627 * k8x)
+    v9 = v + h * (0.47766253643826434 * k0v + -2.4881146199716677 * k3v +
+                  -0.590290826836843 * k4v + 21.230051448181193 * k5v + 15.279233632882423 * k6v +
+                  -33.28821096898486 * k7v + -0.020331201708508627 * k8v)
+    drive = stage_forcing(t, 0.6, h, f, w, cw, sw, force)
+    k9x, k9v = _f2_fn(x9, v9, address, theta, drive, sticking)
+    x10 = x + h * (-0.9371424300859873 * k0x + 5.186372428844064 * k3x + 1.0914373489967295 * k4x +
+                   -8.149787010746927 * k5x + -18.52006565999696 * k6x + 22.739487099350505 * k7x +
+                   2.4936055526796523 * k8x + -3.0467644718982196 * k9x)
+    v10 = v + h * (-0.9371424300859873 * k0v + 5.186372428844064 * k3v + 1.0914373489967295 * k4v +
+                   -8.149787010746927 * k5v + -18.52006565999696 * k6v + 22.739487099350505 * k7v +
+                   2.4936055526796523 * k8v + -3.0467644718982196 * k9v)
+    drive = stage_forcing(t, 0.8571428571428571, h, f, w, cw, sw, force)
+    k10x, k10v = _f2_fn(x10, v10, address, theta, drive, sticking)
+    x11 = x + h * (2.273310147516538 * k0x + -10.53449546673725 * k3x + -2.0008720582248625 * k4x +
+                   -17.9589318631188 * k5x + 27.94888452941996 * k6x + -2.8589982771350235 * k7x +
+                   -8.87285693353063 * k8x + 12.360567175794303 * k9x + 0.6433927460157636 * k10x)
+    v11 = v + h * (2.273310147516538 * k0v + -10.53449546673725 * k3v + -2.0008720582248625 * k4v +
+                   -17.9589318631188 * k5v + 27.94888452941996 * k6v + -2.8589982771350235 * k7v +
+                   -8.87285693353063 * k8v + 12.360567175794303 * k9v + 0.6433927460157636 * k10v)
+    drive = stage_forcing(t, 1.0, h, f, w, cw, sw, force)
+    k11x, k11v = _f2_fn(x11, v11, address, theta, drive, sticking)
+    xn = x + h * (0.054293734116568765 * k0x + 4.450312892752409 * k5x + 1.8915178993145003 * k6x +
+                  -5.801203960010585 * k7x + 0.3111643669578199 * k8x + -0.1521609496625161 * k9x +
+                  0.20136540080403034 * k10x + 0.04471061572777259 * k11x)
+    vn = v + h * (0.054293734116568765 * k0v + 4.450312892752409 * k5v + 1.8915178993145003 * k6v +
+                  -5.801203960010585 * k7v + 0.3111643669578199 * k8v + -0.1521609496625161 * k9v +
+                  0.20136540080403034 * k10v + 0.04471061572777259 * k11v)
+    k12x, k12v = _f2_fn(xn, vn, address, theta, drive, sticking)
+    kx = (k1x, k2x, k3x, k4x, k5x, k6x, k7x, k8x, k9x, k10x, k11x, k12x)
+    kv = (k1v, k2v, k3v, k4v, k5v, k6v, k7v, k8v, k9v, k10v, k11v, k12v)
+    return xn, vn, kx, kv
+
+
+@njit(cache=True)
+def _dense_stages2_dop853_fn(t, h, K, x, v, address, theta, f, w, cw, sw, force, sticking):
+    """Rows 13-15 of K (the dense-output stages) of the 2-D system, generated from
+    the tableau (see ``step2``)."""
+    x13 = x + h * (0.056167502283047954 * K[0, 0] + 0.25350021021662483 * K[6, 0] +
+                   -0.2462390374708025 * K[7, 0] + -0.12419142326381637 * K[8, 0] +
+                   0.15329179827876568 * K[9, 0] + 0.00820105229563469 * K[10, 0] +
+                   0.007567897660545699 * K[11, 0] + -0.008298 * K[12, 0])
+    v13 = v + h * (0.056167502283047954 * K[0, 1] + 0.25350021021662483 * K[6, 1] +
+                   -0.2462390374708025 * K[7, 1] + -0.12419142326381637 * K[8, 1] +
+                   0.15329179827876568 * K[9, 1] + 0.00820105229563469 * K[10, 1] +
+                   0.007567897660545699 * K[11, 1] + -0.008298 * K[12, 1])
+    drive = stage_drive(t, 0.1, h, f, w, cw, sw, force)
+    k13x, k13v = _f2_fn(x13, v13, address, theta, drive, sticking)
+    K[13, 0] = k13x
+    K[13, 1] = k13v
+    x14 = x + h * (0.03183464816350214 * K[0, 0] + 0.028300909672366776 * K[5, 0] +
+                   0.053541988307438566 * K[6, 0] + -0.05492374857139099 * K[7, 0] +
+                   -0.00010834732869724932 * K[10, 0] + 0.0003825710908356584 * K[11, 0] +
+                   -0.00034046500868740456 * K[12, 0] + 0.1413124436746325 * k13x)
+    v14 = v + h * (0.03183464816350214 * K[0, 1] + 0.028300909672366776 * K[5, 1] +
+                   0.053541988307438566 * K[6, 1] + -0.05492374857139099 * K[7, 1] +
+                   -0.00010834732869724932 * K[10, 1] + 0.0003825710908356584 * K[11, 1] +
+                   -0.00034046500868740456 * K[12, 1] + 0.1413124436746325 * k13v)
+    drive = stage_drive(t, 0.2, h, f, w, cw, sw, force)
+    k14x, k14v = _f2_fn(x14, v14, address, theta, drive, sticking)
+    K[14, 0] = k14x
+    K[14, 1] = k14v
+    x15 = x + h * (-0.42889630158379194 * K[0, 0] + -4.697621415361164 * K[5, 0] +
+                   7.683421196062599 * K[6, 0] + 4.06898981839711 * K[7, 0] +
+                   0.3567271874552811 * K[8, 0] + -0.0013990241651590145 * K[12, 0] +
+                   2.9475147891527724 * k13x + -9.15095847217987 * k14x)
+    v15 = v + h * (-0.42889630158379194 * K[0, 1] + -4.697621415361164 * K[5, 1] +
+                   7.683421196062599 * K[6, 1] + 4.06898981839711 * K[7, 1] +
+                   0.3567271874552811 * K[8, 1] + -0.0013990241651590145 * K[12, 1] +
+                   2.9475147891527724 * k13v + -9.15095847217987 * k14v)
+    drive = stage_drive(t, 0.7777777777777778, h, f, w, cw, sw, force)
+    k15x, k15v = _f2_fn(x15, v15, address, theta, drive, sticking)
+    K[15, 0] = k15x
+    K[15, 1] = k15v
+
+
+@njit(cache=True)
 def _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol):
     """``error_norm`` and ``wall_margin`` of a DOP853 step of the 2-D system, from its
     scalar stages (no array argument)."""
@@ -992,6 +1123,9 @@ def step2(t, z, h, K, z_new, p, cfg, force, sticking, rtol, atol):
     if cfg[C_FORCE] == FORCE_POLYNOMIAL:
         xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, force_law(p), p[P_F], w,
                                               cw, sw, force, sticking)
+    elif cfg[C_FORCE] == FORCE_FUNCTION:
+        xn, vn, kx, kv = _stages2_dop853_fn(t, x, v, h, k0x, k0v, cfg[C_FUNCTION],
+                                            _theta_of_p(p), p[P_F], w, cw, sw, force, sticking)
     else:
         xn, vn, kx, kv = _stages2_dop853(t, x, v, h, k0x, k0v, p[P_MU], p[P_A], p[P_C], p[P_F],
                                          w, cw, sw, force, sticking)
@@ -1047,8 +1181,7 @@ def rk_step(method, t, z, h, K, z_new, ztmp, m, p, cfg, table, weights, U, force
     A = DP_A if method == METHOD_DP5 else D8_A
     C = DP_C if method == METHOD_DP5 else D8_C
     B = DP_B if method == METHOD_DP5 else D8_B
-    if (method == METHOD_DOP853 and size == 2 and cfg[C_FORCE] != FORCE_FUNCTION
-            and is_deterministic(m, cfg, table, p)):
+    if method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p):
         step2(t, z, h, K, z_new, p, cfg, force, sticking, 1.0, 1.0)
         return last
     cw, sw = _stage_rows(t, z, h, K, ztmp, A, C, np.int64(1), last, m, p, cfg, table,
@@ -1142,7 +1275,7 @@ def dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights,
                     acc += K[s, j] * DP_P[s, d]
                 F[d, j] = h * acc
         return 0
-    if size == 2 and cfg[C_FORCE] != FORCE_FUNCTION and is_deterministic(m, cfg, table, p):
+    if size == 2 and is_deterministic(m, cfg, table, p):
         return dense_prepare2(t, z, z_new, h, K, F, p, cfg, force, sticking)
     _stage_rows(t, z, h, K, ztmp, D8_A, D8_C, np.int64(13), np.int64(16), m, p, cfg, table,
                 weights, U, force, sticking, work)
@@ -1158,6 +1291,9 @@ def dense_prepare2(t, z, z_new, h, K, F, p, cfg, force, sticking):
     if cfg[C_FORCE] == FORCE_POLYNOMIAL:
         _dense_stages2_dop853_poly(t, h, K, z[0], z[1], force_law(p), p[P_F], w,
                                    math.cos(w * t), math.sin(w * t), force, sticking)
+    elif cfg[C_FORCE] == FORCE_FUNCTION:
+        _dense_stages2_dop853_fn(t, h, K, z[0], z[1], cfg[C_FUNCTION], _theta_of_p(p), p[P_F],
+                                 w, math.cos(w * t), math.sin(w * t), force, sticking)
     else:
         _dense_stages2_dop853(t, h, K, z[0], z[1], p[P_MU], p[P_A], p[P_C], p[P_F], w,
                               math.cos(w * t), math.sin(w * t), force, sticking)
@@ -1945,12 +2081,20 @@ def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, a
 
 
 @njit(cache=True)
-def register_step_poly(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
-    """``register_step`` of a polynomial force law (``force_law``'s tuple of C[j, k]).
-    A call, not inlined: a second inlined step in the driver's loop made the paper's
-    law's DMR 4 % slower (benchmarks.bench_several's speed check)."""
-    xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, math.cos(w * t),
-                                          math.sin(w * t), force, sticking)
+def register_step_user(t, x, v, h, k0x, k0v, law, address, theta, f, w, force, sticking,
+                       rtol, atol):
+    """``register_step`` of a user's law: a polynomial (``force_law``'s tuple of C[j, k])
+    where ``address`` is 0, else the compiled function at ``address`` with its constants
+    at ``theta``. A call, not inlined: a second inlined step in the driver's loop made the
+    paper's law's DMR 4 % slower (benchmarks.bench_several's speed check)."""
+    cw = math.cos(w * t)
+    sw = math.sin(w * t)
+    if address != 0:
+        xn, vn, kx, kv = _stages2_dop853_fn(t, x, v, h, k0x, k0v, address, theta, f, w, cw,
+                                            sw, force, sticking)
+    else:
+        xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force,
+                                              sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
     return err, margin, xn, vn, kx, kv
 
@@ -2189,12 +2333,12 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     want_stats = stats.shape[0] > 0
     n_out = t_out.shape[0]
     # the 2-D register path, decided once: its trial step takes and returns scalars only
-    # (a compiled force function takes the general step: its calls go through a pointer)
-    two_d = (method == METHOD_DOP853 and size == 2 and cfg[C_FORCE] != FORCE_FUNCTION
-             and is_deterministic(m, cfg, table, p))
+    two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p)
     mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
-    poly = cfg[C_FORCE] == FORCE_POLYNOMIAL
-    law = force_law(p)  # a polynomial law's coefficients (read only when poly)
+    user = cfg[C_FORCE] != FORCE_PAPER  # a user's law: polynomial, or compiled function
+    law = force_law(p)  # a polynomial law's coefficients (read only when user)
+    address = cfg[C_FUNCTION]  # a compiled function's (0: a polynomial law)
+    constants = _theta_of_p(p)  # the address of a compiled function's constants
     kx = kv = _NO_STAGES
     off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
     t = t_out[0]
@@ -2259,10 +2403,10 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
                 break
             # ---- trial step into z_new, K[last] = f(t + h_try, z_new)
             if two_d:
-                if poly:
-                    err, margin, z_new[0], z_new[1], kx, kv = register_step_poly(
-                        t, z[0], z[1], h_try, K[0, 0], K[0, 1], law, f_amp, w, force,
-                        sticking, rtol, atol)
+                if user:
+                    err, margin, z_new[0], z_new[1], kx, kv = register_step_user(
+                        t, z[0], z[1], h_try, K[0, 0], K[0, 1], law, address, constants, f_amp,
+                        w, force, sticking, rtol, atol)
                 else:
                     err, margin, z_new[0], z_new[1], kx, kv = register_step(
                         t, z[0], z[1], h_try, K[0, 0], K[0, 1], mu, a_lin, c_cub, f_amp, w,

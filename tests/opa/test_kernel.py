@@ -245,8 +245,11 @@ def _wrapped_sum(terms, indent):
 
 
 #: the force law's arguments and right-hand side of each 2-D register path: the paper's
-#: law (mu, a, c) and a user's polynomial law (``force_law``'s tuple of C[j, k])
-LAWS = {"paper": ("mu, a, c", "_f2"), "polynomial": ("law", "_f2_poly")}
+#: law (mu, a, c), a user's polynomial law (``force_law``'s tuple of C[j, k]) and a
+#: compiled force function (its address and its constants' address)
+LAWS = {"paper": ("mu, a, c", "_f2"), "polynomial": ("law", "_f2_poly"),
+        "function": ("address, theta", "_f2_fn")}
+SUFFIX = {"paper": "", "polynomial": "_poly", "function": "_fn"}
 
 
 def unrolled_step(name, A, C, B, last, law="paper"):
@@ -301,7 +304,7 @@ def unrolled_dense_stages(name, A, C, first, stop, law="paper"):
 
 
 def kernel_steps_source(law: str = "paper") -> str:
-    suffix = "" if law == "paper" else "_poly"
+    suffix = SUFFIX[law]
     return (unrolled_step(f"_stages2_dop853{suffix}", kernel.D8_A, kernel.D8_C, kernel.D8_B,
                           12, law) + "\n\n"
             + unrolled_dense_stages(f"_dense_stages2_dop853{suffix}", kernel.D8_A, kernel.D8_C,
@@ -314,6 +317,7 @@ def test_the_unrolled_steps_are_generated_from_the_tableaux():
     source = (ROOT / "opa" / "_kernel.py").read_text()
     assert kernel_steps_source("paper") in source
     assert kernel_steps_source("polynomial") in source
+    assert kernel_steps_source("function") in source
 
 
 def two_node_rule(inputs):
