@@ -585,12 +585,12 @@ def test_semicircle_map_with_k_elements(tmp_path):
     (dict(distribution="triangle"), "distribution must be one of"),
     (dict(distribution="beta:0,1"), "distribution 'beta:0,1'"),
     (dict(distribution=3), "distribution must be a name"),
-    (dict(elements=1), "elements must be an integer in 2..256"),
+    (dict(elements=1), "elements must be an integer in 2..1024"),
     (dict(elements="many"), "elements must be an integer"),
     (dict(elements=True), "elements must be an integer"),
     (dict(max_elements=8), "max_elements = 8 .* no effect"),
     (dict(elements=4, max_elements=8), "no effect"),
-    (dict(elements="adaptive", max_elements=1000), "max_elements must be an integer"),
+    (dict(elements="adaptive", max_elements=1025), "max_elements must be an integer"),
 ])
 def test_law_and_element_settings_are_checked(kw, message):
     with pytest.raises(ValueError, match=message):

@@ -309,17 +309,17 @@ def test_adaptive_refinement_does_not_get_worse_with_the_budget():
     assert errors[-1] < 0.05 * errors[0]
 
 
-@pytest.mark.parametrize("budget", [0, 1, 257, 2.5, True])
+@pytest.mark.parametrize("budget", [0, 1, 1025, 2.5, True])
 def test_the_element_budget_has_one_rule_everywhere(budget, capsys):
-    """max_elements is an integer in 2..256 in simulate_opa as in validate's config (a budget
+    """max_elements is an integer in 2..1024 in simulate_opa as in validate's config (a budget
     of one element cannot refine); the CLI refuses it naming the value, exit status 2."""
     from compare import load_config
     from opa.cli._main import main
 
-    with pytest.raises(ValueError, match=r"max_elements must be an integer in 2\.\.256"):
+    with pytest.raises(ValueError, match=r"max_elements must be an integer in 2\.\.1024"):
         simulate_opa(Oscillator(), sigma=0.01, order=1, periods=1, elements="adaptive",
                      max_elements=budget)
-    with pytest.raises(ValueError, match=r"max_elements must be an integer in 2\.\.256"):
+    with pytest.raises(ValueError, match=r"max_elements must be an integer in 2\.\.1024"):
         load_config(None, elements="adaptive", max_elements=budget)
     if isinstance(budget, int) and not isinstance(budget, bool):
         try:
