@@ -308,6 +308,10 @@ class Problem:
                 raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] makes omega = "
                                  f"{mean:g} + sigma xi reach {low:.6g}: every frequency must "
                                  f"be > 0")
+            if name == "delta" and oscillator.two_walls and low <= oscillator.delta_minus:
+                raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] puts the wall "
+                                 f"delta = {mean:g} + sigma xi down to {low:.6g}, at or below "
+                                 f"the lower wall delta_minus = {oscillator.delta_minus:g}")
             if name == "delta" and low < oscillator.x0:
                 raise ValueError(f"sigma = {scale} with xi in [{lo:g}, {hi:g}] puts the wall "
                                  f"delta = {mean:g} + sigma xi down to {low:.6g}, below the start "

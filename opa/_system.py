@@ -391,11 +391,10 @@ def _check_law(oscillator: Oscillator, problem: Problem, truncation: str) -> Non
                                      for name in problem.names):
         raise ValueError("truncation 'paper' (eq. (27)) closes a force law's coefficient; an "
                          "uncertain eta, delta, f, omega or F0 takes truncation 'galerkin'")
-    if oscillator.two_walls and any(name in IMPACT_PARAMETERS and scale != 0.0
-                                    for name, scale in zip(problem.names, problem.scales)):
-        raise ValueError("an uncertain eta or delta takes one wall: the uncertain impact law "
-                         "is the upper wall's only (this oscillator has a lower wall, "
-                         "delta_minus)")
+    if oscillator.two_walls and oscillator.eta_minus is None and any(
+            name == "eta" and scale != 0.0 for name, scale in zip(problem.names, problem.scales)):
+        raise ValueError("an uncertain eta is the upper wall's restitution: with a lower wall, "
+                         "give the lower wall's own eta_minus (it is eta when left out)")
     names = oscillator.uncertain_names
     for name, scale in zip(problem.names, problem.scales):
         if name not in names and scale != 0.0:
