@@ -23,6 +23,9 @@ _HOMES = {
     "certify_sobol": "compare._certify_sobol",
     # the trust line of several uncertain parameters (opa-mc validate --uncertain mu,c)
     "trust_line": "compare._trustline", "trust_scaled": "compare._trustline:scaled",
+    # its map: trust lines over a model parameter's values and horizons, s* bisected
+    "trust_map_several": "compare._trustmap_several",
+    "check_map_several": "compare._trustmap_several",
     # the paper's figures: matplotlib only when they are asked for
     "reproduce": "compare._figures", "FIGURES": "compare._figures",
 }
@@ -58,6 +61,8 @@ __all__ = [
     "reproduce",
     "trust_line",
     "trust_scaled",
+    "trust_map_several",
+    "check_map_several",
     "ValidateConfig",
     "boundary_table",
     "compare_runs",

@@ -31,8 +31,14 @@ def test_the_trust_line_writes_its_dataset_and_table(tmp_path, capsys):
 @pytest.mark.parametrize("argv, words", [
     (["--uncertain", "mu,c"], "--relative R1,R2,... is needed"),
     (["--uncertain", "mu,c", "--relative", "0.02"], "--relative must give one positive size"),
-    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--values", "3.9,4"],
-     "--values does not apply with several uncertain parameters"),
+    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--values", "3.9,-4"],
+     "omega = -4: omega must be > 0"),
+    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--sweep", "mu=0.7:0.9:2"],
+     "the swept parameter 'mu' is one of the uncertain ones"),
+    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--values", "3.9", "--resolution",
+      "-1"], "--resolution must be a positive number"),
+    (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--config", "x.toml"],
+     "--config does not apply"),
     (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--elements", "4"],
      "--elements does not apply"),
     (["--uncertain", "mu,c", "--relative", "0.02,0.1", "--sigmas", "-1"],
@@ -45,3 +51,24 @@ def test_refusals_name_the_flag_before_any_work(argv, words, capsys, tmp_path):
     err = capsys.readouterr().err
     assert words in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
+
+
+def test_the_trust_map_of_several_parameters_writes_its_dataset_and_tables(tmp_path, capsys):
+    """--values and two horizons with --resolution: the map's dims, one table per horizon
+    and the bisected intervals, whose ends bracket the grid's s*."""
+    out = tmp_path / "map"
+    assert main(["validate", "--uncertain", "mu,c", "--relative", "0.2,0.4", "--sigmas",
+                 "0.25,1", "--orders", "1", "--horizons", "2,3", "--samples", "64",
+                 "--max-samples", "128", "--values", "1.3,1.4", "--resolution", "0.5", *FREE,
+                 "--outdir", str(out)]) == 0
+    with xr.open_dataset(out / "validate.nc") as ds:
+        assert ds.verdict.dims == ("omega", "horizon", "variant", "scale")
+        np.testing.assert_array_equal(ds.omega.values, [1.3, 1.4])
+        np.testing.assert_array_equal(ds.horizon.values, [2.0, 3.0])
+        star = ds.scale_star.isel(horizon=-1).values
+        lower, upper = ds.scale_star_lower.values, ds.scale_star_upper.values
+    assert (lower >= star).all() and (lower < upper).all()
+    summary = (out / "summary.md").read_text()
+    assert "Over 2 periods:" in summary and "Over 3 periods:" in summary
+    assert summary.count("| 1.4 | adaptive boxes |") == 2
+    assert "s* bisected to 0.5" in capsys.readouterr().out
