@@ -29,7 +29,10 @@ name, beside the choices made (`sigma`, `N`, `uncertain`, `impulse`, `truncation
 a missing seed is -1 and a missing sampler is "none". An oscillator with a lower wall
 (`delta_minus`) adds the attributes `delta_minus` and `eta_minus` and, beside the impact
 variables, `impact_wall` (impact; +1 the upper wall, -1 the lower, where `impact_velocity`
-is negative); a one-wall dataset has none of them. A user's force law (`opa.ForceLaw`,
+is negative), and a bifurcation sweep `min_gap_lower` (over the swept parameter: the
+lowest free-flight minimum of x minus `delta_minus`; its `grazing` and
+`grazing_parameter` then look at both walls); a one-wall dataset has none of them. A
+user's force law (`opa.ForceLaw`,
 docs/own-oscillator.md) adds the attributes `force_law` (its expression) and
 `force_constants` (`name=value,...`, the values of its own constants); the paper's law
 has neither. A compiled law adds `force_kind`: "compiled" (an expression that is not a

@@ -47,7 +47,9 @@ impact law's formulas hold with the signed v- < 0, sticking rests on the wall ne
 to x_0 (``resting_side``: it is held exactly there) and ends where the force turns away
 from it (acc > 0 at the lower wall), a Dirac kick downwards at rest on the lower wall is
 an impact at once, and lower-wall events are logged as their kind plus EV_LOWER. The
-uncertain wall (C_WALL_NODES) and the gap statistic S_GAP are the upper wall's only.
+uncertain wall (C_WALL_NODES) is the upper wall's only; the gap statistic S_GAP (delta -
+x_0 at free-flight maxima) has its lower wall's mirror S_GAP_LOWER (x_0 - delta_minus at
+free-flight minima), inf and never looked for without a lower wall.
 With delta_minus = -inf every lower-wall test (x_0 <= delta_minus, ...) is false and the
 upper wall's arithmetic is unchanged (times side = 1.0): one-wall runs give the same bits.
 
@@ -144,7 +146,8 @@ METHOD_DP5, METHOD_DOP853 = 0, 1
 
 # Slots of the per-interval ``stats`` output of ``integrate``.
 S_IMPACTS, S_MIN_VELOCITY, S_STICKS, S_STEPS, S_STICKING, S_GAP = 0, 1, 2, 3, 4, 5
-N_STATS = 6
+S_GAP_LOWER = 6  # the lower wall's gap x_0 - delta_minus at free-flight minima (inf: none)
+N_STATS = 7
 
 # Kinds in the event log (rows: time, velocity, kind). EV_KICK is an impact made by a
 # Dirac kick into the wall while the mean rests on it (logged with the kicked velocity).
@@ -1531,20 +1534,21 @@ def first_crossing(method, x_old, c, h, delta, delta_minus, near_wall, near_floo
 
 
 @njit(cache=True)
-def free_flight_maximum(method, x_old, c, delta):
+def free_flight_maximum(method, x_old, c, delta, side):
     """The highest interior maximum of the dense x_0 in a step (the signature of a
     grazing bifurcation when it approaches the wall): (gap delta - x_0, theta), or
-    (inf, -1) when x_0 has no interior maximum."""
+    (inf, -1) when x_0 has no interior maximum. side = -1.0: the lowest interior minimum
+    and its gap x_0 - delta to the lower wall delta (the maximum of side x_0)."""
     gap = np.inf
     where = -1.0
     prev_t = 0.0
-    prev_s = dense_dx(method, 0.0, c)
+    prev_s = side * dense_dx(method, 0.0, c)
     for i in range(1, N_SCAN + 1):
         th = i / N_SCAN
-        s = dense_dx(method, th, c)
+        s = side * dense_dx(method, th, c)
         if prev_s > 0.0 and s <= 0.0:
-            tm = _bisect_maximum(method, prev_t, th, c, 1.0)
-            g = delta - dense_x(method, tm, x_old, c)
+            tm = _bisect_maximum(method, prev_t, th, c, side)
+            g = side * (delta - dense_x(method, tm, x_old, c))
             if g < gap:
                 gap = g
                 where = tm
@@ -1554,8 +1558,8 @@ def free_flight_maximum(method, x_old, c, delta):
 
 
 # the events ``restep_to`` refines: an impact on the upper wall, a free-flight maximum,
-# an impact on the lower wall
-IMPACT_ROOT, MAXIMUM_ROOT, IMPACT_LOWER_ROOT = 0, 1, 2
+# an impact on the lower wall, a free-flight minimum
+IMPACT_ROOT, MAXIMUM_ROOT, IMPACT_LOWER_ROOT, MINIMUM_ROOT = 0, 1, 2, 3
 
 
 @njit(cache=True)
@@ -1569,7 +1573,8 @@ def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, table
     g = x_0 - delta_minus, g' = v_0 < 0 (the impact on the lower wall). MAXIMUM_ROOT:
     g = v_0, g' = v_0' < 0 (a free-flight maximum of x_0, whose gap to the wall then
     varies smoothly with the parameters; the interpolant's error changes with the step
-    sequence). Leaves the state at t + hh in ``z_new``; returns (hh, evaluations).
+    sequence); MINIMUM_ROOT: g = v_0, g' = v_0' > 0 (a minimum, the lower wall's).
+    Leaves the state at t + hh in ``z_new``; returns (hh, evaluations).
     """
     n = cfg[C_NCOEF]
     last = last_stage(method)
@@ -1583,14 +1588,15 @@ def restep_to(method, kind, t, z, h, theta, K, K2, z_new, ztmp, m, p, cfg, table
     for _ in range(4):
         evals += rk_step(method, t, z, hh, K2, z_new, ztmp, m, p, cfg, table, weights, U, force,
                          off, work)
-        if kind != MAXIMUM_ROOT:
+        if kind == IMPACT_ROOT or kind == IMPACT_LOWER_ROOT:
             g = z_new[0] - delta
             slope = z_new[n]
             done = side * slope <= 0.0 or abs(g) <= 1e-14 * (1.0 + abs(delta))
         else:
             g = z_new[n]
             slope = K2[last, n]
-            done = slope >= 0.0 or abs(g) <= 1e-15 * (1.0 + abs(g))
+            done = (slope >= 0.0 if kind == MAXIMUM_ROOT else slope <= 0.0) \
+                or abs(g) <= 1e-15 * (1.0 + abs(g))
         if done:
             break
         dh = -g / slope
@@ -1870,6 +1876,7 @@ def start_run(z, t, t_end, include_start, p, cfg, escape, snap, out, stats):
         stats[i, S_STEPS] = 0.0
         stats[i, S_STICKING] = 0.0
         stats[i, S_GAP] = np.inf
+        stats[i, S_GAP_LOWER] = np.inf
     for i in range(out.shape[0]):
         for j in range(out.shape[1]):
             out[i, j] = np.nan
@@ -2243,17 +2250,22 @@ def release_event(method, t, h, z, m, force, n_events, p, cfg, table, weights, U
 
 @njit(cache=True, inline="always")
 def free_flight_gap(method, t, z, h, seg, K, K2, F, z_top, ztmp, m, p, cfg, table, weights,
-                    U, force, work, stats):
+                    U, force, work, stats, side):
     """Phase "gap statistics": the highest maximum of x_0 inside the accepted step (dense
-    output F ready; ``free_flight_maximum``), of the upper wall only (a lower wall has no
-    gap statistic: S_GAP is delta - x_0 at the maxima), refined by re-stepping exactly to it
+    output F ready; ``free_flight_maximum``), refined by re-stepping exactly to it
     (``restep_to``) when it comes closer to the wall than the interval's smallest gap so
-    far (``stats[seg, S_GAP]``). Returns the evaluations."""
-    gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)), p[P_DELTA])
-    if gap < stats[seg, S_GAP]:
-        _, evals = restep_to(method, np.int64(MAXIMUM_ROOT), t, z, h, theta, K, K2, z_top,
-                             ztmp, m, p, cfg, table, weights, U, force, work)
-        stats[seg, S_GAP] = p[P_DELTA] - z_top[0]
+    far (``stats[seg, S_GAP]``, delta - x_0 at the maxima). side = -1.0: the lowest
+    minimum and the lower wall's gap x_0 - delta_minus (``stats[seg, S_GAP_LOWER]``).
+    Returns the evaluations."""
+    upper = side > 0.0
+    wall = p[P_DELTA] if upper else p[P_DELTA_MINUS]
+    slot = S_GAP if upper else S_GAP_LOWER
+    gap, theta = free_flight_maximum(method, z[0], dense_column(F, np.int64(0)), wall, side)
+    if gap < stats[seg, slot]:
+        _, evals = restep_to(method, np.int64(MAXIMUM_ROOT if upper else MINIMUM_ROOT), t, z,
+                             h, theta, K, K2, z_top, ztmp, m, p, cfg, table, weights, U, force,
+                             work)
+        stats[seg, slot] = side * (wall - z_top[0])
         return evals
     return 0
 
@@ -2300,8 +2312,8 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     out : (n_out, D) the states at ``t_out`` (W is not stored); rows not reached are NaN.
     stats : (n_out - 1, N_STATS) per-interval statistics (impacts, smallest pre-impact
         speed |v-|, sticking episodes, steps, sticking at the end, smallest free-flight
-        gap delta - x_0 at maxima, the upper wall's only), or an empty (0, N_STATS) array
-        to skip them.
+        gap delta - x_0 at maxima, and x_0 - delta_minus at minima: inf without a lower
+        wall), or an empty (0, N_STATS) array to skip them.
     log : (cap, 3) event rows (time, velocity, kind EV_*, plus EV_LOWER at the lower
         wall); impacts record the pre-impact velocity of x_0 (negative at the lower
         wall); rows beyond cap are counted, not written.
@@ -2331,6 +2343,7 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     hmax = p[P_HMAX]
     stick_hmax = 2.0 * np.pi / p[P_OMEGA] / 32.0
     want_stats = stats.shape[0] > 0
+    lower_stats = want_stats and delta_minus > -np.inf  # the lower wall's gap (S_GAP_LOWER)
     n_out = t_out.shape[0]
     # the 2-D register path, decided once: its trial step takes and returns scalars only
     two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p)
@@ -2435,14 +2448,16 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
             if sticking:  # sticking ends inside the step?
                 n_rhs += 1
                 jump = pulls_off(t + h_try, z_new, force, p, cfg, table, weights, U, f_plus, work)
-                near_wall = near_floor = near_top = off
+                near_wall = near_floor = near_top = near_bottom = off
             else:  # an impact, or a free-flight maximum closer than the smallest gap so far?
                 jump = off
                 near_wall = may_reach_wall(z[0], z_new[0], margin, delta)
                 near_floor = may_reach_floor(z[0], z_new[0], margin, delta_minus)
                 near_top = want_stats and K[0, 0] > 0.0 and may_reach_wall(
                     z[0], z_new[0], margin, delta - stats[seg, S_GAP])
-            if jump or near_wall or near_floor or near_top:
+                near_bottom = lower_stats and K[0, 0] < 0.0 and may_reach_floor(
+                    z[0], z_new[0], margin, delta_minus + stats[seg, S_GAP_LOWER])
+            if jump or near_wall or near_floor or near_top or near_bottom:
                 n_rhs += step_dense(two_d, kx, kv, method, t, z, z_new, h_try, K, F, ztmp, m, p,
                                     cfg, table, weights, U, force, sticking, work)
             if jump:
@@ -2472,7 +2487,10 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
                 continue
             if near_top:
                 n_rhs += free_flight_gap(method, t, z, h_try, seg, K, K2, F, z_top, ztmp, m, p,
-                                         cfg, table, weights, U, force, work, stats)
+                                         cfg, table, weights, U, force, work, stats, 1.0)
+            if near_bottom:
+                n_rhs += free_flight_gap(method, t, z, h_try, seg, K, K2, F, z_top, ztmp, m, p,
+                                         cfg, table, weights, U, force, work, stats, -1.0)
             # ---- accept: advance to the step's end (held on the wall while sticking)
             t = t_break if is_last else t + h_try
             if two_d:

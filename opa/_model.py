@@ -169,8 +169,9 @@ class Oscillator:
 
     ``delta_minus`` (default -inf, none) adds a lower wall with restitution ``eta_minus``
     (None: eta): the motion is then in delta_minus < x < delta. It is not one of
-    ``PARAMETER_NAMES`` (not sweepable, not uncertain, not a flag of the CLI or a key of
-    a model file yet); datasets and manifests carry it only where it exists.
+    ``PARAMETER_NAMES`` (not sweepable, not uncertain); the CLI's ``--delta-minus`` and
+    ``--eta-minus`` and a model file's [oscillator] keys give it; datasets and manifests
+    carry it only where it exists.
 
     Examples
     --------

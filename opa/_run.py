@@ -150,7 +150,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "_bisect_maximum": (i8, f8, f8, column, f8),
         "wall_crossing": (i8, f8, column, f8, f8, f8),
         "dense_state": (i8, f8, v, m, v),
-        "free_flight_maximum": (i8, f8, column, f8),
+        "free_flight_maximum": (i8, f8, column, f8, f8),
         # the driver's phases that call no vector field (those that do are inlined)
         "start_run": (v, f8, f8, b1, v, iv, f8, f8, m, m),
         "impulses": (f8, v, i8, b1, i8, f8, f8, f8, i8, i8, i8, v, iv, m, v, m, f8, f8, m, m),
@@ -608,8 +608,9 @@ class Events:
 @dataclass(frozen=True)
 class Statistics:
     """Per output interval: impacts, smallest pre-impact speed |v-| (at either wall),
-    sticking episodes, steps, sticking at its end (0/1) and smallest free-flight gap
-    delta - x_0 (the upper wall's only: a lower wall has no gap statistic)."""
+    sticking episodes, steps, sticking at its end (0/1), smallest free-flight gap
+    delta - x_0 to the upper wall (at the maxima of x_0) and ``gap_lower``, the smallest
+    x_0 - delta_minus to the lower wall (at the minima; inf without a lower wall)."""
 
     impacts: np.ndarray
     min_velocity: np.ndarray
@@ -617,11 +618,17 @@ class Statistics:
     steps: np.ndarray
     sticking: np.ndarray
     gap: np.ndarray
+    gap_lower: np.ndarray
+
+    @property
+    def nearest_gap(self) -> np.ndarray:
+        """The smaller of the two walls' gaps, per interval (``gap`` with one wall)."""
+        return np.minimum(self.gap, self.gap_lower)
 
     @classmethod
     def of(cls, stats: np.ndarray) -> Statistics:
         columns = (kernel.S_IMPACTS, kernel.S_MIN_VELOCITY, kernel.S_STICKS, kernel.S_STEPS,
-                   kernel.S_STICKING, kernel.S_GAP)
+                   kernel.S_STICKING, kernel.S_GAP, kernel.S_GAP_LOWER)
         return cls(*(stats[:, j].copy() for j in columns))
 
 

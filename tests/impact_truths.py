@@ -314,7 +314,8 @@ def _missed_crossing(sol, walls, t_start, t_stop):
 
 def _flight(rhs, t, y, t_end, walls, rtol, atol):
     """One flight from ``(t, y)``: ``(t_hit, v_hit, side)`` of its impact, or ``None`` and
-    the state at ``t_end`` if it reaches ``t_end`` first."""
+    the state at ``t_end`` if it reaches ``t_end`` first; and its turning points before
+    the impact as ``(t, x, +1 a minimum / -1 a maximum)`` (the sign of x'' there)."""
     events, sides = _wall_events(walls)
     sol = solve_ivp(rhs, (t, t_end), y, method="DOP853", events=events, rtol=rtol, atol=atol,
                     dense_output=True)
@@ -327,7 +328,10 @@ def _flight(rhs, t, y, t_end, walls, rtol, atol):
     missed = _missed_crossing(sol, walls, t, hit[0] if hit else sol.t[-1])
     if missed is not None and (hit is None or missed[0] < hit[0]):
         hit = missed
-    return hit, (float(sol.t[-1]), sol.y[:, -1].copy())
+    stop = hit[0] if hit else float(sol.t[-1])
+    turns = [(float(tt), float(yy[0]), math.copysign(1.0, rhs(tt, yy)[1]))
+             for tt, yy in zip(sol.t_events[-1], sol.y_events[-1]) if t < tt < stop]
+    return hit, (float(sol.t[-1]), sol.y[:, -1].copy()), turns
 
 
 def two_wall_impacts(force, f, omega, walls, restitutions, y0, t_end, t0=0.0,
@@ -348,7 +352,9 @@ def two_wall_impacts(force, f, omega, walls, restitutions, y0, t_end, t0=0.0,
     below ``1e-8``, or an impact at the instant of the previous one.
 
     Returns a dict: ``times``, ``velocities`` (pre-impact) and ``wall`` (+1 upper, -1 lower)
-    of every impact as arrays, and the final time ``t`` and state ``state = (x, v)``.
+    of every impact as arrays, the final time ``t`` and state ``state = (x, v)``, and the
+    free flights' turning points (``v = 0`` events): ``turn_times``, ``turn_x`` and
+    ``turn_kind`` (+1 a minimum of x, -1 a maximum).
     """
     if omega <= 0.0:
         raise ValueError("omega must be positive (it sets the chatter window 2 pi / omega)")
@@ -362,9 +368,10 @@ def two_wall_impacts(force, f, omega, walls, restitutions, y0, t_end, t0=0.0,
         return [y[1], force(y[0], y[1]) + f * math.cos(omega * t)]
 
     t, y = float(t0), np.array(y0, dtype=float)
-    times, velocities, wall = [], [], []
+    times, velocities, wall, turns = [], [], [], []
     while t < t_end:
-        hit, (t, y) = _flight(rhs, t, y, t_end, walls, rtol, atol)
+        hit, (t, y), flight_turns = _flight(rhs, t, y, t_end, walls, rtol, atol)
+        turns += flight_turns
         if hit is None:
             break
         t_hit, v_hit, side = hit
@@ -376,8 +383,10 @@ def two_wall_impacts(force, f, omega, walls, restitutions, y0, t_end, t0=0.0,
         t, y = t_hit, np.array([upper if side == 1 else lower, -r * v_hit])
         if max_impacts is not None and len(times) >= max_impacts:
             break
+    turns = np.array(turns).reshape(-1, 3)
     return dict(times=np.array(times), velocities=np.array(velocities),
-                wall=np.array(wall, dtype=int), t=t, state=y)
+                wall=np.array(wall, dtype=int), t=t, state=y, turn_times=turns[:, 0],
+                turn_x=turns[:, 1], turn_kind=turns[:, 2].astype(int))
 
 
 def _refuse_chatter(times, t_start, t_hit, v_hit, side, period, per_period=1000,

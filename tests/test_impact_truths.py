@@ -225,6 +225,21 @@ def test_far_walls_leave_a_nonlinear_flow_alone():
     assert np.allclose(out["state"], sol.y[:, -1], rtol=0, atol=1e-10)
 
 
+def test_the_turning_points_of_a_free_flight_are_the_closed_forms():
+    """``x'' = -x`` from ``(0, 1)`` is ``sin t``: maxima x = 1 at pi/2 + 2 pi k, minima x = -1
+    at 3 pi/2 + 2 pi k; with an elastic wall at x = 0.5 the flights' maxima are gone (each
+    rise ends at the wall) and the minima x = -1 stay, one per flight."""
+    out = two_wall_impacts(lambda x, v: -x, 0.0, 1.0, (-5.0, 5.0), (1.0, 1.0), (0.0, 1.0), 20.0)
+    k = np.arange(1, 7)
+    assert np.allclose(out["turn_times"], k * math.pi - math.pi / 2, rtol=0, atol=1e-10)
+    assert np.allclose(out["turn_x"], np.where(k % 2, 1.0, -1.0), rtol=0, atol=1e-10)
+    assert np.array_equal(out["turn_kind"], np.where(k % 2, -1, 1))
+    walled = two_wall_impacts(lambda x, v: -x, 0.0, 1.0, (None, 0.5), (None, 1.0), (0.0, 1.0),
+                              10.0)
+    assert walled["times"].size >= 2 and np.all(walled["turn_kind"] == 1)
+    assert np.allclose(walled["turn_x"], -1.0, rtol=0, atol=1e-10)
+
+
 def test_chatter_is_refused():
     """A ball bouncing on the floor under gravity with ``r = 0.5`` accumulates infinitely many
     impacts in finite time: without a sticking model that is an error."""

@@ -55,7 +55,6 @@ TESTED_IN = {
     "opa/_simulate.py": ("tests/opa/test_solver.py",),
     "opa/dynamics/_warm_worker.py": ("tests/opa/dynamics/test_pool.py",),
     "opa/cli/_main.py": ("tests/opa/cli/test_bad_inputs.py", "tests/opa/cli/test_commands.py"),
-    "opa/cli/_flags.py": ("tests/opa/cli/test_bifurcation.py",),
     "opa/cli/_args.py": ("tests/opa/cli/test_bad_inputs.py",),
     "opa/cli/_paths.py": ("tests/opa/cli/test_bad_inputs.py",),
     "opa/cli/_validate.py": ("tests/opa/cli/test_bad_inputs.py",),

@@ -38,6 +38,12 @@ EXIT_SIMULATION = 3
 EXIT_UNVERIFIED = 4
 MAX_WORKERS = 4 * (os.cpu_count() or 1)
 
+#: the lower wall's flags (--delta-minus, --eta-minus): Oscillator fields that are not
+#: PARAMETER_NAMES (neither swept nor uncertain)
+LOWER_WALL = ("delta_minus", "eta_minus")
+#: every oscillator flag's name
+OSCILLATOR_FLAGS = PARAMETER_NAMES + LOWER_WALL
+
 #: what --uncertain may name with the paper's law: its coefficients, the impact's eta and
 #: delta, and the drive's f, omega and F0
 UNCERTAIN_NAMES = Oscillator().uncertain_names
@@ -61,6 +67,15 @@ def _model_flags(parser: argparse.ArgumentParser) -> None:
     for name in PARAMETER_NAMES:
         group.add_argument(f"--{name}", type=float, default=None, metavar="VALUE",
                            help=f"{PARAMETER_DOCS[name]} (default {getattr(defaults, name):g})")
+    group.add_argument("--delta-minus", dest="delta_minus", type=float, default=None,
+                       metavar="VALUE",
+                       help="position of an optional lower wall, below --delta: the motion "
+                            "is then delta_minus < x < delta (default -inf, none; -inf also "
+                            "removes a --model file's lower wall)")
+    group.add_argument("--eta-minus", dest="eta_minus", type=float, default=None,
+                       metavar="VALUE",
+                       help="coefficient of restitution of the lower wall, 0 < eta_minus "
+                            "<= 1 (default: the value of eta)")
 
 
 def uncertain_names(text: str):
@@ -353,12 +368,12 @@ def model_from(args):
 def oscillator_from(args) -> Oscillator:
     """The oscillator of ``--preset`` or ``--model`` (or the defaults), each parameter
     flag given overriding it."""
-    flags = {name: getattr(args, name) for name in PARAMETER_NAMES
+    flags = {name: getattr(args, name) for name in OSCILLATOR_FLAGS
              if getattr(args, name, None) is not None}
     model = model_from(args)
     if model is None:
         base = dict(PRESETS[args.preset]) if getattr(args, "preset", None) else {}
-        return Oscillator(**{**base, **flags})
+        return _lower_wall_flagged(lambda: Oscillator(**{**base, **flags}), flags)
     law = model.oscillator.force
     if law is not None:
         from opa.engine import OSCILLATOR_COEFFICIENTS
@@ -369,7 +384,16 @@ def oscillator_from(args) -> Oscillator:
             raise CliError(f"--{unused[0]} {flags[unused[0]]:g} has no effect: the force law "
                            f"{law.expression!r:.60} of --model {args.model_file} does not "
                            f"name {unused[0]}")
-    return model.oscillator.replace(**flags)
+    return _lower_wall_flagged(lambda: model.oscillator.replace(**flags), flags)
+
+
+def _lower_wall_flagged(build, flags: dict) -> Oscillator:
+    """``build()``, its refusal of a lower wall's value given as a flag (``--delta-minus``,
+    ``--eta-minus``) named as that flag; other refusals as they are (exit 2 either way)."""
+    try:
+        return build()
+    except ValueError as err:
+        raise CliError(flagged(err, [name for name in LOWER_WALL if name in flags])) from None
 
 
 def uncertain_from(args) -> dict:

@@ -12,7 +12,8 @@ import numpy as np
 from opa import IMPULSE_FIELDS, MAX_GRID, PARAMETER_NAMES, UNCERTAIN_PARAMETERS
 from opa.cli._args import parse_sweep, positive_int, whole_number
 from opa.cli._flags import (
-    CliError, _elements_arg, _impulse_flags, _model_flags, _solver_flags, uncertain_names,
+    OSCILLATOR_FLAGS, CliError, _elements_arg, _impulse_flags, _model_flags, _solver_flags,
+    uncertain_names,
 )
 from opa.cli._trustline import cmd_trust_line, relative_sizes
 
@@ -181,13 +182,14 @@ def _validate_model(args) -> None:
 
     model = model_from(args)
     if model is None:
+        oscillator_from(args)  # a refused flag's value named as its flag
         return
     if model.problem is not None:
         raise CliError(f"--model {args.model_file}: validate sweeps its own grid of sigma "
                        f"(--sigmas, --uncertain, --distribution): leave out the file's "
                        f"[uncertain.NAME] tables")
     osc = oscillator_from(args)
-    for name in PARAMETER_NAMES:  # every value of the file, the flags' included
+    for name in OSCILLATOR_FLAGS:  # every value of the file, the flags' included
         setattr(args, name, getattr(osc, name))
     args.force_law = osc.force  # and its force law (None: the paper's)
 
@@ -201,7 +203,7 @@ def cmd_validate(args) -> int:
                        "mu,c); with one, --sigmas are the intensities themselves")
     from compare import load_config
 
-    model = {name: getattr(args, name) for name in PARAMETER_NAMES
+    model = {name: getattr(args, name) for name in OSCILLATOR_FLAGS
              if getattr(args, name, None) is not None}
     if args.preset:
         model["preset"] = args.preset

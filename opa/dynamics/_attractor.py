@@ -11,8 +11,8 @@ leaves the batch once its type is known:
   grow from the older to the newer half of the window (a run drifting away from an
   unstable orbit does not count), and not still approaching the orbit of half the
   period. Its type is the label ``z = n/p`` (n = p forcing periods, the impacts in one
-  repeat; ``n/?`` when the count is not steady), or ``sticking`` when it rests on the
-  wall at every point of the window.
+  repeat, at either wall; ``n/?`` when the count is not steady), or ``sticking`` when it
+  rests on a wall (either of two) at every point of the window.
 * **the approach through a multiplier near -1.** Near a period doubling a run approaches
   its period-q orbit as an alternating deviation, and looks period-2q to any tolerance
   long before it looks period-q (a fixed 1000-period transient calls such runs 2q). The
@@ -157,6 +157,7 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
     carry one; a run leaves the batch once its type is decided."""
     osc = system.oscillator
     T, delta = osc.forcing_period, osc.delta
+    walls = (osc.delta_minus, delta)  # -inf: no lower wall
     # periods are multiples of the forcing's cycle; None: it has none (and, with the
     # record holding at most record / 2, neither has a cycle longer than that)
     cycle = impulse_cycle(osc)
@@ -220,22 +221,23 @@ def settle_batch(system: System, inputs: Inputs, states, *, options: SolverOptio
             if result[b] is not None:
                 continue
             result[b] = _decide(b, k, total, W, strobe[b, :k], impacts[b], complete[b], y[b],
-                                T, delta, s, phase, growth, lam_early, cycle)
+                                T, walls, s, phase, growth, lam_early, cycle)
             if result[b] is None:
                 twin_on[b] = phase[b] in ("early", "final")
                 if twin_on[b]:
-                    if y[b, 0] + s.d0 * u[b, 0] > delta:
+                    if not walls[0] <= y[b, 0] + s.d0 * u[b, 0] <= delta:  # beyond a wall
                         u[b] = -u[b]
                     twin[b] = y[b] + s.d0 * u[b]
         active = np.array([b for b in active if result[b] is None], dtype=int)
     return result
 
 
-def _decide(b, k, total, W, history, impacts, complete, y, T, delta, s, phase, growth,
+def _decide(b, k, total, W, history, impacts, complete, y, T, walls, s, phase, growth,
             lam_early, cycle) -> Attractor | None:
     """The attractor of run b after k periods, or None to go on (updating its twin's
     ``phase``, ``growth`` and ``lam_early``). ``cycle`` None: the forcing has no common
-    period, no stroboscopic period exists, and the exponent alone decides."""
+    period, no stroboscopic period exists, and the exponent alone decides. ``walls``:
+    (delta_minus, delta)."""
     window = history[k - W:k]
     # settled: first on the last 2 check periods (periods up to check, clear of the
     # transient sooner), then on the whole window
@@ -244,7 +246,7 @@ def _decide(b, k, total, W, history, impacts, complete, y, T, delta, s, phase, g
             p = _settled_period(history[k - span:k], s.settle_tol,
                                 final=span == s.record or k == total)
             if p:
-                return _periodic(history[k - span:k], p, impacts, complete, k, T, delta, y,
+                return _periodic(history[k - span:k], p, impacts, complete, k, T, walls, y,
                                  settled=True)
     periodic = _period_within(window, s.period_tol) if cycle else 0
     lam = (_exponent(growth[b], T) if growth[b] else lam_early[b]) if k == total else math.nan
@@ -253,7 +255,7 @@ def _decide(b, k, total, W, history, impacts, complete, y, T, delta, s, phase, g
                                cycle=cycle)
         # (without a period within tol, a flip approach does not outvote chaos)
         if p and (periodic or not lam > s.chaos_threshold):
-            return _periodic(window, p, impacts, complete, k, T, delta, y, settled=k < total)
+            return _periodic(window, p, impacts, complete, k, T, walls, y, settled=k < total)
     if k == total:
         kind = "chaotic" if lam > s.chaos_threshold else "quasi-periodic"
         return Attractor(kind, periods=k, lyapunov=lam, points=window.copy(), state=y.copy())
@@ -451,15 +453,18 @@ def same_attractor(a: Attractor, b: Attractor, tol: float = 1e-3) -> bool:
     return bool(gap.min(axis=1).max() <= reach and gap.min(axis=0).max() <= reach)
 
 
-def _periodic(window, p, impacts, complete, k, T, delta, y, *, settled) -> Attractor:
-    """The attractor of a run whose last ``len(window)`` points have period p."""
+def _periodic(window, p, impacts, complete, k, T, walls, y, *, settled) -> Attractor:
+    """The attractor of a run whose last ``len(window)`` points have period p (impacts
+    counted at both walls; ``walls`` (delta_minus, delta), sticking on either)."""
+    lower, delta = walls
     W = len(window)
     end = k * T
     ev = Events.of(np.concatenate(impacts) if impacts else np.zeros((0, 3)))
     times = ev.time[ev.impacts]
     count = (impacts_per_period(times[times > end - W * T - 1e-9 * T], end, T, p, W // p)
              if complete else -1)
-    resting = np.all(window[:, 0] >= delta - 1e-12) and np.all(window[:, 1] == 0.0)
+    resting = ((np.all(window[:, 0] >= delta - 1e-12) or np.all(window[:, 0] <= lower + 1e-12))
+               and np.all(window[:, 1] == 0.0))
     kind = "sticking" if resting else period_label(p, count)
     return Attractor(kind, period=p, impacts=count, settled=settled, periods=k,
                      points=window[-p:].copy(), state=y.copy(),
@@ -468,12 +473,15 @@ def _periodic(window, p, impacts, complete, k, T, delta, y, *, settled) -> Attra
 
 def initial_states(oscillator, extra: int) -> np.ndarray:
     """The paper's start (x0, v0) and ``extra`` others, (1 + extra, 2): points on a circle
-    of radius 1 around the origin, moved inside the wall where they lie beyond it."""
+    of radius 1 around the origin, moved inside the walls where they lie beyond one (to
+    0.5 from it, or a quarter of the gap between two walls if that is less)."""
     states = [(oscillator.x0, oscillator.v0)]
+    upper, lower = oscillator.delta, oscillator.delta_minus
+    margin = min(0.5, (upper - lower) / 4)  # 0.5 with one wall
     for j in range(extra):
         angle = 2 * math.pi * (j + 0.5) / extra
         x, v = math.cos(angle), math.sin(angle)
-        states.append((min(x, oscillator.delta - 0.5), v))
+        states.append((min(max(x, lower + margin), upper - margin), v))
     return np.array(states, dtype=float)
 
 

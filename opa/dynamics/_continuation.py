@@ -1009,8 +1009,9 @@ def branch_dataset(system: ImpactSystem, parameter: str, branches: list, bifurca
                                                   "(NaN: no impact)", **one}),
             "min_gap": ("point", _none_as_nan([o.min_gap for *_, o in rows]),
                         {"long_name": "smallest distance of a free-flight maximum of x_0 "
-                                      "below the wall (NaN: no free-flight maximum, every "
-                                      "flight ends at the wall)", **one}),
+                                      "below the wall, or of a minimum above a lower wall "
+                                      "(NaN: no free-flight extremum, every flight ends at "
+                                      "a wall)", **one}),
             "section_x": (("point", "strobe"), sx,
                           {"long_name": "x_0 at t0 + j 2 pi/omega (stroboscopic points)", **one}),
             "section_v": (("point", "strobe"), sv,

@@ -231,7 +231,7 @@ class Flow:
     ``states`` (len(times), D); ``tangent`` (D, m): W(t_end) for W(t_start) given;
     ``impact_time``, ``impact_velocity``: impacts of the mean coordinate (pre-impact
     velocity); ``min_gap``: smallest distance of a free-flight maximum of x_0 below the
-    wall; ``sticks``: sticking episodes.
+    wall, or of a minimum above a lower wall (the nearer); ``sticks``: sticking episodes.
     """
 
     times: np.ndarray
@@ -290,7 +290,7 @@ def flow(system: ImpactSystem, state, times, *, tangent=None, include_start: boo
         tangent=rec.tangent,
         impact_time=rec.events.time[located],
         impact_velocity=rec.events.velocity[located],
-        min_gap=float(rec.statistics.gap.min()),
+        min_gap=float(rec.statistics.nearest_gap.min()),
         sticks=int(rec.statistics.sticks.sum()),
         steps=int(rec.statistics.steps.sum()),
     )
@@ -351,7 +351,8 @@ class PeriodicOrbit:
     multipliers : (D,) complex eigenvalues of ``jacobian``, by decreasing modulus.
     eigenvectors : (D, D) the matching eigenvectors (columns).
     impact_time, impact_velocity : impacts over one period of the orbit.
-    min_gap : smallest distance below the wall of a free-flight maximum of x_0.
+    min_gap : smallest distance below the wall of a free-flight maximum of x_0 (or above
+        a lower wall of a minimum, the nearer: ``Statistics.nearest_gap``).
     residual : max |P^k(y) - y| / (1 + max |y|) at convergence; iterations: Newton steps.
     """
 
@@ -435,7 +436,8 @@ class PeriodicOrbit:
         ``period-doubling``: a real multiplier within ``tol`` of -1; ``fold``: within
         ``tol`` of +1; ``neimark-sacker``: a complex pair within ``tol`` of the unit
         circle; ``grazing``: an impact slower than ``graze_velocity`` or a free-flight
-        maximum within ``graze_gap`` of the wall; ``sticking``: the orbit sticks.
+        maximum within ``graze_gap`` of the wall (a minimum of a lower wall); ``sticking``:
+        the orbit sticks.
         """
         labels = ["stable" if self.stable else "unstable"]
         mu = self.multipliers
@@ -699,7 +701,7 @@ def lyapunov_exponent(system: ImpactSystem, *, periods: int = 2000, transient: i
     return LyapunovEstimate(
         exponent=float(np.mean(rec.log_growth) / T), log_growth=rec.log_growth,
         forcing_period=T, method="variational (saltation)", impacts=int(stats.impacts.sum()),
-        min_impact_velocity=float(stats.min_velocity.min()), min_gap=float(stats.gap.min()),
+        min_impact_velocity=float(stats.min_velocity.min()), min_gap=float(stats.nearest_gap.min()),
         sticks=int(stats.sticks.sum()),
     )
 

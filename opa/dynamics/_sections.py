@@ -224,10 +224,10 @@ def grazing_points(values: np.ndarray, period: np.ndarray, impacts: np.ndarray,
 
     Along a branch of periodic motions the number of impacts per forcing period changes
     only where an impact appears or disappears, i.e. at a grazing (a free-flight maximum
-    reaching the wall with zero velocity). Such a change between two periodic
-    neighbours is reported, located by the square law near a graze: on the impacting
-    side the new impact has ``v^2 ~ |p - p_g|``, on the other side the nearest free
-    flight has ``gap ~ |p - p_g|``; with ``g = gap`` on one side and ``g = -v^2/2`` on
+    reaching the wall with zero velocity, or a minimum the lower wall). Such a change
+    between two periodic neighbours is reported, located by the square law near a graze:
+    on the impacting side the new impact has ``v^2 ~ |p - p_g|``, on the other side the
+    nearest free flight has ``gap ~ |p - p_g|``; with ``g = gap`` on one side and ``g = -v^2/2`` on
     the other, the linear root of ``g`` is taken (the midpoint when either is missing).
     Grazings inside non-periodic ranges are not located (see the per-value ``grazing``
     flag and ``min_impact_velocity`` there).
@@ -235,7 +235,8 @@ def grazing_points(values: np.ndarray, period: np.ndarray, impacts: np.ndarray,
     Parameters
     ----------
     values : (P,) increasing parameter values; ``period``, ``impacts`` (per period),
-        ``min_impact_velocity``, ``min_gap`` per value (NaN where undefined).
+        ``min_impact_velocity``, ``min_gap`` per value (NaN where undefined); with a lower
+        wall, ``min_gap`` is the nearer wall's (``Motion.nearest_gap``).
 
     Returns
     -------
@@ -318,8 +319,11 @@ class Motion:
     min_impact_velocity : slowest impact in the record (NaN if none).
     min_gap : ``delta`` minus the highest free-flight maximum of x (NaN if none or if the
         outputs are too sparse to resolve maxima, fewer than 8 per period).
-    grazing : 1 if an impact is slower than ``graze_velocity`` or a free flight comes
-        within ``graze_gap`` of the wall, else 0.
+    grazing : 1 if an impact (at either wall) is slower than ``graze_velocity`` or a free
+        flight comes within ``graze_gap`` of a wall (``min_gap`` or ``min_gap_lower``),
+        else 0.
+    min_gap_lower : with a lower wall, the lowest free-flight minimum of x minus
+        ``delta_minus`` (NaN as for ``min_gap``, and without a lower wall).
     """
 
     period: int
@@ -331,6 +335,12 @@ class Motion:
     min_impact_velocity: float
     min_gap: float
     grazing: int
+    min_gap_lower: float = math.nan
+
+    @property
+    def nearest_gap(self) -> float:
+        """The smaller of the two walls' gaps (``min_gap`` with one wall; NaN: none)."""
+        return float(np.fmin(self.min_gap, self.min_gap_lower))
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -345,7 +355,8 @@ class MotionTolerances:
     period_tol : relative stroboscopic repeat distance below which a period is taken.
     max_period : the longest period looked for (None: half the recorded periods).
     graze_velocity, graze_gap : a motion grazes where an impact is slower than
-        ``graze_velocity`` or a free flight comes within ``graze_gap`` of the wall.
+        ``graze_velocity`` or a free flight comes within ``graze_gap`` of a wall (either
+        of two).
     """
 
     period_tol: float = PERIOD_TOL
@@ -379,11 +390,14 @@ def identify(
     breaks: np.ndarray = (),
     sticking: np.ndarray | None = None,
     tolerances: MotionTolerances | None = None,
+    delta_minus: float = -math.inf,
 ) -> Motion:
     """Array form of ``identify_motion``: outputs ``t, x, v`` (n,), impacts (m,) or None
     when the run has no impact record (MC mean), ``breaks`` the times where the velocity
     or force jumps, ``sticking`` (n,) True while resting on the wall; ``tolerances`` the
-    period and grazing thresholds (:class:`MotionTolerances`, default its defaults)."""
+    period and grazing thresholds (:class:`MotionTolerances`, default its defaults);
+    ``delta_minus`` a lower wall (-inf: none), whose gap is that of the free-flight
+    minima of x."""
     tol = MotionTolerances() if tolerances is None else tolerances
     period_tol, max_period = tol.period_tol, tol.max_period
     graze_velocity, graze_gap = tol.graze_velocity, tol.graze_gap
@@ -407,18 +421,24 @@ def identify(
     else:
         impacts, rate, vmin = -1, math.nan, math.nan
     in_rec = (t >= lo) & (t <= hi)
-    gap = math.nan
+    gap = gap_lower = math.nan
     if (np.count_nonzero(in_rec) - 1) / span >= 8:
         free = in_rec if sticking is None else in_rec & ~np.asarray(sticking, dtype=bool)
         _, xm = free_flight_maxima(t[free], x[free], v[free], breaks)
         if len(xm):
             gap = float(delta - xm.max())
+        if delta_minus > -math.inf:  # the minima of x are the maxima of -x
+            _, negated = free_flight_maxima(t[free], -x[free], -v[free], breaks)
+            if len(negated):
+                gap_lower = float(-negated.max() - delta_minus)
     graze = int((np.isfinite(vmin) and vmin < graze_velocity)
-                or (np.isfinite(gap) and gap < graze_gap))
+                or (np.isfinite(gap) and gap < graze_gap)
+                or (np.isfinite(gap_lower) and gap_lower < graze_gap))
     return Motion(period=int(period), impacts=int(impacts),
                   label=period_label(period, impacts), residual=float(residual),
                   nearest_period=int(nearest), impact_rate=float(rate),
-                  min_impact_velocity=vmin, min_gap=gap, grazing=graze)
+                  min_impact_velocity=vmin, min_gap=gap, grazing=graze,
+                  min_gap_lower=gap_lower)
 
 
 # --------------------------------------------------------------------------- labelled layer
@@ -560,6 +580,7 @@ def identify_motion(
         sticking = sticking_mask(t, ds.stick_time.values, ds.release_time.values)
     return identify(
         t, x, v, forcing_period=_forcing_period(ds), delta=float(ds.attrs["delta"]),
+        delta_minus=float(ds.attrs.get("delta_minus", -math.inf)),
         start=start, impact_time=ds.impact_time.values if has_impacts else None,
         impact_velocity=ds.impact_velocity.values if has_impacts else None,
         breaks=run_breaks(ds), sticking=sticking, tolerances=MotionTolerances(

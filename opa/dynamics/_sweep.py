@@ -162,7 +162,8 @@ def compute_point(task: PointTask) -> dict:
             "impact_phase": np.zeros(0), "impact_v": np.zeros(0),
             "period": 0, "impacts": -1, "label": "failed", "residual": nan,
             "nearest_period": 0, "impact_rate": nan, "min_impact_velocity": nan,
-            "min_gap": nan, "grazing": 0, "final": np.full((2, ncoef), nan),
+            "min_gap": nan, "grazing": 0, "min_gap_lower": nan,
+            "final": np.full((2, ncoef), nan),
         }
     T = osc.forcing_period
     start = task.transient * T  # t = start itself belongs to the transient
@@ -174,7 +175,7 @@ def compute_point(task: PointTask) -> dict:
     sticking = (sticking_mask(times, run["stick_time"], run["release_time"])
                 if len(run["stick_time"]) else None)
     motion = identify(times, run["x"], run["v"], forcing_period=T, delta=osc.delta,
-                      start=start, impact_time=run["impact_time"],
+                      delta_minus=osc.delta_minus, start=start, impact_time=run["impact_time"],
                       impact_velocity=run["impact_velocity"], breaks=np.concatenate(breaks),
                       sticking=sticking, tolerances=MotionTolerances(
                           period_tol=task.period_tol, graze_velocity=task.graze_velocity,
@@ -413,7 +414,8 @@ def sweep(
     (param, point)`` (stroboscopic points of the record, NaN padded), ``impact_phase,
     impact_v (param, point)`` (constraint plane), ``period`` (0: none), ``impacts`` (per
     period, -1: none), ``label`` ("n/p"), ``residual``, ``impact_rate``,
-    ``min_impact_velocity``, ``min_gap``, ``grazing``, ``observed_doubling`` (the
+    ``min_impact_velocity``, ``min_gap``, ``grazing`` (at either wall), with a lower wall
+    ``min_gap_lower`` (its free flights' gap), ``observed_doubling`` (the
     observed period is twice a neighbour's: an observation, not a located bifurcation;
     ``period_doubling`` is the same, its former name), ``failed``;
     ``grazing_parameter(graze)``: grazing locations estimated between neighbours; over
@@ -881,9 +883,14 @@ _SCALARS = {
                            "free-flight maximum, every flight ends at the wall, or too few "
                            "outputs to see one)"),
     "grazing": ("int8", ("1 where an impact is slower than graze_velocity or a free "
-                        "flight comes within graze_gap of the wall")),
+                        "flight comes within graze_gap of the wall (of either wall, "
+                        "with a lower wall)")),
     "failed": ("int8", "1 where the trajectory could not be completed"),
 }
+
+
+_LOWER_GAP = ("the lowest free-flight minimum of x minus delta_minus, the lower wall's gap "
+              "(NaN: none, or too few outputs to see one)")
 
 
 def _padded(rows, width):
@@ -917,6 +924,11 @@ def assemble(model, param, values, results, base, options, kw, continuation
     for name, (dtype, long_name) in _SCALARS.items():
         data[name] = (dim, np.array([r[name] for r in results], dtype=dtype),
                       {"long_name": long_name, "units": "1"})
+    nearest = data["min_gap"][1]
+    if base.oscillator.two_walls:  # parts written before it lack it: NaN
+        lower = np.array([r.get("min_gap_lower", math.nan) for r in results], dtype=float)
+        data["min_gap_lower"] = (dim, lower, {"long_name": _LOWER_GAP, "units": "1"})
+        nearest = np.fmin(nearest, lower)
     periods = data["period"][1]
     doubled = period_doubling(periods)
     data["observed_doubling"] = (dim, doubled,
@@ -926,7 +938,7 @@ def assemble(model, param, values, results, base, options, kw, continuation
     data["period_doubling"] = (dim, doubled.copy(),
                                {"long_name": "former name of observed_doubling", "units": "1"})
     graze_at = grazing_points(values, periods, data["impacts"][1],
-                              data["min_impact_velocity"][1], data["min_gap"][1])
+                              data["min_impact_velocity"][1], nearest)
     data["grazing_parameter"] = ("graze", graze_at,
                                  {"long_name": f"estimated {param} of grazing bifurcations",
                                   "units": "1"})
@@ -991,6 +1003,11 @@ def summary_lines(ds) -> list[str]:
         j = int(np.nanargmin(gap))
         lines.append(f"  closest free flight to the wall: gap {gap[j]:.3g} at {param} = "
                      f"{values[j]:.6g}")
+    lower = ds.min_gap_lower.values if "min_gap_lower" in ds else np.zeros(0)
+    if np.isfinite(lower).any():
+        j = int(np.nanargmin(lower))
+        lines.append(f"  closest free flight to the lower wall: gap {lower[j]:.3g} at {param} "
+                     f"= {values[j]:.6g}")
     graze = ds.grazing_parameter.values
     if len(graze):
         lines.append(f"  grazing between periodic branches near {param} = "

@@ -659,3 +659,39 @@ def test_runs_are_shared_by_a_view_to_another_end(monkeypatch):
     assert runs.get(0.3) is None and short.get(0.3).time[0] == 1.0
     runs.ensure([0.3])  # too short for the longer view: run again, the longer run kept
     assert made[-1] == (0.3, 2.0) and short.get(0.3).time[0] == 2.0
+
+
+def test_a_free_flight_minimum_reaching_the_lower_wall_is_a_grazing_split():
+    """``x'' = -2 zeta x' - x + f cos(omega t)`` from rest is f times the unit response
+    x_1(t) until its first impact, so the first lower-wall impact appears at f_s =
+    delta_minus / min x_1 over the horizon: scipy's turning points of x_1 (walls out of
+    reach) give it. The scan over f finds there a grazing split (within its tol), one more
+    impact on the right, at the time of that minimum, at the lower wall (v- < 0), and
+    none without the lower wall (the impacts counted are Events.impacts, either wall)."""
+    from tests.impact_truths import two_wall_impacts
+    from tests.opa.dynamics.test_sweep import (
+        LOWER_OMEGA,
+        LOWER_WALL,
+        LOWER_ZETA,
+        lower_wall_oscillator,
+    )
+
+    osc = lower_wall_oscillator()
+    horizon = 6.3 * osc.forcing_period
+    unit = two_wall_impacts(lambda x, v: -2 * LOWER_ZETA * v - x, 1.0, LOWER_OMEGA,
+                            (None, None), (None, None), (0.0, 0.0), horizon, rtol=1e-12,
+                            atol=1e-13)
+    minima = unit["turn_kind"] == 1
+    lowest = int(np.argmin(np.where(minima, unit["turn_x"], np.inf)))
+    f_s = LOWER_WALL / unit["turn_x"][lowest]
+    options = SolverOptions(rtol=1e-10, atol=1e-10)
+    splits, truncated = find_splits(osc, options, "f", 0.8 * f_s, 1.2 * f_s, horizon,
+                                    scan=9, tol=1e-9)
+    first = min(splits, key=lambda s: s.value)
+    assert not truncated and first.kind == "grazing"
+    assert abs(first.value - f_s) <= 2e-9
+    assert (first.left, first.right) == (0, 1) and first.speed < 0
+    assert first.time == pytest.approx(unit["turn_times"][lowest], abs=1e-4)
+    one_wall, _ = find_splits(osc.replace(delta_minus=-np.inf), options, "f", 0.8 * f_s,
+                              1.2 * f_s, horizon, scan=9, tol=1e-9)
+    assert one_wall == []

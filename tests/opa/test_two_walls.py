@@ -170,6 +170,44 @@ def test_the_tangent_map_through_lower_wall_impacts_is_the_flow_maps_derivative(
     np.testing.assert_allclose(rec.tangent, fd, rtol=0, atol=1e-7)
 
 
+def scipy_gaps(want: dict, times, delta_minus, delta):
+    """Per interval of ``times``: the smallest x - delta_minus at scipy's free-flight minima
+    and delta - x at its maxima (inf where there is none)."""
+    lower, upper = np.full(len(times) - 1, np.inf), np.full(len(times) - 1, np.inf)
+    seg = np.searchsorted(times, want["turn_times"], side="right") - 1
+    for j, x, kind in zip(seg, want["turn_x"], want["turn_kind"]):
+        if kind == 1:
+            lower[j] = min(lower[j], x - delta_minus)
+        else:
+            upper[j] = min(upper[j], delta - x)
+    return lower, upper
+
+
+@pytest.mark.parametrize("delta_minus", [-0.8, -1.2])
+def test_the_lower_walls_gap_is_the_lowest_free_flight_minimum_as_scipy_says(delta_minus):
+    """Statistics.gap_lower (kernel S_GAP_LOWER) per quarter period over ten: x_0 -
+    delta_minus at the lowest free-flight minimum, inf where the interval has none, as
+    scipy's turning points say (measured within 7e-12); the upper wall's gap as well."""
+    osc = gear_pair(delta_minus=delta_minus)
+    system = opa.System(osc, order=0)
+    times = np.linspace(0.0, 10 * T, 41)
+    rec = run(system.kernel_inputs(TIGHT), system.initial_state(), times, rtol=1e-12,
+              atol=1e-12, statistics=True)
+    want = truth(lambda x, v: -2 * ZETA * v - x, osc, 10 * T)
+    lower, upper = scipy_gaps(want, times, delta_minus, osc.delta)
+    stats = rec.statistics
+    assert np.isfinite(lower).sum() >= 9
+    for got, expected in ((stats.gap_lower, lower), (stats.gap, upper)):
+        np.testing.assert_array_equal(np.isfinite(got), np.isfinite(expected))
+        finite = np.isfinite(expected)
+        np.testing.assert_allclose(got[finite], expected[finite], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(stats.nearest_gap, np.minimum(lower, upper), rtol=0, atol=1e-9)
+    one_wall = run(system.replace(oscillator=osc.replace(delta_minus=-math.inf))
+                   .kernel_inputs(TIGHT), system.initial_state(), times, rtol=1e-12,
+                   atol=1e-12, statistics=True).statistics
+    assert np.all(one_wall.gap_lower == np.inf)
+
+
 # ---------------------------------------------------------------- sticking on the lower wall
 def pushed(**changes) -> opa.Oscillator:
     """x'' = -1 + 2 cos t with the lower wall at -1 (the upper at 5, out of reach): from

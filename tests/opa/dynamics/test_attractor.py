@@ -8,12 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from opa import SolverOptions, System, preset
+from opa import ForceLaw, Oscillator, SolverOptions, System, preset
 from opa.dynamics._attractor import (
     CHAOS_THRESHOLD,
     Settings,
     _flip_fit,
     initial_states,
+    row,
     same_attractor,
     sample_inputs,
     settle,
@@ -210,3 +211,55 @@ def test_bad_settings_are_named():
         Settings(record=2)
     with pytest.raises(ValueError, match="settle_tol must be a finite number > 0"):
         Settings(settle_tol=0.0)
+
+
+# ------------------------------------------------------------------------ a lower wall
+def settled_with(osc, name: str, value: float, state):
+    """The attractor of ``osc`` with its parameter ``name`` (a force law's constant) at
+    ``value``, from ``state``."""
+    system = System(osc, sigma=0.0, order=0, uncertain=name)
+    inputs = sample_inputs(system, OPTIONS, [value])
+    return settle(system, row(inputs, 0), state, options=OPTIONS)
+
+
+def test_impacts_on_the_lower_wall_count_in_the_label():
+    """``test_sweep``'s linear oscillator at f = 1.1 f_g hits only the lower wall: scipy's
+    event integrator sees 50 impacts, all at the lower wall, over periods 200..300, one
+    every two periods; the classification says 2/1 (period 2, one impact)."""
+    from tests.impact_truths import two_wall_impacts
+    from tests.opa.dynamics.test_sweep import (
+        LOWER_GRAZE_F,
+        LOWER_OMEGA,
+        LOWER_WALL,
+        LOWER_ZETA,
+        lower_wall_oscillator,
+    )
+
+    osc = lower_wall_oscillator(f=1.1 * LOWER_GRAZE_F)
+    T = osc.forcing_period
+    truth = two_wall_impacts(lambda x, v: -2 * LOWER_ZETA * v - x, osc.f, LOWER_OMEGA,
+                             (LOWER_WALL, osc.delta), (osc.lower_restitution, osc.eta),
+                             (osc.x0, osc.v0), 300 * T, rtol=1e-10, atol=1e-11)
+    late = truth["times"] > 200 * T
+    assert set(truth["wall"][late]) == {-1}
+    got = settled_with(osc, "zeta", LOWER_ZETA, (osc.x0, osc.v0))
+    assert got.period * late.sum() == 100 * got.impacts
+    assert (got.type, got.period, got.impacts) == ("2/1", 2, 1)
+
+
+def test_resting_on_the_lower_wall_is_sticking():
+    """x'' = -1 + 0.5 cos t pushes the mass onto the lower wall x = -1 at all times: from
+    rest there it never leaves (the force never turns away from the wall); it was
+    labelled 1/0 when only the upper wall could hold it."""
+    osc = Oscillator(force=ForceLaw("-g", g=1.0), f=0.5, omega=1.0, delta=5.0,
+                     delta_minus=-1.0, F0=0.0, omega1=1.0, x0=-1.0, v0=0.0)
+    assert settled_with(osc, "g", 1.0, (-1.0, 0.0)).type == "sticking"
+
+
+def test_other_initial_states_lie_between_the_walls():
+    osc = Oscillator(delta=0.2, delta_minus=-0.2, x0=0.0)
+    states = initial_states(osc, 6)
+    assert np.all((states[:, 0] > -0.2) & (states[:, 0] < 0.2))
+    assert np.array_equal(states[1:, 1], initial_states(Oscillator(), 6)[1:, 1])
+    one_wall = initial_states(Oscillator(delta=0.2), 6)  # as it was: 0.5 below the wall
+    assert np.isclose(one_wall[:, 0].max(), -0.3) and one_wall[:, 0].min() < -0.8

@@ -239,3 +239,22 @@ def test_bad_input_is_reported():
         poincare_map(ImpactSystem(preset("3.1", F0=0.0)), [0.5, 0.0])
     with pytest.raises(ValueError, match="parameter"):
         continue_orbits(ImpactSystem(preset("3.1", F0=0.0)), "x0", 0.0, 1.0)
+
+
+def test_an_orbits_gap_is_the_nearer_walls_and_grazes_at_the_lower_wall():
+    """The linear oscillator of ``test_sweep``'s lower-wall cases at f = 0.9995 f_g: its
+    period-1 orbit has no impact and its minimum lies 1 - A = 5e-4 above the lower wall
+    (closed form), far below the upper wall (4 + ...): ``min_gap`` is the lower wall's,
+    and the orbit is classified grazing (ORBIT_GRAZE_GAP 1e-3)."""
+    from tests.opa.dynamics.test_sweep import (
+        LOWER_DENOMINATOR,
+        LOWER_GRAZE_F,
+        lower_wall_oscillator,
+    )
+
+    f = 0.9995 * LOWER_GRAZE_F
+    system = ImpactSystem(lower_wall_oscillator(f=f), options=TIGHT)
+    orbit = periodic_orbit(system)
+    assert orbit.periods == 1 and len(orbit.impact_time) == 0
+    assert orbit.min_gap == pytest.approx(1.0 - f / LOWER_DENOMINATOR, abs=1e-9)
+    assert "grazing" in orbit.classify() and orbit.stable

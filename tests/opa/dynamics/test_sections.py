@@ -226,3 +226,23 @@ def test_mc_mean_has_no_constraint_section():
     assert constraint_section(ds).sizes["point"] == 0
     m = identify_motion(ds, start=10 * osc.forcing_period)
     assert m.impacts == -1 and math.isnan(m.impact_rate)
+
+
+def test_identify_motion_measures_the_lower_walls_gap_at_the_free_flight_minima():
+    """A run's free-flight minima above the lower wall (``test_sweep``'s linear oscillator
+    at f = 0.99 f_g: 1 - A = 0.01 in closed form, within 1e-6 by Hermite interpolation of
+    64 outputs per period) make ``min_gap_lower``, and grazing with graze_gap = 0.02 but
+    not with the default 1e-4; a one-wall run has none."""
+    from tests.opa.dynamics.test_sweep import LOWER_DENOMINATOR, LOWER_GRAZE_F, \
+        lower_wall_oscillator
+
+    f = 0.99 * LOWER_GRAZE_F
+    osc = lower_wall_oscillator(f=f)
+    ds = simulate_dmr(osc, periods=160, per_period=64)
+    start = 150 * osc.forcing_period
+    motion = identify_motion(ds, start=start, graze_gap=0.02)
+    assert motion.min_gap_lower == pytest.approx(1.0 - f / LOWER_DENOMINATOR, abs=1e-6)
+    assert motion.nearest_gap == motion.min_gap_lower and motion.grazing == 1
+    assert identify_motion(ds, start=start).grazing == 0
+    one_wall = simulate_dmr(osc.replace(delta_minus=-math.inf), periods=160, per_period=64)
+    assert math.isnan(identify_motion(one_wall, start=start, graze_gap=0.02).min_gap_lower)

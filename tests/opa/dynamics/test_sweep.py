@@ -367,3 +367,52 @@ def test_bad_input_is_refused_with_the_value(args, kwargs, match):
     with pytest.raises(ValueError, match=match):
         sweep(*args, preset("3.1"), **{**QUICK, **kwargs})
 
+
+
+# ----------------------------------------------------------- a lower wall's free flights
+# x'' = -2 zeta x' - x + f cos(omega t) with the upper wall far away (delta = 5) and a
+# lower wall at -1: without impacts the steady state is A cos(omega t - phi) with the
+# closed-form amplitude A = f / |1 - omega^2 + 2 i zeta omega|, so its free-flight minima
+# lie 1 - A above the lower wall, and they graze it at f_g = |1 - omega^2 + 2i zeta omega|.
+LOWER_ZETA, LOWER_OMEGA, LOWER_WALL = 0.1, 0.8, -1.0
+LOWER_DENOMINATOR = abs(complex(1 - LOWER_OMEGA ** 2, 2 * LOWER_ZETA * LOWER_OMEGA))
+LOWER_GRAZE_F = -LOWER_WALL * LOWER_DENOMINATOR
+
+
+def lower_wall_oscillator(**changes):
+    import opa
+
+    fields = dict(force=opa.ForceLaw("-2*zeta*v - x", zeta=LOWER_ZETA), f=0.3,
+                  omega=LOWER_OMEGA, delta=5.0, delta_minus=LOWER_WALL, eta_minus=0.8, F0=0.0,
+                  omega1=LOWER_OMEGA, x0=0.0, v0=0.0)
+    return opa.Oscillator(**{**fields, **changes})
+
+
+def test_a_sweep_sees_free_flights_graze_the_lower_wall():
+    """Values of f below and above the grazing f_g: below, ``min_gap_lower`` is the closed
+    form 1 - A (within 1e-6; measured 1.4e-7 from the Hermite interpolation of 64 outputs
+    per period) and ``grazing`` flags the value within graze_gap = 0.02 of the wall
+    only; above, the motion impacts the lower wall; the grazing is located between the
+    two within 1e-3 f_g (measured 1e-4) from the lower wall's gap (the upper wall's
+    would put it near 1.01 f_g)."""
+    import opa
+
+    values = LOWER_GRAZE_F * np.array([0.9, 0.99, 1.01, 1.1])
+    ds = sweep("dmr", "f", values, lower_wall_oscillator(),
+               window=B.Window(transient=150, record=10, per_period=64), locate=False,
+               motion=B.MotionTolerances(graze_gap=0.02), execution=opa.Execution(workers=1),
+               options=opa.SolverOptions(rtol=1e-10, atol=1e-10))
+    free = slice(0, 2)
+    np.testing.assert_allclose(ds.min_gap_lower.values[free],
+                               1.0 - values[free] / LOWER_DENOMINATOR, rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(ds.grazing.values[free], [0, 1])
+    np.testing.assert_array_equal(ds.impacts.values[free], [0, 0])
+    assert np.all(ds.impacts.values[2:] > 0) and np.all(ds.min_gap.values > 3.9)
+    assert ds.grazing_parameter.values == pytest.approx([LOWER_GRAZE_F],
+                                                        abs=1e-3 * LOWER_GRAZE_F)
+    assert any("closest free flight to the lower wall" in line
+               for line in B.summary_lines(ds))
+    one_wall = sweep("dmr", "f", values[:1], lower_wall_oscillator(delta_minus=-np.inf),
+                     window=B.Window(transient=2, record=2, per_period=16), locate=False,
+                     execution=opa.Execution(workers=1))
+    assert "min_gap_lower" not in one_wall
