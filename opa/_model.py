@@ -322,6 +322,13 @@ class Oscillator:
         return self.coefficient_names + IMPACT_PARAMETERS + DRIVE_PARAMETERS
 
     @property
+    def sweepable_names(self) -> tuple[str, ...]:
+        """The parameters a sweep may vary: every ``PARAMETER_NAMES`` value and a user's
+        force law's own constants."""
+        own = () if self.force is None else tuple(self.force.constants)
+        return PARAMETER_NAMES + own
+
+    @property
     def coefficient_names(self) -> tuple[str, ...]:
         """The named coefficients of the force law, the parameters that may be uncertain
         in it: mu, a, c for the paper's law, the names a user's law uses otherwise."""

@@ -17,7 +17,6 @@ import time
 
 import numpy as np
 
-from opa import PARAMETER_NAMES
 from opa.cli._args import parse_sweep, positive_int, whole_number
 from opa.cli._flags import _model_flags, _output_flags, _solver_flags, scales, uncertain_names
 
@@ -113,9 +112,9 @@ def cmd_stochastic(args) -> int:
         raise ValueError(f"--sweep {args.sweep!r}: {swept} is {which} "
                          f"(--uncertain {','.join(uncertain)}); sweep another parameter, or "
                          f"make another one uncertain")
+    names = oscillator_from(args).sweepable_names  # with a --model law's own constants
     name, values, _ = parse_sweep(
-        args.sweep, names=tuple(n for n in PARAMETER_NAMES
-                                if n not in (*uncertain, "x0", "v0")))
+        args.sweep, names=tuple(n for n in names if n not in (*uncertain, "x0", "v0")))
     refuse_given(args, [name], f"has no effect: --sweep sets {name}")
     if args.samples == 0:
         refuse_given(args, ["seed"], "has no effect with --samples 0 (no Monte Carlo samples "

@@ -42,7 +42,6 @@ from opa._model import Oscillator, SolverOptions, check_instance
 from opa._run import SimulationError
 from opa._system import System
 from opa.dynamics._orbits import (
-    CONTINUABLE,
     ConvergenceError,
     ImpactSystem,
     PeriodicOrbit,
@@ -116,8 +115,8 @@ class _Continuation:
     """Pseudo-arclength continuation of the fixed points of ``P^k`` in one parameter."""
 
     def __init__(self, system, parameter, lo, hi, periods, t0, *, tol, scale):
-        if parameter not in CONTINUABLE:
-            raise ValueError(f"parameter must be one of {', '.join(CONTINUABLE)}, got "
+        if parameter not in system.continuable:
+            raise ValueError(f"parameter must be one of {', '.join(system.continuable)}, got "
                              f"{parameter!r}")
         self.system = system
         self.name = parameter
@@ -671,8 +670,9 @@ def continue_orbits(system: ImpactSystem, parameter: str, start: float, stop: fl
     >>> int(ds.sizes["bifurcation"]) >= 1
     True
     """
-    if parameter not in CONTINUABLE:
-        raise ValueError(f"parameter must be one of {', '.join(CONTINUABLE)}, got {parameter!r}")
+    if parameter not in system.continuable:
+        raise ValueError(f"parameter must be one of {', '.join(system.continuable)}, got "
+                         f"{parameter!r}")
     for name, value in (("start", start), ("stop", stop)):
         if not math.isfinite(value):
             raise ValueError(f"{name} must be finite, got {value}")
@@ -1231,9 +1231,9 @@ def check_locatable(system: ImpactSystem, parameter: str, lo: float, hi: float) 
     parameter that is not continued (``x0``, ``v0`` only pick the attractor) or one
     that changes the forcing's common period (``impulse_cycle``) over ``[lo, hi]``.
     Returns that period k0 (in forcing periods)."""
-    if parameter not in CONTINUABLE:
+    if parameter not in system.continuable:
         why = (f"{parameter} only selects the attractor, it moves no bifurcation"
-               if parameter in ("x0", "v0") else f"choose from {', '.join(CONTINUABLE)}")
+               if parameter in ("x0", "v0") else f"choose from {', '.join(system.continuable)}")
         raise ValueError(f"bifurcations cannot be located in {parameter}: {why}")
     cycles = {impulse_cycle(system.with_parameter(parameter, v).oscillator)
               for v in (lo, 0.5 * (lo + hi), hi)}

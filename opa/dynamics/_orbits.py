@@ -124,10 +124,19 @@ class ImpactSystem(System):
     def forcing_period(self) -> float:
         return self.oscillator.forcing_period
 
+    @property
+    def continuable(self) -> tuple[str, ...]:
+        """The parameters a continuation may follow: ``CONTINUABLE`` and a user's force
+        law's own constants."""
+        law = self.oscillator.force
+        return CONTINUABLE + (() if law is None else tuple(law.constants))
+
     def with_parameter(self, name: str, value: float) -> ImpactSystem:
-        """A copy with one model parameter (or ``sigma``) changed."""
-        if name not in CONTINUABLE:
-            raise ValueError(f"parameter must be one of {', '.join(CONTINUABLE)}, got {name!r}")
+        """A copy with one model parameter (or ``sigma``, or a constant of a user's force
+        law) changed."""
+        if name not in self.continuable:
+            raise ValueError(f"parameter must be one of {', '.join(self.continuable)}, got "
+                             f"{name!r}")
         return self.replace(**{name: float(value)})
 
     def parameter(self, name: str) -> float:

@@ -428,6 +428,13 @@ def stochastic_slice(oscillator: Oscillator, uncertain: str, sigma: float,
         coexist=int(coexist)))
 
 
+#: why omega cannot be the diagram's uncertain parameter
+OMEGA_REFUSED = ("{uncertain} {0}: omega cannot be uncertain in the stochastic diagram: each "
+                 "sampled system has its own forcing period 2 pi/omega_i, and the attractors are "
+                 "classified at the nominal period's stroboscopic times (a period-1 orbit would "
+                 "read as quasi-periodic); sweep omega instead")
+
+
 class DiagramInputError(ValueError):
     """An input of :func:`stochastic_diagram` refused before any work starts: one line
     naming the keyword and its value.
@@ -631,7 +638,6 @@ def _check_inputs(oscillator, parameter, values, *, sigma, uncertain, distributi
 def _check_model(oscillator, parameter, values, sigma, uncertain, distribution, xtol):
     """The model, the control parameter and its values, the uncertainty and its law."""
     from opa._measure import parse
-    from opa._model import PARAMETER_NAMES
 
     given = oscillator
     if isinstance(oscillator, System):
@@ -640,6 +646,8 @@ def _check_model(oscillator, parameter, values, sigma, uncertain, distribution, 
         raise DiagramInputError("{oscillator} must be an opa.Oscillator or System, got {0}",
                                 type(oscillator).__name__)
     names = _several(uncertain)
+    if "omega" in (names or (uncertain,)):
+        raise DiagramInputError(OMEGA_REFUSED, "omega")
     if names:
         return _check_several(given, oscillator, parameter, values, sigma, names,
                               distribution, xtol)
@@ -651,7 +659,7 @@ def _check_model(oscillator, parameter, values, sigma, uncertain, distribution, 
             "{oscillator}: the System's uncertainty ({0}, sigma {1:g}) is not the diagram's "
             "({uncertain} {2}, {sigma} {3!r}): pass its .oscillator, or the same", given.uncertain,
             given.sigma, uncertain, sigma)
-    if not (isinstance(parameter, str) and parameter in PARAMETER_NAMES) \
+    if not (isinstance(parameter, str) and parameter in oscillator.sweepable_names) \
             or parameter in (uncertain, "x0", "v0"):
         raise DiagramInputError("{parameter} must be a model parameter other than the "
                                 "uncertain one ({0}) and x0, v0, got {1!r}", uncertain,
@@ -691,7 +699,6 @@ def _check_several(given, oscillator, parameter, values, sigma, names, distribut
     """:func:`_check_model` of several uncertain parameters: the problem (its refusals
     name ``sigma``, ``uncertain`` or ``distribution``), the control parameter and values;
     ``xtol`` has no effect (no boundaries are located). The measure is None."""
-    from opa._model import PARAMETER_NAMES
 
     if isinstance(given, System) and (tuple(given.uncertain), given.sigma) != (names, sigma):
         raise DiagramInputError(
@@ -716,7 +723,7 @@ def _check_several(given, oscillator, parameter, values, sigma, names, distribut
                 "{sigma} {0:g} makes {1} = {2:g} + sigma xi negative for xi below {3:.3g} "
                 "(the law of xi reaches {4:g}); at most {5:.6g} keeps it >= 0", scale, name,
                 mean, -mean / scale, lo, mean / -lo if lo < 0 else math.inf)
-    if not (isinstance(parameter, str) and parameter in PARAMETER_NAMES) \
+    if not (isinstance(parameter, str) and parameter in oscillator.sweepable_names) \
             or parameter in (*names, "x0", "v0"):
         raise DiagramInputError("{parameter} must be a model parameter other than the "
                                 "uncertain ones ({0}) and x0, v0, got {1!r}",

@@ -548,11 +548,16 @@ def _setup(model, param, values, system, window, continuation, mc, options, moti
     motion = _record("motion", motion, MotionTolerances, fields)
     _choice("model", model, SWEEP_MODELS)
     _choice("continuation", continuation, CONTINUATIONS)
-    _choice("parameter", param, SWEEPABLE)
     options = check_instance("options", options, SolverOptions, SolverOptions())
     base = as_system(system, options, allowed=SWEEP_FIELDS, where="sweep", **fields)
+    law = base.oscillator.force  # a user's force law's own constants may be swept too
+    _choice("parameter", param, SWEEPABLE + (() if law is None else tuple(law.constants)))
     base = (base.deterministic() if model == "dmr" else
             base.replace(order=0) if model == "mc" else base)
+    if model == "mc" and "omega" in base.problem.names:
+        raise ValueError("an uncertain omega cannot be swept with model 'mc': each sample has "
+                         "its own forcing period, and its motion is classified at the nominal "
+                         "period's stroboscopic times; sweep omega instead")
     if param == "sigma" and model == "dmr":
         raise ValueError("the DMR has no uncertainty: sweep sigma with model 'opa' or 'mc'")
     if continuation != "fixed" and model == "mc":

@@ -337,3 +337,30 @@ def test_several_parameters_resume_from_their_parts(tmp_path, monkeypatch):
                                **{**kw, "sigma": (0.03, 0.003)})
     assert len(calls) == 3
     assert list(other.attrs["sigma"]) == [0.03, 0.003]
+
+
+@pytest.mark.parametrize("uncertain, sigma", [("omega", 0.001), ("mu,omega", (0.01, 0.001))])
+def test_an_uncertain_omega_is_refused_naming_why(uncertain, sigma):
+    """Each sampled system's period differs from the nominal one at which its attractor
+    is classified: with sigma = 1e-4 a stable period-1 orbit read as quasi-periodic in
+    62 % of the samples (measured before the refusal); refused in one line."""
+    with pytest.raises(ValueError, match=r"^uncertain omega: omega cannot be uncertain") as err:
+        stochastic_diagram(SECTION_31, "c", [0.05], uncertain=uncertain, sigma=sigma,
+                           samples=16)
+    assert "\n" not in str(err.value)
+
+
+def test_a_user_laws_constant_is_the_control_parameter():
+    """Shaw & Holmes' damping zeta as the control parameter, eta uncertain: the stable
+    closed-form period-1 orbit holds the whole law (``tests/impact_truths.py``: |mu| <
+    0.73 at zeta = 0.04 and 0.05)."""
+    import opa
+
+    osc = opa.Oscillator(force=opa.ForceLaw("-2*zeta*v - x", zeta=0.05), f=1.0, omega=2.5,
+                         eta=0.8, delta=0.0, F0=0.0, omega1=2.5, x0=-0.5)
+    ds = stochastic_diagram(osc, "zeta", [0.04, 0.05], uncertain="eta", sigma=0.005,
+                            samples=16, extra_states=0, transient=300, record=16)
+    assert ds.zeta.values.tolist() == [0.04, 0.05]
+    labels = [str(t) for t in np.atleast_1d(ds.type.values).ravel() if str(t)]
+    assert set(labels) >= {"1/1"}, labels
+    np.testing.assert_allclose(ds.probability.sel(type="1/1").values, 1.0)

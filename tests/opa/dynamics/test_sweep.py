@@ -416,3 +416,32 @@ def test_a_sweep_sees_free_flights_graze_the_lower_wall():
                      window=B.Window(transient=2, record=2, per_period=16), locate=False,
                      execution=opa.Execution(workers=1))
     assert "min_gap_lower" not in one_wall
+
+
+def test_a_user_laws_constant_is_swept_onto_shaw_holmes_closed_form_orbits():
+    """Shaw & Holmes' damping zeta swept (a constant of the user's law): at each value the
+    settled motion is the closed-form period-1 orbit, its impact velocity and phase
+    (omega t) to 1e-6 (``tests/impact_truths.py``)."""
+    import opa
+    from tests.impact_truths import shaw_holmes_orbits
+
+    osc = opa.Oscillator(force=opa.ForceLaw("-2*zeta*v - x", zeta=0.05), f=1.0, omega=2.5,
+                         eta=0.8, delta=0.0, F0=0.0, omega1=2.5, x0=-0.5)
+    zetas = [0.04, 0.05, 0.07]
+    ds = sweep("dmr", "zeta", zetas, osc, transient=300, record=8, workers=1)
+    assert list(ds.label.values) == ["1/1"] * 3
+    for zeta in zetas:
+        (orbit,) = [o for o in shaw_holmes_orbits(zeta, 2.5, 0.0, 0.8)
+                    if max(abs(np.asarray(o["multipliers"]))) < 1]
+        at = ds.sel(zeta=zeta)
+        np.testing.assert_allclose(at.impact_v.values, orbit["velocity"], atol=1e-6)
+        np.testing.assert_allclose(at.impact_phase.values, 2.5 * orbit["phase"], atol=1e-6)
+    with pytest.raises(ValueError, match="parameter"):
+        sweep("dmr", "kappa", zetas, osc, transient=10, record=8, workers=1)
+
+
+def test_an_uncertain_omega_is_not_swept_with_monte_carlo():
+    """Each sample would have its own period, classified at the nominal one's times."""
+    with pytest.raises(ValueError, match="its own forcing period"):
+        sweep("mc", "c", [0.03, 0.04], preset("3.1"), uncertain="omega", sigma=0.001,
+              transient=10, record=8, workers=1)
