@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-import mc
 import opa
 from opa import _kernel as kernel
 from opa._forcefunction import check_addresses, function_parameters, imported_function
@@ -25,6 +24,7 @@ from opa._forcelaw import PAPER_EXPRESSION, ForceLaw
 from opa._run import sampled
 from opa.dynamics import ImpactSystem, periodic_orbit
 from tests.impact_truths import SHAW_HOLMES_CASES, shaw_holmes_flight, shaw_holmes_orbits
+from tests.opa.test_forcelaw import assert_built_in_runs
 
 HERTZ = "-2*zeta*v - x - k*max(x - g, 0)^1.5"
 
@@ -87,20 +87,8 @@ def test_a_function_law_reads_its_constants_from_its_parameters():
 def test_the_paper_law_compiled_gives_the_built_in_runs_to_round_off():
     """DMR, OPA with mu, c and (mu, c) uncertain, and Monte Carlo: the projections by
     quadrature of the compiled function equal the built-in law's to round-off."""
-    osc = opa.preset("3.2")
-    compiled = osc.replace(force=ForceLaw.compiled(PAPER_EXPRESSION))
-    a, b = (opa.simulate_dmr(o, periods=10, per_period=8) for o in (osc, compiled))
-    assert int(a.impact_time.count()) > 3
-    np.testing.assert_allclose(b.x, a.x, rtol=0, atol=1e-12)
-    for uncertain, sigma in (("mu", 0.02), ("c", 0.005), ("mu,c", (0.016, 0.005))):
-        runs = [opa.simulate_opa(opa.System(o, uncertain=uncertain, sigma=sigma, order=3),
-                                 periods=10, per_period=8) for o in (osc, compiled)]
-        for name in ("x_mean", "x_var"):
-            np.testing.assert_allclose(runs[1][name], runs[0][name], rtol=0, atol=1e-12)
-    runs = [mc.simulate_mc(opa.System(o, uncertain="c", sigma=0.005), samples=32, periods=10,
-                           per_period=8) for o in (osc, compiled)]
-    np.testing.assert_allclose(runs[1].x_mean, runs[0].x_mean, rtol=0, atol=1e-12)
-    assert runs[1].attrs["force_kind"] == "compiled"
+    run = assert_built_in_runs(ForceLaw.compiled(PAPER_EXPRESSION))
+    assert run.attrs["force_kind"] == "compiled"
 
 
 def test_a_law_other_than_the_papers_compiled_gives_its_polynomial_runs():
