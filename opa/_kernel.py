@@ -2088,20 +2088,24 @@ def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, a
 
 
 @njit(cache=True)
-def register_step_user(t, x, v, h, k0x, k0v, law, address, theta, f, w, force, sticking,
-                       rtol, atol):
-    """``register_step`` of a user's law: a polynomial (``force_law``'s tuple of C[j, k])
-    where ``address`` is 0, else the compiled function at ``address`` with its constants
-    at ``theta``. A call, not inlined: a second inlined step in the driver's loop made the
-    paper's law's DMR 4 % slower (benchmarks.bench_several's speed check)."""
-    cw = math.cos(w * t)
-    sw = math.sin(w * t)
-    if address != 0:
-        xn, vn, kx, kv = _stages2_dop853_fn(t, x, v, h, k0x, k0v, address, theta, f, w, cw,
-                                            sw, force, sticking)
-    else:
-        xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, cw, sw, force,
-                                              sticking)
+def register_step_poly(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
+    """``register_step`` of a polynomial force law (``force_law``'s tuple of C[j, k]).
+    A call, not inlined: a second inlined step in the driver's loop made the paper's
+    law's DMR 4 % slower (benchmarks.bench_several's speed check)."""
+    xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, math.cos(w * t),
+                                          math.sin(w * t), force, sticking)
+    err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
+    return err, margin, xn, vn, kx, kv
+
+
+@njit(cache=True)
+def register_step_fn(t, x, v, h, k0x, k0v, address, theta, f, w, force, sticking, rtol,
+                     atol):
+    """``register_step`` of a compiled force function at ``address`` with its constants
+    at ``theta`` (a call, as ``register_step_poly``; one call for both laws, choosing
+    inside, made the polynomial law's DMR about 8 % slower)."""
+    xn, vn, kx, kv = _stages2_dop853_fn(t, x, v, h, k0x, k0v, address, theta, f, w,
+                                        math.cos(w * t), math.sin(w * t), force, sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
     return err, margin, xn, vn, kx, kv
 
@@ -2348,9 +2352,10 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
     # the 2-D register path, decided once: its trial step takes and returns scalars only
     two_d = method == METHOD_DOP853 and size == 2 and is_deterministic(m, cfg, table, p)
     mu, a_lin, c_cub, f_amp, w = p[P_MU], p[P_A], p[P_C], p[P_F], p[P_OMEGA]
-    user = cfg[C_FORCE] != FORCE_PAPER  # a user's law: polynomial, or compiled function
-    law = force_law(p)  # a polynomial law's coefficients (read only when user)
-    address = cfg[C_FUNCTION]  # a compiled function's (0: a polynomial law)
+    poly = cfg[C_FORCE] == FORCE_POLYNOMIAL
+    law = force_law(p)  # a polynomial law's coefficients (read only when poly)
+    function = cfg[C_FORCE] == FORCE_FUNCTION
+    address = cfg[C_FUNCTION]  # a compiled function's (read only when function)
     constants = _theta_of_p(p)  # the address of a compiled function's constants
     kx = kv = _NO_STAGES
     off = np.bool_(False)  # typed, not literal: a literal False is a type of its own
@@ -2416,10 +2421,14 @@ def integrate_with(z, m, t_out, include_start, renormalise, p, cfg, table, weigh
                 break
             # ---- trial step into z_new, K[last] = f(t + h_try, z_new)
             if two_d:
-                if user:
-                    err, margin, z_new[0], z_new[1], kx, kv = register_step_user(
-                        t, z[0], z[1], h_try, K[0, 0], K[0, 1], law, address, constants, f_amp,
-                        w, force, sticking, rtol, atol)
+                if poly:
+                    err, margin, z_new[0], z_new[1], kx, kv = register_step_poly(
+                        t, z[0], z[1], h_try, K[0, 0], K[0, 1], law, f_amp, w, force,
+                        sticking, rtol, atol)
+                elif function:
+                    err, margin, z_new[0], z_new[1], kx, kv = register_step_fn(
+                        t, z[0], z[1], h_try, K[0, 0], K[0, 1], address, constants, f_amp, w,
+                        force, sticking, rtol, atol)
                 else:
                     err, margin, z_new[0], z_new[1], kx, kv = register_step(
                         t, z[0], z[1], h_try, K[0, 0], K[0, 1], mu, a_lin, c_cub, f_amp, w,
