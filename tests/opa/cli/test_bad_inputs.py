@@ -694,7 +694,7 @@ BAD_MODEL = [
     (["validate", "--model", SHAW], ("validate", "[uncertain.NAME]")),
     (["validate", "--model", "{model}"], ("validate", "[uncertain"), PAPER_MODEL),
     (["sobol", "--model", SHAW, "--periods", "1"], ("--model", "two")),
-    (["bifurcation", "dmr", "--model", SHAW, "--sweep", "zeta=0.04:0.06:3"], "zeta"),
+    (["bifurcation", "dmr", "--model", SHAW, "--sweep", "kappa=0.04:0.06:3"], "kappa"),
     (["stochastic", "--model", SHAW, "--sweep", "zeta=0.1"], ("--sweep", "zeta")),
     (["stability", "dmr", "--model", SHAW, "--preset", "3.2"], "--preset"),
 ]
