@@ -478,19 +478,45 @@ def _poly_row(table, k, x, v):
                         table[k, q + 3], table[k, q + 7], table[k, q + 11], table[k, q + 15])
 
 
+def _on_gpu(context) -> bool:
+    """Whether code is generated for a CUDA device (numba-cuda's target context), where a
+    host function pointer means nothing: a compiled force function is refused there
+    before any launch (``opa._run``), and its two intrinsics below compile to constants."""
+    return type(context).__name__.startswith("CUDA")
+
+
 @intrinsic
 def _call_function(typingctx, address, x, v, theta):
     """g(x, v, theta) of the C function at ``address`` (an int64), with ``theta`` the
     address of its constants (an int64): a call through a pointer, so one compiled kernel
-    serves every user's function (and its on-disk cache stays valid)."""
+    serves every user's function (and its on-disk cache stays valid). NaN on a GPU."""
     sig = types.float64(types.int64, types.float64, types.float64, types.int64)
 
     def codegen(context, builder, signature, args):
         double = ir.DoubleType()
+        if _on_gpu(context):
+            return ir.Constant(double, math.nan)
         fnty = ir.FunctionType(double, [double, double, double.as_pointer()])
         fn = builder.inttoptr(args[0], fnty.as_pointer())
         return builder.call(fn, [args[1], args[2], builder.inttoptr(args[3],
                                                                     double.as_pointer())])
+    return sig, codegen
+
+
+@intrinsic
+def _element_address(typingctx, array, offset):
+    """The address (an int64) of element ``offset`` of a C-contiguous float64 array,
+    counted in its flat layout; 0 on a GPU (``_call_function``)."""
+    if not (isinstance(array, types.Array) and array.dtype == types.float64
+            and array.layout == "C"):
+        return None
+    sig = types.int64(array, types.int64)
+
+    def codegen(context, builder, signature, args):
+        if _on_gpu(context):
+            return ir.Constant(ir.IntType(64), 0)
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data
+        return builder.ptrtoint(builder.gep(data, [args[1]]), ir.IntType(64))
     return sig, codegen
 
 
@@ -518,13 +544,13 @@ def _function_law(address, x, v, theta, derivatives):
 @njit(cache=True, inline="always")
 def _theta_of_p(p):
     """The address of a compiled force function's constants in the parameter vector."""
-    return p.ctypes.data + P_POLY * p.strides[0]
+    return _element_address(p, np.int64(P_POLY))
 
 
 @njit(cache=True, inline="always")
 def _theta_of_row(table, k):
     """The address of a compiled force function's constants in row k of the table."""
-    return table.ctypes.data + k * table.strides[0] + T_POLY * table.strides[1]
+    return _element_address(table, k * table.shape[1] + T_POLY)
 
 
 @njit(cache=True, inline="always")
