@@ -116,7 +116,15 @@ def _register(key, make) -> int:
     process."""
     compiled = _COMPILED_LAWS.get(key)
     if compiled is None:
-        compiled = kernel.compile_force_function(make())
+        try:
+            compiled = kernel.compile_force_function(make())
+        except ValueError:
+            raise
+        except Exception as error:  # noqa: BLE001 - numba's typing and lowering errors
+            first = next((line.strip() for line in str(error).splitlines() if line.strip()),
+                         type(error).__name__)
+            raise ValueError(f"force law {key[1]!r:.80} does not compile with numba "
+                             f"({type(error).__name__}: {first:.200})") from None
         _COMPILED_LAWS[key] = compiled
         _ADDRESSES.add(int(compiled.address))
     return int(compiled.address)
@@ -182,9 +190,11 @@ def imported_function(reference: str):
         target = importlib.import_module(module_name)
         for part in qualname.split("."):
             target = getattr(target, part)
-    except (ImportError, AttributeError, ValueError) as error:
-        raise ValueError(f"force function {reference!r:.80} cannot be imported ({error}); "
-                         f"a force function must live in an importable module") from None
+    except Exception as error:  # noqa: BLE001 - a user's module may raise anything
+        text = " ".join(str(error).split())
+        raise ValueError(f"force function {reference!r:.80} cannot be imported "
+                         f"({type(error).__name__}: {text:.200}); a force function must live "
+                         f"in an importable module") from None
     if not callable(target):
         raise ValueError(f"force function {reference!r:.80} is not a function")
     return target

@@ -190,3 +190,24 @@ def test_inputs_from_another_process_and_the_gpu_are_refused():
     with pytest.raises(ValueError, match="CPU only"):
         opa._run.run_batch(batch, [0.0, 0.0], [0.0, 1.0], rtol=1e-8, atol=1e-8,
                            device="cuda")
+
+
+@pytest.mark.parametrize("source, words", [
+    ("def g(x, v, k):\n    return -k * x +\n", "cannot be imported (SyntaxError"),
+    ("raise RuntimeError('no')\ndef g(x, v, k):\n    return -k * x\n",
+     "cannot be imported (RuntimeError: no)"),
+    ("def g(x, v, k):\n    return -k * x + len('abc' + x)\n", "does not compile with numba"),
+])
+def test_a_broken_function_beside_a_model_file_is_one_line_and_exit_2(tmp_path, capsys, source,
+                                                                       words):
+    """The user's module may not import, or its function may not compile: one line
+    naming it, exit status 2, never a traceback."""
+    from opa.cli._main import main
+
+    name = f"user_law_{abs(hash(source)) % 10**8}"
+    (tmp_path / f"{name}.py").write_text(source)
+    model = tmp_path / "model.toml"
+    model.write_text(f'function = "{name}:g"\n[constants]\nk = 1.0\n[oscillator]\nF0 = 0.0\n')
+    assert main(["simulate", "dmr", "--model", str(model), "--periods", "1"]) == 2
+    err = capsys.readouterr().err
+    assert words in err and len(err.strip().splitlines()) == 1, err
