@@ -53,6 +53,8 @@ RESERVED = ("x", "v", "t", "f", "omega", "eta", "delta", "F0", "a1", "omega1", "
             "sigma", "xi")
 #: the paper's law, eq. (1)
 PAPER_EXPRESSION = "mu*(1 - v^2)*v - a*x - c*x^3"
+#: deepest syntax tree accepted (its readers recurse; a law is a few levels deep)
+MAX_DEPTH = 100
 #: longest expression accepted (a guard against pathological input, not a modelling limit)
 MAX_EXPRESSION = 2000
 
@@ -265,9 +267,12 @@ class ForceLaw:
         text = expression.strip().replace("^", "**")
         try:
             tree = ast.parse(text, mode="eval")
-        except SyntaxError:
+        except (SyntaxError, RecursionError, MemoryError):
             raise ValueError(f"force law {expression!r:.80} is not an expression in x and v "
                              f"(write e.g. \"-2*zeta*v - x - c*x^3\")") from None
+        if _depth(tree) > MAX_DEPTH:
+            raise ValueError(f"force law {expression!r:.80} is nested more than {MAX_DEPTH} "
+                             f"levels deep")
         terms = None if compile_it else _polynomial(text, tree)
         if terms is None:  # not a polynomial the kernel's table holds: compiled
             names = tuple(check_expression(text, tree))
@@ -405,6 +410,16 @@ class ForceLaw:
         coef = self.coefficients(merged)[0].reshape(MAX_POWER + 1, MAX_POWER + 1)
         return sum(coef[j, k] * x**j * v**k for j in range(MAX_POWER + 1)
                    for k in range(MAX_POWER + 1) if coef[j, k] != 0.0)
+
+
+def _depth(tree) -> int:
+    """The depth of a syntax tree, counted without recursion."""
+    deepest, stack = 0, [(tree, 1)]
+    while stack:
+        node, level = stack.pop()
+        deepest = max(deepest, level)
+        stack.extend((child, level + 1) for child in ast.iter_child_nodes(node))
+    return deepest
 
 
 def _polynomial(text: str, tree) -> dict | None:

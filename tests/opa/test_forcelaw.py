@@ -85,6 +85,8 @@ def test_coefficients_at_many_points_follow_each_constant():
     ("x == v", {}, "'x == v' is not allowed"),
     ("'x'", {}, "not a finite number"),
     ("1e400*x", {}, "finite"),
+    ("-" * 1990 + "x", {}, "nested more than 100 levels"),
+    ("x*" * 900 + "x", {}, "nested more than 100 levels"),
 ])
 def test_a_bad_law_gets_one_line_naming_the_piece(expression, constants, words):
     with pytest.raises(ValueError) as err:
