@@ -270,13 +270,42 @@ def _validate():
         return run_validation(cfg, progress=False, log=lambda *a: None)
 
 
+SEVERAL_MAP_TEXT = """## validate.nc with several uncertain parameters (the trust map)
+
+`opa-mc validate --uncertain mu,c --relative R1,R2` writes the trust line: the verdicts
+of each variant at each scale s of sigma_j = s R_j |p_bar_j|, dims (variant, scale). With
+`--values` (or `--sweep`), several `--horizons` or `--resolution` it writes the trust
+map: the swept parameter (here `omega`) and `horizon` are coordinates too, and the
+bisected interval of s* at the longest horizon is (`scale_star_lower`,
+`scale_star_upper`). The global attributes are the model's at scale 1, without the swept
+parameter's value.
+"""
+SEVERAL_MAP_CALL = ('trust_map_several(System(Oscillator(mu=0.3, a=1.0, c=0.5, f=0.4, '
+                    'omega=1.3, delta=50.0, F0=0.0, x0=0.5), uncertain="mu,c", order=1, '
+                    'sigma=(0.0, 0.0)), (0.2, 0.4), (0.25, 1.0), values=(1.3, 1.4), '
+                    'horizons=(2, 3), resolution=0.5, per_period=4, samples=64, '
+                    'max_samples=128, max_elements=8)')
+
+
+def _several_map():
+    from compare import trust_map_several
+    from opa import Oscillator, System
+
+    osc = Oscillator(mu=0.3, a=1.0, c=0.5, f=0.4, omega=1.3, delta=50.0, F0=0.0, x0=0.5)
+    system = System(osc, uncertain="mu,c", order=1, sigma=(0.0, 0.0))
+    return trust_map_several(system, (0.2, 0.4), (0.25, 1.0), values=(1.3, 1.4),
+                             horizons=(2, 3), resolution=0.5, per_period=4, samples=64,
+                             max_samples=128, max_elements=8)
+
+
 def render() -> str:
     out = [HEADER]
     runs = _runs()
     runs.append(("validate", VALIDATE_CALL, _validate()))
+    runs.append(("several map", SEVERAL_MAP_CALL, _several_map()))
     for title, call, ds in runs:
-        if title == "validate":
-            out.append(VALIDATE_TEXT)
+        if title in ("validate", "several map"):
+            out.append(VALIDATE_TEXT if title == "validate" else SEVERAL_MAP_TEXT)
             out.append(f"`{call}` (from `compare`):\n")
             out.extend(_table(ds))
             out.append("")
