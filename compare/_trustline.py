@@ -160,7 +160,7 @@ def _dataset(system, relative, scales, data, options, started) -> xr.Dataset:
         attrs=provenance_attrs("trust-line", scaled(system, relative, 1.0), options))
     ds.variant.attrs.update(long_name="the OPA variant: one element with the mean or the "
                                       "saltation impact law, or adaptive boxes", units="1")
-    ds.scale.attrs.update(long_name="the scale s of sigma_j = s x relative_j x |p_bar_j|",
+    ds.scale.attrs.update(long_name="the scale s of sigma_j = s x relative_j x abs(p_bar_j)",
                           units="1")
     ds["scale_star"] = ("variant", np.array([star(data["verdict"][i], scales)
                                              for i in range(len(names))]), {
