@@ -1336,8 +1336,9 @@ def step_dense(two_d, kx, kv, method, t, z, z_new, h, K, F, ztmp, m, p, cfg, tab
     """``dense_prepare`` for the step the driver just took (once per step at most): on the
     2-D register path (``two_d``) the stages kx, kv, until now only in registers, are
     stored in K first; ``dense_prepare`` itself picks the 2-D path."""
-    if two_d:
+    if two_d:  # the 2-D system's dense output, without asking again what the run is
         store_stages2(K, kx, kv)
+        return dense_prepare2(t, z, z_new, h, K, F, p, cfg, force, sticking)
     return dense_prepare(method, t, z, z_new, h, K, F, ztmp, m, p, cfg, table, weights, U,
                          force, sticking, work)
 
@@ -2113,13 +2114,22 @@ def register_step(t, x, v, h, k0x, k0v, mu, a, c, f, w, force, sticking, rtol, a
     return err, margin, xn, vn, kx, kv
 
 
+# The user laws' stages inlined into their register steps: the driver's one call reaches
+# them (a call to a step that calls the stages cost a polynomial law's register step 9 %
+# against the built-in law's in a loop of steps; inlined, 5 %)
+_stages2_dop853_poly_inlined = njit(cache=True, inline="always")(
+    _stages2_dop853_poly.py_func)
+_stages2_dop853_fn_inlined = njit(cache=True, inline="always")(_stages2_dop853_fn.py_func)
+
+
 @njit(cache=True)
 def register_step_poly(t, x, v, h, k0x, k0v, law, f, w, force, sticking, rtol, atol):
     """``register_step`` of a polynomial force law (``force_law``'s tuple of C[j, k]).
     A call, not inlined: a second inlined step in the driver's loop made the paper's
     law's DMR 4 % slower (benchmarks.bench_several's speed check)."""
-    xn, vn, kx, kv = _stages2_dop853_poly(t, x, v, h, k0x, k0v, law, f, w, math.cos(w * t),
-                                          math.sin(w * t), force, sticking)
+    xn, vn, kx, kv = _stages2_dop853_poly_inlined(t, x, v, h, k0x, k0v, law, f, w,
+                                                  math.cos(w * t), math.sin(w * t), force,
+                                                  sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
     return err, margin, xn, vn, kx, kv
 
@@ -2130,8 +2140,9 @@ def register_step_fn(t, x, v, h, k0x, k0v, address, theta, f, w, force, sticking
     """``register_step`` of a compiled force function at ``address`` with its constants
     at ``theta`` (a call, as ``register_step_poly``; one call for both laws, choosing
     inside, made the polynomial law's DMR about 8 % slower)."""
-    xn, vn, kx, kv = _stages2_dop853_fn(t, x, v, h, k0x, k0v, address, theta, f, w,
-                                        math.cos(w * t), math.sin(w * t), force, sticking)
+    xn, vn, kx, kv = _stages2_dop853_fn_inlined(t, x, v, h, k0x, k0v, address, theta, f, w,
+                                                math.cos(w * t), math.sin(w * t), force,
+                                                sticking)
     err, margin = _error2(h, x, v, xn, vn, k0x, k0v, kx, kv, rtol, atol)
     return err, margin, xn, vn, kx, kv
 
