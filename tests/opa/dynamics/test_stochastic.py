@@ -343,7 +343,8 @@ def test_several_parameters_resume_from_their_parts(tmp_path, monkeypatch):
 def test_an_uncertain_omega_is_refused_naming_why(uncertain, sigma):
     """Each sampled system's period differs from the nominal one at which its attractor
     is classified: with sigma = 1e-4 a stable period-1 orbit read as quasi-periodic in
-    62 % of the samples (measured before the refusal); refused in one line."""
+    10 of 16 samples of Shaw & Holmes' (zeta = 0.05; measured before the refusal);
+    refused in one line."""
     with pytest.raises(ValueError, match=r"^uncertain omega: omega cannot be uncertain") as err:
         stochastic_diagram(SECTION_31, "c", [0.05], uncertain=uncertain, sigma=sigma,
                            samples=16)
