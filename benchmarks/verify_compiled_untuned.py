@@ -30,7 +30,7 @@ CASES = [
 ]
 if __name__ == "__main__":
     print(f"load average {os.getloadavg()[0]:.2f}")
-    counts = {}
+    counts: dict = {}
     for label, path, name, sigma in CASES:
         osc = read_model(path).oscillator
         base = opa.System(osc, uncertain=name, sigma=sigma, distribution="uniform", order=3)
@@ -46,5 +46,7 @@ if __name__ == "__main__":
                 got = (reading(v.attrs["verdict_mean"], rm), reading(v.attrs["verdict_var"], rv))
                 for g in got:
                     counts[g] = counts.get(g, 0) + 1
-                print(f"{label:20s} {law:9s} seed {seed}: mean {v.attrs['verdict_mean']} (truth ratio {rm:.3g}) -> {got[0]}; var {v.attrs['verdict_var']} ({rv:.3g}) -> {got[1]}", flush=True)
+                print(f"{label:20s} {law:9s} seed {seed}: mean {v.attrs['verdict_mean']} "
+                      f"(truth ratio {rm:.3g}) -> {got[0]}; var {v.attrs['verdict_var']} "
+                      f"({rv:.3g}) -> {got[1]}", flush=True)
     print(counts)
