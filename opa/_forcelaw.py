@@ -228,6 +228,7 @@ class ForceLaw:
 
     kind = "polynomial"
     function = None
+    _forced = False  # compiled by ForceLaw.compiled, though a polynomial
 
     def __init__(self, expression: str, **constants):
         self._setup(expression, constants, compile_it=False)
@@ -273,15 +274,14 @@ class ForceLaw:
         if _depth(tree) > MAX_DEPTH:
             raise ValueError(f"force law {expression!r:.80} is nested more than {MAX_DEPTH} "
                              f"levels deep")
-        terms = None if compile_it else _polynomial(text, tree)
+        terms, names = (None, None) if compile_it else _polynomial(text, tree)
         if terms is None:  # not a polynomial the kernel's table holds: compiled
             names = tuple(check_expression(text, tree))
             if len(names) > MAX_CONSTANTS:
                 raise ValueError(f"force law {expression!r:.80} has {len(names)} constants; a "
                                  f"compiled law takes at most {MAX_CONSTANTS}")
             self.kind = "compiled"
-        else:
-            names = tuple(_names_of(tree))
+        self._forced = compile_it
         self._check_names(f"force law {expression!r:.80}", names, constants)
         self.expression = expression.strip()
         self._text = text
@@ -311,7 +311,7 @@ class ForceLaw:
         extra = "".join(f", {k}={v!r}" for k, v in self.constants.items())
         if self.kind == "function":
             return f"ForceLaw.from_function({self.expression}{extra})"
-        if self.kind == "compiled" and self._terms is None and _is_polynomial(self._text):
+        if self.kind == "compiled" and self._forced:
             return f"ForceLaw.compiled({self.expression!r}{extra})"
         return f"ForceLaw({self.expression!r}{extra})"
 
@@ -422,29 +422,20 @@ def _depth(tree) -> int:
     return deepest
 
 
-def _polynomial(text: str, tree) -> dict | None:
-    """The expansion of a polynomial of powers up to MAX_POWER, None for any other
-    expression (which the compiled path checks and refuses in its own words)."""
+def _polynomial(text: str, tree) -> tuple[dict | None, tuple | None]:
+    """(the expansion, the names it uses besides x and v in order of first use) of a
+    polynomial of powers up to MAX_POWER; (None, None) for any other expression (which
+    the compiled path checks and refuses in its own words)."""
     if any(isinstance(n, ast.Name) and n.id in FUNCTION_NAMES for n in ast.walk(tree)):
-        return None
+        return None, None
+    expander = _Expander(text)
     try:
-        terms = _Expander(text).expand(tree.body)
+        terms = expander.expand(tree.body)
     except ValueError:
-        return None
+        return None, None
     if any(j > MAX_POWER or k > MAX_POWER for (j, k) in terms):
-        return None
-    return terms
-
-
-def _is_polynomial(text: str) -> bool:
-    return _polynomial(text, ast.parse(text, mode="eval")) is not None
-
-
-def _names_of(tree) -> list[str]:
-    """The names a polynomial uses besides x and v, in order of first use."""
-    expander = _Expander("")
-    expander.expand(tree.body)
-    return expander.names
+        return None, None
+    return terms, tuple(expander.names)
 
 
 def _rebuild(expression: str, constants: dict) -> ForceLaw:

@@ -21,17 +21,17 @@ from opa.dynamics import (CONTINUATIONS, DEFAULT_WORKERS, MOTION_GRAZE_GAP,
 SECTIONS = ("phase", "constraint", "both")
 
 
-def parse_sweep(spec: str, law=None) -> tuple[str, np.ndarray]:
+def parse_sweep(spec: str, oscillator=None) -> tuple[str, np.ndarray]:
     """``--sweep`` of ``bifurcation`` (the grammar of ``opa.cli._args.parse_sweep``):
-    the swept parameter and its values; ``law``: a ``--model`` file's force law, whose
-    own constants may be swept too.
+    the swept parameter and its values; with ``oscillator``, its force law's own
+    constants may be swept too (``Oscillator.sweepable_names``).
 
     >>> name, values = parse_sweep("c=0.01:0.1:10")
     >>> name, len(values), float(values[-1])
     ('c', 10, 0.1)
     """
-    own = () if law is None else tuple(law.constants)
-    name, values, _ = _parse_sweep(spec, names=SWEEPABLE + own)
+    names = SWEEPABLE if oscillator is None else oscillator.sweepable_names + ("sigma",)
+    name, values, _ = _parse_sweep(spec, names=names)
     return name, values
 
 
@@ -66,7 +66,7 @@ def cmd_bifurcation(args) -> int:
         raise ValueError("--periods does not apply to bifurcation sweeps; use --transient P "
                          "and --record P")
     system = system_from(args)
-    param, values = parse_sweep(args.sweep, system.oscillator.force)
+    param, values = parse_sweep(args.sweep, system.oscillator)
     opts = options_from(args)
     _check_sizes(system.oscillator, param, values, args)
     start = time.perf_counter()

@@ -550,8 +550,8 @@ def _setup(model, param, values, system, window, continuation, mc, options, moti
     _choice("continuation", continuation, CONTINUATIONS)
     options = check_instance("options", options, SolverOptions, SolverOptions())
     base = as_system(system, options, allowed=SWEEP_FIELDS, where="sweep", **fields)
-    law = base.oscillator.force  # a user's force law's own constants may be swept too
-    _choice("parameter", param, SWEEPABLE + (() if law is None else tuple(law.constants)))
+    # the model's parameters, a user's force law's own constants, and sigma
+    _choice("parameter", param, base.oscillator.sweepable_names + ("sigma",))
     base = (base.deterministic() if model == "dmr" else
             base.replace(order=0) if model == "mc" else base)
     if model == "mc" and "omega" in base.problem.names:
