@@ -189,8 +189,11 @@ def _validate_model(args) -> None:
                        f"(--sigmas, --uncertain, --distribution): leave out the file's "
                        f"[uncertain.NAME] tables")
     osc = oscillator_from(args)
+    unused = () if osc.force is None else tuple(  # mu, a, c a user's law does not name
+        name for name in ("mu", "a", "c") if name not in osc.force.names)
     for name in OSCILLATOR_FLAGS:  # every value of the file, the flags' included
-        setattr(args, name, getattr(osc, name))
+        if name not in unused:  # (as flags they would be refused as having no effect)
+            setattr(args, name, getattr(osc, name))
     args.force_law = osc.force  # and its force law (None: the paper's)
 
 

@@ -72,3 +72,24 @@ def test_the_trust_map_of_several_parameters_writes_its_dataset_and_tables(tmp_p
     assert "Over 2 periods:" in summary and "Over 3 periods:" in summary
     assert summary.count("| 1.4 | adaptive boxes |") == 2
     assert "s* bisected to 0.5" in capsys.readouterr().out
+
+
+def test_several_parameters_of_a_model_files_own_law(tmp_path, capsys):
+    """A model file whose law names none of mu, a, c (a Python function beside it):
+    validate's own copy of the file's values must not turn the unnamed mu into a flag
+    that "has no effect" (it did: the trust line was refused)."""
+    import shutil
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parents[3] / "docs" / "examples"
+    shutil.copy(examples / "contact.py", tmp_path / "contact.py")
+    text = (examples / "hertz-function.toml").read_text()
+    model = tmp_path / "hertz.toml"
+    model.write_text(text[:text.index("[uncertain.k]")])
+    out = tmp_path / "line"
+    assert main(["validate", "--model", str(model), "--uncertain", "k,zeta", "--relative",
+                 "0.2,0.2", "--sigmas", "0.5", "--orders", "1", "--horizons", "2",
+                 "--samples", "64", "--max-samples", "128", "--quiet", "--outdir",
+                 str(out)]) == 0, capsys.readouterr().err
+    with xr.open_dataset(out / "validate.nc") as ds:
+        assert ds.attrs["force_kind"] == "function" and ds.verdict.dims == ("variant", "scale")
