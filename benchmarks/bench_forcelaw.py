@@ -9,18 +9,21 @@ train), all in one pytest-benchmark session:
 - ``mc``: 512 random samples of sigma = 0.01 on mu, 100 periods (8 samples x 5 periods
   in smoke mode), rtol = atol = 1e-8, two threads;
 
-each with five laws: ``builtin`` (the paper's law, eq. (1)), ``paper-as-user`` (the same
+each with six laws: ``builtin`` (the paper's law, eq. (1)), ``paper-as-user`` (the same
 law written as ``opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3")``, the kernel's polynomial
 path), ``duffing-user`` (``-2*zeta*v - a*x - c*x^3 + mu*(1 - v^2)*v`` with zeta = 0:
-five terms, the same motion to round-off), and the escape hatch's two ways:
-``paper-compiled`` (the expression compiled, ``opa.ForceLaw.compiled``) and
+five terms, the same motion to round-off), ``cross-user`` (the paper's law plus
+k x^2 v with k = 1e-300: a cross term, which takes the register path's longer
+evaluation (``opa._kernel._poly_value``), on the same motion), and the escape hatch's two
+ways: ``paper-compiled`` (the expression compiled, ``opa.ForceLaw.compiled``) and
 ``paper-function`` (the Python function :func:`paper_law`, ``ForceLaw.from_function``),
-both called through a pointer on the general step, with their compile excluded by the
-warm-up round. Before timing, each user law is checked to
-agree with the built-in run over 20 periods (states to 1e-9; longer, round-off grows).
+both called through a pointer, with their compile excluded by the warm-up round. Each
+oscillator is built once, outside the timed runs, as a user builds it once. Before
+timing, each user law is checked to agree with the built-in run over 20 periods (states
+to 1e-9; longer, round-off grows).
 
-Run ``python -m pytest benchmarks/bench_forcelaw.py --benchmark-only -p no:xdist`` for the
-numbers; ``test_force_law_ratios`` prints the ratios of the medians to the built-in law.
+Run ``python -m pytest benchmarks/bench_forcelaw.py -p no:xdist -s`` for the numbers:
+``test_force_law_ratios`` prints the ratios of the medians to the built-in law.
 """
 
 from __future__ import annotations
@@ -44,6 +47,7 @@ LAWS = {
     "builtin": None,
     "paper-as-user": opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3"),
     "duffing-user": opa.ForceLaw("-2*zeta*v - a*x - c*x^3 + mu*(1 - v^2)*v", zeta=0.0),
+    "cross-user": opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3 + k*x^2*v", k=1e-300),
     "paper-compiled": opa.ForceLaw.compiled("mu*(1 - v^2)*v - a*x - c*x^3"),
     "paper-function": opa.ForceLaw.from_function(paper_law),
 }
@@ -56,8 +60,12 @@ _MEDIANS: dict[tuple[str, str], float] = {}
 AGREE_PERIODS = 20
 
 
+OSCILLATORS = {law: OSCILLATOR if force is None else OSCILLATOR.replace(force=force)
+               for law, force in LAWS.items()}
+
+
 def oscillator(law: str) -> opa.Oscillator:
-    return OSCILLATOR if LAWS[law] is None else OSCILLATOR.replace(force=LAWS[law])
+    return OSCILLATORS[law]
 
 
 def run_dmr(law: str, periods: int):
@@ -80,7 +88,7 @@ def test_force_law_dmr(benchmark, law, periods):
     reference = run_dmr("builtin", AGREE_PERIODS)
     got = run_dmr(law, AGREE_PERIODS)
     np.testing.assert_allclose(got.x, reference.x, rtol=0, atol=1e-9)  # agrees first
-    benchmark.pedantic(run_dmr, args=(law, periods), rounds=7, warmup_rounds=1)
+    benchmark.pedantic(run_dmr, args=(law, periods), rounds=31, warmup_rounds=1)
     if benchmark.stats is not None:
         _MEDIANS["dmr", law] = benchmark.stats.stats.median
 
@@ -91,7 +99,7 @@ def test_force_law_mc(benchmark, law, mc_size):
     reference = run_mc("builtin", mc_size[0], AGREE_PERIODS)
     got = run_mc(law, mc_size[0], AGREE_PERIODS)
     np.testing.assert_allclose(got.x_mean, reference.x_mean, rtol=0, atol=1e-9)
-    benchmark.pedantic(run_mc, args=(law, *mc_size), rounds=7, warmup_rounds=1)
+    benchmark.pedantic(run_mc, args=(law, *mc_size), rounds=11, warmup_rounds=1)
     if benchmark.stats is not None:
         _MEDIANS["mc", law] = benchmark.stats.stats.median
 

@@ -14,6 +14,7 @@ import argparse
 import os
 import time
 
+import numpy as np
 from numba import njit
 
 import opa
@@ -47,7 +48,9 @@ def main(argv=None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
     mu, a, c = 0.8, 0.5, 0.05
-    law = tuple(opa.ForceLaw(PAPER_EXPRESSION).coefficients(dict(mu=mu, a=a, c=c))[0])
+    p = np.zeros(kernel.P_POLY + kernel.N_POLY)
+    p[kernel.P_POLY:] = opa.ForceLaw(PAPER_EXPRESSION).coefficients(dict(mu=mu, a=a, c=c))[0]
+    law = kernel.force_law(p)  # the coefficients and the cross-term flag, as the driver's
     _loop_builtin(10, mu, a, c)
     _loop_polynomial(10, law)
     print(f"register_step_speed: load average {os.getloadavg()[0]:.2f}, {args.steps} steps")

@@ -434,18 +434,28 @@ def _stage_forcing_long(t, theta, h, f, w, cw, sw, force):
 @njit(cache=True, inline="always")
 def force_law(p):
     """A polynomial force law's coefficients in scalars, (C[0, 0], C[0, 1], ..., C[3, 3]),
-    for its 2-D register path (a tuple is passed by value: no reference counts)."""
+    then 1.0 if it has a cross term (C[j, k] != 0 with j, k >= 1) else 0.0, for its 2-D
+    register path (a tuple is passed by value: no reference counts). The flag is read
+    here once per run, not in each stage: a test of the nine coefficients in each stage
+    cost a DMR run 8 %."""
     q = P_POLY
+    cross = 0.0
+    for j in range(1, POLY_DEGREE + 1):
+        for k in range(1, POLY_DEGREE + 1):
+            if p[q + (POLY_DEGREE + 1) * j + k] != 0.0:
+                cross = 1.0
     return (p[q], p[q + 1], p[q + 2], p[q + 3], p[q + 4], p[q + 5], p[q + 6], p[q + 7],
             p[q + 8], p[q + 9], p[q + 10], p[q + 11], p[q + 12], p[q + 13], p[q + 14],
-            p[q + 15])
+            p[q + 15], cross)
 
 
 @njit(cache=True, inline="always")
 def _poly_horner(x, v, c00, c10, c20, c30, c01, c11, c21, c31, c02, c12, c22, c32, c03, c13,
                  c23, c33):
     """g = sum_jk C[j, k] x^j v^k and its partial derivatives (g, dg/dx, dg/dv), by
-    Horner in x for each power of v, then in v."""
+    Horner in x for each power of v, then in v; g summed as ``_poly_value`` sums it
+    (its cross terms added even when zero, which leaves g's bits as they are), so the
+    general loop and the 2-D register path agree bit for bit."""
     p0 = c00 + x * (c10 + x * (c20 + x * c30))
     p1 = c01 + x * (c11 + x * (c21 + x * c31))
     p2 = c02 + x * (c12 + x * (c22 + x * c32))
@@ -454,18 +464,29 @@ def _poly_horner(x, v, c00, c10, c20, c30, c01, c11, c21, c31, c02, c12, c22, c3
     d1 = c11 + x * (2.0 * c21 + x * 3.0 * c31)
     d2 = c12 + x * (2.0 * c22 + x * 3.0 * c32)
     d3 = c13 + x * (2.0 * c23 + x * 3.0 * c33)
-    g = p0 + v * (p1 + v * (p2 + v * p3))
+    g = p0 + v * (c01 + v * (c02 + v * c03))
+    g += x * v * ((c11 + x * (c21 + x * c31)) + v * ((c12 + x * (c22 + x * c32))
+                                                      + v * (c13 + x * (c23 + x * c33))))
     gx = d0 + v * (d1 + v * (d2 + v * d3))
     gv = p1 + v * (2.0 * p2 + v * 3.0 * p3)
     return g, gx, gv
 
 
 @njit(cache=True, inline="always")
-def _poly_law(x, v, law):
-    """``_poly_horner`` of a ``force_law`` tuple (C[j, k] at law[4 j + k])."""
-    return _poly_horner(x, v, law[0], law[4], law[8], law[12], law[1], law[5], law[9],
-                        law[13], law[2], law[6], law[10], law[14], law[3], law[7], law[11],
-                        law[15])
+def _poly_value(x, v, law):
+    """g = sum_jk C[j, k] x^j v^k of a ``force_law`` tuple, without its derivatives:
+    the x-only and v-only terms by Horner, and the cross terms x v sum C[j, k]
+    x^(j-1) v^(k-1) (j, k >= 1) only when ``force_law`` flagged one. Most laws (the
+    paper's, Duffing's, Shaw and Holmes's) have none and cost about what the built-in
+    law does."""
+    g = (law[0] + x * (law[4] + x * (law[8] + x * law[12]))
+         + v * (law[1] + v * (law[2] + v * law[3])))
+    if law[N_POLY] != 0.0:  # the cross terms' flag (``force_law``)
+        q1 = law[5] + x * (law[9] + x * law[13])
+        q2 = law[6] + x * (law[10] + x * law[14])
+        q3 = law[7] + x * (law[11] + x * law[15])
+        g += x * v * (q1 + v * (q2 + v * q3))
+    return g
 
 
 @njit(cache=True, inline="always")
@@ -567,8 +588,7 @@ def _f2_poly(x, v, law, drive, sticking):
     """``_f2`` of a polynomial force law (``force_law``'s tuple)."""
     if sticking:
         return 0.0, 0.0
-    g, _, _ = _poly_law(x, v, law)
-    return v, g + drive
+    return v, _poly_value(x, v, law) + drive
 
 
 @njit(cache=True, inline="always")
@@ -650,7 +670,7 @@ def vector_field(z, m, p, cfg, table, weights, U, t, drive, sticking, out, work)
     if function:
         g0 = _call_function(cfg[C_FUNCTION], x0, v0, _theta_of_p(p))
     elif poly:
-        g0, _, _ = _poly_law(x0, v0, force_law(p))
+        g0 = _poly_value(x0, v0, force_law(p))
     else:
         g0 = p[P_MU] * (1.0 - v0 * v0) * v0 - p[P_A] * x0 - p[P_C] * x0 * x0 * x0
     for i in range(n):

@@ -120,7 +120,7 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
     system = (v, iv, m, v, m)  # p, cfg, table, weights, U
     column = nt.UniTuple(f8, 7)  # a component's dense-output coefficients
     stages = nt.UniTuple(f8, 12)  # one component's stages of a 2-D DOP853 step
-    law = nt.UniTuple(f8, kernel.N_POLY)  # a polynomial law's coefficients (force_law)
+    law = nt.UniTuple(f8, kernel.N_POLY + 1)  # a polynomial law (force_law's tuple)
     helper = {  # leaves and the 2-D stepper: nothing here calls the vector field; what
         # the main group calls first comes first (the main group's leaves give the
         # helper the time to finish the 2-D step before rk_step needs it)
