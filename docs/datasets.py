@@ -200,7 +200,8 @@ def _several(single, boxes, ens) -> str:
     assert boxes.element_lower.dims == boxes.element_upper.dims == ("element", "parameter")
     assert boxes.element_x_coef.dims == ("element", "term", "time")
     assert "element_edges" not in boxes and "element_straddles" not in boxes
-    assert "element_split_inside" in boxes
+    assert "element_split_inside" in boxes and "element_method" in boxes
+    assert boxes.attrs["collocation_elements"] == int(boxes.element_method.sum())
     assert ens.xi.dims == ("sample", "parameter") and ens.x_coef.dims == ("term", "time")
     assert "multi_index" in ens and "basis" not in ens.attrs
     assert single.attrs["uncertain"] == boxes.attrs["uncertain"] == ens.attrs["uncertain"]
@@ -223,7 +224,13 @@ the three runs below:
 - a single-element run has no `element` dimension; with `elements=` the elements are
   boxes in ξ: `element_lower`, `element_upper` (element, parameter) stand for
   `element_edges`, `element_split_inside` (element) for `element_straddles`, and
-  `element_x_coef` is (element, term, time);
+  `element_x_coef` is (element, term, time); `element_method` (element) is as in one
+  dimension (1: the box's OPA system could not be completed and halving did not mend
+  it, so its coefficients come from the true systems at its tensor Gauss nodes), with
+  `collocation_elements` ({boxes.attrs["collocation_elements"]} here) and
+  `collocation_rhs_evaluations`, the true systems' right-hand sides
+  ({boxes.attrs["collocation_rhs_evaluations"]} here; `rhs_evaluations` counts the OPA
+  systems');
 - a Monte Carlo run adds `xi` (sample, parameter) and `multi_index` beside its `x_coef`
   (term, time);
 - attributes: `uncertain` is the names, comma-separated ("{single.attrs["uncertain"]}"),

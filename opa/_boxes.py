@@ -45,7 +45,7 @@ import xarray as xr
 
 from opa._chaos import ChaosBasis
 from opa._dataset import provenance_attrs, time_coord
-from opa._elements import ElementBudgetWarning
+from opa._elements import ElementBudgetWarning, true_runs
 from opa._galerkin import chaos_basis, chaos_rule, initial_coefficients
 from opa._model import SolverOptions
 from opa._run import SimulationError, run_batch, stack
@@ -111,6 +111,8 @@ class BoxRun:
     rhs_evaluations: int
     impacts: int
     failure: str = ""
+    method: str = "opa"  # or "collocation": its OPA system failed (see collocate_box)
+    true_rhs_evaluations: int = 0  # the true systems' of a collocated box
 
 
 def run_boxes(system: System, options: SolverOptions, boxes, times, basis: str, *,
@@ -144,6 +146,34 @@ def run_boxes(system: System, options: SolverOptions, boxes, times, basis: str, 
                    batch.states[e, :, P:].T.copy(), int(batch.rhs_evaluations[e]),
                    int(batch.impacts[e]), failures[e])
             for e, box in enumerate(boxes)], chaos, nodes
+
+
+def collocate_box(system: System, options: SolverOptions, run: BoxRun, basis: str, *,
+                  times) -> BoxRun:
+    """A box's coefficients by collocation: the true sampled systems at the nodes of the
+    tensor Gauss rule of the box's conditional law that is exact for products of two of
+    its basis functions (N + 1 points per parameter), projected on that basis
+    (``x_alpha = sum_q w_q x(xi_q) Psi_alpha(xi_q)``).
+
+    The fallback of a box whose OPA system cannot be completed and that halving did not
+    mend (its mean grazes or the Galerkin system diverges near a change of the impact
+    sequence), as :func:`opa._elements.collocate_element` is in one dimension: the true
+    systems do not depend on the Galerkin system."""
+    whole = system.problem.measures
+    local = chaos_basis(system, basis, run.box.measures(whole))
+    nodes, weights = local.exact_rule(2, "tensor")  # positive weights
+    phi = local.evaluate(nodes)  # (Q, P)
+    paths, rhs = true_runs(system, options, nodes, times,
+                           what=f"collocation of box {_box_text(run.box)} at")
+    coef = np.einsum("qj,q,qts->sjt", phi, weights, paths)  # (2, P, T)
+    return BoxRun(run.box, run.probability, coef[0], coef[1], run.rhs_evaluations, 0,
+                  run.failure, "collocation", rhs)
+
+
+def replace_failed_boxes(system, options, runs, basis, *, times) -> list[BoxRun]:
+    """Every failed box of ``runs`` computed again by :func:`collocate_box`."""
+    return [collocate_box(system, options, r, basis, times=times) if r.failure else r
+            for r in runs]
 
 
 def _box_text(box: Box) -> str:
@@ -198,10 +228,8 @@ def refine(system, options, times, basis, tolerance, max_elements):
         top = float(share.max())
         room = max_elements - len(runs)
         if top < tolerance or room <= 0:
-            failed = [r.failure for r in runs if r.failure]
-            if failed:
-                raise SimulationError(f"{failed[0]}; the element budget (max_elements "
-                                      f"{max_elements}) ran out before halving it mended it")
+            # what halving could not mend is computed by collocation of the true systems
+            runs = replace_failed_boxes(system, options, runs, basis, times=times)
             met = top < tolerance
             if not met:
                 warnings.warn(
@@ -244,26 +272,19 @@ def sobol_from_boxes(runs, chaos: ChaosBasis, whole, coef: str = "x_coef"):
             xs.append(x)
             ws.append(w * cell.probability())
         axes.append((np.concatenate(xs), np.concatenate(ws)))
-    grid = np.array(list(itertools.product(*(a[0] for a in axes))))
     weights = [a[1] for a in axes]
-    values = np.empty((len(grid), getattr(runs[0], coef).shape[1]))
-    owner = _owners(runs, grid)
-    for e, r in enumerate(runs):
-        rows = owner == e
-        local = ChaosBasis(r.box.measures(whole), chaos.indices)
-        values[rows] = local.evaluate(grid[rows]) @ getattr(r, coef)
     shape = tuple(len(w) for w in weights)
-    return _anova(values.reshape(*shape, -1), weights)
-
-
-def _owners(runs, grid) -> np.ndarray:
-    """The box each grid point lies in (points are inside cells, never on an edge)."""
-    owner = np.full(len(grid), -1)
-    for e, r in enumerate(runs):
-        inside = np.all((grid >= np.array(r.box.lower)) & (grid <= np.array(r.box.upper)),
-                        axis=1)
-        owner[inside & (owner < 0)] = e
-    return owner
+    values = np.full(shape + (getattr(runs[0], coef).shape[1],), np.nan)
+    for r in runs:  # each box is a block of whole cells: its slice of the grid
+        block = tuple(slice((order + 1) * int(np.searchsorted(edges[j], r.box.lower[j])),
+                            (order + 1) * int(np.searchsorted(edges[j], r.box.upper[j])))
+                      for j in range(d))
+        points = np.stack([g.ravel() for g in np.meshgrid(
+            *(axes[j][0][block[j]] for j in range(d)), indexing="ij")], axis=1)
+        local = ChaosBasis(r.box.measures(whole), chaos.indices)
+        values[block] = (local.evaluate(points) @ getattr(r, coef)).reshape(
+            *(b.stop - b.start for b in block), -1)
+    return _anova(values, weights)
 
 
 def _anova(values: np.ndarray, weights) -> tuple[np.ndarray, np.ndarray]:
@@ -310,7 +331,8 @@ def simulate_boxes(system: System, options: SolverOptions, times, elements, *,
             raise ValueError(f"elements = {count} makes {count}^{system.dimension} boxes, more "
                              f"than {MAX_BOXES}")
         boxes = uniform_boxes(whole, count)
-        runs, chaos, nodes = run_boxes(system, options, boxes, times, basis)
+        runs, chaos, nodes = run_boxes(system, options, boxes, times, basis, partial=True)
+        runs = replace_failed_boxes(system, options, runs, basis, times=times)
         flags, record = split_inside(system, options, boxes, times), {}
     return _dataset(system, options, times, runs, chaos, whole, flags,
                     dict(record, basis=basis, nodes=nodes,
@@ -344,6 +366,11 @@ def _dataset(system, options, times, runs, chaos, whole, flags, attrs) -> xr.Dat
         "element_split_inside": ("element", np.asarray(flags, dtype=np.int8), {
             "long_name": "1 where the true systems at the box's corners differ in their "
                          "number of impacts", "units": "1"}),
+        "element_method": ("element", np.array([r.method == "collocation" for r in runs],
+                                               dtype=np.int8), {
+            "long_name": "how each box was computed", "units": "1",
+            "flag_values": np.array([0, 1], dtype=np.int8),
+            "flag_meanings": "opa collocation_after_opa_failed"}),
         "multi_index": (("term", "parameter"), chaos.indices.astype(np.int64),
                         {"long_name": "degree of each parameter's polynomial in Psi_alpha",
                          "units": "1"}),
@@ -362,5 +389,8 @@ def _dataset(system, options, times, runs, chaos, whole, flags, attrs) -> xr.Dat
                                   "element": ("element", np.arange(len(runs)))},
                     attrs=provenance_attrs("opa", system, options))
     ds.attrs.update(attrs, elements=len(runs),
+                    collocation_elements=int(sum(r.method == "collocation" for r in runs)),
+                    collocation_rhs_evaluations=int(sum(r.true_rhs_evaluations
+                                                        for r in runs)),
                     rhs_evaluations=int(sum(r.rhs_evaluations for r in runs)))
     return ds

@@ -98,12 +98,30 @@ def test_on_the_impact_system_the_line_tells_the_boxes_from_the_single_element()
     np.testing.assert_array_equal(line.scale_star.values, [0.0, 0.0, 1.0])
 
 
-def test_a_variant_that_cannot_be_completed_is_failed_not_disagreeing():
-    """At twice the issue's scales a box near grazing escapes (tests/opa/test_boxes.py):
-    the boxes' cell reads failed (code 3), and s* stops before it."""
+def test_a_variant_that_cannot_be_completed_is_failed_not_disagreeing(monkeypatch):
+    """An OPA run that raises SimulationError (here the adaptive boxes at the larger
+    scale, made to) reads failed (code 3), and s* stops before it."""
     system = opa.System(opa.preset("3.2", omega=3.98), uncertain="mu,c", order=3)
+    real = opa.simulate_opa
+
+    def boxes_fail_at_two(system, **kwargs):
+        if kwargs.get("elements") == "adaptive" and system.problem.scales[0] > 0.02:
+            raise opa.SimulationError("made to fail by the test")
+        return real(system, **kwargs)
+
+    monkeypatch.setattr(opa, "simulate_opa", boxes_fail_at_two)
     line = compare.trust_line(system, (0.02, 0.1), [1.0, 2.0], max_samples=256)
     boxes = [name for name, _, _ in LINE_VARIANTS].index("adaptive boxes")
     assert line.verdict.values[boxes].tolist() == [CODES["agrees"], CODES["failed"]]
     assert line.scale_star.values[boxes] == 1.0
     assert line.verdict.attrs["flag_meanings"] == "agrees disagrees undecided failed"
+
+
+def test_boxes_near_grazing_are_collocated_not_failed():
+    """At twice the issue's scales a box's OPA system escapes near grazing
+    (tests/opa/test_boxes.py); the box is computed by collocation of the true systems, so
+    the boxes' cell has a verdict of the certificate, not failed."""
+    system = opa.System(opa.preset("3.2", omega=3.98), uncertain="mu,c", order=3)
+    line = compare.trust_line(system, (0.02, 0.1), [2.0], max_samples=256)
+    boxes = [name for name, _, _ in LINE_VARIANTS].index("adaptive boxes")
+    assert int(line.verdict.values[boxes, 0]) != CODES["failed"]

@@ -1,0 +1,72 @@
+"""Boxes above the first split with three uncertain parameters: how the RMS error of E[x]
+of multi-element OPA falls with the number of boxes, against scrambled Sobol Monte Carlo
+of the true systems.
+
+Case (issue 42's d = 3 case above the split): section 3.2 at omega = 3.98, 10 periods, 8
+outputs per period, (mu, c, a) uncertain, semicircle laws, relative sizes (0.02, 0.1,
+0.02) at scale s = 2 (above the first split at s = 0.817, ``benchmarks.bench_several``),
+impact law ``saltation``. Runs: adaptive boxes with budgets 64, 256 and 1024 and uniform
+boxes K = 4, 8 per parameter, at N = 1 and 2. Each row says how many boxes were computed
+by collocation of the true systems (their OPA system escaped near grazing) and the
+right-hand sides: the OPA systems' times the rule's nodes, plus the collocated boxes'
+true systems. The reference's own RMS standard error is printed with it.
+
+    python -m benchmarks.boxes_above_split [--log2-samples 20] [--budgets 64,256,1024]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+import warnings
+
+import numpy as np
+
+import mc
+import opa
+from benchmarks.bench_several import PER_PERIOD, PERIODS, rms, system
+from opa._elements import ElementBudgetWarning
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--log2-samples", type=int, default=20)
+    parser.add_argument("--budgets", default="64,256,1024")
+    parser.add_argument("--uniform", default="4,8")
+    parser.add_argument("--orders", default="1,2")
+    args = parser.parse_args(argv)
+    print(f"load average before: {os.getloadavg()[0]:.2f}", flush=True)
+    start = time.perf_counter()
+    ref = mc.simulate_mc(system(3, 2.0), samples=2 ** args.log2_samples, sampler="sobol",
+                         periods=PERIODS, per_period=PER_PERIOD, progress=False)
+    print(f"reference: 2^{args.log2_samples} Sobol samples, "
+          f"{time.perf_counter() - start:.1f} s, RMS standard error of E[x] "
+          f"{float(np.sqrt((ref.x_sem ** 2).mean())):.2e}", flush=True)
+    print("| N | boxes | computed | collocated | RMS error E[x] | RMS error Var[x] | "
+          "OPA RHS x nodes + true RHS | wall s |")
+    print("|---|---|---|---|---|---|---|---|")
+    settings = ([("adaptive", int(b)) for b in args.budgets.split(",")]
+                + [(int(k), None) for k in args.uniform.split(",")])
+    for order in (int(n) for n in args.orders.split(",")):
+        for elements, budget in settings:
+            run = system(3, 2.0, order, impact_law="saltation")
+            extra = {} if budget is None else {"max_elements": budget}
+            start = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", ElementBudgetWarning)
+                ds = opa.simulate_opa(run, periods=PERIODS, per_period=PER_PERIOD,
+                                      elements=elements, **extra)
+            seconds = time.perf_counter() - start
+            label = f"adaptive, budget {budget}" if budget else f"uniform, K = {elements}"
+            cost = (int(ds.attrs["rhs_evaluations"]) * int(ds.attrs["nodes"])
+                    + int(ds.attrs["collocation_rhs_evaluations"]))
+            print(f"| {order} | {label} | {ds.attrs['elements']} | "
+                  f"{ds.attrs['collocation_elements']} | {rms(ds.x_mean, ref.x_mean):.2e} | "
+                  f"{rms(ds.x_var, ref.x_var):.2e} | {cost:,} | {seconds:.1f} |", flush=True)
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
