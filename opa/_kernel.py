@@ -1711,15 +1711,18 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work, si
     eta(xi_k) v(xi_k); ``saltation`` takes the deviations from the wall, y_i = x_i -
     delta_i, to -eta_bar y_i and the velocities to -eta_bar v_i + k y_i - eta_i v_0-
     (the first-order effect of each node's own restitution), with delta_i, eta_i the
-    coefficients of delta(xi) and eta(xi). The Python layer refuses tangents there, and
-    an uncertain wall together with a lower wall.
+    coefficients of delta(xi) and eta(xi). Tangents: under ``mean`` and ``ensemble``
+    (the reset is linear in the velocities: dR = -A on them, A_ij = sum_k w_k eta(xi_k)
+    U_i(xi_k) U_j(xi_k)); the Python layer refuses them under ``saltation``, and an
+    uncertain wall together with a lower wall.
     """
     n = cfg[C_NCOEF]
     dim = 2 * n
     delta, eta = wall_of(side, p)
     law = cfg[C_LAW]
-    if cfg[C_WALL_NODES] != 0 and n > 1 and side > 0.0:
-        return _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus,
+    # (the mean law at nodes is this function's own: v_0 with eta_bar at delta_bar)
+    if cfg[C_WALL_NODES] != 0 and n > 1 and side > 0.0 and law != LAW_MEAN:
+        return _impact_at_nodes(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus,
                                 work)
     m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
     off = np.bool_(False)
@@ -1754,17 +1757,18 @@ def _impact(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work, si
 
 
 @njit(cache=True)
-def _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work):
-    """``_impact`` with the restitution or the wall uncertain (see there); no tangents."""
+def _impact_at_nodes(t, z, m, p, cfg, table, weights, U, force, f_minus, f_plus, work):
+    """``_impact`` with the restitution or the wall uncertain and the laws ``saltation``
+    and ``ensemble`` (see there; the mean law is ``_impact``'s own). Tangents W under
+    ``ensemble``: ``S = dR + (f(t*, R y-) - dR f(t*, y-)) e_0^T / v_0-`` with dR the
+    identity on the positions and -A on the velocities."""
     n = cfg[C_NCOEF]
+    dim = 2 * n
     q = table.shape[0]
     eta = p[P_ETA]
     law = cfg[C_LAW]
     z[0] = p[P_DELTA]
     v_minus = z[n]
-    if law == LAW_MEAN:
-        z[n] = -eta * z[n]
-        return v_minus, 0
     if law == LAW_SALTATION and v_minus > EVENT_GRAZE_VELOCITY:
         k = _saltation_gain(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, work,
                             eta)
@@ -1779,17 +1783,46 @@ def _impact_at_nodes(t, z, p, cfg, table, weights, U, force, f_minus, f_plus, wo
             z[n + i] = -eta * z[n + i] + k * y - eta_i * v_minus
         return v_minus, 2
     # the ensemble law (and a graze under the saltation law): each node's own reflection
-    for j in range(q):
+    evals = 0
+    m0 = np.int64(0)  # typed, not literal: one compiled vector_field for every call
+    off = np.bool_(False)
+    one = np.int64(1)  # typed, not literal: one compiled _reflect_at_nodes
+    if m > 0:
+        vector_field(z, m0, p, cfg, table, weights, U, t, forcing(t, p, force), off, f_minus,
+                     work)
+        evals += 1
+    _reflect_at_nodes(z, n, n, one, table, weights, U, work)
+    if m > 0:
+        vector_field(z, m0, p, cfg, table, weights, U, t, forcing(t, p, force), off, f_plus,
+                     work)
+        evals += 1
+        # dR f-: f- with its velocities through -A (in place: f- is scratch from here)
+        _reflect_at_nodes(f_minus, n, n, one, table, weights, U, work)
+        for c in range(m):
+            w0 = z[dim + c] / v_minus  # e_0^T W / (e_0^T f-)
+            _reflect_at_nodes(z, n, dim + n * m + c, m, table, weights, U, work)
+            for r in range(dim):
+                z[dim + r * m + c] += (f_plus[r] - f_minus[r]) * w0
+    return v_minus, evals
+
+
+@njit(cache=True)
+def _reflect_at_nodes(y, n, first, stride, table, weights, U, work):
+    """The ensemble law's reset of velocity coefficients, in place: the n entries of
+    ``y`` at ``first``, ``first + stride``, ... (the velocities, or a tangent column's
+    velocity rows) become -sum_k w_k eta(xi_k) U_i(xi_k) v(xi_k), v(xi_k) = sum_j v_j
+    U_j(xi_k) (work row 4 is scratch)."""
+    q = table.shape[0]
+    for k in range(q):
         vs = 0.0
         for i in range(n):
-            vs += z[n + i] * U[j, i]
-        work[1, j] = weights[j] * table[j, T_ETA] * vs
+            vs += y[first + i * stride] * U[k, i]
+        work[4, k] = weights[k] * table[k, T_ETA] * vs
     for i in range(n):
         acc = 0.0
-        for j in range(q):
-            acc += work[1, j] * U[j, i]
-        z[n + i] = -acc
-    return v_minus, 0
+        for k in range(q):
+            acc += work[4, k] * U[k, i]
+        y[first + i * stride] = -acc
 
 
 @njit(cache=True)

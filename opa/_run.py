@@ -163,7 +163,8 @@ def callee_signatures() -> dict[str, dict[str, tuple]]:
         "stage_drive": (f8,) * 8,
         "_stage_rows": (f8, v, f8, m, v, table_m, table_v, i8, i8, i8) + system + (f8, b1, m),
         "_impact": (f8, v, i8) + system + (f8, v, v, m, f8),
-        "_impact_at_nodes": (f8, v, v, iv, m, v, m, f8, v, v, m),
+        "_impact_at_nodes": (f8, v, i8) + system + (f8, v, v, m),
+        "_reflect_at_nodes": (v, i8, i8, i8, m, v, m, m),
         "error_norm": (i8, v, v, m, f8, f8, f8),
         "wall_margin": (m, i8, i8, f8),
         "escape_bound": (v, v, iv),
@@ -811,10 +812,11 @@ def run(inputs: Inputs, y0, times, *, rtol: float, atol: float, label: str = "tr
     if limit is not None:
         cfg = cfg.copy()
         cfg[kernel.C_MAXSTEPS] = limit
-    if variational is not None and cfg[kernel.C_WALL_NODES] and cfg[kernel.C_NCOEF] > 1:
+    if (variational is not None and cfg[kernel.C_WALL_NODES] and cfg[kernel.C_NCOEF] > 1
+            and cfg[kernel.C_LAW] == kernel.LAW_SALTATION):
         raise ValueError("tangents (Floquet multipliers, Lyapunov exponents) of an OPA system "
-                         "with an uncertain eta or delta are not implemented: the impact law "
-                         "reads them per node and has no saltation matrix here yet")
+                         "with an uncertain eta or delta take the impact law mean or "
+                         "ensemble; the saltation law's has no saltation matrix here yet")
     W = np.zeros((len(y0), 0)) if variational is None else variational.tangent
     if W.shape[0] != len(y0):
         raise ValueError(f"tangent must have {len(y0)} rows, got shape {W.shape}")

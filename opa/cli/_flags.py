@@ -535,3 +535,14 @@ def write_and_draw(ds, args, draw) -> None:
             write(ds, path)
             if not args.quiet:
                 print(f"  wrote {path}")
+
+
+def mean_law_blind(impact_law: str, uncertain: str) -> list[str]:
+    """The warning a run with the mean impact law and an uncertain eta or delta needs (the
+    law reflects every node with the mean eta at the mean wall: it adds no spread from
+    them), or nothing."""
+    if impact_law != "mean" or not {"eta", "delta"} & set(str(uncertain).split(",")):
+        return []
+    return ["warning: impact law mean reflects with the mean eta at the mean wall: it adds "
+            "no spread from an uncertain eta or delta, so Var[x] misses it; use "
+            "--impact-law saltation with --elements adaptive"]

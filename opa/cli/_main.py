@@ -19,6 +19,7 @@ import numpy as np
 
 from opa.cli._args import EXIT_USAGE, Parser
 from opa.cli._flags import (
+    mean_law_blind,
     DEFAULT_VERIFY_MAX,
     EXIT_SIMULATION,
     EXIT_UNVERIFIED,
@@ -263,11 +264,7 @@ def _element_lines(ds) -> list[str]:
     impact law misses an uncertain eta's or delta's spread."""
     if ds.attrs.get("model") != "opa":
         return []
-    blind = (ds.attrs.get("impact_law") == "mean"
-             and {"eta", "delta"} & set(str(ds.attrs.get("uncertain", "")).split(",")))
-    notes = ["warning: impact law mean reflects with the mean eta at the mean wall: it adds "
-             "no spread from an uncertain eta or delta, so Var[x] misses it; use "
-             "--impact-law saltation with --elements adaptive"] if blind else []
+    notes = mean_law_blind(ds.attrs.get("impact_law"), ds.attrs.get("uncertain", ""))
     if ds.attrs.get("element_mode", "single") == "single":
         return notes
     K = ds.sizes["element"]

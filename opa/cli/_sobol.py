@@ -12,6 +12,7 @@ import math
 
 from opa.cli._args import positive_int, whole_number
 from opa.cli._flags import (
+    mean_law_blind,
     CliError,
     _law_flag,
     _model_flags,
@@ -91,6 +92,8 @@ def cmd_sobol(args) -> int:
           f"{'' if args.no_control else ', the surrogate as control variate'})")
     for line in table_lines(ds):
         print(f"  {line}")
+    for line in mean_law_blind(system.impact_law, ",".join(system.problem.names)):
+        print(f"  {line.replace(' with --elements adaptive', '')}")
     print(f"agreement: the surrogate's indices lie in the certified intervals at "
           f"{100 * ds.attrs['agreement']:.0f} % of the outputs of x and v")
     if not args.quiet:

@@ -91,6 +91,17 @@ def test_sobol_prints_the_table_and_writes_the_dataset_and_figure(tmp_path, caps
     assert png.stat().st_size > 10_000
 
 
+@pytest.mark.parametrize("law, warned", [("mean", True), ("saltation", False)])
+def test_an_uncertain_restitution_under_the_mean_law_is_warned(law, warned, capsys):
+    """The mean impact law reflects every node with the mean eta: the surrogate has no
+    spread from an uncertain eta, and the command says so (as simulate opa does)."""
+    impacting = flags(uncertain="eta,c", sigma="0.05,0.005", delta="0.6", periods="1",
+                      order="2", impact_law=law, rtol="1e-10", atol="1e-10")
+    assert main(["sobol", *impacting, "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert ("warning: impact law mean reflects with the mean eta" in text) == warned
+
+
 @pytest.mark.parametrize("change, flag", [
     (dict(uncertain="mu", sigma="0.06"), "--uncertain mu: Sobol indices need at least two"),
     (dict(samples="0"), "argument --samples"),
