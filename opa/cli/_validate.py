@@ -176,25 +176,61 @@ def _check_outdir(path: str) -> None:
 
 def _validate_model(args) -> None:
     """``validate --model FILE``: the file's oscillator and force law under the
-    parameter flags; the file may not name uncertain parameters (validate sweeps its own
-    grid of sigma)."""
-    from opa.cli._flags import model_from, oscillator_from
+    parameter flags. The file's [uncertain.NAME] tables name the uncertain parameters
+    and their laws unless ``--uncertain`` is given; validate sweeps its own grid of
+    sigma, so with several parameters the file's sigma_j / |p_bar_j| are the relative
+    sizes (``--relative``, sigma_j at scale 1) unless given, and with one the file's
+    sigma is not used (said on stderr)."""
+    from opa.cli._flags import model_from, oscillator_from, say
 
     model = model_from(args)
     if model is None:
         oscillator_from(args)  # a refused flag's value named as its flag
         return
-    if model.problem is not None:
-        raise CliError(f"--model {args.model_file}: validate sweeps its own grid of sigma "
-                       f"(--sigmas, --uncertain, --distribution): leave out the file's "
-                       f"[uncertain.NAME] tables")
     osc = oscillator_from(args)
+    if model.problem is not None and args.uncertain is None:
+        _uncertain_of_file(args, model.problem, osc)
+    elif model.problem is not None:
+        given = args.uncertain if isinstance(args.uncertain, str) else ",".join(args.uncertain)
+        say(f"--model {args.model_file}: its [uncertain.NAME] tables are set aside for "
+            f"--uncertain {given}")
     unused = () if osc.force is None else tuple(  # mu, a, c a user's law does not name
         name for name in ("mu", "a", "c") if name not in osc.force.names)
     for name in OSCILLATOR_FLAGS:  # every value of the file, the flags' included
         if name not in unused:  # (as flags they would be refused as having no effect)
             setattr(args, name, getattr(osc, name))
     args.force_law = osc.force  # and its force law (None: the paper's)
+
+
+def _uncertain_of_file(args, problem, osc) -> None:
+    """``--uncertain``, ``--distribution`` and (several parameters) ``--relative`` from a
+    model file's [uncertain.NAME] tables, each unless its flag was given."""
+    from opa.cli._flags import say
+
+    names, laws = problem.names, ["semicircle" if law is None else str(law)
+                                  for law in problem.laws]
+    several = problem.dimension > 1
+    args.uncertain = names if several else names[0]
+    if args.distribution is None:
+        args.distribution = ",".join(laws)
+    if not several:
+        say(f"--model {args.model_file}: uncertain {names[0]} ({laws[0]}) from its "
+            f"[uncertain.{names[0]}] table; validate sweeps its own grid of sigma "
+            f"(--sigmas), so the file's sigma = {problem.scales[0]:g} is not used")
+        return
+    if args.relative is None:
+        means = [abs(osc.value(name)) for name in names]
+        if not all(means):
+            zero = ",".join(n for n, m in zip(names, means) if not m)
+            raise CliError(f"--model {args.model_file}: {zero} = 0 has no size relative to "
+                           f"its nominal value: give --relative R1,R2,... (sigma_j = scale x "
+                           f"R_j x |p_bar_j|) or --uncertain")
+        args.relative = tuple(s / m for s, m in zip(problem.scales, means))
+    sizes = ("" if args.relative is None else
+             f"; relative sizes {', '.join(f'{r:.4g}' for r in args.relative)} (the file's "
+             f"sigma at scale 1)")
+    say(f"--model {args.model_file}: uncertain {','.join(names)} ({','.join(laws)}) from "
+        f"its [uncertain.NAME] tables{sizes}")
 
 
 def cmd_validate(args) -> int:

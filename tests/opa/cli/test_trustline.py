@@ -93,3 +93,31 @@ def test_several_parameters_of_a_model_files_own_law(tmp_path, capsys):
                  str(out)]) == 0, capsys.readouterr().err
     with xr.open_dataset(out / "validate.nc") as ds:
         assert ds.attrs["force_kind"] == "function" and ds.verdict.dims == ("variant", "scale")
+
+
+def test_a_model_files_uncertain_tables_name_validates_parameters(tmp_path, capsys):
+    """validate --model FILE with [uncertain.NAME] tables and no --uncertain: the file
+    names the parameters and their laws; with several, the file's sigma_j / |p_bar_j| are
+    the relative sizes, so scale 1 is the file's sigma (read back from the dataset)."""
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parents[3] / "docs" / "examples"
+    out = tmp_path / "line"
+    assert main(["validate", "--model", str(examples / "duffing-impact.toml"), "--sigmas",
+                 "1", "--orders", "1", "--horizons", "2", "--samples", "64",
+                 "--max-samples", "128", "--quiet", "--outdir", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "uncertain k,b (semicircle,uniform) from its [uncertain.NAME] tables" in err
+    with xr.open_dataset(out / "validate.nc") as ds:
+        assert ds.attrs["uncertain"] == "k,b"
+        # the file: k = 1.0 with sigma 0.05, b = 0.2 with sigma 0.04 (uniform)
+        np.testing.assert_allclose(ds.attrs["relative"], [0.05 / 1.0, 0.04 / 0.2])
+    one = tmp_path / "one"
+    assert main(["validate", "--model", str(examples / "shaw-holmes.toml"), "--values",
+                 "2.5", "--sigmas", "0.01", "--orders", "0:1", "--horizons", "1",
+                 "--samples", "64", "--max-samples", "128", "--no-frontier", "--no-plots",
+                 "--quiet", "--outdir", str(one)]) == 0
+    err = capsys.readouterr().err
+    assert "uncertain zeta (uniform) from its [uncertain.zeta] table" in err
+    with xr.open_dataset(one / "validate.nc") as ds:
+        assert ds.attrs["uncertain"] == "zeta" and ds.attrs["distribution"] == "uniform"
