@@ -9,13 +9,14 @@ train), all in one pytest-benchmark session:
 - ``mc``: 512 random samples of sigma = 0.01 on mu, 100 periods (8 samples x 5 periods
   in smoke mode), rtol = atol = 1e-8, two threads;
 
-each with six laws: ``builtin`` (the paper's law, eq. (1)), ``paper-as-user`` (the same
+each with seven laws: ``builtin`` (the paper's law, eq. (1)), ``paper-as-user`` (the same
 law written as ``opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3")``, the kernel's polynomial
 path), ``duffing-user`` (``-2*zeta*v - a*x - c*x^3 + mu*(1 - v^2)*v`` with zeta = 0:
-five terms, the same motion to round-off), ``cross-user`` (the paper's law plus
-k x^2 v with k = 1e-300: a cross term, which takes the register path's longer
-evaluation (``opa._kernel._poly_value``), on the same motion), and the escape hatch's two
-ways: ``paper-compiled`` (the expression compiled, ``opa.ForceLaw.compiled``) and
+five terms, the same motion to round-off), ``cross-user`` and ``cross-v3-user`` (the
+paper's law plus k x^2 v, or k x v^3, with k = 1e-300: a cross term, which takes the
+register path's longer evaluation (``opa._kernel._poly_value``: one row of cross terms,
+or three), on the same motion), and the escape hatch's two ways: ``paper-compiled``
+(the expression compiled, ``opa.ForceLaw.compiled``) and
 ``paper-function`` (the Python function :func:`paper_law`, ``ForceLaw.from_function``),
 both called through a pointer, with their compile excluded by the warm-up round. Each
 oscillator is built once, outside the timed runs, as a user builds it once. Before
@@ -48,6 +49,7 @@ LAWS = {
     "paper-as-user": opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3"),
     "duffing-user": opa.ForceLaw("-2*zeta*v - a*x - c*x^3 + mu*(1 - v^2)*v", zeta=0.0),
     "cross-user": opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3 + k*x^2*v", k=1e-300),
+    "cross-v3-user": opa.ForceLaw("mu*(1 - v^2)*v - a*x - c*x^3 + k*x*v^3", k=1e-300),
     "paper-compiled": opa.ForceLaw.compiled("mu*(1 - v^2)*v - a*x - c*x^3"),
     "paper-function": opa.ForceLaw.from_function(paper_law),
 }

@@ -320,18 +320,20 @@ def test_the_unrolled_steps_are_generated_from_the_tableaux():
     assert kernel_steps_source("function") in source
 
 
-@pytest.mark.parametrize("expression, cross", [
-    ("mu*(1 - v^2)*v - a*x - c*x^3", False), ("x^3 + v^3 + x^2 + v^2 + 1", False),
-    ("x*v", True), ("x^3*v^3", True), ("-x + 0.1*x^2*v^2", True), ("-x + 0*x*v", False)])
-def test_force_law_flags_exactly_the_laws_with_a_cross_term(expression, cross):
-    """The register path's cheaper evaluation (no cross terms) is taken exactly when every
-    C[j, k] with j, k >= 1 is zero, and then gives the same g as the full Horner sum."""
+@pytest.mark.parametrize("expression, top", [
+    ("mu*(1 - v^2)*v - a*x - c*x^3", 0), ("x^3 + v^3 + x^2 + v^2 + 1", 0),
+    ("x*v", 1), ("x^3*v^3", 3), ("-x + 0.1*x^2*v^2", 2), ("-x + 0*x*v", 0),
+    ("(1 - x^2)*v - x", 1), ("x*v + x*v^3", 3)])
+def test_force_law_flags_the_highest_power_of_v_in_its_cross_terms(expression, top):
+    """The register path sums the cross terms C[j, k] x^j v^k (j, k >= 1) only up to the
+    highest k with a non-zero C[j, k] (none when all are zero), and gives the same g as
+    the full sum."""
     coefficients = opa.ForceLaw(expression).coefficients(dict(mu=0.8, a=0.5, c=0.05))[0]
     p = np.zeros(kernel.P_POLY + kernel.N_POLY)
     p[kernel.P_POLY:] = coefficients
     law = kernel.force_law(p)
     assert law[:kernel.N_POLY] == tuple(coefficients)
-    assert law[kernel.N_POLY] == (1.0 if cross else 0.0)
+    assert law[kernel.N_POLY] == float(top)
     C = np.asarray(coefficients).reshape(4, 4)  # C[j, k] of x^j v^k
     for x, v in [(0.3, -0.7), (-1.2, 0.4), (2.0, 1.5)]:
         g = sum(C[j, k] * x ** j * v ** k for j in range(4) for k in range(4))
@@ -349,7 +351,9 @@ def two_node_rule(inputs):
 
 
 @pytest.mark.parametrize("law", [None, "mu*(1 - v^2)*v - a*x - c*x^3 + 0.1*x^2*v",
-                                 "-0.1*v^3 + 0.2*v^2 - 0.3*v - a*x + 0.4*x^2 - c*x^3 + 0.05"])
+                                 "-0.1*v^3 + 0.2*v^2 - 0.3*v - a*x + 0.4*x^2 - c*x^3 + 0.05",
+                                 "-x - c*x^3 + 0.2*x*v^2 - 0.1*x^2*v",
+                                 "-x - 0.3*v + 0.1*x^3*v^3 + 0.2*x*v^2 + 0.05*x^2*v"])
 @pytest.mark.parametrize("method", [kernel.METHOD_DOP853, kernel.METHOD_DP5])
 @pytest.mark.parametrize("h, force, sticking", [(0.07, 0.0, False), (0.3, 0.8, False),
                                                 (1.0, 0.0, False), (0.07, 0.5, True)])
