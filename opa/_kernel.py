@@ -435,10 +435,10 @@ def _stage_forcing_long(t, theta, h, f, w, cw, sw, force):
 def force_law(p):
     """A polynomial force law's coefficients in scalars, (C[0, 0], C[0, 1], ..., C[3, 3]),
     then the highest power k of v in its cross terms (C[j, k] != 0 with j, k >= 1; 0.0
-    when it has none), for its 2-D
-    register path (a tuple is passed by value: no reference counts). The flag is read
-    here once per run, not in each stage: a test of the nine coefficients in each stage
-    cost a DMR run 8 %."""
+    when it has none), for its 2-D register path (a tuple is passed by value: no
+    reference counts). That power is found here, once per run, not in each stage: a test
+    of the nine coefficients in each stage cost a DMR run 8 %. Not for the general vector
+    field (``_poly_of_p``)."""
     q = P_POLY
     cross = 0.0
     for j in range(1, POLY_DEGREE + 1):
