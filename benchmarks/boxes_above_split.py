@@ -11,7 +11,13 @@ by collocation of the true systems (their OPA system escaped near grazing) and t
 right-hand sides: the OPA systems' times the rule's nodes, plus the collocated boxes'
 true systems. The reference's own RMS standard error is printed with it.
 
+With ``--verify`` each run is also certified (``compare.verify``) and its verdicts on
+the mean and the variance are read against the reference with the certificate's own rule
+(``benchmarks.verify_several_untuned.ratios`` and ``reading``): the count of wrong
+verdicts is printed (a case the certificate was not tuned to).
+
     python -m benchmarks.boxes_above_split [--log2-samples 20] [--budgets 64,256,1024]
+        [--verify]
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ def main(argv=None) -> int:
     parser.add_argument("--budgets", default="64,256,1024")
     parser.add_argument("--uniform", default="4,8")
     parser.add_argument("--orders", default="1,2")
+    parser.add_argument("--verify", action="store_true")
     args = parser.parse_args(argv)
     print(f"load average before: {os.getloadavg()[0]:.2f}", flush=True)
     start = time.perf_counter()
@@ -46,6 +53,7 @@ def main(argv=None) -> int:
     print("| N | boxes | computed | collocated | RMS error E[x] | RMS error Var[x] | "
           "OPA RHS x nodes + true RHS | wall s |")
     print("|---|---|---|---|---|---|---|---|")
+    runs = []
     settings = ([("adaptive", int(b)) for b in args.budgets.split(",")]
                 + [(int(k), None) for k in args.uniform.split(",")])
     for order in (int(n) for n in args.orders.split(",")):
@@ -64,7 +72,28 @@ def main(argv=None) -> int:
             print(f"| {order} | {label} | {ds.attrs['elements']} | "
                   f"{ds.attrs['collocation_elements']} | {rms(ds.x_mean, ref.x_mean):.2e} | "
                   f"{rms(ds.x_var, ref.x_var):.2e} | {cost:,} | {seconds:.1f} |", flush=True)
+            runs.append((f"N = {order}, {label}", ds))
+    if args.verify:
+        _verify(runs, ref)
     print(f"load average after: {os.getloadavg()[0]:.2f}")
+
+
+def _verify(runs, ref) -> None:
+    """Each run's certificate, read against the reference (``reading``'s words)."""
+    import compare
+    from benchmarks.verify_several_untuned import ratios, reading
+
+    tally: dict[str, int] = {}
+    for label, ds in runs:
+        verdicts = compare.verify(ds).attrs
+        truth = ratios(ds, ref)
+        words = [reading(verdicts[f"verdict_{q}"], r) for q, r in zip(("mean", "var"), truth)]
+        for word in words:
+            tally[word] = tally.get(word, 0) + 1
+        print(f"{label}: mean {verdicts['verdict_mean']} (truth's ratio {truth[0]:.2f}: "
+              f"{words[0]}), variance {verdicts['verdict_var']} ({truth[1]:.2f}: {words[1]})",
+              flush=True)
+    print("verdicts:", ", ".join(f"{k} {v}" for k, v in sorted(tally.items())))
     return 0
 
 
